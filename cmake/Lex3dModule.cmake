@@ -1,0 +1,19 @@
+# lex3d_set_warnings(target): the project's warning set.
+function(lex3d_set_warnings target)
+  target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic -Wshadow -Wconversion
+                                           -Wno-sign-conversion)
+endfunction()
+
+# lex3d_add_module(name SOURCES ... [PUBLIC_DEPS ...] [PRIVATE_DEPS ...])
+# Adds static library lex3d_<name> with alias lex3d::<name>; public headers live
+# in include/lex3d/<name>/, sources and private headers in src/<name>/.
+function(lex3d_add_module name)
+  cmake_parse_arguments(M "" "" "SOURCES;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
+  add_library(lex3d_${name} STATIC ${M_SOURCES})
+  add_library(lex3d::${name} ALIAS lex3d_${name})
+  target_include_directories(lex3d_${name}
+    PUBLIC $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include> $<INSTALL_INTERFACE:include>
+    PRIVATE ${PROJECT_SOURCE_DIR}/src)
+  target_link_libraries(lex3d_${name} PUBLIC ${M_PUBLIC_DEPS} PRIVATE ${M_PRIVATE_DEPS})
+  lex3d_set_warnings(lex3d_${name})
+endfunction()

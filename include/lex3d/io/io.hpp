@@ -1,0 +1,105 @@
+#pragma once
+/// \file
+/// Reading and writing point cloud files. The only library module (with codec)
+/// that touches the file system. Readers are hardened: every length is checked
+/// against the bytes left before anything is allocated, and a bad file gives
+/// a Status naming the file and what is wrong, never a crash.
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "lex3d/core/cloud.hpp"
+#include "lex3d/core/status.hpp"
+
+namespace lex3d::io {
+
+/// Point cloud file formats lex3d reads (and, for some, writes).
+enum class Format : std::uint8_t {
+  kAuto,     ///< detect from extension and content
+  kKitti,    ///< little-endian float32 x y z intensity, 16 bytes a point (`.bin`)
+  kBinXyz,   ///< little-endian float32 x y z, 12 bytes a point (`.bin`, e.g. Newer College)
+  kPcd,      ///< PCL PCD v0.7: ascii, binary or binary_compressed
+  kPly,      ///< PLY: ascii, binary_little_endian or binary_big_endian
+  kXyz,      ///< ASCII text, `x y z [more columns]` a line, metres (`.xyz`, `.txt`, `.asc`, `.csv`)
+  kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`
+};
+
+/// Canonical lower-case name of a format ("kitti", "binxyz", "pcd", "ply", "xyz", "uos", "auto").
+[[nodiscard]] std::string_view format_name(Format f) noexcept;
+/// Parses a format name (as printed by format_name, case-insensitive; "3d" is an alias of "uos").
+[[nodiscard]] std::optional<Format> parse_format(std::string_view name) noexcept;
+
+/// Decides the format of an existing file from its extension, magic bytes and size.
+/// `.bin` files whose size is a multiple of both 16 and 12 are read as KITTI
+/// unless the fourth float of the first records is negative or not finite.
+[[nodiscard]] StatusOr<Format> detect_format(const std::string& path);
+
+struct ReadOptions {
+  /// Format to read as; kAuto detects it (see detect_format).
+  Format format = Format::kAuto;
+  /// For kUos3d: read `<stem>.pose` beside the file into Cloud::T_world_cloud when it exists.
+  bool load_pose = true;
+  /// For kUos3d: points at or beyond this range (centimetres) are the scanner's
+  /// no-return value; they are dropped, counted, and kept as no-return directions.
+  float uos_no_return_cm = 3270.0F;
+};
+
+struct ReadResult {
+  Cloud cloud;                          ///< finite points only
+  Format format = Format::kAuto;        ///< the format actually read
+  std::string encoding;                 ///< e.g. "binary_compressed", "ascii", "binary_little_endian"
+  std::size_t non_finite_dropped = 0;   ///< points with a NaN or Inf coordinate, dropped
+  std::size_t no_return_dropped = 0;    ///< no-return readings dropped (kUos3d)
+  std::uint64_t file_bytes = 0;         ///< size of the file read
+};
+
+/// Reads a point cloud file. Errors: kIoError when the file cannot be opened or
+/// read, kBadData when its content is empty, truncated or malformed; the message
+/// names the file and what is wrong, in one line.
+[[nodiscard]] StatusOr<ReadResult> read_cloud(const std::string& path, const ReadOptions& options = {});
+
+/// How the PCD writer encodes the data section.
+enum class PcdEncoding : std::uint8_t { kAscii, kBinary, kBinaryCompressed };
+
+struct WriteOptions {
+  /// kAuto picks from the extension: .pcd, .ply, .bin (KITTI), .xyz/.txt.
+  Format format = Format::kAuto;
+  PcdEncoding pcd_encoding = PcdEncoding::kBinary;
+  /// PLY: binary_little_endian when true, ascii otherwise.
+  bool ply_binary = true;
+  /// Write the intensity field when the cloud has one (PCD/PLY); KITTI always writes 4 floats.
+  bool write_intensity = true;
+  /// Optional per-point RGB colour (empty, or one per point); PCD/PLY only.
+  std::vector<std::array<std::uint8_t, 3>> colors;
+};
+
+/// Writes `cloud` to `path`: the bytes go to a temporary file in the same
+/// directory which is renamed over `path` only once complete, so a failure
+/// never leaves a partial file.
+[[nodiscard]] Status write_cloud(const std::string& path, const Cloud& cloud,
+                                 const WriteOptions& options = {});
+
+/// Writes `bytes` to `path` atomically (temporary file + rename).
+[[nodiscard]] Status write_file_atomic(const std::string& path, const std::vector<std::uint8_t>& bytes);
+
+/// Reads a whole file into memory; kIoError when missing/unreadable; `max_bytes` caps the size.
+[[nodiscard]] StatusOr<std::vector<std::uint8_t>> read_file(const std::string& path,
+                                                            std::uint64_t max_bytes = (1ULL << 34));
+
+/// Reads a KITTI-style pose list: one line a pose, 12 numbers, the row-major
+/// 3x4 matrix [R | t]. Blank lines are not allowed; the rotation must be
+/// orthonormal within 1e-3 (it is re-orthonormalised).
+[[nodiscard]] StatusOr<std::vector<Pose>> read_pose_list(const std::string& path);
+
+/// Reads a list of one number a line (e.g. KITTI times.txt).
+[[nodiscard]] StatusOr<std::vector<double>> read_number_list(const std::string& path);
+
+/// Writes an 8-bit RGB image (row-major, width*height*3 bytes) as PNG, atomically.
+[[nodiscard]] Status write_png_rgb(const std::string& path, int width, int height,
+                                   const std::vector<std::uint8_t>& rgb);
+
+}  // namespace lex3d::io

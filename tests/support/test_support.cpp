@@ -1,0 +1,41 @@
+#include "support/test_support.hpp"
+
+#include <cstdlib>
+#include <unistd.h>
+
+#include "lex3d/io/io.hpp"
+
+namespace lex3d::test {
+
+std::string shared_data(const std::string& relative) {
+  return std::string(LEX3D_SHARED_DATA_DIR) + "/" + relative;
+}
+
+std::string sample(const std::string& relative) {
+  return std::string(LEX3D_SAMPLES_DIR) + "/" + relative;
+}
+
+bool has_shared_data(const std::string& relative) {
+  std::error_code ec;
+  return std::filesystem::exists(shared_data(relative), ec);
+}
+
+std::filesystem::path temp_dir(const std::string& name) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() /
+                       ("lex3d_test_" + std::to_string(::getpid()) + "_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+Cloud load_or_fail(const std::string& path) {
+  auto r = io::read_cloud(path);
+  if (!r.ok()) {
+    ADD_FAILURE() << "cannot read " << path << ": " << r.status().to_string();
+    return {};
+  }
+  return std::move(r).value().cloud;
+}
+
+}  // namespace lex3d::test
