@@ -1,1 +1,42 @@
-int main() { return 0; }
+// lex3d: compress lidar scans with a learned alphabet of local 3D structures.
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <exception>
+#include <iostream>
+
+#include "cli_common.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"lex3d: compact lidar scans and maps from a learned alphabet of local 3D structures"};
+  app.set_version_flag("--version", std::string("lex3d ") + LEX3D_VERSION);
+  app.require_subcommand(1);
+  lex3d::cli::register_info(app);
+  lex3d::cli::register_features(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "lex3d: " << e.what() << " (see --help)\n";
+    return 1;
+  } catch (const lex3d::cli::CliError& e) {
+    std::cerr << "lex3d: " << e.what() << "\n";
+    return e.exit_code();
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "lex3d: " << e.what() << "\n";
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::cerr << "lex3d: out of memory\n";
+    return 3;
+  } catch (const std::exception& e) {
+    std::cerr << "lex3d: " << e.what() << "\n";
+    return 2;
+  }
+  return 0;
+}

@@ -1,1 +1,151 @@
-// placeholder
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+#include "lex3d/range/range_image.hpp"
+#include "range/spacing.hpp"
+
+namespace lex3d {
+
+void AngularResolutionParams::validate() const {
+  if (max_samples < 16 || max_samples > 1000000)
+    throw std::invalid_argument("AngularResolutionParams::max_samples must be in [16, 1e6], got " +
+                                std::to_string(max_samples));
+  if (!(min_range >= 0.0 && min_range <= 1e3))
+    throw std::invalid_argument("AngularResolutionParams::min_range must be in [0, 1000] m");
+}
+
+namespace {
+
+double median_of(std::vector<double>& v) {
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+}  // namespace
+
+// The spacing is measured locally: for a sample of returns, the nearest neighbour in
+// the horizontal direction (|Δel| small against |Δaz|·cos el) and in the vertical one.
+// Neighbours are found through a hash grid over (azimuth, elevation) whose cell is a
+// few times the mean spacing sqrt(solid angle / N), so that anisotropic sensors
+// (vertical spacing up to ~30x the horizontal one) still find their vertical neighbour
+// in the 3x3 cells around a sample.
+namespace detail {
+std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& dirs, std::size_t max_samples) {
+  if (dirs.size() < 16) return std::nullopt;
+
+  // Robust elevation extent (1st..99th percentile) for the mean-spacing estimate.
+  std::vector<float> els(dirs.size());
+  std::transform(dirs.begin(), dirs.end(), els.begin(), [](const Direction& d) { return d.el; });
+  const auto lo_it = els.begin() + static_cast<std::ptrdiff_t>(els.size() / 100);
+  std::nth_element(els.begin(), lo_it, els.end());
+  const double el_lo = *lo_it;
+  const auto hi_it = els.begin() + static_cast<std::ptrdiff_t>(els.size() - 1 - els.size() / 100);
+  std::nth_element(els.begin(), hi_it, els.end());
+  const double el_hi = *hi_it;
+  const double solid_angle =
+      2.0 * M_PI * std::max(1e-4, std::sin(std::max(el_lo, el_hi)) - std::sin(std::min(el_lo, el_hi)));
+  const double mean_spacing = std::sqrt(solid_angle / static_cast<double>(dirs.size()));
+  const double cell = std::clamp(6.0 * mean_spacing, 1e-4, 0.5);
+
+  // Hash grid: rows of constant elevation, each row with its own azimuth cell count.
+  const int rows = std::max(1, static_cast<int>(std::ceil(M_PI / cell)));
+  std::vector<int> row_cols(static_cast<std::size_t>(rows));
+  std::vector<std::size_t> row_offset(static_cast<std::size_t>(rows) + 1, 0);
+  for (int r = 0; r < rows; ++r) {
+    const double el_mid = -M_PI / 2 + (r + 0.5) * cell;
+    const double circumference = 2.0 * M_PI * std::max(std::cos(el_mid), 1e-3);
+    row_cols[static_cast<std::size_t>(r)] = std::max(1, static_cast<int>(std::floor(circumference / cell)));
+    row_offset[static_cast<std::size_t>(r) + 1] =
+        row_offset[static_cast<std::size_t>(r)] + static_cast<std::size_t>(row_cols[static_cast<std::size_t>(r)]);
+  }
+  auto row_of = [&](float el) {
+    return std::clamp(static_cast<int>((el + M_PI / 2) / cell), 0, rows - 1);
+  };
+  auto col_of = [&](int row, float az) {
+    const int n = row_cols[static_cast<std::size_t>(row)];
+    const int c = static_cast<int>((az + M_PI) / (2.0 * M_PI) * n);
+    return std::clamp(c, 0, n - 1);
+  };
+  const std::size_t cells = row_offset.back();
+  std::vector<std::uint32_t> start(cells + 1, 0);
+  std::vector<std::uint32_t> cell_of(dirs.size());
+  for (std::size_t i = 0; i < dirs.size(); ++i) {
+    const int row = row_of(dirs[i].el);
+    cell_of[i] = static_cast<std::uint32_t>(row_offset[static_cast<std::size_t>(row)] +
+                                            static_cast<std::size_t>(col_of(row, dirs[i].az)));
+    ++start[cell_of[i] + 1];
+  }
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<std::uint32_t> order(dirs.size());
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::size_t i = 0; i < dirs.size(); ++i) order[fill[cell_of[i]]++] = static_cast<std::uint32_t>(i);
+  }
+
+  const std::size_t samples = std::min(max_samples, dirs.size());
+  const double stride = static_cast<double>(dirs.size()) / static_cast<double>(samples);
+  std::vector<double> horizontal;
+  std::vector<double> vertical;
+  horizontal.reserve(samples);
+  vertical.reserve(samples);
+  const double kSame = 1e-7;  // coincident directions are duplicates, not neighbours
+  for (std::size_t s = 0; s < samples; ++s) {
+    const Direction& d = dirs[static_cast<std::size_t>(static_cast<double>(s) * stride)];
+    const double cos_el = std::cos(d.el);
+    double best_h = std::numeric_limits<double>::infinity();
+    double best_v = std::numeric_limits<double>::infinity();
+    const int row = row_of(d.el);
+    for (int dr = -1; dr <= 1; ++dr) {
+      const int rr = row + dr;
+      if (rr < 0 || rr >= rows) continue;
+      const int n = row_cols[static_cast<std::size_t>(rr)];
+      const int c0 = col_of(rr, d.az);
+      for (int dc = -1; dc <= 1; ++dc) {
+        if (n < 3 && dc != 0) continue;
+        const int cc = ((c0 + dc) % n + n) % n;
+        const std::size_t cell_index = row_offset[static_cast<std::size_t>(rr)] + static_cast<std::size_t>(cc);
+        for (std::uint32_t k = start[cell_index]; k < start[cell_index + 1]; ++k) {
+          const Direction& e = dirs[order[k]];
+          double daz = static_cast<double>(e.az) - d.az;
+          if (daz > M_PI) daz -= 2 * M_PI;
+          if (daz < -M_PI) daz += 2 * M_PI;
+          const double h = std::abs(daz) * cos_el;
+          const double v = std::abs(static_cast<double>(e.el) - d.el);
+          if (h < kSame && v < kSame) continue;
+          if (v < 0.5 * h) best_h = std::min(best_h, h);
+          else if (h < 0.5 * v) best_v = std::min(best_v, v);
+        }
+      }
+    }
+    if (std::isfinite(best_h)) horizontal.push_back(best_h);
+    if (std::isfinite(best_v)) vertical.push_back(best_v);
+  }
+  if (horizontal.size() < 8 || vertical.size() < 8) return std::nullopt;
+  AngularResolution res;
+  res.azimuth_rad = median_of(horizontal);
+  res.elevation_rad = median_of(vertical);
+  return res;
+}
+
+}  // namespace detail
+
+std::optional<AngularResolution> estimate_angular_resolution(const Cloud& cloud,
+                                                             const AngularResolutionParams& params) {
+  params.validate();
+  const Eigen::Isometry3f T_sensor_cloud = cloud.T_cloud_sensor.inverse().cast<float>();
+  std::vector<detail::Direction> dirs;
+  dirs.reserve(cloud.size());
+  for (const auto& p : cloud.points) {
+    const Eigen::Vector3f q = T_sensor_cloud * p;
+    const float r = q.norm();
+    if (!(r > static_cast<float>(params.min_range))) continue;
+    dirs.push_back({std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z() / r, -1.0F, 1.0F))});
+  }
+  return detail::estimate_spacing(dirs, params.max_samples);
+}
+
+}  // namespace lex3d

@@ -54,6 +54,9 @@ struct ReadResult {
   std::string encoding;                 ///< e.g. "binary_compressed", "ascii", "binary_little_endian"
   std::size_t non_finite_dropped = 0;   ///< points with a NaN or Inf coordinate, dropped
   std::size_t no_return_dropped = 0;    ///< no-return readings dropped (kUos3d)
+  /// Per-point RGB colour (one per point of `cloud`) when the file has one
+  /// (PCD `rgb`/`rgba` field, PLY `red green blue` properties); empty otherwise.
+  std::vector<std::array<std::uint8_t, 3>> colors;
   std::uint64_t file_bytes = 0;         ///< size of the file read
 };
 

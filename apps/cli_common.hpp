@@ -1,0 +1,48 @@
+#pragma once
+// Shared pieces of the lex3d subcommands: errors with exit codes, loading inputs,
+// output-path safety.
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "lex3d/core/status.hpp"
+#include "lex3d/io/io.hpp"
+
+namespace CLI {
+class App;
+}
+
+namespace lex3d::cli {
+
+/// An error the command reports as one line on stderr with its exit code
+/// (1 usage, 2 bad data, 3 I/O).
+class CliError : public std::runtime_error {
+ public:
+  CliError(int exit_code, const std::string& message) : std::runtime_error(message), code_(exit_code) {}
+  [[nodiscard]] int exit_code() const noexcept { return code_; }
+
+ private:
+  int code_;
+};
+
+/// Throws CliError for a non-ok status.
+void throw_if_error(const Status& status);
+
+/// Parses a --format value; throws a usage CliError for an unknown name.
+io::Format parse_format_option(const std::string& name);
+
+/// Reads a point cloud or throws CliError (2 bad data, 3 I/O).
+io::ReadResult load_cloud(const std::string& path, io::Format format);
+
+/// Refuses an output path that names one of the inputs (never overwrite an input).
+void check_output_path(const std::string& output, const std::vector<std::string>& inputs);
+
+/// Parses "x,y,z" into a vector; throws a usage CliError naming `option`.
+Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option);
+
+/// Registration of each subcommand (one file each).
+void register_info(CLI::App& app);
+void register_features(CLI::App& app);
+
+}  // namespace lex3d::cli

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs every system package lex3d needs (Debian 12 / apt-get) and builds it in
+# Release. The one place where packages are installed. Usage: scripts/setup.sh [BUILD_DIR]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD_DIR="${1:-build}"
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+
+PACKAGES=(
+  build-essential cmake pkg-config
+  libeigen3-dev libpcl-dev libflann-dev liboctomap-dev zlib1g-dev
+  libcli11-dev libgtest-dev libgmock-dev
+  python3 python3-numpy python3-scipy
+)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ "${#missing[@]}" -gt 0 ]; then
+  echo "setup: installing ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release
+cmake --build "$BUILD_DIR" -j2
+echo "setup: built $BUILD_DIR/lex3d"
