@@ -1,6 +1,7 @@
 #include "support/test_support.hpp"
 
 #include <cstdlib>
+#include <vector>
 #include <unistd.h>
 
 #include "lex3d/io/io.hpp"
@@ -20,12 +21,28 @@ bool has_shared_data(const std::string& relative) {
   return std::filesystem::exists(shared_data(relative), ec);
 }
 
+namespace {
+// Removes the directories handed out by temp_dir when the test binary exits.
+struct TempDirs {
+  std::vector<std::filesystem::path> dirs;
+  ~TempDirs() {
+    std::error_code ec;
+    for (const auto& d : dirs) std::filesystem::remove_all(d, ec);
+  }
+};
+TempDirs& temp_dirs() {
+  static TempDirs t;
+  return t;
+}
+}  // namespace
+
 std::filesystem::path temp_dir(const std::string& name) {
   namespace fs = std::filesystem;
   const fs::path dir = fs::temp_directory_path() /
                        ("lex3d_test_" + std::to_string(::getpid()) + "_" + name);
   fs::remove_all(dir);
   fs::create_directories(dir);
+  temp_dirs().dirs.push_back(dir);
   return dir;
 }
 

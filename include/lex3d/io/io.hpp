@@ -24,8 +24,11 @@ enum class Format : std::uint8_t {
   kBinXyz,   ///< little-endian float32 x y z, 12 bytes a point (`.bin`, e.g. Newer College)
   kPcd,      ///< PCL PCD v0.7: ascii, binary or binary_compressed
   kPly,      ///< PLY: ascii, binary_little_endian or binary_big_endian
-  kXyz,      ///< ASCII text, `x y z [more columns]` a line, metres (`.xyz`, `.txt`, `.asc`, `.csv`)
-  kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`
+  kXyz,      ///< ASCII text, `x y z [more columns]` a line, metres (`.xyz`, `.txt`, `.asc`, `.csv`);
+             ///< a 4th column is the intensity when lines have exactly 4, or when a first
+             ///< line `x y z ... intensity ...` names the columns
+  kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`;
+             ///< read into lex3d's right-handed metric frame: x = z_in/100, y = -x_in/100, z = y_in/100
 };
 
 /// Canonical lower-case name of a format ("kitti", "binxyz", "pcd", "ply", "xyz", "uos", "auto").
