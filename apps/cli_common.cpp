@@ -1,5 +1,7 @@
 #include "cli_common.hpp"
 
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <sstream>
@@ -33,6 +35,52 @@ void check_output_path(const std::string& output, const std::vector<std::string>
     if (fs::exists(output, ec) && fs::equivalent(output, in, ec))
       throw CliError(1, "refusing to overwrite input file " + in);
   }
+}
+
+std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
+                              const std::string& poses_path) {
+  std::vector<Cloud> clouds;
+  clouds.reserve(paths.size());
+  for (const auto& p : paths) clouds.push_back(load_cloud(p, format).cloud);
+  if (!poses_path.empty()) {
+    auto poses = io::read_pose_list(poses_path);
+    if (!poses.ok()) throw CliError(2, poses.status().to_string());
+    if (poses.value().size() != clouds.size())
+      throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
+                            std::to_string(clouds.size()) + " scans (one pose a scan, in order)");
+    for (std::size_t i = 0; i < clouds.size(); ++i) {
+      clouds[i].T_world_cloud = poses.value()[i];
+      clouds[i].has_world_pose = true;
+    }
+  }
+  return clouds;
+}
+
+std::array<std::uint8_t, 3> word_color(std::uint32_t word) {
+  // Golden-angle hues at full saturation: neighbouring ids get distant colours.
+  const double h = std::fmod(static_cast<double>(word) * 137.50776405, 360.0) / 60.0;
+  const double x = 1.0 - std::abs(std::fmod(h, 2.0) - 1.0);
+  double r = 0, g = 0, b = 0;
+  switch (static_cast<int>(h)) {
+    case 0: r = 1; g = x; break;
+    case 1: r = x; g = 1; break;
+    case 2: g = 1; b = x; break;
+    case 3: g = x; b = 1; break;
+    case 4: r = x; b = 1; break;
+    default: r = 1; b = x; break;
+  }
+  const double v = (word % 3 == 0) ? 1.0 : (word % 3 == 1 ? 0.8 : 0.6);
+  return {static_cast<std::uint8_t>(255 * r * v), static_cast<std::uint8_t>(255 * g * v),
+          static_cast<std::uint8_t>(255 * b * v)};
+}
+
+std::string numbered_output(const std::string& output, std::size_t index, std::size_t count) {
+  if (count <= 1) return output;
+  namespace fs = std::filesystem;
+  const fs::path p(output);
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "_%03zu", index);
+  return (p.parent_path() / (p.stem().string() + buf + p.extension().string())).string();
 }
 
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option) {

@@ -2,6 +2,8 @@
 // Shared pieces of the lex3d subcommands: errors with exit codes, loading inputs,
 // output-path safety.
 
+#include <array>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -41,8 +43,21 @@ void check_output_path(const std::string& output, const std::vector<std::string>
 /// Parses "x,y,z" into a vector; throws a usage CliError naming `option`.
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option);
 
+/// Reads scans in order; with `poses_path` (one KITTI-style pose a scan, world <- sensor)
+/// each cloud gets its world pose, so features stay upright for tilted sensors.
+std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
+                              const std::string& poses_path);
+
+/// A distinct, stable colour for a word id.
+std::array<std::uint8_t, 3> word_color(std::uint32_t word);
+
+/// OUT for one scan; OUT's stem + "_<index>" + extension for several.
+std::string numbered_output(const std::string& output, std::size_t index, std::size_t count);
+
 /// Registration of each subcommand (one file each).
 void register_info(CLI::App& app);
 void register_features(CLI::App& app);
+void register_learn(CLI::App& app);
+void register_reconstruct(CLI::App& app);
 
 }  // namespace lex3d::cli

@@ -1,8 +1,13 @@
 #pragma once
 // Private helpers shared by the io sources: message formatting, number
-// parsing on byte buffers, line scanning and format sniffing. Not installed.
+// parsing on byte buffers, line scanning, format sniffing, and what the
+// readers (read.cpp, read_bin.cpp, read_pcd.cpp, read_ply.cpp, read_text.cpp)
+// share. Not installed.
 
+#include <algorithm>
+#include <array>
 #include <charconv>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -28,6 +33,17 @@ inline std::string display_path(const std::string& path) { return printable(path
 /// "<path>: <what>" — the shape of every error message of the module.
 inline std::string msg(const std::string& path, const std::string& what) {
   return display_path(path) + ": " + what;
+}
+
+/// "'<s>'": a token of the file quoted for a message (printable, at most 32 characters).
+inline std::string quoted(std::string_view s) { return "'" + printable(s, 32) + "'"; }
+
+/// "line <n>: " — the start of a message about one line of a text file.
+inline std::string line_prefix(std::uint64_t line_no) { return "line " + std::to_string(line_no) + ": "; }
+
+/// "line <n>: '<tok>' is not a number" — every text reader's message for a bad token.
+inline std::string not_a_number(std::uint64_t line_no, std::string_view tok) {
+  return line_prefix(line_no) + quoted(tok) + " is not a number";
 }
 
 /// Lower-cased extension with the dot (".pcd"), or "" when there is none.
@@ -112,6 +128,12 @@ bool parse_number(const char* b, const char* e, T& out) {
   return true;
 }
 
+/// True when [b, e) is a number as parse_number reads it (for a value that is not kept).
+inline bool is_number(const char* b, const char* e) {
+  double ignored = 0.0;
+  return parse_number(b, e, ignored);
+}
+
 /// Splits a line into tokens separated by spaces, tabs and (when `commas`) ',' or ';'.
 /// Calls fn(begin, end) for each token; stops early when fn returns false.
 template <typename Fn>
@@ -131,11 +153,148 @@ void for_each_token(std::string_view line, bool commas, Fn&& fn) {
   }
 }
 
+/// Parses the tokens of one data line (split as by for_each_token; with
+/// `commas`, a token may be empty) left to right: `parse(k, b, e)` takes token k
+/// (0-based) and returns false when it is not a number. `count` is how many
+/// tokens parsed; at the first that does not, returns false with it in `bad`.
+template <typename Fn>
+bool parse_tokens(std::string_view line, bool commas, std::size_t& count, std::string_view& bad,
+                  Fn&& parse) {
+  bool ok = true;
+  count = 0;
+  for_each_token(line, commas, [&](const char* b, const char* e) {
+    if (!parse(count, b, e)) {
+      bad = std::string_view(b, static_cast<std::size_t>(e - b));
+      ok = false;
+      return false;
+    }
+    ++count;
+    return true;
+  });
+  return ok;
+}
+
+/// Splits a line at spaces and tabs.
+std::vector<std::string_view> split_ws(std::string_view line);
+
+/// A whole non-negative decimal integer (no sign, no spaces).
+inline bool parse_u64(std::string_view s, std::uint64_t& out) {
+  if (s.empty()) return false;
+  auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
+  return ec == std::errc() && ptr == s.data() + s.size();
+}
+
 /// Trims spaces/tabs/CR from both ends.
 inline std::string_view trim(std::string_view s) {
   while (!s.empty() && is_space(s.front())) s.remove_prefix(1);
   while (!s.empty() && is_space(s.back())) s.remove_suffix(1);
   return s;
 }
+
+// ---------------------------------------------------------------- binary values
+
+constexpr bool kHostBigEndian = __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__;
+
+/// The value types of binary PCD fields and PLY properties.
+enum class Scalar : std::uint8_t { kI8, kU8, kI16, kU16, kI32, kU32, kI64, kU64, kF32, kF64 };
+
+inline unsigned scalar_size(Scalar s) {
+  switch (s) {
+    case Scalar::kI8: case Scalar::kU8: return 1;
+    case Scalar::kI16: case Scalar::kU16: return 2;
+    case Scalar::kI32: case Scalar::kU32: case Scalar::kF32: return 4;
+    case Scalar::kI64: case Scalar::kU64: case Scalar::kF64: return 8;
+  }
+  return 1;
+}
+
+/// The T stored at `p`, byte-swapped when `swap`.
+template <typename T>
+T load(const std::uint8_t* p, bool swap) {
+  std::array<std::uint8_t, sizeof(T)> b{};
+  std::memcpy(b.data(), p, sizeof(T));
+  if (swap) std::reverse(b.begin(), b.end());
+  T v;
+  std::memcpy(&v, b.data(), sizeof(T));
+  return v;
+}
+
+/// The value at `p` as a double (integers converted exactly up to 2^53).
+inline double load_scalar(const std::uint8_t* p, Scalar s, bool swap) {
+  switch (s) {
+    case Scalar::kI8: return static_cast<double>(static_cast<std::int8_t>(p[0]));
+    case Scalar::kU8: return static_cast<double>(p[0]);
+    case Scalar::kI16: return static_cast<double>(load<std::int16_t>(p, swap));
+    case Scalar::kU16: return static_cast<double>(load<std::uint16_t>(p, swap));
+    case Scalar::kI32: return static_cast<double>(load<std::int32_t>(p, swap));
+    case Scalar::kU32: return static_cast<double>(load<std::uint32_t>(p, swap));
+    case Scalar::kI64: return static_cast<double>(load<std::int64_t>(p, swap));
+    case Scalar::kU64: return static_cast<double>(load<std::uint64_t>(p, swap));
+    case Scalar::kF32: return static_cast<double>(load<float>(p, swap));
+    case Scalar::kF64: return load<double>(p, swap);
+  }
+  return 0.0;
+}
+
+/// The value at `p` as a float (a float32 is copied bit-exactly).
+inline float load_float(const std::uint8_t* p, Scalar s, bool swap) {
+  if (s == Scalar::kF32) return load<float>(p, swap);
+  return static_cast<float>(load_scalar(p, s, swap));
+}
+
+// ---------------------------------------------------------------- readers
+
+constexpr std::size_t kMaxHeaderBytes = 1U << 20;  // PCD / PLY header cap
+constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties (PLY) / columns (text) cap
+
+using Rgb = std::array<std::uint8_t, 3>;
+
+/// Collects the finite points of a file into a ReadResult.
+class Builder {
+ public:
+  Builder(ReadResult& r, bool intensity, bool color) : r_(r), intensity_(intensity), color_(color) {}
+
+  void reserve(std::size_t n) {
+    r_.cloud.points.reserve(n);
+    if (intensity_) r_.cloud.intensity.reserve(n);
+    if (color_) r_.colors.reserve(n);
+  }
+
+  void add(float x, float y, float z, float i = 0.0F, const Rgb& c = {}) {
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+      ++r_.non_finite_dropped;
+      return;
+    }
+    r_.cloud.points.emplace_back(x, y, z);
+    if (intensity_) r_.cloud.intensity.push_back(i);
+    if (color_) r_.colors.push_back(c);
+  }
+
+ private:
+  ReadResult& r_;
+  bool intensity_;
+  bool color_;
+};
+
+// Each reader gets the whole file (`data`, `size` bytes, not empty), fills `r`
+// (all but `format` and `file_bytes`) and returns the first error, a one-line
+// message "<path>: <what>" with a byte offset where one is meaningful.
+
+/// KITTI (`format` kKitti: x y z intensity) or x y z (kBinXyz) float32 records;
+/// `detected` says the format was guessed, which the size error mentions.
+Status read_float_binary(const std::string& path, const std::uint8_t* data, std::size_t size,
+                         Format format, bool detected, ReadResult& r);  // read_bin.cpp
+
+/// PCD v0.7: ascii, binary or binary_compressed.
+Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t size,
+                ReadResult& r);  // read_pcd.cpp
+
+/// PLY: ascii, binary_little_endian or binary_big_endian.
+Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t size,
+                ReadResult& r);  // read_ply.cpp
+
+/// x y z text in metres, or (`uos`) 3DTK `.3d` in centimetres, left-handed.
+Status read_text(const std::string& path, const std::uint8_t* data, std::size_t size, bool uos,
+                 const ReadOptions& options, ReadResult& r);  // read_text.cpp
 
 }  // namespace lex3d::io::detail

@@ -11,7 +11,9 @@
 
 namespace lex3d::io {
 
+using detail::line_prefix;
 using detail::msg;
+using detail::not_a_number;
 
 namespace {
 
@@ -35,10 +37,21 @@ bool parse_line_numbers(std::string_view line, std::vector<double>& out, std::st
   return ok;
 }
 
-std::string line_prefix(std::uint64_t line_no) { return "line " + std::to_string(line_no) + ": "; }
-
-std::string not_a_number(std::uint64_t line_no, std::string_view tok) {
-  return line_prefix(line_no) + "'" + detail::printable(tok, 32) + "' is not a number";
+/// Reads the list file `path` (at most kMaxListBytes; empty is an error) and
+/// calls `fn(lines, line)` on each of its lines, stopping at the first error.
+template <typename Fn>
+Status for_each_list_line(const std::string& path, Fn&& fn) {
+  auto file = read_file(path, kMaxListBytes);
+  if (!file.ok()) return file.status();
+  const auto& bytes = file.value();
+  if (bytes.empty()) return bad_data(msg(path, "file is empty"), 0);
+  const char* text = reinterpret_cast<const char*>(bytes.data());
+  detail::LineCursor lines(text, text + bytes.size());
+  std::string_view line;
+  while (lines.next(line)) {
+    if (Status s = fn(lines, line); !s.ok()) return s;
+  }
+  return {};
 }
 
 /// Nearest rotation to `m` (SVD), or false when `m` is not a rotation within `tol`.
@@ -54,16 +67,9 @@ bool orthonormalise(const Eigen::Matrix3d& m, double tol, Eigen::Matrix3d& out, 
 }  // namespace
 
 StatusOr<std::vector<Pose>> read_pose_list(const std::string& path) {
-  auto file = read_file(path, kMaxListBytes);
-  if (!file.ok()) return file.status();
-  const auto& bytes = file.value();
-  if (bytes.empty()) return bad_data(msg(path, "file is empty"), 0);
-  const char* text = reinterpret_cast<const char*>(bytes.data());
-  detail::LineCursor lines(text, text + bytes.size());
-  std::string_view line;
   std::vector<double> v;
   std::vector<Pose> poses;
-  while (lines.next(line)) {
+  Status s = for_each_list_line(path, [&](const detail::LineCursor& lines, std::string_view line) -> Status {
     const std::uint64_t n = lines.line_no();
     if (detail::trim(line).empty()) {
       return bad_data(msg(path, line_prefix(n) + "blank line (one pose a line, 12 numbers)"),
@@ -100,23 +106,18 @@ StatusOr<std::vector<Pose>> read_pose_list(const std::string& path) {
     p.linear() = R;
     p.translation() = t;
     poses.push_back(p);
-  }
+    return {};
+  });
+  if (!s.ok()) return s;
   return poses;
 }
 
 StatusOr<std::vector<double>> read_number_list(const std::string& path) {
-  auto file = read_file(path, kMaxListBytes);
-  if (!file.ok()) return file.status();
-  const auto& bytes = file.value();
-  if (bytes.empty()) return bad_data(msg(path, "file is empty"), 0);
-  const char* text = reinterpret_cast<const char*>(bytes.data());
-  detail::LineCursor lines(text, text + bytes.size());
-  std::string_view line;
   std::vector<double> v;
   std::vector<double> out;
-  while (lines.next(line)) {
+  Status s = for_each_list_line(path, [&](const detail::LineCursor& lines, std::string_view line) -> Status {
     const std::string_view t = detail::trim(line);
-    if (t.empty() || t.front() == '#') continue;  // blank and comment lines are skipped
+    if (t.empty() || t.front() == '#') return {};  // blank and comment lines are skipped
     std::string_view bad;
     if (!parse_line_numbers(t, v, bad)) {
       return bad_data(msg(path, not_a_number(lines.line_no(), bad)), lines.line_offset());
@@ -127,7 +128,9 @@ StatusOr<std::vector<double>> read_number_list(const std::string& path) {
                       lines.line_offset());
     }
     out.push_back(v[0]);
-  }
+    return {};
+  });
+  if (!s.ok()) return s;
   return out;
 }
 

@@ -24,11 +24,10 @@
 
 namespace lex3d::io {
 
+using detail::kHostBigEndian;
 using detail::msg;
 
 namespace {
-
-constexpr bool kHostBigEndian = __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__;
 
 Status invalid(const std::string& path, const std::string& what) {
   return {ErrorCode::kInvalidArgument, msg(path, what)};
@@ -57,6 +56,19 @@ class Bytes {
     char buf[24];
     const auto res = std::to_chars(buf, buf + sizeof(buf), v);
     b_.insert(b_.end(), buf, res.ptr);
+  }
+  /// "x y z" of point i, then " intensity" when `with_i` (no end of line).
+  void text_point(const Cloud& cloud, std::size_t i, bool with_i) {
+    const auto& p = cloud.points[i];
+    text(p.x());
+    u8(' ');
+    text(p.y());
+    u8(' ');
+    text(p.z());
+    if (with_i) {
+      u8(' ');
+      text(cloud.intensity[i]);
+    }
   }
   std::vector<std::uint8_t>& vec() { return b_; }
 
@@ -99,16 +111,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
   switch (o.pcd_encoding) {
     case PcdEncoding::kAscii:
       for (std::size_t i = 0; i < n; ++i) {
-        const auto& p = cloud.points[i];
-        b.text(p.x());
-        b.u8(' ');
-        b.text(p.y());
-        b.u8(' ');
-        b.text(p.z());
-        if (with_i) {
-          b.u8(' ');
-          b.text(cloud.intensity[i]);
-        }
+        b.text_point(cloud, i, with_i);
         if (with_c) {  // as PCL does: the packed colour written as an unsigned integer
           b.u8(' ');
           b.text(static_cast<std::uint64_t>(pack_rgb(o.colors[i])));
@@ -186,15 +189,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
         b.u8(o.colors[i][2]);
       }
     } else {
-      b.text(p.x());
-      b.u8(' ');
-      b.text(p.y());
-      b.u8(' ');
-      b.text(p.z());
-      if (with_i) {
-        b.u8(' ');
-        b.text(cloud.intensity[i]);
-      }
+      b.text_point(cloud, i, with_i);
       if (with_c) {
         for (int ch = 0; ch < 3; ++ch) {
           b.u8(' ');
@@ -225,16 +220,7 @@ void build_xyz(const Cloud& cloud, bool with_i, std::vector<std::uint8_t>& out) 
   const std::size_t n = cloud.size();
   Bytes b(n * 48);
   for (std::size_t i = 0; i < n; ++i) {
-    const auto& p = cloud.points[i];
-    b.text(p.x());
-    b.u8(' ');
-    b.text(p.y());
-    b.u8(' ');
-    b.text(p.z());
-    if (with_i) {
-      b.u8(' ');
-      b.text(cloud.intensity[i]);
-    }
+    b.text_point(cloud, i, with_i);
     b.u8('\n');
   }
   out = std::move(b.vec());

@@ -24,6 +24,8 @@ const std::map<std::string, std::set<std::string>>& allowed() {
       {"io", {"core", "io"}},
       {"range", {"core", "range"}},
       {"features", {"core", "range", "features"}},
+      {"alphabet", {"core", "range", "features", "alphabet"}},
+      {"model", {"core", "range", "features", "alphabet", "model"}},
       {"eval", {"core", "eval"}},
   };
   return table;

@@ -240,26 +240,36 @@ TEST(ReadErrors, PlyTruncatedBinary) {
 }
 
 TEST(ReadErrors, PlyMalformedHeader) {
-  expect_bad("ply_format", "x.ply", "ply\nformat binary_middle_endian 1.0\nend_header\n",
-             "unknown format 'binary_middle_endian'");
-  expect_bad("ply_noformat", "x.ply", "ply\nelement vertex 0\nproperty float x\nend_header\n",
-             "header has no 'format' line");
-  expect_bad("ply_novertex", "x.ply", "ply\nformat ascii 1.0\nelement face 0\nend_header\n",
-             "header has no 'vertex' element");
-  expect_bad("ply_noz", "x.ply",
-             "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
-             "vertex element has no 'z' property");
-  expect_bad("ply_type", "x.ply",
-             "ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n",
-             "unknown property type 'float128'");
-  expect_bad("ply_prop_first", "x.ply", "ply\nformat ascii 1.0\nproperty float x\nend_header\n",
-             "property before any element");
-  expect_bad("ply_count", "x.ply", "ply\nformat ascii 1.0\nelement vertex -5\nend_header\n",
-             "element needs a name and a non-negative count");
-  expect_bad("ply_huge", "x.ply",
-             "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999999\nproperty float x\n"
-             "property float y\nproperty float z\nend_header\n" + std::string(24, '\0'),
-             "truncated binary data");
+  struct BadPly {
+    const char* test;
+    std::string bytes;
+    const char* needle;
+  };
+  const BadPly cases[] = {
+      {"ply_format", "ply\nformat binary_middle_endian 1.0\nend_header\n",
+       "unknown format 'binary_middle_endian'"},
+      {"ply_noformat", "ply\nelement vertex 0\nproperty float x\nend_header\n",
+       "header has no 'format' line"},
+      {"ply_novertex", "ply\nformat ascii 1.0\nelement face 0\nend_header\n",
+       "header has no 'vertex' element"},
+      {"ply_noz",
+       "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
+       "vertex element has no 'z' property"},
+      {"ply_type", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n",
+       "unknown property type 'float128'"},
+      {"ply_prop_first", "ply\nformat ascii 1.0\nproperty float x\nend_header\n",
+       "property before any element"},
+      {"ply_count", "ply\nformat ascii 1.0\nelement vertex -5\nend_header\n",
+       "element needs a name and a non-negative count"},
+      {"ply_huge",
+       "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999999\nproperty float x\n"
+       "property float y\nproperty float z\nend_header\n" + std::string(24, '\0'),
+       "truncated binary data"},
+  };
+  for (const BadPly& c : cases) {
+    SCOPED_TRACE(c.test);
+    expect_bad(c.test, "x.ply", c.bytes, c.needle);
+  }
 }
 
 TEST(ReadErrors, PlyAsciiNotNumbers) {

@@ -1,0 +1,137 @@
+// lex3d reconstruct SCAN... [--alphabet A] -o OUT.ply: model and reconstruction in
+// memory, written with each point coloured by its word, and the metrics.
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <iostream>
+
+#include "cli_common.hpp"
+#include "json.hpp"
+#include "lex3d/core/timer.hpp"
+#include "model_report.hpp"
+#include "progress.hpp"
+
+namespace lex3d::cli {
+
+namespace {
+
+struct ReconstructOptions {
+  std::vector<std::string> inputs;
+  std::string output;
+  std::string alphabet;
+  std::string format = "auto";
+  std::string poses;
+  int iterations = LearnParams{}.max_iterations;
+  std::uint64_t seed = LearnParams{}.seed;
+  bool no_prune = false;
+  bool json = false;
+  ModelOptions model;
+};
+
+void run_reconstruct(const ReconstructOptions& o) {
+  std::vector<std::string> outputs;
+  for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
+  std::vector<std::string> inputs = o.inputs;
+  if (!o.alphabet.empty()) inputs.push_back(o.alphabet);
+  for (const auto& out : outputs) check_output_path(out, inputs);
+  Stopwatch sw;
+  const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  const ModelParams mp = o.model.params();
+  Alphabet alphabet;
+  std::vector<PreparedScan> scans;
+  std::vector<Model> models;
+  if (o.alphabet.empty()) {
+    LearnParams p;
+    p.model = mp;
+    p.max_iterations = o.iterations;
+    p.seed = o.seed;
+    p.prune = !o.no_prune;
+    ProgressBar bar("learning");
+    LearnResult r = learn_alphabet(clouds, p, [&](const LearnProgress& pr) {
+      char detail[96];
+      std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
+      bar.update(pr.iteration, pr.max_iterations, detail);
+    });
+    alphabet = std::move(r.alphabet);
+    scans = std::move(r.scans);
+    models = std::move(r.models);
+  } else {
+    auto bytes = io::read_file(o.alphabet);
+    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+    auto a = deserialize_alphabet(bytes.value());
+    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
+    alphabet = std::move(a).value();
+    for (const auto& c : clouds) {
+      scans.push_back(prepare_scan(c, mp, alphabet.word_radius));
+      models.push_back(encode_scan(scans.back(), alphabet, !o.no_prune, mp.threads));
+    }
+  }
+  const double model_ms = sw.lap_ms();
+
+  std::vector<ScanReport> reports;
+  for (std::size_t i = 0; i < clouds.size(); ++i) {
+    Reconstruction rec;
+    reports.push_back(measure(o.inputs[i], scans[i], models[i], alphabet, mp.sigma_lambda, mp.threads, &rec));
+    io::WriteOptions wo;
+    wo.colors.reserve(rec.word_of_point.size());
+    for (const auto w : rec.word_of_point) wo.colors.push_back(word_color(w));
+    throw_if_error(io::write_cloud(outputs[i], rec.cloud, wo));
+  }
+  const double measure_ms = sw.lap_ms();
+  std::vector<const Cloud*> cl;
+  std::vector<const Model*> ml;
+  for (std::size_t i = 0; i < clouds.size(); ++i) {
+    cl.push_back(&clouds[i]);
+    ml.push_back(&models[i]);
+  }
+  const ScanReport all = total(reports, cl, ml, alphabet);
+
+  if (o.json) {
+    Json j;
+    j.begin_object();
+    j.value("alphabet_words", alphabet.size()).value("alphabet_points", alphabet.total_points());
+    j.value("word_radius_m", alphabet.word_radius);
+    j.begin_array("scans");
+    for (const auto& r : reports) {
+      j.begin_object();
+      report_json(j, r);
+      j.end_object();
+    }
+    j.end_array();
+    j.begin_object("total");
+    report_json(j, all);
+    j.end_object();
+    j.begin_object("timings_ms").value("model", model_ms).value("reconstruct_and_measure", measure_ms).end_object();
+    j.end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("alphabet: %zu words, %zu points, radius %.3f m\n", alphabet.size(), alphabet.total_points(),
+              alphabet.word_radius);
+  print_report_header();
+  for (const auto& r : reports) print_report_row(r);
+  if (reports.size() > 1) print_report_row(all);
+  std::printf("time: model %.0f ms, reconstruction + metrics %.0f ms\n", model_ms, measure_ms);
+  for (const auto& out : outputs) std::printf("wrote %s\n", out.c_str());
+}
+
+}  // namespace
+
+void register_reconstruct(CLI::App& app) {
+  auto o = std::make_shared<ReconstructOptions>();
+  CLI::App* sub = app.add_subcommand("reconstruct", "Model scans with an alphabet and write the reconstruction");
+  sub->add_option("scans", o->inputs, "Point clouds")->required();
+  sub->add_option("-o,--output", o->output, "Reconstruction (.ply or .pcd; numbered for several scans)")->required();
+  sub->add_option("--alphabet", o->alphabet, "Use this alphabet instead of learning one");
+  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  sub->add_option("--poses", o->poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
+  sub->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
+  sub->add_option("--seed", o->seed, "Seed of the candidate order when learning");
+  sub->add_flag("--no-prune", o->no_prune, "Keep every instance");
+  sub->add_flag("--json", o->json, "Print one JSON object");
+  o->model.add_to(*sub);
+  sub->callback([o] { run_reconstruct(*o); });
+}
+
+}  // namespace lex3d::cli

@@ -1,0 +1,126 @@
+#include "model_report.hpp"
+
+#include <cmath>
+#include <cstdio>
+
+namespace lex3d::cli {
+
+void ModelOptions::add_to(CLI::App& app) {
+  app.add_option("--word-radius", word_radius, "Word radius, m (0 = 8 beam spacings at the median range)");
+  app.add_option("--coverage-factor", coverage_factor, "Coverage points at most this many word radii apart");
+  app.add_option("--word-spacing", word_spacing_factor, "Word points thinned to this many word radii");
+  app.add_option("--sigma-lambda", sigma_lambda, "λ of σ = λ tan(α/2) range (likelihood, inliers)");
+  app.add_option("--threads", threads, "Worker threads")->check(CLI::Range(1, 64));
+}
+
+ModelParams ModelOptions::params() const {
+  ModelParams p;
+  p.word_radius = word_radius;
+  p.coverage_factor = coverage_factor;
+  p.word_spacing_factor = word_spacing_factor;
+  p.sigma_lambda = sigma_lambda;
+  p.threads = threads;
+  return p;
+}
+
+namespace {
+std::vector<std::vector<Eigen::Vector3f>> word_points(const Alphabet& a) {
+  std::vector<std::vector<Eigen::Vector3f>> w;
+  w.reserve(a.size());
+  for (const auto& word : a.words) w.push_back(word.points);
+  return w;
+}
+void split(const Model& m, std::vector<std::uint32_t>& ids, std::vector<Pose>& poses) {
+  for (const auto& inst : m.instances) {
+    ids.push_back(inst.word);
+    poses.push_back(inst.T_cloud_word);
+  }
+}
+}  // namespace
+
+ScanReport measure(const std::string& file, const PreparedScan& scan, const Model& model, const Alphabet& alphabet,
+                   double sigma_lambda, int threads, Reconstruction* reconstruction) {
+  ScanReport r;
+  r.file = file;
+  r.points = scan.cloud.size();
+  r.features = scan.features.size();
+  r.instances = model.instances.size();
+  Reconstruction rec = reconstruct(model, alphabet, alphabet.point_spacing);
+  r.reconstructed_points = rec.cloud.size();
+  std::vector<std::uint32_t> ids;
+  std::vector<Pose> poses;
+  split(model, ids, poses);
+  r.rates = eval::compression_rates(scan.cloud, word_points(alphabet), ids, poses);
+  eval::RangeSigma sigma;
+  sigma.factor = sigma_lambda * std::tan(scan.beam_spacing / 2.0);
+  sigma.min_sigma = 1e-3;
+  sigma.origin = scan.cloud.T_cloud_sensor.translation();
+  r.inliers = eval::inliers_outliers(scan.cloud, rec.cloud, sigma, threads);
+  eval::DistanceParams dp;
+  dp.threads = threads;
+  r.distances = eval::compare_clouds(scan.cloud, rec.cloud, dp);
+  if (reconstruction) *reconstruction = std::move(rec);
+  return r;
+}
+
+ScanReport total(const std::vector<ScanReport>& reports, const std::vector<const Cloud*>& clouds,
+                 const std::vector<const Model*>& models, const Alphabet& alphabet) {
+  ScanReport t;
+  t.file = "total";
+  Cloud all;
+  std::vector<std::uint32_t> ids;
+  std::vector<Pose> poses;
+  double inl = 0, outl = 0, mse_ab = 0, mse_ba = 0;
+  std::size_t rec_points = 0;
+  for (std::size_t i = 0; i < reports.size(); ++i) {
+    const auto& r = reports[i];
+    t.points += r.points;
+    t.features += r.features;
+    t.instances += r.instances;
+    t.reconstructed_points += r.reconstructed_points;
+    inl += r.inliers.inliers * static_cast<double>(r.points);
+    outl += r.inliers.outliers * static_cast<double>(r.reconstructed_points);
+    mse_ab += r.distances.mse_ab * static_cast<double>(r.points);
+    mse_ba += r.distances.mse_ba * static_cast<double>(r.reconstructed_points);
+    rec_points += r.reconstructed_points;
+    all.points.insert(all.points.end(), clouds[i]->points.begin(), clouds[i]->points.end());
+    split(*models[i], ids, poses);
+  }
+  t.rates = eval::compression_rates(all, word_points(alphabet), ids, poses);
+  t.inliers.inliers = t.points ? inl / static_cast<double>(t.points) : 0.0;
+  t.inliers.outliers = rec_points ? outl / static_cast<double>(rec_points) : 0.0;
+  t.distances.mse_ab = t.points ? mse_ab / static_cast<double>(t.points) : 0.0;
+  t.distances.mse_ba = rec_points ? mse_ba / static_cast<double>(rec_points) : 0.0;
+  const double mse = std::max(t.distances.mse_ab, t.distances.mse_ba);
+  t.distances.rmse = std::sqrt(mse);
+  t.distances.d1_psnr_db = mse > 0 ? 10.0 * std::log10(3.0 * 59.70 * 59.70 / mse) : INFINITY;
+  t.distances.chamfer = NAN;
+  t.distances.hausdorff = NAN;
+  for (const auto& r : reports) t.distances.hausdorff = std::isnan(t.distances.hausdorff) ? r.distances.hausdorff : std::max(t.distances.hausdorff, r.distances.hausdorff);
+  return t;
+}
+
+void print_report_header() {
+  std::printf("%-28s %8s %8s %9s %7s %7s %8s %8s %9s %9s %9s\n", "scan", "points", "features", "instances",
+              "rate", "gzip", "inliers", "outliers", "D1 PSNR", "chamfer", "hausdorff");
+}
+
+void print_report_row(const ScanReport& r) {
+  std::string name = r.file;
+  if (name.size() > 28) name = "..." + name.substr(name.size() - 25);
+  std::printf("%-28s %8zu %8zu %9zu %6.1f%% %6.1f%% %7.1f%% %7.1f%% %6.2f dB %7.4f m %7.3f m\n", name.c_str(), r.points,
+              r.features, r.instances, 100.0 * r.rates.rate, 100.0 * r.rates.gzip_rate, 100.0 * r.inliers.inliers,
+              100.0 * r.inliers.outliers, r.distances.d1_psnr_db, r.distances.chamfer, r.distances.hausdorff);
+}
+
+void report_json(Json& j, const ScanReport& r) {
+  j.value("file", r.file).value("points", r.points).value("features", r.features).value("instances", r.instances);
+  j.value("reconstructed_points", r.reconstructed_points);
+  j.value("model_bytes", r.rates.model_bytes).value("raw_bytes", r.rates.raw_bytes);
+  j.value("compression_rate", r.rates.rate).value("gzip_rate", r.rates.gzip_rate);
+  j.value("inliers", r.inliers.inliers).value("outliers", r.inliers.outliers);
+  j.value("d1_psnr_db", r.distances.d1_psnr_db).value("rmse_m", r.distances.rmse);
+  j.value("chamfer_m", r.distances.chamfer).value("hausdorff_m", r.distances.hausdorff);
+}
+
+}  // namespace lex3d::cli

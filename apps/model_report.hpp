@@ -1,0 +1,50 @@
+#pragma once
+// Shared by `learn` and `reconstruct`: options that shape a model, and the metrics
+// of a reconstructed scan (ruhnke2010 §IV plus D1 PSNR / Chamfer / Hausdorff).
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+#include <vector>
+
+#include "json.hpp"
+#include "lex3d/eval/metrics.hpp"
+#include "lex3d/model/model.hpp"
+
+namespace lex3d::cli {
+
+struct ModelOptions {
+  double word_radius = 0.0;
+  double coverage_factor = ModelParams{}.coverage_factor;
+  double word_spacing_factor = ModelParams{}.word_spacing_factor;
+  double sigma_lambda = ModelParams{}.sigma_lambda;
+  int threads = 2;
+  void add_to(CLI::App& app);
+  [[nodiscard]] ModelParams params() const;
+};
+
+struct ScanReport {
+  std::string file;
+  std::size_t points = 0;
+  std::size_t features = 0;
+  std::size_t instances = 0;
+  std::size_t reconstructed_points = 0;
+  eval::RateResult rates;
+  eval::InlierResult inliers;
+  eval::DistanceResult distances;
+};
+
+/// Reconstructs `model` (thinned to the alphabet's point spacing) and measures it
+/// against the scan.
+ScanReport measure(const std::string& file, const PreparedScan& scan, const Model& model, const Alphabet& alphabet,
+                   double sigma_lambda, int threads, Reconstruction* reconstruction = nullptr);
+
+/// Totals over several scans (rates over the summed sizes, the alphabet counted once).
+ScanReport total(const std::vector<ScanReport>& reports, const std::vector<const Cloud*>& clouds,
+                 const std::vector<const Model*>& models, const Alphabet& alphabet);
+
+void print_report_header();
+void print_report_row(const ScanReport& r);
+void report_json(Json& j, const ScanReport& r);
+
+}  // namespace lex3d::cli

@@ -1,0 +1,38 @@
+// Reader of KITTI (x y z intensity) and x y z float32 binaries.
+
+#include <string>
+
+#include "io/internal.hpp"
+#include "lex3d/io/io.hpp"
+
+namespace lex3d::io::detail {
+
+Status read_float_binary(const std::string& path, const std::uint8_t* data, std::size_t size,
+                         Format format, bool detected, ReadResult& r) {
+  const std::size_t stride = format == Format::kKitti ? 16 : 12;
+  if (size % stride != 0) {
+    std::string what = "size " + std::to_string(size) + " is not a multiple of " +
+                       std::to_string(stride) + " bytes";
+    if (detected) {
+      what += " (KITTI x y z intensity) nor of 12 bytes (x y z float32)";
+    } else {
+      what += format == Format::kKitti ? " (KITTI x y z intensity)" : " (x y z float32)";
+    }
+    return bad_data(msg(path, what), size - size % stride);
+  }
+  const std::size_t n = size / stride;
+  r.encoding = "binary_little_endian";
+  Builder b(r, format == Format::kKitti, false);
+  b.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t* p = data + i * stride;
+    const float x = load<float>(p, kHostBigEndian);
+    const float y = load<float>(p + 4, kHostBigEndian);
+    const float z = load<float>(p + 8, kHostBigEndian);
+    const float in = stride == 16 ? load<float>(p + 12, kHostBigEndian) : 0.0F;
+    b.add(x, y, z, in);
+  }
+  return {};
+}
+
+}  // namespace lex3d::io::detail

@@ -1,0 +1,123 @@
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <string>
+#include <unordered_map>
+
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include "lex3d/core/parallel.hpp"
+#include "lex3d/model/model.hpp"
+#include "model/scan_state.hpp"
+
+namespace lex3d {
+
+Reconstruction reconstruct(const Model& model, const Alphabet& alphabet, double spacing) {
+  Reconstruction out;
+  const float inv = spacing > 0.0 ? static_cast<float>(1.0 / spacing) : 0.0F;
+  const float s2 = static_cast<float>(spacing * spacing);
+  // Eq. 3 greedily, in instance order: a point is kept when no kept point is closer
+  // than `spacing`, found through a hash grid of cell `spacing`.
+  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid;
+  const auto key = [](const Eigen::Vector3i& c) {
+    const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::int64_t>(v) + (1 << 20)) & 0x1FFFFFULL; };
+    return u(c.x()) | (u(c.y()) << 21) | (u(c.z()) << 42);
+  };
+  for (const auto& inst : model.instances) {
+    if (inst.word >= alphabet.size()) continue;
+    const Eigen::Isometry3f T = inst.T_cloud_word.cast<float>();
+    for (const auto& p : alphabet.words[inst.word].points) {
+      const Eigen::Vector3f q = T * p;
+      if (inv > 0.0F) {
+        const Eigen::Vector3i c(static_cast<int>(std::floor(q.x() * inv)), static_cast<int>(std::floor(q.y() * inv)),
+                                static_cast<int>(std::floor(q.z() * inv)));
+        bool near = false;
+        for (int dz = -1; dz <= 1 && !near; ++dz)
+          for (int dy = -1; dy <= 1 && !near; ++dy)
+            for (int dx = -1; dx <= 1 && !near; ++dx) {
+              const auto it = grid.find(key(c + Eigen::Vector3i(dx, dy, dz)));
+              if (it == grid.end()) continue;
+              for (const auto k : it->second)
+                if ((out.cloud.points[k] - q).squaredNorm() < s2) {
+                  near = true;
+                  break;
+                }
+            }
+        if (near) continue;
+        grid[key(c)].push_back(static_cast<std::uint32_t>(out.cloud.points.size()));
+      }
+      out.cloud.points.push_back(q);
+      out.word_of_point.push_back(inst.word);
+    }
+  }
+  return out;
+}
+
+double log_likelihood(const PreparedScan& scan, const Model& model, const Alphabet& alphabet) {
+  const Reconstruction r = reconstruct(model, alphabet, 0.0);
+  const std::size_t n = scan.cloud.size();
+  const std::size_t m = r.cloud.size();
+  std::vector<double> terms(n, 0.0);
+  const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
+  const double log_m = m > 1 ? std::log(static_cast<double>(m)) : 0.0;
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree(true);
+  if (m > 0) {
+    auto pc = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    for (const auto& p : r.cloud.points) pc->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+    tree.setInputCloud(pc);
+  }
+  for (std::size_t j = 0; j < n; ++j) {
+    const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
+    const double norm = std::pow(2.0 * M_PI * s * s, -1.5);
+    const double log_floor = std::log(norm) - 4.5 - log_n;
+    double sum = 0.0;
+    if (m > 0) {
+      std::vector<int> idx;
+      std::vector<float> d2;
+      const auto& p = scan.cloud.points[j];
+      tree.radiusSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 3.0 * s, idx, d2);
+      for (const float d : d2) sum += std::exp(-static_cast<double>(d) / (2.0 * s * s));
+      sum *= norm;
+    }
+    terms[j] = sum > 0.0 ? std::max(std::log(sum) - log_m, log_floor) : log_floor;
+  }
+  return std::accumulate(terms.begin(), terms.end(), 0.0);
+}
+
+double bic(double log_likelihood, std::size_t alphabet_points, std::size_t data_points) {
+  const double k = 3.0 * static_cast<double>(alphabet_points);
+  return -2.0 * log_likelihood + k * std::log(static_cast<double>(std::max<std::size_t>(data_points, 1)));
+}
+
+Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune, int threads) {
+  if (alphabet.size() == 0 || scan.features.size() == 0) return {};
+  if (alphabet.descriptor_dim != scan.features.descriptor_dim)
+    throw std::invalid_argument("encode_scan: the alphabet's descriptors have " +
+                                std::to_string(alphabet.descriptor_dim) + " values, the scan's " +
+                                std::to_string(scan.features.descriptor_dim));
+  const WordIndex index(alphabet);
+  const auto matches = index.nearest(scan.features.descriptors.data(), scan.features.size(), threads);
+  if (!prune) {
+    Model m;
+    for (std::size_t f = 0; f < matches.size(); ++f)
+      m.instances.push_back({matches[f].word, scan.features.features[f].T_cloud_feature, static_cast<std::uint32_t>(f)});
+    return m;
+  }
+  detail::ScanState state(scan);
+  std::vector<detail::ScanState::Change> changes(matches.size());
+  parallel_for(matches.size(), threads, [&](std::size_t f) {
+    auto& c = changes[f];
+    c.feature = static_cast<std::uint32_t>(f);
+    c.word = static_cast<std::int32_t>(matches[f].word);
+    const Word& w = alphabet.words[matches[f].word];
+    c.word_points = static_cast<std::uint32_t>(w.points.size());
+    state.contribution(f, w, c.contrib);
+  });
+  state.apply(changes);
+  state.prune(alphabet);
+  return state.model();
+}
+
+}  // namespace lex3d

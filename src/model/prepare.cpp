@@ -1,0 +1,101 @@
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include "lex3d/core/parallel.hpp"
+#include "lex3d/core/timer.hpp"
+#include "lex3d/model/model.hpp"
+
+namespace lex3d {
+
+void ModelParams::validate() const {
+  if (!(word_radius == 0.0 || (word_radius > 0.0 && word_radius <= 10.0)))
+    throw std::invalid_argument("ModelParams::word_radius must be 0 (derive) or in (0, 10] m");
+  if (!(coverage_factor > 0.0 && coverage_factor <= 10.0))
+    throw std::invalid_argument("ModelParams::coverage_factor must be in (0, 10]");
+  if (!(word_spacing_factor >= 0.0 && word_spacing_factor <= 1.0))
+    throw std::invalid_argument("ModelParams::word_spacing_factor must be in [0, 1]");
+  if (!(sigma_lambda > 0.0 && sigma_lambda <= 100.0))
+    throw std::invalid_argument("ModelParams::sigma_lambda must be in (0, 100]");
+  if (threads < 1 || threads > 64) throw std::invalid_argument("ModelParams::threads must be in [1, 64]");
+  features.validate();
+}
+
+namespace {
+
+double median_range(const Cloud& cloud) {
+  if (cloud.empty()) return 0.0;
+  const Eigen::Isometry3f T_sensor_cloud = cloud.T_cloud_sensor.inverse().cast<float>();
+  std::vector<float> r;
+  r.reserve(cloud.size());
+  for (const auto& p : cloud.points) r.push_back((T_sensor_cloud * p).norm());
+  const auto mid = r.begin() + static_cast<std::ptrdiff_t>(r.size() / 2);
+  std::nth_element(r.begin(), mid, r.end());
+  return static_cast<double>(*mid);
+}
+
+}  // namespace
+
+double derive_word_radius(const Cloud& cloud) {
+  const auto res = estimate_angular_resolution(cloud);
+  if (!res) return 0.25;  // too few points to measure: ruhnke2010's outdoor value
+  const double spacing = median_range(cloud) * std::sqrt(res->azimuth_rad * res->elevation_rad);
+  return std::clamp(8.0 * spacing, 0.1, 1.0);
+}
+
+PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double word_radius) {
+  params.validate();
+  Stopwatch sw;
+  PreparedScan s;
+  s.cloud = cloud;
+  s.word_radius = word_radius > 0.0 ? word_radius
+                  : params.word_radius > 0.0 ? params.word_radius
+                                             : derive_word_radius(cloud);
+  FeatureParams fp = params.features;
+  fp.threads = params.threads;
+  fp.coverage.distance = params.coverage_factor * s.word_radius;
+  if (cloud.has_world_pose) fp.descriptor.up = cloud.T_world_cloud.linear().transpose() * Eigen::Vector3d::UnitZ();
+  FeatureResult fr = extract_features(cloud, fp);
+  s.features = std::move(fr.features);
+  s.timings = fr.timings;
+  const auto res = estimate_angular_resolution(cloud);
+  s.beam_spacing = res ? std::max(res->azimuth_rad, res->elevation_rad) : 0.2 * M_PI / 180.0;
+
+  // σ of eq. 13 for every point.
+  const double factor = params.sigma_lambda * std::tan(s.beam_spacing / 2.0);
+  const Eigen::Vector3f origin = cloud.T_cloud_sensor.translation().cast<float>();
+  s.sigma.resize(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i)
+    s.sigma[i] = static_cast<float>(std::max(1e-3, factor * static_cast<double>((cloud.points[i] - origin).norm())));
+
+  // Points within δ + 3σ of each feature point (the most a word placed there can reach).
+  s.nearby.resize(s.features.size());
+  if (!cloud.empty() && !s.features.features.empty()) {
+    auto pc = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    pc->reserve(cloud.size());
+    for (const auto& p : cloud.points) pc->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+    pcl::KdTreeFLANN<pcl::PointXYZ> tree(true);
+    tree.setInputCloud(pc);
+    parallel_for(s.features.size(), params.threads, [&](std::size_t f) {
+      const Eigen::Vector3d t = s.features.features[f].T_cloud_feature.translation();
+      const double range = (t - cloud.T_cloud_sensor.translation()).norm();
+      const double reach = s.word_radius + 3.0 * factor * (range + s.word_radius) + 1e-3;
+      std::vector<int> idx;
+      std::vector<float> d2;
+      tree.radiusSearch(pcl::PointXYZ(static_cast<float>(t.x()), static_cast<float>(t.y()), static_cast<float>(t.z())),
+                        reach, idx, d2);
+      auto& out = s.nearby[f];
+      out.assign(idx.begin(), idx.end());
+      std::sort(out.begin(), out.end());
+    });
+  }
+  s.prepare_ms = sw.elapsed_ms();
+  return s;
+}
+
+}  // namespace lex3d

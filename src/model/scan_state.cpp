@@ -1,0 +1,174 @@
+#include "model/scan_state.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace lex3d::detail {
+
+ScanState::ScanState(const PreparedScan& scan) : scan_(scan) {
+  const std::size_t n = scan.cloud.size();
+  const std::size_t nf = scan.features.size();
+  inv_two_sigma2_.resize(n);
+  reach2_.resize(n);
+  norm_.resize(n);
+  log_floor_.resize(n);
+  const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
+  for (std::size_t j = 0; j < n; ++j) {
+    const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
+    inv_two_sigma2_[j] = static_cast<float>(1.0 / (2.0 * s * s));
+    reach2_[j] = static_cast<float>(9.0 * s * s);
+    norm_[j] = std::pow(2.0 * M_PI * s * s, -1.5);
+    log_floor_[j] = std::log(norm_[j]) - 4.5 - log_n;
+  }
+  S_.assign(n, 0.0);
+  delta_.assign(n, 0.0);
+  word_.assign(nf, -1);
+  word_points_.assign(nf, 0);
+  cache_.resize(nf);
+  local_.resize(nf);
+  for (std::size_t f = 0; f < nf; ++f) {
+    const Eigen::Isometry3f T_feature_cloud = scan.features.features[f].T_cloud_feature.inverse().cast<float>();
+    local_[f].reserve(scan.nearby[f].size());
+    for (const std::uint32_t j : scan.nearby[f]) local_[f].push_back(T_feature_cloud * scan.cloud.points[j]);
+  }
+  recompute();
+}
+
+void ScanState::recompute() {
+  const double lm = log_m(M_);
+  log_l_ = 0.0;
+  above_ = 0;
+  for (std::size_t j = 0; j < S_.size(); ++j) {
+    log_l_ += log_term(j, S_[j], lm);
+    above_ += above(j, S_[j], lm) ? 1 : 0;
+  }
+}
+
+void ScanState::contribution(std::size_t f, const Word& word, std::vector<float>& out) const {
+  const auto& nearby = scan_.nearby[f];
+  const auto& local = local_[f];
+  out.assign(nearby.size(), 0.0F);
+  for (std::size_t k = 0; k < nearby.size(); ++k) {
+    const std::uint32_t j = nearby[k];
+    const Eigen::Vector3f q = local[k];
+    const float reach2 = reach2_[j];
+    const float a = inv_two_sigma2_[j];
+    float s = 0.0F;
+    for (const auto& p : word.points) {
+      const float d2 = (p - q).squaredNorm();
+      if (d2 <= reach2) s += std::exp(-d2 * a);
+    }
+    out[k] = static_cast<float>(s * norm_[j]);
+  }
+}
+
+double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
+  std::int64_t dm = 0;
+  for (const auto& c : changes) {
+    const auto& nearby = scan_.nearby[c.feature];
+    const auto& old = cache_[c.feature];
+    for (std::size_t k = 0; k < nearby.size(); ++k) {
+      const std::uint32_t j = nearby[k];
+      const double before = k < old.size() ? old[k] : 0.0;
+      const double after = k < c.contrib.size() ? c.contrib[k] : 0.0;
+      if (before == 0.0 && after == 0.0) continue;
+      if (delta_[j] == 0.0) touched_.push_back(j);
+      delta_[j] += after - before;
+      if (delta_[j] == 0.0) delta_[j] = 1e-300;  // keep it marked as touched
+    }
+    dm += static_cast<std::int64_t>(c.word_points) - static_cast<std::int64_t>(word_points_[c.feature]);
+  }
+  const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
+  const double lm_old = log_m(M_);
+  const double lm_new = log_m(m_new);
+  double d = 0.0;
+  std::size_t touched_above = 0;
+  for (const std::uint32_t j : touched_) {
+    const double s_new = std::max(0.0, S_[j] + delta_[j]);
+    d += log_term(j, s_new, lm_new) - log_term(j, S_[j], lm_old);
+    touched_above += above(j, S_[j], lm_old) ? 1 : 0;
+  }
+  d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
+  for (const std::uint32_t j : touched_) delta_[j] = 0.0;
+  touched_.clear();
+  return d;
+}
+
+void ScanState::apply(std::vector<Change>& changes) {
+  // The change of ln L is evaluated exactly as delta_log_likelihood does, then the
+  // state moves.
+  log_l_ += delta_log_likelihood(changes);
+  std::int64_t dm = 0;
+  for (const auto& c : changes)
+    dm += static_cast<std::int64_t>(c.word_points) - static_cast<std::int64_t>(word_points_[c.feature]);
+  const double lm_old = log_m(M_);
+  const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
+  const double lm_new = log_m(m_new);
+  for (auto& c : changes) {
+    const auto& nearby = scan_.nearby[c.feature];
+    auto& old = cache_[c.feature];
+    for (std::size_t k = 0; k < nearby.size(); ++k) {
+      const std::uint32_t j = nearby[k];
+      const double before = k < old.size() ? old[k] : 0.0;
+      const double after = k < c.contrib.size() ? c.contrib[k] : 0.0;
+      if (before == 0.0 && after == 0.0) continue;
+      if (delta_[j] == 0.0) touched_.push_back(j);
+      delta_[j] += after - before;
+      if (delta_[j] == 0.0) delta_[j] = 1e-300;
+    }
+    word_[c.feature] = c.word;
+    word_points_[c.feature] = c.word_points;
+    old = std::move(c.contrib);
+  }
+  for (const std::uint32_t j : touched_) {
+    const bool was = above(j, S_[j], lm_old);
+    S_[j] = std::max(0.0, S_[j] + delta_[j]);
+    const bool is = above(j, S_[j], lm_new);
+    above_ = above_ + (is ? 1 : 0) - (was ? 1 : 0);
+    delta_[j] = 0.0;
+  }
+  touched_.clear();
+  M_ = m_new;
+}
+
+std::size_t ScanState::prune(const Alphabet& alphabet) {
+  std::vector<std::size_t> count(alphabet.size(), 0);
+  for (const auto w : word_)
+    if (w >= 0) ++count[static_cast<std::size_t>(w)];
+  std::vector<std::uint32_t> order(alphabet.size());
+  std::iota(order.begin(), order.end(), 0U);
+  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return count[a] > count[b]; });
+  std::size_t dropped = 0;
+  std::vector<Change> one(1);
+  for (const std::uint32_t w : order) {
+    for (std::size_t f = 0; f < word_.size(); ++f) {
+      if (word_[f] != static_cast<std::int32_t>(w)) continue;
+      one[0].feature = static_cast<std::uint32_t>(f);
+      one[0].word = -1;
+      one[0].word_points = 0;
+      one[0].contrib.clear();
+      if (delta_log_likelihood(one) >= 0.0) {
+        apply(one);
+        ++dropped;
+      }
+    }
+  }
+  recompute();
+  return dropped;
+}
+
+Model ScanState::model() const {
+  Model m;
+  for (std::size_t f = 0; f < word_.size(); ++f) {
+    if (word_[f] < 0) continue;
+    Instance inst;
+    inst.word = static_cast<std::uint32_t>(word_[f]);
+    inst.T_cloud_word = scan_.features.features[f].T_cloud_feature;
+    inst.feature = static_cast<std::uint32_t>(f);
+    m.instances.push_back(inst);
+  }
+  return m;
+}
+
+}  // namespace lex3d::detail

@@ -1,0 +1,165 @@
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "lex3d/eval/metrics.hpp"
+#include "lex3d/model/model.hpp"
+#include "support/test_support.hpp"
+
+using namespace lex3d;
+
+namespace {
+
+LearnParams quick_params() {
+  LearnParams p;
+  p.max_iterations = 120;
+  p.patience = 60;
+  p.model.threads = 2;
+  return p;
+}
+
+// The likelihood as documented, by brute force over every pair of points.
+double brute_force_log_likelihood(const PreparedScan& scan, const Model& model, const Alphabet& alphabet) {
+  std::vector<Eigen::Vector3d> rec;
+  for (const auto& inst : model.instances)
+    for (const auto& p : alphabet.words[inst.word].points) rec.push_back(inst.T_cloud_word * p.cast<double>());
+  const double n = static_cast<double>(scan.cloud.size());
+  const double log_m = rec.size() > 1 ? std::log(static_cast<double>(rec.size())) : 0.0;
+  double l = 0.0;
+  for (std::size_t j = 0; j < scan.cloud.size(); ++j) {
+    const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
+    const double norm = std::pow(2.0 * M_PI * s * s, -1.5);
+    const double log_bg = std::log(norm) - 4.5 - std::log(n);
+    double sum = 0.0;
+    for (const auto& r : rec) {
+      const double d2 = (r - scan.cloud.points[j].cast<double>()).squaredNorm();
+      if (d2 <= 9.0 * s * s) sum += norm * std::exp(-d2 / (2.0 * s * s));
+    }
+    l += sum > 0.0 ? std::max(std::log(sum) - log_m, log_bg) : log_bg;
+  }
+  return l;
+}
+
+Cloud crop(const Cloud& c, float radius) {
+  Cloud out;
+  for (const auto& p : c.points)
+    if (p.norm() < radius) out.points.push_back(p);
+  return out;
+}
+
+}  // namespace
+
+TEST(Likelihood, DirectMatchesBruteForceOnASmallRealCloud) {
+  const Cloud c = crop(test::load_or_fail(test::sample("newer_college_00.bin")), 12.0F);
+  ASSERT_GT(c.size(), 500U);
+  LearnParams p = quick_params();
+  p.max_iterations = 30;
+  const LearnResult r = learn_alphabet({c}, p);
+  ASSERT_GT(r.alphabet.size(), 0U);
+  const double direct = log_likelihood(r.scans[0], r.models[0], r.alphabet);
+  const double brute = brute_force_log_likelihood(r.scans[0], r.models[0], r.alphabet);
+  EXPECT_NEAR(direct, brute, 1e-6 * std::abs(brute));
+  // The learner's incremental bookkeeping agrees with both.
+  EXPECT_NEAR(r.log_likelihood, brute, 1e-6 * std::abs(brute));
+}
+
+TEST(Learner, BicDecreasesOnEveryAcceptedWord) {
+  const Cloud c = test::load_or_fail(test::sample("kitti00_000000.bin"));
+  const LearnResult r = learn_alphabet({c}, quick_params());
+  ASSERT_GT(r.accepted, 3U);
+  ASSERT_EQ(r.bic_history.size(), r.accepted_history.size() + 1);
+  for (std::size_t i = 0; i < r.accepted_history.size(); ++i) {
+    if (r.accepted_history[i])
+      EXPECT_LT(r.bic_history[i + 1], r.bic_history[i]) << "candidate " << i;
+    else
+      EXPECT_EQ(r.bic_history[i + 1], r.bic_history[i]) << "candidate " << i;
+  }
+  EXPECT_EQ(r.alphabet.size(), r.accepted);
+  EXPECT_LT(r.final_bic, r.bic_history.front());
+}
+
+TEST(Learner, DeterministicForASeedAndAnyThreadCount) {
+  const Cloud c = test::load_or_fail(test::sample("newer_college_00.bin"));
+  LearnParams p = quick_params();
+  p.max_iterations = 60;
+  p.model.threads = 1;
+  const LearnResult a = learn_alphabet({c}, p);
+  p.model.threads = 2;
+  const LearnResult b = learn_alphabet({c}, p);
+  EXPECT_EQ(serialize_alphabet(a.alphabet), serialize_alphabet(b.alphabet));
+  ASSERT_EQ(a.models[0].instances.size(), b.models[0].instances.size());
+  for (std::size_t i = 0; i < a.models[0].instances.size(); ++i)
+    EXPECT_EQ(a.models[0].instances[i].word, b.models[0].instances[i].word);
+  p.seed = 99;
+  const LearnResult other = learn_alphabet({c}, p);
+  EXPECT_NE(serialize_alphabet(a.alphabet), serialize_alphabet(other.alphabet));
+}
+
+TEST(Pruning, NeverLowersTheLikelihood) {
+  const Cloud c = test::load_or_fail(test::sample("newer_college_00.bin"));
+  LearnParams p = quick_params();
+  p.prune = false;
+  const LearnResult r = learn_alphabet({c}, p);
+  ASSERT_GT(r.alphabet.size(), 0U);
+  const Model full = encode_scan(r.scans[0], r.alphabet, false);
+  const Model pruned = encode_scan(r.scans[0], r.alphabet, true);
+  EXPECT_EQ(full.instances.size(), r.scans[0].features.size());
+  EXPECT_LT(pruned.instances.size(), full.instances.size());
+  EXPECT_GE(log_likelihood(r.scans[0], pruned, r.alphabet), log_likelihood(r.scans[0], full, r.alphabet));
+}
+
+TEST(Learner, EmptyAndTinyScans) {
+  LearnParams p = quick_params();
+  const LearnResult empty = learn_alphabet({Cloud{}}, p);
+  EXPECT_EQ(empty.alphabet.size(), 0U);
+  ASSERT_EQ(empty.models.size(), 1U);
+  EXPECT_TRUE(empty.models[0].instances.empty());
+  EXPECT_TRUE(reconstruct(empty.models[0], empty.alphabet, 0.01).cloud.empty());
+  Cloud one;
+  one.points.emplace_back(3.0F, 1.0F, 0.0F);
+  const LearnResult single = learn_alphabet({one}, p);
+  EXPECT_EQ(single.alphabet.size(), 0U);  // a word needs at least 3 points
+  EXPECT_TRUE(learn_alphabet({}, p).models.empty());
+  EXPECT_TRUE(encode_scan(prepare_scan(Cloud{}, p.model, 0.3), single.alphabet, true).instances.empty());
+}
+
+TEST(Model, ReconstructionPlacesWordsAndThinsToTheSpacing) {
+  Alphabet a;
+  a.descriptor_dim = 1;
+  a.word_radius = 0.5;
+  Word w;
+  for (int i = 0; i < 10; ++i) w.points.emplace_back(0.01F * static_cast<float>(i), 0.0F, 0.0F);
+  w.descriptor = {0.0F};
+  a.words.push_back(w);
+  Model m;
+  Pose T = Pose::Identity();
+  T.translation() = Eigen::Vector3d(5, 0, 0);
+  m.instances.push_back({0, T, 0});
+  m.instances.push_back({0, T, 1});  // the same place twice
+  EXPECT_EQ(reconstruct(m, a, 0.0).cloud.size(), 20U);
+  const Reconstruction thin = reconstruct(m, a, 0.025);
+  EXPECT_EQ(thin.cloud.size(), 4U);  // x = 5.00, 5.03, 5.06, 5.09
+  for (const auto& p : thin.cloud.points) EXPECT_NEAR(p.x(), 5.0F, 0.1F);
+}
+
+// ruhnke2010 §IV-B: an alphabet learned on one scan rebuilds a different scan.
+TEST(SceneRebuilding, AlphabetOfOneBalmScanRebuildsAnother) {
+  LEX3D_REQUIRE_SHARED("balm/000060.bin");
+  const Cloud a = test::load_or_fail(test::shared_data("balm/000000.bin"));
+  const Cloud b = test::load_or_fail(test::shared_data("balm/000060.bin"));
+  LearnParams p = quick_params();
+  p.max_iterations = 300;
+  const LearnResult r = learn_alphabet({a}, p);
+  ASSERT_GT(r.alphabet.size(), 5U);
+  const PreparedScan sb = prepare_scan(b, p.model, r.alphabet.word_radius);
+  const Model mb = encode_scan(sb, r.alphabet, true);
+  const Reconstruction rec = reconstruct(mb, r.alphabet, r.alphabet.point_spacing);
+  eval::RangeSigma sigma;
+  sigma.factor = p.model.sigma_lambda * std::tan(sb.beam_spacing / 2.0);
+  sigma.min_sigma = 1e-3;
+  const eval::InlierResult io = eval::inliers_outliers(b, rec.cloud, sigma);
+  RecordProperty("inliers", std::to_string(io.inliers));
+  RecordProperty("outliers", std::to_string(io.outliers));
+  EXPECT_GT(io.inliers, 0.5) << "outliers " << io.outliers;
+}
