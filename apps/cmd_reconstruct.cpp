@@ -64,7 +64,7 @@ void run_reconstruct(const ReconstructOptions& o) {
     alphabet = std::move(a).value();
     for (const auto& c : clouds) {
       scans.push_back(prepare_scan(c, mp, alphabet.word_radius));
-      models.push_back(encode_scan(scans.back(), alphabet, !o.no_prune, mp.threads));
+      models.push_back(encode_scan(scans.back(), alphabet, !o.no_prune, mp));
     }
   }
   const double model_ms = sw.lap_ms();

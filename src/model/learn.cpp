@@ -135,8 +135,10 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
   }
   res.learn_ms = sw.lap_ms();
 
-  if (params.prune)
-    for (auto& st : states) st.prune(res.alphabet);
+  for (std::size_t s = 0; s < states.size(); ++s) {
+    states[s].refine(res.alphabet, params.model.refine_iterations, params.model.refine_reach_factor * radius, threads);
+    if (params.prune) states[s].prune(res.alphabet);
+  }
   res.log_likelihood = 0.0;
   for (const auto& st : states) {
     res.log_likelihood += st.log_likelihood();

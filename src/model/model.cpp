@@ -91,7 +91,9 @@ double bic(double log_likelihood, std::size_t alphabet_points, std::size_t data_
   return -2.0 * log_likelihood + k * std::log(static_cast<double>(std::max<std::size_t>(data_points, 1)));
 }
 
-Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune, int threads) {
+Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune, const ModelParams& params) {
+  params.validate();
+  const int threads = params.threads;
   if (alphabet.size() == 0 || scan.features.size() == 0) return {};
   if (alphabet.descriptor_dim != scan.features.descriptor_dim)
     throw std::invalid_argument("encode_scan: the alphabet's descriptors have " +
@@ -99,12 +101,6 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
                                 std::to_string(scan.features.descriptor_dim));
   const WordIndex index(alphabet);
   const auto matches = index.nearest(scan.features.descriptors.data(), scan.features.size(), threads);
-  if (!prune) {
-    Model m;
-    for (std::size_t f = 0; f < matches.size(); ++f)
-      m.instances.push_back({matches[f].word, scan.features.features[f].T_cloud_feature, static_cast<std::uint32_t>(f)});
-    return m;
-  }
   detail::ScanState state(scan);
   std::vector<detail::ScanState::Change> changes(matches.size());
   parallel_for(matches.size(), threads, [&](std::size_t f) {
@@ -116,7 +112,8 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
     state.contribution(f, w, c.contrib);
   });
   state.apply(changes);
-  state.prune(alphabet);
+  state.refine(alphabet, params.refine_iterations, params.refine_reach_factor * scan.word_radius, threads);
+  if (prune) state.prune(alphabet);
   return state.model();
 }
 

@@ -4,6 +4,10 @@
 #include <cmath>
 #include <numeric>
 
+#include <Eigen/SVD>
+
+#include "lex3d/core/parallel.hpp"
+
 namespace lex3d::detail {
 
 ScanState::ScanState(const PreparedScan& scan) : scan_(scan) {
@@ -27,8 +31,10 @@ ScanState::ScanState(const PreparedScan& scan) : scan_(scan) {
   word_points_.assign(nf, 0);
   cache_.resize(nf);
   local_.resize(nf);
+  pose_.resize(nf);
   for (std::size_t f = 0; f < nf; ++f) {
-    const Eigen::Isometry3f T_feature_cloud = scan.features.features[f].T_cloud_feature.inverse().cast<float>();
+    pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
+    const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
     local_[f].reserve(scan.nearby[f].size());
     for (const std::uint32_t j : scan.nearby[f]) local_[f].push_back(T_feature_cloud * scan.cloud.points[j]);
   }
@@ -158,13 +164,93 @@ std::size_t ScanState::prune(const Alphabet& alphabet) {
   return dropped;
 }
 
+namespace {
+
+// One rigid correction D (q ≈ D p) from word points to their nearest scan points,
+// in the instance's frame; identity when fewer than 3 pairs fall within reach.
+Eigen::Isometry3f icp_step(const std::vector<Eigen::Vector3f>& word, const std::vector<Eigen::Vector3f>& scan,
+                           float reach2) {
+  Eigen::Vector3d ca = Eigen::Vector3d::Zero(), cb = Eigen::Vector3d::Zero();
+  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> pairs;
+  pairs.reserve(word.size());
+  for (const auto& p : word) {
+    float best = reach2;
+    const Eigen::Vector3f* match = nullptr;
+    for (const auto& q : scan) {
+      const float d = (q - p).squaredNorm();
+      if (d < best) {
+        best = d;
+        match = &q;
+      }
+    }
+    if (match == nullptr) continue;
+    pairs.emplace_back(p.cast<double>(), match->cast<double>());
+    ca += pairs.back().first;
+    cb += pairs.back().second;
+  }
+  Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
+  if (pairs.size() < 3) return D;
+  ca /= static_cast<double>(pairs.size());
+  cb /= static_cast<double>(pairs.size());
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (const auto& [a, b] : pairs) H += (a - ca) * (b - cb).transpose();
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d V = svd.matrixV();
+  Eigen::Matrix3d R = V * svd.matrixU().transpose();
+  if (R.determinant() < 0.0) {
+    V.col(2) *= -1.0;
+    R = V * svd.matrixU().transpose();
+  }
+  D.linear() = R.cast<float>();
+  D.translation() = (cb - R * ca).cast<float>();
+  return D;
+}
+
+}  // namespace
+
+void ScanState::refine(const Alphabet& alphabet, int iterations, double max_distance, int threads) {
+  if (iterations <= 0) return;
+  const float reach2 = static_cast<float>(max_distance * max_distance);
+  std::vector<std::size_t> active;
+  for (std::size_t f = 0; f < word_.size(); ++f)
+    if (word_[f] >= 0) active.push_back(f);
+  std::vector<Change> changes(active.size());
+  std::vector<Eigen::Isometry3f> correction(active.size(), Eigen::Isometry3f::Identity());
+  parallel_for(active.size(), threads, [&](std::size_t i) {
+    const std::size_t f = active[i];
+    // ICP in the instance's frame: D moves the word onto the nearby scan points;
+    // the new pose is pose · D.
+    Word moved = alphabet.words[static_cast<std::size_t>(word_[f])];
+    Eigen::Isometry3f& total = correction[i];
+    for (int it = 0; it < iterations; ++it) {
+      const Eigen::Isometry3f D = icp_step(moved.points, local_[f], reach2);
+      if (D.isApprox(Eigen::Isometry3f::Identity(), 1e-7F)) break;
+      for (auto& p : moved.points) p = D * p;
+      total = D * total;
+    }
+    Change& c = changes[i];
+    c.feature = static_cast<std::uint32_t>(f);
+    c.word = word_[f];
+    c.word_points = word_points_[f];
+    contribution(f, moved, c.contrib);  // the moved word against the unchanged frame
+  }, 8);
+  apply(changes);
+  for (std::size_t i = 0; i < active.size(); ++i) {
+    const std::size_t f = active[i];
+    pose_[f] = pose_[f] * correction[i];
+    const Eigen::Isometry3f inv = correction[i].inverse();
+    for (auto& q : local_[f]) q = inv * q;
+  }
+  recompute();
+}
+
 Model ScanState::model() const {
   Model m;
   for (std::size_t f = 0; f < word_.size(); ++f) {
     if (word_[f] < 0) continue;
     Instance inst;
     inst.word = static_cast<std::uint32_t>(word_[f]);
-    inst.T_cloud_word = scan_.features.features[f].T_cloud_feature;
+    inst.T_cloud_word = pose_[f].cast<double>();
     inst.feature = static_cast<std::uint32_t>(f);
     m.instances.push_back(inst);
   }

@@ -48,6 +48,11 @@ class ScanState {
   /// occurrence count (ruhnke2010 §III-D). Returns how many were dropped.
   std::size_t prune(const Alphabet& alphabet);
 
+  /// Refines the pose of every instance by point-to-point ICP of its word against the
+  /// scan points near it (correspondences within max_distance, `iterations` rounds),
+  /// then re-scores the changed instances.
+  void refine(const Alphabet& alphabet, int iterations, double max_distance, int threads);
+
   /// The model: one instance per feature that holds a word.
   [[nodiscard]] Model model() const;
 
@@ -65,7 +70,8 @@ class ScanState {
   }
 
   const PreparedScan& scan_;
-  std::vector<std::vector<Eigen::Vector3f>> local_;  // nearby points in each feature's frame
+  std::vector<Eigen::Isometry3f> pose_;               // instance pose of each feature (cloud frame)
+  std::vector<std::vector<Eigen::Vector3f>> local_;  // nearby points in that pose's frame
   std::vector<float> inv_two_sigma2_;                 // 1 / (2σ²)
   std::vector<float> reach2_;                         // (3σ)²
   std::vector<double> norm_;                          // (2πσ²)^(-3/2)

@@ -25,6 +25,11 @@ struct ModelParams {
   double word_spacing_factor = 0.1;
   /// λ of eq. 13: σ = λ · tan(α/2) · range, α the coarser beam spacing; (0, 100].
   double sigma_lambda = 2.0;
+  /// Rounds of point-to-point ICP that fit each instance's pose to the scan before
+  /// pruning (0 keeps the feature frames); [0, 50].
+  int refine_iterations = 5;
+  /// ICP pairs a word point with a scan point at most this many word radii away; (0, 1].
+  double refine_reach_factor = 0.3;
   /// Feature extraction (the coverage distance is set from the word radius).
   FeatureParams features;
   /// Worker threads; [1, 64]. Results do not depend on it.
@@ -85,9 +90,11 @@ struct Reconstruction {
 [[nodiscard]] double bic(double log_likelihood, std::size_t alphabet_points, std::size_t data_points);
 
 /// Encodes a scan with a given alphabet: every feature takes the word with the nearest
-/// descriptor (§III-C); then, when `prune`, instances whose removal does not lower the
-/// likelihood are dropped (§III-D).
-[[nodiscard]] Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune, int threads = 2);
+/// descriptor (§III-C), each instance's pose is fitted to the scan by ICP (when
+/// params.refine_iterations > 0), then, when `prune`, instances whose removal does not
+/// lower the likelihood are dropped (§III-D).
+[[nodiscard]] Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune,
+                                const ModelParams& params = {});
 
 struct LearnParams {
   ModelParams model;
