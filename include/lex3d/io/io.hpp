@@ -109,3 +109,20 @@ struct WriteOptions {
                                    const std::vector<std::uint8_t>& rgb);
 
 }  // namespace lex3d::io
+
+namespace lex3d::io {
+
+/// What write_octomap produced.
+struct OctomapStats {
+  std::size_t occupied_leaves = 0;
+  std::size_t free_leaves = 0;
+  std::uint64_t file_bytes = 0;
+};
+
+/// Builds an OctoMap occupancy tree of `cloud` at `resolution` metres, casting free
+/// space along the rays from `sensor_origin` (the cloud's frame) to every point, and
+/// writes it as a binary `.bt` file atomically. An empty cloud gives an empty tree.
+[[nodiscard]] StatusOr<OctomapStats> write_octomap(const std::string& path, const Cloud& cloud,
+                                                   const Eigen::Vector3d& sensor_origin, double resolution);
+
+}  // namespace lex3d::io

@@ -22,7 +22,7 @@ struct ModelParams {
   /// Coverage points are this many word radii apart at most, so words tile the scan; (0, 10].
   double coverage_factor = 1.0;
   /// Word points are thinned to this many word radii apart; [0, 1].
-  double word_spacing_factor = 0.1;
+  double word_spacing_factor = 0.05;
   /// λ of eq. 13: σ = λ · tan(α/2) · range, α the coarser beam spacing; (0, 100].
   double sigma_lambda = 2.0;
   /// Rounds of point-to-point ICP that fit each instance's pose to the scan before

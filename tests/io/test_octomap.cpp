@@ -1,0 +1,39 @@
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "lex3d/io/io.hpp"
+#include "support/test_support.hpp"
+
+using namespace lex3d;
+
+TEST(Octomap, WritesOccupiedAndFreeSpaceFromTheSensor) {
+  Cloud wall;
+  for (int i = -20; i <= 20; ++i)
+    for (int k = -10; k <= 10; ++k) wall.points.emplace_back(5.0F, 0.05F * static_cast<float>(i), 0.05F * static_cast<float>(k));
+  const auto dir = test::temp_dir("octomap");
+  const std::string path = (dir / "wall.bt").string();
+  const auto r = io::write_octomap(path, wall, Eigen::Vector3d::Zero(), 0.1);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_GT(r.value().occupied_leaves, 20U);
+  EXPECT_GT(r.value().free_leaves, 20U);  // the rays from the sensor to the wall
+  std::ifstream in(path, std::ios::binary);
+  std::string first_line;
+  std::getline(in, first_line);
+  EXPECT_EQ(first_line.rfind("# Octomap OcTree binary file", 0), 0U);
+}
+
+TEST(Octomap, EmptyCloudAndBadResolution) {
+  const auto dir = test::temp_dir("octomap_empty");
+  const auto r = io::write_octomap((dir / "empty.bt").string(), Cloud{}, Eigen::Vector3d::Zero(), 0.2);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_EQ(r.value().occupied_leaves, 0U);
+  const auto bad = io::write_octomap((dir / "bad.bt").string(), Cloud{}, Eigen::Vector3d::Zero(), 0.0);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_FALSE(std::ifstream((dir / "bad.bt").string()).good());
+  const auto nodir = io::write_octomap((dir / "no" / "x.bt").string(), Cloud{}, Eigen::Vector3d::Zero(), 0.2);
+  ASSERT_FALSE(nodir.ok());
+  EXPECT_EQ(nodir.status().code(), ErrorCode::kIoError);
+}
