@@ -59,5 +59,8 @@ void register_info(CLI::App& app);
 void register_features(CLI::App& app);
 void register_learn(CLI::App& app);
 void register_reconstruct(CLI::App& app);
+void register_place(CLI::App& app);
+void register_compress(CLI::App& app);
+void register_decompress(CLI::App& app);
 
 }  // namespace lex3d::cli

@@ -4,11 +4,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <iostream>
 
 #include "cli_common.hpp"
 #include "json.hpp"
+#include "lex3d/codec/codec.hpp"
 #include "lex3d/range/range_image.hpp"
 
 namespace lex3d::cli {
@@ -28,7 +30,86 @@ double quantile(std::vector<float> v, double q) {
   return static_cast<double>(v[k]);
 }
 
+// lex3d's own files: header, chunk table with checksum status, counts, sizes.
+bool info_lex3d_file(const InfoOptions& o) {
+  auto bytes = io::read_file(o.path);
+  if (!bytes.ok()) return false;  // load_cloud reports the error
+  const auto& b = bytes.value();
+  static constexpr char kModel[] = "LEX3DMDL";
+  static constexpr char kAlphabet[] = "LEX3DALP";
+  if (b.size() < 8 || (std::memcmp(b.data(), kModel, 8) != 0 && std::memcmp(b.data(), kAlphabet, 8) != 0)) return false;
+  auto info = codec::inspect(b);
+  if (!info.ok()) throw CliError(2, o.path + ": " + info.status().to_string());
+  const codec::FileInfo& fi = info.value();
+  bool all_crc_ok = true;
+  for (const auto& c : fi.chunks) all_crc_ok = all_crc_ok && c.crc_ok;
+  std::size_t words = 0, word_points = 0, instances = 0;
+  std::uint64_t input_points = 0;
+  std::string decode_error;
+  bool referenced = false;
+  if (fi.kind == "alphabet") {
+    auto a = codec::decode_alphabet(b);
+    if (a.ok()) {
+      words = a.value().size();
+      word_points = a.value().total_points();
+    } else {
+      decode_error = a.status().to_string();
+    }
+  } else {
+    auto m = codec::decode_model(b);
+    if (m.ok()) {
+      instances = m.value().model.instances.size();
+      input_points = m.value().input_points;
+      if (m.value().alphabet) {
+        words = m.value().alphabet->size();
+        word_points = m.value().alphabet->total_points();
+      }
+    } else if (m.status().message().find("alphabet") != std::string::npos && (fi.flags & 2U) != 0) {
+      referenced = true;  // counts of the model itself need no alphabet: report the chunks only
+    } else {
+      decode_error = m.status().to_string();
+    }
+  }
+  const double bpp = input_points ? 8.0 * static_cast<double>(b.size()) / static_cast<double>(input_points) : 0.0;
+  if (o.json) {
+    Json j;
+    j.begin_object();
+    j.value("file", o.path).value("kind", fi.kind).value("format_version", std::to_string(fi.major) + "." + std::to_string(fi.minor));
+    j.value("flags", static_cast<std::uint64_t>(fi.flags)).value("file_bytes", fi.file_bytes);
+    j.begin_array("chunks");
+    for (const auto& c : fi.chunks)
+      j.begin_object().value("type", c.type).value("offset", c.offset).value("length", c.length).value("crc_ok", c.crc_ok).end_object();
+    j.end_array();
+    j.value("checksums_ok", all_crc_ok);
+    if (fi.kind == "model") j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
+    j.value("words", words).value("word_points", word_points);
+    if (referenced) j.value("alphabet", "referenced");
+    if (!decode_error.empty()) j.value("error", decode_error);
+    j.end_object();
+    std::cout << j.str() << "\n";
+  } else {
+    std::printf("file           %s\n", o.path.c_str());
+    std::printf("kind           lex3d %s, format %d.%d, flags 0x%x\n", fi.kind.c_str(), fi.major, fi.minor, fi.flags);
+    std::printf("size           %llu bytes\n", static_cast<unsigned long long>(fi.file_bytes));
+    std::printf("chunks         %-6s %10s %12s  crc\n", "type", "offset", "length");
+    for (const auto& c : fi.chunks)
+      std::printf("               %-6s %10llu %12llu  %s\n", c.type.c_str(), static_cast<unsigned long long>(c.offset),
+                  static_cast<unsigned long long>(c.length), c.crc_ok ? "ok" : "MISMATCH");
+    if (fi.kind == "model") {
+      std::printf("instances      %zu\n", instances);
+      std::printf("input points   %llu (%.3f bits per point)\n", static_cast<unsigned long long>(input_points), bpp);
+      if (referenced) std::printf("alphabet       referenced by hash (external file)\n");
+    }
+    if (words) std::printf("words          %zu (%zu points)\n", words, word_points);
+    if (!decode_error.empty()) std::printf("error          %s\n", decode_error.c_str());
+  }
+  if (!all_crc_ok || !decode_error.empty())
+    throw CliError(2, o.path + ": " + (decode_error.empty() ? std::string("checksum mismatch") : decode_error));
+  return true;
+}
+
 void run_info(const InfoOptions& o) {
+  if (o.format == "auto" && info_lex3d_file(o)) return;
   const io::ReadResult r = load_cloud(o.path, parse_format_option(o.format));
   const Cloud& c = r.cloud;
   const Bounds b = compute_bounds(c);
@@ -93,7 +174,7 @@ void run_info(const InfoOptions& o) {
 
 void register_info(CLI::App& app) {
   auto o = std::make_shared<InfoOptions>();
-  CLI::App* sub = app.add_subcommand("info", "Describe a point cloud file: format, points, bounds, ranges");
+  CLI::App* sub = app.add_subcommand("info", "Describe a point cloud, model or alphabet file");
   sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d)")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
   sub->add_flag("--json", o->json, "Print one JSON object");

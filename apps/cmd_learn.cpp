@@ -7,6 +7,7 @@
 
 #include "cli_common.hpp"
 #include "json.hpp"
+#include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "model_report.hpp"
 #include "progress.hpp"
@@ -45,7 +46,7 @@ void run_learn(const LearnOptions& o) {
     bar.update(pr.iteration, pr.max_iterations, detail);
   });
   bar.finish();
-  throw_if_error(io::write_file_atomic(o.output, serialize_alphabet(r.alphabet)));
+  throw_if_error(io::write_file_atomic(o.output, codec::encode_alphabet(r.alphabet)));
   std::size_t instances = 0, points = 0;
   for (const auto& m : r.models) instances += m.instances.size();
   for (const auto& c : clouds) points += c.size();

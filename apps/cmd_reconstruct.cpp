@@ -8,6 +8,7 @@
 
 #include "cli_common.hpp"
 #include "json.hpp"
+#include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "model_report.hpp"
 #include "progress.hpp"
@@ -59,7 +60,7 @@ void run_reconstruct(const ReconstructOptions& o) {
   } else {
     auto bytes = io::read_file(o.alphabet);
     if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
-    auto a = deserialize_alphabet(bytes.value());
+    auto a = codec::decode_alphabet(bytes.value());
     if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
     alphabet = std::move(a).value();
     for (const auto& c : clouds) {

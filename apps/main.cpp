@@ -14,8 +14,11 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   lex3d::cli::register_info(app);
   lex3d::cli::register_features(app);
+  lex3d::cli::register_compress(app);
+  lex3d::cli::register_decompress(app);
   lex3d::cli::register_learn(app);
   lex3d::cli::register_reconstruct(app);
+  lex3d::cli::register_place(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -12,6 +12,7 @@ PACKAGES=(
   build-essential cmake pkg-config
   libeigen3-dev libpcl-dev libflann-dev liboctomap-dev zlib1g-dev
   libcli11-dev libgtest-dev libgmock-dev
+  clang libclang-rt-14-dev
   python3 python3-numpy python3-scipy
 )
 missing=()

@@ -25,8 +25,16 @@ StatusOr<OctomapStats> write_octomap(const std::string& path, const Cloud& cloud
   OctomapStats stats;
   for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it)
     (tree.isNodeOccupied(*it) ? stats.occupied_leaves : stats.free_leaves)++;
+  // The .bt layout of OcTree::writeBinary, written here because the packaged library's
+  // writeBinary prints progress on stderr: maximum-likelihood occupancy, then the
+  // header lines and the tree's binary data.
+  tree.toMaxLikelihood();
+  tree.prune();
   std::ostringstream out(std::ios::binary);
-  if (!tree.writeBinary(out)) return io_error(path + ": octomap serialisation failed");
+  out << "# Octomap OcTree binary file\nid " << tree.getTreeType() << "\nsize " << tree.size() << "\nres "
+      << tree.getResolution() << "\ndata\n";
+  tree.writeBinaryData(out);
+  if (!out.good()) return io_error(path + ": octomap serialisation failed");
   const std::string s = out.str();
   const std::vector<std::uint8_t> bytes(s.begin(), s.end());
   Status st = write_file_atomic(path, bytes);

@@ -3,13 +3,10 @@
 #include <stdexcept>
 #include <string>
 
-#include <pcl/kdtree/kdtree_flann.h>
-#include <pcl/point_cloud.h>
-#include <pcl/point_types.h>
-
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/model/model.hpp"
+#include "model/point_grid.hpp"
 
 namespace lex3d {
 
@@ -80,22 +77,12 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
   // Points within δ + 3σ of each feature point (the most a word placed there can reach).
   s.nearby.resize(s.features.size());
   if (!cloud.empty() && !s.features.features.empty()) {
-    auto pc = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-    pc->reserve(cloud.size());
-    for (const auto& p : cloud.points) pc->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
-    pcl::KdTreeFLANN<pcl::PointXYZ> tree(true);
-    tree.setInputCloud(pc);
+    const detail::PointGrid grid(cloud.points, static_cast<float>(s.word_radius));
     parallel_for(s.features.size(), params.threads, [&](std::size_t f) {
       const Eigen::Vector3d t = s.features.features[f].T_cloud_feature.translation();
       const double range = (t - cloud.T_cloud_sensor.translation()).norm();
       const double reach = s.word_radius + 3.0 * factor * (range + s.word_radius) + 1e-3;
-      std::vector<int> idx;
-      std::vector<float> d2;
-      tree.radiusSearch(pcl::PointXYZ(static_cast<float>(t.x()), static_cast<float>(t.y()), static_cast<float>(t.z())),
-                        reach, idx, d2);
-      auto& out = s.nearby[f];
-      out.assign(idx.begin(), idx.end());
-      std::sort(out.begin(), out.end());
+      grid.radius(t.cast<float>(), static_cast<float>(reach), s.nearby[f]);
     });
   }
   s.prepare_ms = sw.elapsed_ms();

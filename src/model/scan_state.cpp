@@ -55,10 +55,19 @@ void ScanState::contribution(std::size_t f, const Word& word, std::vector<float>
   const auto& nearby = scan_.nearby[f];
   const auto& local = local_[f];
   out.assign(nearby.size(), 0.0F);
+  if (word.points.empty()) return;
+  // The word's bounding box: a point farther than 3σ from it gets nothing.
+  Eigen::Vector3f lo = word.points.front(), hi = lo;
+  for (const auto& p : word.points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
   for (std::size_t k = 0; k < nearby.size(); ++k) {
     const std::uint32_t j = nearby[k];
     const Eigen::Vector3f q = local[k];
     const float reach2 = reach2_[j];
+    const Eigen::Vector3f outside = (lo - q).cwiseMax(q - hi).cwiseMax(0.0F);
+    if (outside.squaredNorm() > reach2) continue;
     const float a = inv_two_sigma2_[j];
     float s = 0.0F;
     for (const auto& p : word.points) {
@@ -201,8 +210,10 @@ Eigen::Isometry3f icp_step(const std::vector<Eigen::Vector3f>& word, const std::
     V.col(2) *= -1.0;
     R = V * svd.matrixU().transpose();
   }
+  const Eigen::Vector3d t = cb - R * ca;
+  if (!R.allFinite() || !t.allFinite()) return D;
   D.linear() = R.cast<float>();
-  D.translation() = (cb - R * ca).cast<float>();
+  D.translation() = t.cast<float>();
   return D;
 }
 
@@ -222,11 +233,25 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // the new pose is pose · D.
     Word moved = alphabet.words[static_cast<std::size_t>(word_[f])];
     Eigen::Isometry3f& total = correction[i];
+    if (moved.points.empty()) return;
+    // Only scan points near the word's bounding box can pair up (twice the reach
+    // leaves room for the word to move).
+    Eigen::Vector3f lo = moved.points.front(), hi = lo;
+    for (const auto& p : moved.points) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    const float margin = 2.0F * static_cast<float>(max_distance);
+    std::vector<Eigen::Vector3f> targets;
+    for (const auto& q : local_[f])
+      if (((lo - q).cwiseMax(q - hi).array() <= margin).all()) targets.push_back(q);
     for (int it = 0; it < iterations; ++it) {
-      const Eigen::Isometry3f D = icp_step(moved.points, local_[f], reach2);
-      if (D.isApprox(Eigen::Isometry3f::Identity(), 1e-7F)) break;
+      const Eigen::Isometry3f D = icp_step(moved.points, targets, reach2);
       for (auto& p : moved.points) p = D * p;
       total = D * total;
+      // Converged: under 0.1 mm and 0.1 mrad.
+      const float angle = Eigen::AngleAxisf(D.linear()).angle();
+      if (D.translation().norm() < 1e-4F && angle < 1e-4F) break;
     }
     Change& c = changes[i];
     c.feature = static_cast<std::uint32_t>(f);
@@ -238,6 +263,8 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
   for (std::size_t i = 0; i < active.size(); ++i) {
     const std::size_t f = active[i];
     pose_[f] = pose_[f] * correction[i];
+    // Keep the rotation exactly orthonormal: float products drift.
+    pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
     const Eigen::Isometry3f inv = correction[i].inverse();
     for (auto& q : local_[f]) q = inv * q;
   }

@@ -62,32 +62,3 @@ TEST(WordIndex, FindsTheNearestDescriptorWithDeterministicTies) {
   EXPECT_TRUE(WordIndex(Alphabet{}).nearest(q.data(), 2).empty());
 }
 
-TEST(AlphabetBytes, RoundTrip) {
-  const Alphabet a = small_alphabet();
-  const auto bytes = serialize_alphabet(a);
-  auto b = deserialize_alphabet(bytes);
-  ASSERT_TRUE(b.ok()) << b.status().to_string();
-  EXPECT_EQ(serialize_alphabet(b.value()), bytes);
-  EXPECT_EQ(b.value().size(), 3U);
-  EXPECT_EQ(b.value().words[2].points.size(), 7U);
-}
-
-TEST(AlphabetBytes, RejectsCorruptAndTruncatedInput) {
-  const auto bytes = serialize_alphabet(small_alphabet());
-  for (std::size_t n = 0; n < bytes.size(); ++n) {
-    const std::vector<std::uint8_t> cut(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(n));
-    EXPECT_FALSE(deserialize_alphabet(cut).ok()) << "prefix of " << n << " bytes accepted";
-  }
-  auto bad = bytes;
-  bad[0] = 'X';
-  EXPECT_FALSE(deserialize_alphabet(bad).ok());
-  bad = bytes;
-  bad[28] = 0xFF;  // absurd word count
-  bad[29] = 0xFF;
-  const auto r = deserialize_alphabet(bad);
-  ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
-  auto extra = bytes;
-  extra.push_back(0);
-  EXPECT_FALSE(deserialize_alphabet(extra).ok());
-}

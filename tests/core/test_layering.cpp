@@ -26,6 +26,8 @@ const std::map<std::string, std::set<std::string>>& allowed() {
       {"features", {"core", "range", "features"}},
       {"alphabet", {"core", "range", "features", "alphabet"}},
       {"model", {"core", "range", "features", "alphabet", "model"}},
+      {"codec", {"core", "range", "features", "alphabet", "model", "codec"}},
+      {"place", {"core", "range", "features", "alphabet", "model", "codec", "place"}},
       {"eval", {"core", "eval"}},
   };
   return table;

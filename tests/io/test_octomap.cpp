@@ -2,6 +2,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <octomap/OcTree.h>
 
 #include "lex3d/io/io.hpp"
 #include "support/test_support.hpp"
@@ -18,10 +19,15 @@ TEST(Octomap, WritesOccupiedAndFreeSpaceFromTheSensor) {
   ASSERT_TRUE(r.ok()) << r.status().to_string();
   EXPECT_GT(r.value().occupied_leaves, 20U);
   EXPECT_GT(r.value().free_leaves, 20U);  // the rays from the sensor to the wall
-  std::ifstream in(path, std::ios::binary);
-  std::string first_line;
-  std::getline(in, first_line);
-  EXPECT_EQ(first_line.rfind("# Octomap OcTree binary file", 0), 0U);
+  // OctoMap itself reads the file back with the same occupancy.
+  octomap::OcTree tree(0.1);
+  ASSERT_TRUE(tree.readBinary(path));
+  std::size_t occupied = 0, free = 0;
+  for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it)
+    (tree.isNodeOccupied(*it) ? occupied : free)++;
+  EXPECT_EQ(occupied, r.value().occupied_leaves);
+  EXPECT_EQ(free, r.value().free_leaves);
+  EXPECT_NEAR(tree.getResolution(), 0.1, 1e-12);
 }
 
 TEST(Octomap, EmptyCloudAndBadResolution) {

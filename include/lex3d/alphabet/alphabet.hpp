@@ -64,10 +64,4 @@ class WordIndex {
   std::vector<float> packed_;  // words' descriptors, row-major
 };
 
-/// Serialises an alphabet into a self-describing little-endian byte string
-/// (interim format "L3DA" v0; the codec's alphabet file supersedes it).
-[[nodiscard]] std::vector<std::uint8_t> serialize_alphabet(const Alphabet& alphabet);
-/// Parses serialize_alphabet's bytes; every length is checked before allocating.
-[[nodiscard]] StatusOr<Alphabet> deserialize_alphabet(const std::vector<std::uint8_t>& bytes);
-
 }  // namespace lex3d

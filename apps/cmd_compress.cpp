@@ -1,0 +1,156 @@
+// lex3d compress IN... -o OUT: model files (formats/model.md), learning an alphabet or
+// reusing one.
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <iostream>
+
+#include "cli_common.hpp"
+#include "json.hpp"
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/core/timer.hpp"
+#include "model_report.hpp"
+#include "progress.hpp"
+
+namespace lex3d::cli {
+
+namespace {
+
+struct CompressOptions {
+  std::vector<std::string> inputs;
+  std::string output;
+  std::string alphabet;
+  std::string save_alphabet;
+  std::string format = "auto";
+  std::string poses;
+  int iterations = LearnParams{}.max_iterations;
+  std::uint64_t seed = LearnParams{}.seed;
+  bool json = false;
+  ModelOptions model;
+};
+
+void run_compress(const CompressOptions& o) {
+  if (!o.alphabet.empty() && !o.save_alphabet.empty())
+    throw CliError(1, "--alphabet reuses an alphabet and --save-alphabet writes a learned one: give one of them");
+  std::vector<std::string> outputs;
+  for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
+  std::vector<std::string> protected_paths = o.inputs;
+  if (!o.alphabet.empty()) protected_paths.push_back(o.alphabet);
+  for (const auto& out : outputs) check_output_path(out, protected_paths);
+  if (!o.save_alphabet.empty()) check_output_path(o.save_alphabet, protected_paths);
+
+  Stopwatch sw;
+  const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  const ModelParams mp = o.model.params();
+  Alphabet alphabet;
+  std::vector<std::uint8_t> alphabet_file;
+  std::vector<Model> models;
+  std::vector<std::size_t> features(clouds.size(), 0);
+  if (!o.alphabet.empty()) {
+    auto bytes = io::read_file(o.alphabet);
+    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+    alphabet_file = std::move(bytes).value();
+    auto a = codec::decode_alphabet(alphabet_file);
+    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
+    alphabet = std::move(a).value();
+    ProgressBar bar("encoding");
+    for (std::size_t i = 0; i < clouds.size(); ++i) {
+      const PreparedScan scan = prepare_scan(clouds[i], mp, alphabet.word_radius);
+      features[i] = scan.features.size();
+      models.push_back(encode_scan(scan, alphabet, true, mp));
+      bar.update(static_cast<long>(i + 1), static_cast<long>(clouds.size()), o.inputs[i]);
+    }
+  } else {
+    LearnParams p;
+    p.model = mp;
+    p.max_iterations = o.iterations;
+    p.seed = o.seed;
+    ProgressBar bar("learning");
+    LearnResult r = learn_alphabet(clouds, p, [&](const LearnProgress& pr) {
+      char detail[96];
+      std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
+      bar.update(pr.iteration, pr.max_iterations, detail);
+    });
+    alphabet = std::move(r.alphabet);
+    models = std::move(r.models);
+    for (std::size_t i = 0; i < clouds.size(); ++i) features[i] = r.scans[i].features.size();
+    if (!o.save_alphabet.empty()) {
+      alphabet_file = codec::encode_alphabet(alphabet);
+      throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
+    }
+  }
+  const bool embed = alphabet_file.empty();
+  const std::uint64_t hash = embed ? 0 : codec::alphabet_hash(alphabet_file);
+
+  std::uint64_t total_bytes = 0, total_points = 0;
+  Json j;
+  j.begin_object();
+  j.begin_array("files");
+  if (!o.json) std::printf("%-32s %9s %9s %10s %10s\n", "output", "points", "instances", "bytes", "bits/pt");
+  for (std::size_t i = 0; i < clouds.size(); ++i) {
+    codec::ModelData d;
+    d.input_points = clouds[i].size();
+    d.T_cloud_sensor = clouds[i].T_cloud_sensor;
+    d.model = models[i];
+    if (embed) d.alphabet = alphabet;
+    else d.alphabet_hash = hash;
+    const std::vector<std::uint8_t> bytes = codec::encode_model(d);
+    throw_if_error(io::write_file_atomic(outputs[i], bytes));
+    const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
+    total_bytes += bytes.size();
+    total_points += d.input_points;
+    if (o.json) {
+      j.begin_object()
+          .value("input", o.inputs[i])
+          .value("output", outputs[i])
+          .value("points", d.input_points)
+          .value("features", features[i])
+          .value("instances", d.model.instances.size())
+          .value("bytes", static_cast<std::uint64_t>(bytes.size()))
+          .value("bits_per_point", bpp)
+          .end_object();
+    } else {
+      std::printf("%-32s %9llu %9zu %10zu %10.3f\n", outputs[i].c_str(), static_cast<unsigned long long>(d.input_points),
+                  d.model.instances.size(), bytes.size(), bpp);
+    }
+  }
+  j.end_array();
+  const double total_ms = sw.elapsed_ms();
+  const std::uint64_t alphabet_bytes = embed ? 0 : alphabet_file.size();
+  const double bpp_all = total_points ? 8.0 * static_cast<double>(total_bytes + alphabet_bytes) / static_cast<double>(total_points) : 0.0;
+  if (o.json) {
+    j.value("alphabet_words", alphabet.size()).value("alphabet_embedded", embed);
+    j.value("alphabet_bytes", alphabet_bytes).value("total_bytes", total_bytes + alphabet_bytes);
+    j.value("bits_per_point", bpp_all).value("time_ms", total_ms);
+    j.end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("alphabet: %zu words, %s\n", alphabet.size(),
+              embed ? "embedded in each model file"
+                    : (std::to_string(alphabet_bytes) + " bytes in " + (o.alphabet.empty() ? o.save_alphabet : o.alphabet)).c_str());
+  std::printf("total: %llu bytes for %llu points = %.3f bits per point (alphabet included), %.0f ms\n",
+              static_cast<unsigned long long>(total_bytes + alphabet_bytes), static_cast<unsigned long long>(total_points),
+              bpp_all, total_ms);
+}
+
+}  // namespace
+
+void register_compress(CLI::App& app) {
+  auto o = std::make_shared<CompressOptions>();
+  CLI::App* sub = app.add_subcommand("compress", "Compress scans into lex3d model files");
+  sub->add_option("scans", o->inputs, "Point clouds")->required();
+  sub->add_option("-o,--output", o->output, "Model file (numbered _000, _001... for several scans)")->required();
+  sub->add_option("--alphabet", o->alphabet, "Reuse this alphabet file (nothing is learned)");
+  sub->add_option("--save-alphabet", o->save_alphabet, "Write the learned alphabet here; the models reference it");
+  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  sub->add_option("--poses", o->poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
+  sub->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
+  sub->add_option("--seed", o->seed, "Seed of the candidate order when learning");
+  sub->add_flag("--json", o->json, "Print one JSON object");
+  o->model.add_to(*sub);
+  sub->callback([o] { run_compress(*o); });
+}
+
+}  // namespace lex3d::cli

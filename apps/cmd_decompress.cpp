@@ -1,0 +1,145 @@
+// lex3d decompress MODEL -o OUT: the reconstruction as a point cloud and/or an OctoMap.
+
+#include <CLI/CLI.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+
+#include "cli_common.hpp"
+#include "json.hpp"
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/core/timer.hpp"
+#include "lex3d/eval/metrics.hpp"
+
+namespace lex3d::cli {
+
+namespace {
+
+struct DecompressOptions {
+  std::string input;
+  std::string output;
+  std::string alphabet;
+  std::string octomap;
+  double resolution = 0.1;
+  std::string reference;
+  std::string reference_format = "auto";
+  double sigma_lambda = ModelParams{}.sigma_lambda;
+  bool json = false;
+};
+
+void run_decompress(const DecompressOptions& o) {
+  if (o.output.empty() && o.octomap.empty()) throw CliError(1, "give -o OUT and/or --octomap OUT.bt");
+  std::vector<std::string> inputs = {o.input};
+  if (!o.alphabet.empty()) inputs.push_back(o.alphabet);
+  if (!o.reference.empty()) inputs.push_back(o.reference);
+  if (!o.output.empty()) check_output_path(o.output, inputs);
+  if (!o.octomap.empty()) check_output_path(o.octomap, inputs);
+  Stopwatch sw;
+  auto bytes = io::read_file(o.input);
+  if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+  std::vector<std::uint8_t> alphabet_file;
+  if (!o.alphabet.empty()) {
+    auto a = io::read_file(o.alphabet);
+    if (!a.ok()) throw CliError(2, a.status().to_string());
+    alphabet_file = std::move(a).value();
+  }
+  auto decoded = codec::decode_model(bytes.value(), o.alphabet.empty() ? nullptr : &alphabet_file);
+  if (!decoded.ok()) {
+    // A model that references an alphabet decoded without one is a usage error (1).
+    const auto& st = decoded.status();
+    throw CliError(st.code() == ErrorCode::kInvalidArgument ? 1 : 2, o.input + ": " + st.to_string());
+  }
+  const codec::ModelData& d = decoded.value();
+  const double decode_ms = sw.lap_ms();
+  const Reconstruction rec = reconstruct(d.model, *d.alphabet, d.alphabet->point_spacing);
+  Cloud cloud = rec.cloud;
+  cloud.T_cloud_sensor = d.T_cloud_sensor;
+  const double reconstruct_ms = sw.lap_ms();
+  if (!o.output.empty()) throw_if_error(io::write_cloud(o.output, cloud));
+  io::OctomapStats oct;
+  if (!o.octomap.empty()) {
+    auto r = io::write_octomap(o.octomap, cloud, d.T_cloud_sensor.translation(), o.resolution);
+    throw_if_error(r.status());
+    oct = r.value();
+  }
+  const double write_ms = sw.lap_ms();
+
+  const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.value().size()) / static_cast<double>(d.input_points) : 0.0;
+  eval::DistanceResult dist;
+  eval::InlierResult inl;
+  const bool compare = !o.reference.empty();
+  if (compare) {
+    const Cloud ref = load_cloud(o.reference, parse_format_option(o.reference_format)).cloud;
+    dist = eval::compare_clouds(ref, cloud);
+    const auto res = estimate_angular_resolution(ref);
+    eval::RangeSigma sigma;
+    const double alpha = res ? std::max(res->azimuth_rad, res->elevation_rad) : 0.2 * M_PI / 180.0;
+    sigma.factor = o.sigma_lambda * std::tan(alpha / 2.0);
+    sigma.min_sigma = 1e-3;
+    sigma.origin = ref.T_cloud_sensor.translation();
+    inl = eval::inliers_outliers(ref, cloud, sigma);
+  }
+  if (o.json) {
+    Json j;
+    j.begin_object();
+    j.value("model", o.input).value("model_bytes", static_cast<std::uint64_t>(bytes.value().size()));
+    j.value("input_points", d.input_points).value("bits_per_point", bpp);
+    j.value("instances", d.model.instances.size()).value("words", d.alphabet->size());
+    j.value("points", cloud.size());
+    if (!o.output.empty()) j.value("output", o.output);
+    if (!o.octomap.empty())
+      j.begin_object("octomap")
+          .value("file", o.octomap)
+          .value("resolution_m", o.resolution)
+          .value("occupied_leaves", oct.occupied_leaves)
+          .value("free_leaves", oct.free_leaves)
+          .value("bytes", oct.file_bytes)
+          .end_object();
+    if (compare) {
+      j.begin_object("against_reference")
+          .value("d1_psnr_db", dist.d1_psnr_db)
+          .value("rmse_m", dist.rmse)
+          .value("chamfer_m", dist.chamfer)
+          .value("hausdorff_m", dist.hausdorff)
+          .value("inliers", inl.inliers)
+          .value("outliers", inl.outliers)
+          .end_object();
+    }
+    j.begin_object("timings_ms").value("decode", decode_ms).value("reconstruct", reconstruct_ms).value("write", write_ms).end_object();
+    j.end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("%s: %zu bytes, %llu input points = %.3f bits per point; %zu instances of %zu words\n", o.input.c_str(),
+              bytes.value().size(), static_cast<unsigned long long>(d.input_points), bpp, d.model.instances.size(),
+              d.alphabet->size());
+  std::printf("reconstruction: %zu points (decode %.1f ms, reconstruct %.1f ms)\n", cloud.size(), decode_ms, reconstruct_ms);
+  if (!o.output.empty()) std::printf("wrote %s\n", o.output.c_str());
+  if (!o.octomap.empty())
+    std::printf("wrote %s: OctoMap at %.3g m, %zu occupied and %zu free leaves, %llu bytes\n", o.octomap.c_str(),
+                o.resolution, oct.occupied_leaves, oct.free_leaves, static_cast<unsigned long long>(oct.file_bytes));
+  if (compare)
+    std::printf("against %s: D1 PSNR %.2f dB, RMSE %.4f m, inliers %.1f%%, outliers %.1f%%, Chamfer %.4f m, Hausdorff %.3f m\n",
+                o.reference.c_str(), dist.d1_psnr_db, dist.rmse, 100.0 * inl.inliers, 100.0 * inl.outliers, dist.chamfer,
+                dist.hausdorff);
+}
+
+}  // namespace
+
+void register_decompress(CLI::App& app) {
+  auto o = std::make_shared<DecompressOptions>();
+  CLI::App* sub = app.add_subcommand("decompress", "Reconstruct a point cloud (or an OctoMap) from a model file");
+  sub->add_option("model", o->input, "lex3d model file")->required();
+  sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz)");
+  sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references");
+  sub->add_option("--octomap", o->octomap, "Also write an OctoMap occupancy tree (.bt)");
+  sub->add_option("--resolution", o->resolution, "OctoMap resolution, m")->check(CLI::Range(1e-3, 100.0));
+  sub->add_option("--reference", o->reference, "Compare the reconstruction with this scan (D1 PSNR, inliers)");
+  sub->add_option("--reference-format", o->reference_format, "Format of --reference");
+  sub->add_option("--sigma-lambda", o->sigma_lambda, "λ of σ = λ tan(α/2) range for inliers/outliers");
+  sub->add_flag("--json", o->json, "Print one JSON object");
+  sub->callback([o] { run_decompress(*o); });
+}
+
+}  // namespace lex3d::cli

@@ -1,0 +1,483 @@
+// lex3d place build|add|query|eval: place recognition on word instances.
+
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <map>
+
+#include "lex3d/codec/codec.hpp"
+#include "cli_common.hpp"
+#include "json.hpp"
+#include "lex3d/core/timer.hpp"
+#include "lex3d/place/place.hpp"
+#include "progress.hpp"
+
+namespace lex3d::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct PlaceOptions {
+  std::string db;
+  std::vector<std::string> inputs;
+  std::string alphabet;
+  std::string poses;
+  std::string times;
+  std::string format = "auto";
+  std::string png = "place_eval";
+  int learn_scans = 5;
+  int iterations = 200;
+  int top = 5;
+  double min_gap = 20.0;
+  double radius = 4.0;
+  bool json = false;
+  bool ground = false;
+  PlaceParams params;
+  PlaceStorageParams storage;
+};
+
+ModelParams model_params() {
+  ModelParams mp;
+  mp.threads = 2;
+  return mp;
+}
+
+std::string stem(const std::string& path) { return fs::path(path).stem().string(); }
+
+PlaceDatabase read_db(const std::string& path) {
+  auto bytes = io::read_file(path);
+  if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+  auto db = PlaceDatabase::load(bytes.value());
+  if (!db.ok()) throw CliError(2, path + ": " + db.status().to_string());
+  if (!db.value().has_alphabet()) throw CliError(2, path + ": the database holds no alphabet");
+  return std::move(db).value();
+}
+
+Alphabet learn_on(const std::vector<Cloud>& clouds, int learn_scans, int iterations) {
+  std::vector<Cloud> subset;
+  const std::size_t n = clouds.size();
+  const std::size_t k = std::min<std::size_t>(n, static_cast<std::size_t>(learn_scans));
+  for (std::size_t i = 0; i < k; ++i) subset.push_back(clouds[i * n / k]);
+  LearnParams p;
+  p.model = model_params();
+  p.max_iterations = iterations;
+  ProgressBar bar("learning alphabet");
+  LearnResult r = learn_alphabet(subset, p, [&](const LearnProgress& pr) {
+    bar.update(pr.iteration, pr.max_iterations, std::to_string(pr.alphabet_size) + " words");
+  });
+  return std::move(r.alphabet);
+}
+
+std::vector<PlaceScan> describe_all(const std::vector<Cloud>& clouds, const std::vector<std::string>& names,
+                                    const Alphabet& alphabet, const PlaceStorageParams& storage, double* prepare_ms) {
+  std::vector<PlaceScan> out;
+  const ModelParams mp = model_params();
+  ProgressBar bar("preparing scans");
+  Stopwatch sw;
+  for (std::size_t i = 0; i < clouds.size(); ++i) {
+    const PreparedScan s = prepare_scan(clouds[i], mp, alphabet.word_radius);
+    out.push_back(make_place_scan(s, alphabet, storage, mp.features.range, names[i]));
+    bar.update(static_cast<long>(i + 1), static_cast<long>(clouds.size()), names[i]);
+  }
+  if (prepare_ms != nullptr) *prepare_ms = sw.elapsed_ms();
+  return out;
+}
+
+void run_build(const PlaceOptions& o, bool add) {
+  check_output_path(o.db, o.inputs);
+  const auto clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  std::vector<std::string> names;
+  for (const auto& p : o.inputs) names.push_back(stem(p));
+  PlaceDatabase db(o.storage);
+  if (add) {
+    db = read_db(o.db);
+  } else if (!o.alphabet.empty()) {
+    auto bytes = io::read_file(o.alphabet);
+    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+    auto a = codec::decode_alphabet(bytes.value());
+    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
+    db.set_alphabet(std::move(a).value());
+  } else {
+    db.set_alphabet(learn_on(clouds, o.learn_scans, o.iterations));
+  }
+  double prep = 0;
+  for (auto& s : describe_all(clouds, names, db.alphabet(), db.storage(), &prep)) db.add(std::move(s));
+  const auto bytes = db.save();
+  throw_if_error(io::write_file_atomic(o.db, bytes));
+  if (o.json) {
+    Json j;
+    j.begin_object().value("scans", db.size()).value("bytes", bytes.size()).value("alphabet_words", db.alphabet().size());
+    j.value("prepare_ms", prep).end_object();
+    std::cout << j.str() << "\n";
+  } else {
+    std::printf("%s: %zu scans, %zu words, %zu bytes (%.1f KB a scan)\n", o.db.c_str(), db.size(), db.alphabet().size(),
+                bytes.size(), db.size() ? static_cast<double>(bytes.size()) / 1024.0 / static_cast<double>(db.size()) : 0.0);
+  }
+}
+
+void pose_json(Json& j, const Pose& T) {
+  const Eigen::Matrix4d m = T.matrix();
+  j.begin_array("T_match_query");
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) j.value({}, m(r, c));
+  j.end_array();
+}
+
+void run_query(const PlaceOptions& o) {
+  const PlaceDatabase db = read_db(o.db);
+  const auto clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  double prep = 0;
+  const auto scans = describe_all(clouds, {stem(o.inputs[0])}, db.alphabet(), db.storage(), &prep);
+  PlaceParams p = o.params;
+  p.ground_vehicle = o.ground;
+  const PlaceQueryResult r = db.query(scans[0], p);
+  const std::size_t k = std::min<std::size_t>(r.matches.size(), static_cast<std::size_t>(o.top));
+  if (o.json) {
+    Json j;
+    j.begin_object().value("query", scans[0].name).value("accepted", r.accepted);
+    j.value("retrieval_ms", r.retrieval_ms).value("verification_ms", r.verification_ms).value("prepare_ms", prep);
+    j.begin_array("matches");
+    for (std::size_t i = 0; i < k; ++i) {
+      const PlaceMatch& m = r.matches[i];
+      j.begin_object().value("scan", db.scan(m.scan).name).value("score", m.score).value("valid", m.valid);
+      j.value("accepted", m.valid && m.score >= p.accept_score).value("inliers", m.inliers);
+      j.value("similarity", m.retrieval_similarity);
+      pose_json(j, m.T_match_query);
+      j.end_object();
+    }
+    j.end_array().end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("%s: %s (prepare %.0f ms, query %.1f ms)\n", scans[0].name.c_str(),
+              r.accepted ? "known place" : "unknown place", prep, r.retrieval_ms + r.verification_ms);
+  for (std::size_t i = 0; i < k; ++i) {
+    const PlaceMatch& m = r.matches[i];
+    const Eigen::Vector3d t = m.T_match_query.translation();
+    const Eigen::Vector3d ypr = m.T_match_query.linear().eulerAngles(2, 1, 0) * 180.0 / M_PI;
+    std::printf("  %-12s score %.3f  inliers %3zu  t = (%.3f, %.3f, %.3f) m  ypr = (%.2f, %.2f, %.2f) deg%s\n",
+                db.scan(m.scan).name.c_str(), m.score, m.inliers, t.x(), t.y(), t.z(), ypr.x(), ypr.y(), ypr.z(),
+                m.valid ? "" : "  (no transform)");
+  }
+}
+
+// --- eval ---
+
+struct QueryRecord {
+  std::size_t query = 0;
+  bool has_db = false;
+  double score = 0.0;  // best score (0 when nothing valid)
+  std::size_t match = 0;
+  bool valid = false;
+  Pose T = Pose::Identity();
+  double nearest_m = 1e9;  // planar distance to the nearest database scan
+  double query_ms = 0.0;
+  std::vector<std::pair<std::size_t, double>> scores;  // all verified candidates
+};
+
+double planar(const Pose& a, const Pose& b) { return (a.translation() - b.translation()).head<2>().norm(); }
+
+void draw_line(std::vector<std::uint8_t>& img, int w, int h, int x0, int y0, int x1, int y1, std::array<std::uint8_t, 3> c) {
+  const int n = std::max(std::abs(x1 - x0), std::abs(y1 - y0)) + 1;
+  for (int i = 0; i <= n; ++i) {
+    const int x = x0 + (x1 - x0) * i / n, y = y0 + (y1 - y0) * i / n;
+    if (x < 0 || y < 0 || x >= w || y >= h) continue;
+    const std::size_t k = 3 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x));
+    img[k] = c[0];
+    img[k + 1] = c[1];
+    img[k + 2] = c[2];
+  }
+}
+
+void run_eval(const PlaceOptions& o) {
+  // Scans: frames.txt order when present, else the sorted .bin/.pcd/.ply files.
+  std::vector<std::string> files;
+  const fs::path dir(o.inputs.at(0));
+  if (fs::exists(dir / "frames.txt")) {
+    auto list = io::read_file((dir / "frames.txt").string());
+    if (!list.ok()) throw CliError(3, list.status().to_string());
+    std::string s(list.value().begin(), list.value().end()), line;
+    for (std::size_t i = 0; i <= s.size(); ++i) {
+      if (i == s.size() || s[i] == '\n') {
+        if (!line.empty()) files.push_back((dir / line).string());
+        line.clear();
+      } else if (s[i] != '\r') {
+        line += s[i];
+      }
+    }
+  } else {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+      const auto ext = e.path().extension().string();
+      if (ext == ".bin" || ext == ".pcd" || ext == ".ply") files.push_back(e.path().string());
+    }
+    if (ec) throw CliError(3, o.inputs[0] + ": " + ec.message());
+    std::sort(files.begin(), files.end());
+  }
+  if (files.empty()) throw CliError(2, o.inputs[0] + ": no scans");
+  const auto clouds = load_scans(files, parse_format_option(o.format), o.poses);
+  std::vector<double> times(clouds.size());
+  for (std::size_t i = 0; i < times.size(); ++i) times[i] = static_cast<double>(i);
+  if (!o.times.empty()) {
+    auto t = io::read_number_list(o.times);
+    if (!t.ok()) throw CliError(2, t.status().to_string());
+    if (t.value().size() != clouds.size()) throw CliError(1, o.times + ": one time a scan expected");
+    times = t.value();
+  }
+  std::vector<std::string> names;
+  for (const auto& f : files) names.push_back(stem(f));
+  Stopwatch sw;
+  Alphabet alphabet;
+  if (!o.alphabet.empty()) {
+    auto bytes = io::read_file(o.alphabet);
+    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+    auto a = codec::decode_alphabet(bytes.value());
+    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
+    alphabet = std::move(a).value();
+  } else {
+    alphabet = learn_on(clouds, o.learn_scans, o.iterations);
+  }
+  const double learn_ms = sw.lap_ms();
+  double prep_ms = 0;
+  const auto scans = describe_all(clouds, names, alphabet, o.storage, &prep_ms);
+  PlaceParams p = o.params;
+  p.ground_vehicle = o.ground;
+
+  // Queries in time order against the scans at least min_gap seconds older.
+  std::vector<std::size_t> order(scans.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return times[a] < times[b]; });
+  PlaceDatabase db(o.storage);
+  db.set_alphabet(alphabet);
+  std::vector<std::size_t> db_to_scan;
+  std::size_t next = 0;
+  std::vector<QueryRecord> recs;
+  std::size_t db_bytes = 0;
+  ProgressBar bar("querying");
+  for (std::size_t qi = 0; qi < order.size(); ++qi) {
+    const std::size_t q = order[qi];
+    while (next < order.size() && times[order[next]] <= times[q] - o.min_gap) {
+      db_bytes += stored_bytes(scans[order[next]]);
+      db.add(scans[order[next]]);
+      db_to_scan.push_back(order[next]);
+      ++next;
+    }
+    QueryRecord r;
+    r.query = q;
+    r.has_db = db.size() > 0;
+    for (const auto j : db_to_scan) r.nearest_m = std::min(r.nearest_m, planar(clouds[q].T_world_cloud, clouds[j].T_world_cloud));
+    if (r.has_db) {
+      const auto res = db.query(scans[q], p);
+      r.query_ms = res.retrieval_ms + res.verification_ms;
+      if (const PlaceMatch* b = res.best(); b != nullptr && b->valid) {
+        r.valid = true;
+        r.score = b->score;
+        r.match = db_to_scan[b->scan];
+        r.T = b->T_match_query;
+      }
+      for (const auto& m : res.matches) r.scores.emplace_back(db_to_scan[m.scan], m.valid ? m.score : 0.0);
+      recs.push_back(r);
+    }
+    bar.update(static_cast<long>(qi + 1), static_cast<long>(order.size()), names[q]);
+  }
+  bar.finish();
+  const double query_total_ms = sw.lap_ms();
+
+  auto correct = [&](const QueryRecord& r, double radius) {
+    return r.valid && planar(clouds[r.query].T_world_cloud, clouds[r.match].T_world_cloud) <= radius;
+  };
+  auto counts = [&](double thr, double radius, std::size_t& tp, std::size_t& fp, std::size_t& pos) {
+    tp = fp = pos = 0;
+    for (const auto& r : recs) {
+      if (r.nearest_m <= radius) ++pos;
+      if (!(r.valid && r.score >= thr)) continue;
+      if (correct(r, radius)) ++tp;
+      else ++fp;
+    }
+  };
+  std::size_t tp = 0, fp = 0, pos = 0;
+  counts(p.accept_score, o.radius, tp, fp, pos);
+  const double precision = tp + fp > 0 ? static_cast<double>(tp) / static_cast<double>(tp + fp) : 1.0;
+  const double recall = pos > 0 ? static_cast<double>(tp) / static_cast<double>(pos) : 0.0;
+  // PR curve over thresholds at the distinct scores.
+  std::vector<double> thr{1.01};
+  for (const auto& r : recs)
+    if (r.valid) thr.push_back(r.score);
+  std::sort(thr.begin(), thr.end(), std::greater<double>());
+  std::vector<std::array<double, 3>> curve;  // threshold, precision, recall
+  double max_f1 = 0, recall_at_p1 = 0;
+  for (const double t : thr) {
+    std::size_t a = 0, b = 0, c = 0;
+    counts(t, o.radius, a, b, c);
+    const double pr = a + b > 0 ? static_cast<double>(a) / static_cast<double>(a + b) : 1.0;
+    const double rc = c > 0 ? static_cast<double>(a) / static_cast<double>(c) : 0.0;
+    curve.push_back({t, pr, rc});
+    if (pr + rc > 0) max_f1 = std::max(max_f1, 2 * pr * rc / (pr + rc));
+    if (b == 0) recall_at_p1 = std::max(recall_at_p1, rc);
+  }
+  // Pose errors of accepted true matches.
+  std::vector<double> et, er;
+  for (const auto& r : recs) {
+    if (!(r.valid && r.score >= p.accept_score && correct(r, o.radius))) continue;
+    const Pose truth = clouds[r.match].T_world_cloud.inverse() * clouds[r.query].T_world_cloud;
+    const Pose d = truth.inverse() * r.T;
+    et.push_back(d.translation().norm());
+    er.push_back(Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI);
+  }
+  auto median = [](std::vector<double> v) {
+    if (v.empty()) return std::nan("");
+    std::sort(v.begin(), v.end());
+    return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+  };
+  std::vector<double> qms;
+  for (const auto& r : recs) qms.push_back(r.query_ms);
+  const double per_scan_kb = scans.empty() ? 0.0 : 0.0;
+  (void)per_scan_kb;
+  double bytes_all = 0;
+  for (const auto& s : scans) bytes_all += static_cast<double>(stored_bytes(s));
+  const double kb_per_scan = bytes_all / 1024.0 / static_cast<double>(scans.size());
+
+  // PNGs: confusion matrix (score in red, ground-truth revisit within radius in blue/green)
+  // and the precision-recall curve.
+  {
+    const int n = static_cast<int>(scans.size()), cs = 4;
+    const int w = n * cs;
+    std::vector<std::uint8_t> img(static_cast<std::size_t>(w) * static_cast<std::size_t>(w) * 3, 0);
+    for (const auto& r : recs) {
+      for (std::size_t j = 0; j < scans.size(); ++j) {
+        if (!(times[j] <= times[r.query] - o.min_gap)) continue;
+        const bool near = planar(clouds[r.query].T_world_cloud, clouds[j].T_world_cloud) <= o.radius;
+        double s = 0;
+        for (const auto& [jj, sc] : r.scores)
+          if (jj == j) s = sc;
+        for (int dy = 0; dy < cs; ++dy)
+          for (int dx = 0; dx < cs; ++dx) {
+            const std::size_t k = 3 * (static_cast<std::size_t>(static_cast<int>(r.query) * cs + dy) * static_cast<std::size_t>(w) +
+                                       static_cast<std::size_t>(static_cast<int>(j) * cs + dx));
+            img[k] = static_cast<std::uint8_t>(std::min(255.0, s * 2 * 255.0));
+            img[k + 1] = near ? 90 : 20;
+            img[k + 2] = near ? 140 : 20;
+          }
+      }
+    }
+    throw_if_error(io::write_png_rgb(o.png + "_confusion.png", w, w, img));
+    const int W = 320, H = 320, m = 20;
+    std::vector<std::uint8_t> pr(static_cast<std::size_t>(W) * H * 3, 255);
+    draw_line(pr, W, H, m, H - m, W - m, H - m, {0, 0, 0});
+    draw_line(pr, W, H, m, H - m, m, m, {0, 0, 0});
+    for (std::size_t i = 1; i < curve.size(); ++i) {
+      auto px = [&](double rc) { return m + static_cast<int>(rc * (W - 2 * m)); };
+      auto py = [&](double pc) { return H - m - static_cast<int>(pc * (H - 2 * m)); };
+      draw_line(pr, W, H, px(curve[i - 1][2]), py(curve[i - 1][1]), px(curve[i][2]), py(curve[i][1]), {200, 0, 0});
+    }
+    throw_if_error(io::write_png_rgb(o.png + "_pr.png", W, H, pr));
+  }
+
+  std::vector<std::array<double, 3>> by_distance;  // radius, tp, positives
+  for (const double rr : {1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0}) {
+    std::size_t a = 0, b = 0, c = 0;
+    counts(p.accept_score, rr, a, b, c);
+    by_distance.push_back({rr, static_cast<double>(a), static_cast<double>(c)});
+  }
+  std::vector<std::array<double, 2>> fp_by_thr;
+  for (int k = 0; k <= 12; ++k) {
+    std::size_t a = 0, b = 0, c = 0;
+    const double t = 0.05 * k;
+    counts(t, o.radius, a, b, c);
+    fp_by_thr.push_back({t, static_cast<double>(b)});
+  }
+  if (o.json) {
+    Json j;
+    j.begin_object().value("scans", scans.size()).value("queries", recs.size()).value("positives", pos);
+    j.value("radius_m", o.radius).value("min_gap_s", o.min_gap).value("threshold", p.accept_score);
+    j.value("true_positives", tp).value("false_positives", fp).value("precision", precision).value("recall", recall);
+    j.value("max_f1", max_f1).value("recall_at_precision_1", recall_at_p1);
+    j.value("median_translation_error_m", median(et)).value("median_rotation_error_deg", median(er));
+    j.value("median_query_ms", median(qms)).value("kb_per_scan", kb_per_scan);
+    j.value("alphabet_words", alphabet.size()).value("learn_ms", learn_ms).value("prepare_ms", prep_ms);
+    j.value("query_total_ms", query_total_ms);
+    j.begin_array("recall_by_distance");
+    for (const auto& d : by_distance) j.begin_object().value("radius_m", d[0]).value("tp", d[1]).value("positives", d[2]).end_object();
+    j.end_array().begin_array("false_positives_by_threshold");
+    for (const auto& f : fp_by_thr) j.begin_object().value("threshold", f[0]).value("fp", f[1]).end_object();
+    j.end_array().end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("scans %zu, queries with a database %zu, with a true revisit within %.1f m: %zu\n", scans.size(), recs.size(),
+              o.radius, pos);
+  std::printf("threshold %.2f: TP %zu FP %zu  precision %.3f recall %.3f\n", p.accept_score, tp, fp, precision, recall);
+  std::printf("max F1 %.3f, recall at 100%% precision %.3f\n", max_f1, recall_at_p1);
+  std::printf("accepted true matches: median error %.3f m, %.2f deg (%zu)\n", median(et), median(er), et.size());
+  std::printf("query (excluding feature extraction): median %.1f ms; database %.1f KB a scan; alphabet %zu words\n",
+              median(qms), kb_per_scan, alphabet.size());
+  std::printf("recall against distance:");
+  for (const auto& d : by_distance) std::printf("  %.0fm %g/%g", d[0], d[1], d[2]);
+  std::printf("\nfalse positives against threshold:");
+  for (const auto& f : fp_by_thr) std::printf("  %.2f:%g", f[0], f[1]);
+  std::printf("\nwrote %s_confusion.png %s_pr.png\n", o.png.c_str(), o.png.c_str());
+}
+
+void add_common(CLI::App* sub, PlaceOptions& o) {
+  sub->add_option("--format", o.format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  sub->add_option("--poses", o.poses, "World <- sensor pose of each scan (KITTI poses.txt layout); gives upright features");
+  sub->add_flag("--json", o.json, "Print one JSON object");
+}
+
+}  // namespace
+
+void register_place(CLI::App& app) {
+  auto o = std::make_shared<PlaceOptions>();
+  CLI::App* sub = app.add_subcommand("place", "Place recognition from word instances");
+  sub->require_subcommand(1);
+
+  CLI::App* build = sub->add_subcommand("build", "Build a place database from scans");
+  build->add_option("db", o->db, "Database file to write")->required();
+  build->add_option("scans", o->inputs, "Point clouds")->required();
+  build->add_option("--alphabet", o->alphabet, "Use this alphabet (else one is learned on --learn-scans of the inputs)");
+  build->add_option("--learn-scans", o->learn_scans, "Scans (evenly spaced) the alphabet is learned on")->check(CLI::Range(1, 100000));
+  build->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
+  build->add_option("--descriptor-bits", o->storage.descriptor_bits, "Bits a stored descriptor value: 4 or 8");
+  add_common(build, *o);
+  build->callback([o] { run_build(*o, false); });
+
+  CLI::App* add = sub->add_subcommand("add", "Add scans to a place database");
+  add->add_option("db", o->db, "Database file (rewritten)")->required();
+  add->add_option("scans", o->inputs, "Point clouds")->required();
+  add_common(add, *o);
+  add->callback([o] { run_build(*o, true); });
+
+  auto add_match = [&](CLI::App* s) {
+    s->add_option("--threshold", o->params.accept_score, "Acceptance threshold on the score")->check(CLI::Range(0.0, 1.0));
+    s->add_option("--candidates", o->params.top_k, "Scans retrieved by tf-idf and verified")->check(CLI::Range(1, 1000000));
+    s->add_flag("--ground-vehicle", o->ground, "Reject large roll/pitch or vertical offsets");
+  };
+  CLI::App* query = sub->add_subcommand("query", "Find a scan's place in a database");
+  query->add_option("db", o->db, "Database file")->required();
+  query->add_option("scan", o->inputs, "Query point cloud")->required()->expected(1);
+  query->add_option("--top", o->top, "Matches printed")->check(CLI::Range(1, 1000000));
+  add_match(query);
+  add_common(query, *o);
+  query->callback([o] { run_query(*o); });
+
+  CLI::App* ev = sub->add_subcommand("eval", "Evaluate place recognition on a sequence with poses");
+  ev->add_option("dir", o->inputs, "Folder of scans (frames.txt order when present)")->required()->expected(1);
+  ev->add_option("--times", o->times, "Time of each scan, seconds (default: 1 s apart)");
+  ev->add_option("--min-gap", o->min_gap, "A query's database holds the scans at least this much older, s")->check(CLI::Range(0.0, 1e9));
+  ev->add_option("--radius", o->radius, "A match is true within this planar distance, m")->check(CLI::Range(0.0, 1e6));
+  ev->add_option("--alphabet", o->alphabet, "Use this alphabet (else one is learned on --learn-scans of the scans)");
+  ev->add_option("--learn-scans", o->learn_scans, "Scans (evenly spaced) the alphabet is learned on")->check(CLI::Range(1, 100000));
+  ev->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
+  ev->add_option("--png", o->png, "Prefix of the PNGs written (PREFIX_confusion.png, PREFIX_pr.png)");
+  add_match(ev);
+  add_common(ev, *o);
+  ev->get_option("--poses")->required();
+  ev->callback([o] { run_eval(*o); });
+}
+
+}  // namespace lex3d::cli

@@ -1,0 +1,85 @@
+#pragma once
+/// \file
+/// The lex3d model file and alphabet file (formats/model.md, formats/alphabet.md):
+/// encoders and hardened decoders. Output is deterministic: the same input and options
+/// give the same bytes. Decoders never crash on corrupt input; they return a Status
+/// with a message and the byte offset of the problem.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lex3d/alphabet/alphabet.hpp"
+#include "lex3d/core/status.hpp"
+#include "lex3d/model/model.hpp"
+
+namespace lex3d::codec {
+
+/// Quantisation steps; they are written into the files, so decoders need no options.
+struct Quantization {
+  /// Instance translations, metres; (0, 0.1]. Error per axis <= step / 2.
+  double translation_m = 0.0005;
+  /// Instance rotations (rotation-vector components), radians; (0, 0.1].
+  double rotation_rad = 0.0002;
+  /// Word points in the word frame, metres; (0, 0.1]. Error per axis <= step / 2.
+  double word_point_m = 0.0005;
+  void validate() const;
+};
+
+/// Everything a model file holds.
+struct ModelData {
+  std::uint64_t input_points = 0;             ///< points of the scan the model was made from
+  Pose T_cloud_sensor = Pose::Identity();     ///< sensor pose in the model's frame (for ray casting)
+  Model model;                                ///< instances
+  /// The alphabet when embedded (flag bit 0); else nullopt and alphabet_hash names it.
+  std::optional<Alphabet> alphabet;
+  /// Content hash of the external alphabet file (FNV-1a 64 of its bytes) when referenced.
+  std::optional<std::uint64_t> alphabet_hash;
+};
+
+/// Encodes an alphabet file. Throws std::invalid_argument for an invalid `q` or alphabet
+/// (a descriptor of the wrong length or with a value outside [-1, 1], a non-finite point or
+/// one beyond 2^31 steps, a negative or non-finite radius or spacing).
+[[nodiscard]] std::vector<std::uint8_t> encode_alphabet(const Alphabet& alphabet, const Quantization& q = {});
+/// Decodes an alphabet file.
+[[nodiscard]] StatusOr<Alphabet> decode_alphabet(const std::vector<std::uint8_t>& bytes);
+/// The content hash a model file uses to reference an alphabet file (FNV-1a 64 of the
+/// file's bytes; it detects a wrong or changed file, it is not a cryptographic hash).
+[[nodiscard]] std::uint64_t alphabet_hash(const std::vector<std::uint8_t>& alphabet_file);
+
+/// Encodes a model file; `data.alphabet` set embeds it, else `data.alphabet_hash` must be set.
+/// Throws std::invalid_argument for an invalid `q`, neither alphabet nor hash, a word id beyond
+/// the embedded alphabet, a pose that is not a finite rigid transform (rotation orthonormal
+/// within 1e-6) or a translation beyond 2^31 steps.
+[[nodiscard]] std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization& q = {});
+/// Decodes a model file. A model that references an alphabet needs `external_alphabet_file`
+/// (the alphabet file's bytes, checked against the stored hash); its alphabet is then decoded
+/// into ModelData::alphabet. Without it such a model is not decoded: the Status has code
+/// kInvalidArgument (the caller must supply the file); errors inside the external file carry
+/// offsets in that file. A model that embeds its alphabet ignores `external_alphabet_file`.
+/// Instance::feature is not stored and decodes as 0; the instance order is kept.
+[[nodiscard]] StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
+                                               const std::vector<std::uint8_t>* external_alphabet_file = nullptr);
+
+/// What `lex3d info` shows of a model or alphabet file.
+struct ChunkInfo {
+  std::string type;          ///< four characters
+  std::uint64_t offset = 0;  ///< of the chunk header
+  std::uint64_t length = 0;  ///< payload bytes
+  bool crc_ok = false;
+};
+struct FileInfo {
+  std::string kind;  ///< "model" or "alphabet"
+  int major = 0;
+  int minor = 0;
+  std::uint32_t flags = 0;
+  bool header_crc_ok = false;  ///< the header's own CRC (bytes 0..15)
+  std::vector<ChunkInfo> chunks;
+  std::uint64_t file_bytes = 0;
+};
+/// Reads the header and chunk table without decoding payloads; fails only when the
+/// header or the chunk framing is unreadable (a CRC mismatch is reported, not fatal).
+[[nodiscard]] StatusOr<FileInfo> inspect(const std::vector<std::uint8_t>& bytes);
+
+}  // namespace lex3d::codec

@@ -1,0 +1,234 @@
+#pragma once
+/// \file
+/// Place recognition on word instances (steder2010 §III-B/C, collier2012 §3.2).
+///
+/// A scan enters the place module as a PlaceScan: the word ids of its instances (a
+/// bag of words for tf-idf retrieval), its strongest interest-point features (6-DoF
+/// frame, quantised descriptor) for correspondences, and a coarse, quantised range
+/// image for scoring candidate transforms. A PlaceDatabase holds PlaceScans, retrieves
+/// the top-K by tf-idf similarity through an inverted index, and verifies each with
+/// RANSAC over feature correspondences and steder2010's validation-point score.
+///
+/// Transforms: a match carries T_match_query, which maps a point from the query scan's
+/// cloud frame into the matched scan's cloud frame. With world <- sensor poses T_q and
+/// T_m (e.g. balm's poses.txt) the true value is T_m^-1 · T_q.
+///
+/// Upright frames: features are upright with respect to the world's up direction, which
+/// prepare_scan takes from Cloud::T_world_cloud when has_world_pose. On a robot this
+/// gravity direction would come from an IMU; without it the sensor's z axis is used.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lex3d/alphabet/alphabet.hpp"
+#include "lex3d/core/cloud.hpp"
+#include "lex3d/core/status.hpp"
+#include "lex3d/model/model.hpp"
+#include "lex3d/range/range_image.hpp"
+
+namespace lex3d {
+
+/// What a database stores of each scan; fixed for a database (saved with it).
+struct PlaceStorageParams {
+  /// Interest-point features kept per scan, strongest first; [1, 4096].
+  int max_features = 160;
+  /// Bits per descriptor value (values in [-1, 1], uniform quantiser); 4 or 8.
+  int descriptor_bits = 4;
+  /// Width of a coarse range-image pixel, degrees of azimuth; [0.05, 10].
+  double coarse_azimuth_deg = 1.5;
+  /// Rows of the scan's range image merged into one coarse row; [1, 16].
+  int coarse_row_factor = 1;
+  /// Range quantisation step of the coarse image, metres; [0.001, 1].
+  double range_step = 0.02;
+  void validate() const;
+};
+
+/// Parameters of matching and scoring (defaults from steder2010 and collier2012).
+struct PlaceParams {
+  /// Database scans retrieved by tf-idf and verified geometrically (top-K); [1, 1e6].
+  int top_k = 16;
+  /// Lowe ratio test on descriptor distances: nearest < ratio · second nearest
+  /// (collier2012 §3.2: 0.8); (0, 1].
+  double ratio = 0.8;
+  /// Minimum RANSAC inliers for a transform (collier2012 §3.2: 6); [3, 1000].
+  int min_inliers = 6;
+  /// A query feature is an inlier of a transform when it lands within this distance of
+  /// a feature of the other scan, metres; (0, 10]. Interest points of revisits 2-5 m
+  /// apart repeat only to about this (measured on balm: 15 % within 0.3 m, 30 % within 0.6 m).
+  double inlier_distance = 0.5;
+  /// Distance-consistency check (steder2010 §III-B): two correspondences are consistent
+  /// when their distances within each scan differ by at most this, metres; (0, 10].
+  double consistency_tolerance = 0.4;
+  /// Candidate transforms from 1, 2 and 3 descriptor correspondences, each (steder2010: 500); [1, 1e5].
+  int hypotheses_per_size = 500;
+  /// Query feature pairs tried as gravity-aligned 2-correspondence hypotheses: each pair is
+  /// matched to every pair of the other scan with the same horizontal distance and height
+  /// difference (within consistency_tolerance), giving yaw and translation; [0, 1e5].
+  int gravity_pairs = 300;
+  /// The best hypotheses (by inliers) that are refined and scored; [1, 100].
+  int scored_hypotheses = 10;
+  /// Least-squares refinement rounds on the inliers (Umeyama); [0, 50].
+  int refine_iterations = 3;
+  /// Seed of the RANSAC sampling; results are deterministic for a seed.
+  std::uint64_t seed = 1;
+  /// Validation points per scan, interest points as equidistant as possible
+  /// (steder2010: 100); [1, 4096].
+  int validation_points = 100;
+  /// Error radius e, coarse-image pixels (steder2010 eq. 6: 2); [0, 20].
+  int error_radius_px = 2;
+  /// d̂, the largest range difference that still supports a validation point, metres
+  /// (steder2010 eq. 7: 0.3); (0, 10].
+  double max_range_difference = 0.3;
+  /// p, the penalty of a visible but contradicted validation point (eq. 8: 0.3); [0, 1].
+  double penalty = 0.3;
+  /// Acceptance threshold on the score S (eq. 10), steder2010: 0.25; [0, 1].
+  double accept_score = 0.25;
+  /// Ground-vehicle check: reject transforms with a large tilt or vertical offset.
+  bool ground_vehicle = false;
+  /// Ground-vehicle check: largest angle between the two scans' up directions, degrees; [0, 180].
+  double max_tilt_deg = 10.0;
+  /// Ground-vehicle check: largest vertical offset, metres; [0, 100].
+  double max_vertical_offset = 1.0;
+  /// Worker threads over candidates; [1, 64]. Results do not depend on it.
+  int threads = 1;
+  void validate() const;
+};
+
+/// One stored interest-point feature: its frame in the scan's cloud frame.
+struct PlaceFeature {
+  Eigen::Vector3f position = Eigen::Vector3f::Zero();                ///< cloud frame, metres
+  Eigen::Quaternionf rotation = Eigen::Quaternionf::Identity();      ///< R_cloud_feature
+};
+
+/// A scan as the place module sees it (the database form; a query takes the same form).
+struct PlaceScan {
+  std::string name;
+  /// Pose of the cloud frame in the world, when known (kept for diagnostics and the
+  /// ground-vehicle check).
+  Pose T_world_cloud = Pose::Identity();
+  bool has_world_pose = false;
+  /// Bag of words: (word id, instance count), sorted by word id.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> words;
+  std::vector<PlaceFeature> features;
+  int descriptor_dim = 0;
+  int descriptor_bits = 8;
+  /// Quantised descriptors, features.size() x descriptor_dim codes (one per byte in memory).
+  std::vector<std::uint8_t> descriptor_codes;
+  /// Dequantised descriptors (derived from the codes).
+  std::vector<float> descriptors;
+  /// Coarse range image: geometry and ranges (quantised) and states; points are not kept.
+  RangeImage coarse;
+  /// All features in farthest-point order, the strongest first (derived); the first
+  /// PlaceParams::validation_points are the validation points (as equidistant as possible).
+  std::vector<std::uint32_t> validation;
+};
+
+/// Builds the PlaceScan of a prepared scan and its model (word ids from the instances;
+/// `model` may be empty, then retrieval has nothing to go on). Builds the scan's range
+/// image with `range` (as feature extraction does) for the coarse image.
+[[nodiscard]] PlaceScan make_place_scan(const PreparedScan& scan, const Model& model,
+                                        const PlaceStorageParams& storage, const RangeImageParams& range = {},
+                                        std::string name = {});
+
+/// As above, with word ids assigned directly: every feature (interest and coverage) takes
+/// the word with the nearest descriptor, which is encode_scan's assignment before its
+/// pose refinement and pruning (much cheaper, same ids).
+[[nodiscard]] PlaceScan make_place_scan(const PreparedScan& scan, const Alphabet& alphabet,
+                                        const PlaceStorageParams& storage, const RangeImageParams& range = {},
+                                        std::string name = {});
+
+/// Bytes of one scan in the database format (its SCAN chunk, framing included).
+[[nodiscard]] std::size_t stored_bytes(const PlaceScan& scan);
+
+/// The result of matching a query against one scan.
+struct PlaceMatch {
+  std::size_t scan = 0;                 ///< database index
+  Pose T_match_query = Pose::Identity();
+  double score = 0.0;                   ///< S = min(score_query_in_match, score_match_in_query)
+  double score_query_in_match = 0.0;    ///< query validation points in the match's image
+  double score_match_in_query = 0.0;    ///< match validation points in the query's image
+  double retrieval_similarity = 0.0;    ///< tf-idf cosine similarity
+  std::size_t correspondences = 0;      ///< after the ratio test
+  std::size_t inliers = 0;              ///< query features within inlier_distance of a match feature
+  std::size_t descriptor_inliers = 0;   ///< ratio-test correspondences consistent with the transform
+  std::size_t hypotheses = 0;           ///< candidate transforms evaluated
+  double rms_inlier_m = 0.0;            ///< RMS distance of the inliers after refinement
+  bool rejected_ground = false;         ///< dropped by the ground-vehicle check
+  bool valid = false;                   ///< a transform with at least min_inliers was found
+};
+
+/// Matches `query` against `candidate`: correspondences (ratio test), candidate
+/// transforms from 1, 2 and 3 correspondences with the distance-consistency check,
+/// RANSAC inlier counting, Umeyama refinement, validation-point score. Deterministic.
+[[nodiscard]] PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const PlaceParams& params);
+
+/// Steder2010 eq. 6-10: score of the validation points of `from` moved by T_to_from into
+/// the coarse range image of `to`; in [0, 1].
+[[nodiscard]] double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from,
+                                      const PlaceParams& params);
+
+struct PlaceQueryResult {
+  /// Verified candidates, best score first (invalid ones last, score 0).
+  std::vector<PlaceMatch> matches;
+  /// True when the best score reaches PlaceParams::accept_score; false = unknown place.
+  bool accepted = false;
+  std::size_t retrieved = 0;  ///< candidates from the inverted index
+  double retrieval_ms = 0.0;
+  double verification_ms = 0.0;
+  [[nodiscard]] const PlaceMatch* best() const noexcept { return matches.empty() ? nullptr : &matches.front(); }
+};
+
+/// A scan database with an inverted index word id -> scans (after FAISS's Index:
+/// state lasts across add/query; save/load to bytes).
+class PlaceDatabase {
+ public:
+  explicit PlaceDatabase(PlaceStorageParams storage = {});
+
+  [[nodiscard]] const PlaceStorageParams& storage() const noexcept { return storage_; }
+  /// The alphabet the word ids refer to (optional; stored with the database).
+  void set_alphabet(Alphabet alphabet) { alphabet_ = std::move(alphabet); has_alphabet_ = true; }
+  [[nodiscard]] bool has_alphabet() const noexcept { return has_alphabet_; }
+  [[nodiscard]] const Alphabet& alphabet() const noexcept { return alphabet_; }
+
+  /// Adds a scan; returns its index. Throws std::invalid_argument when its descriptor
+  /// layout differs from the database's.
+  std::size_t add(PlaceScan scan);
+  [[nodiscard]] std::size_t size() const noexcept { return scans_.size(); }
+  [[nodiscard]] const PlaceScan& scan(std::size_t i) const { return scans_.at(i); }
+
+  /// tf-idf cosine similarity of `query` to every scan with a shared word, best first,
+  /// at most `k` (ties by lower index). idf = ln(1 + N / n_w).
+  [[nodiscard]] std::vector<std::pair<std::size_t, double>> retrieve(const PlaceScan& query, std::size_t k) const;
+
+  /// Retrieves top_k candidates and verifies them with match_scans.
+  [[nodiscard]] PlaceQueryResult query(const PlaceScan& query, const PlaceParams& params) const;
+
+  /// Serialises the database (formats/place_db.md).
+  [[nodiscard]] std::vector<std::uint8_t> save() const;
+  /// Parses save()'s bytes; corrupt, truncated or inconsistent bytes give a kBadData
+  /// Status with the byte offset.
+  [[nodiscard]] static StatusOr<PlaceDatabase> load(const std::vector<std::uint8_t>& bytes);
+
+ private:
+  struct Posting {
+    std::uint32_t scan;
+    std::uint32_t count;
+  };
+  PlaceStorageParams storage_;
+  Alphabet alphabet_;
+  bool has_alphabet_ = false;
+  std::vector<PlaceScan> scans_;
+  std::vector<std::uint32_t> scan_word_total_;  // instances per scan
+  std::vector<std::vector<Posting>> inverted_;  // word id -> postings
+};
+
+namespace detail {
+/// Quantises descriptors (values in [-1, 1]) to `bits` per value and back.
+std::uint8_t quantise_descriptor_value(float v, int bits) noexcept;
+float dequantise_descriptor_value(std::uint8_t code, int bits) noexcept;
+/// Fills `scan.descriptors` and `scan.validation` from the stored fields.
+void finish_place_scan(PlaceScan& scan);
+}  // namespace detail
+
+}  // namespace lex3d

@@ -1,0 +1,852 @@
+// The model file and alphabet file (formats/model.md, formats/alphabet.md). Field and
+// chunk names follow the specifications; section numbers refer to them.
+//
+// Reading never trusts a length: every chunk length is compared with the bytes left,
+// every count with what the stored bytes can hold, before anything is allocated, and
+// inflated data grows only as zlib actually produces it, never past the stored raw_size.
+
+#include "lex3d/codec/codec.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include <zlib.h>
+
+namespace lex3d::codec {
+namespace {
+
+// ---------------------------------------------------------------------------------------
+// Constants of the specifications
+// ---------------------------------------------------------------------------------------
+
+constexpr char kModelMagic[8] = {'L', 'E', 'X', '3', 'D', 'M', 'D', 'L'};
+constexpr char kAlphabetMagic[8] = {'L', 'E', 'X', '3', 'D', 'A', 'L', 'P'};
+constexpr std::uint16_t kMajor = 1;
+constexpr std::uint16_t kMinor = 0;
+constexpr std::size_t kHeaderBytes = 20;      // magic 8, major 2, minor 2, flags 4, header_crc 4
+constexpr std::size_t kChunkHeadBytes = 12;   // type 4, length 8
+constexpr std::size_t kChunkCrcBytes = 4;
+constexpr std::uint32_t kFlagAlphabetEmbedded = 1U << 0;
+constexpr std::uint32_t kFlagAlphabetReferenced = 1U << 1;
+constexpr std::uint64_t kMhdrBytes = 120;
+constexpr std::uint64_t kAhdrBytes = 32;
+constexpr std::uint64_t kArefBytes = 8;
+constexpr std::uint64_t kDeflatedHeadBytes = 16;  // count u64 + raw_size u64 (INST, WORD)
+constexpr std::uint64_t kInstanceRawBytes = 28;   // 7 columns of u32
+constexpr std::uint32_t kMaxDescriptorDim = 65535;
+constexpr std::uint64_t kMaxInflateRatio = 1032;  // deflate's best case is ~1032:1
+constexpr std::uint64_t kInflateSlack = 64;
+constexpr int kZlibLevel = 9;
+constexpr double kOrthonormalTolerance = 1e-6;
+constexpr double kDescriptorScale = 127.0;
+constexpr double kPi = 3.14159265358979323846;
+
+// ---------------------------------------------------------------------------------------
+// Little-endian writing
+// ---------------------------------------------------------------------------------------
+
+void put_u16(std::vector<std::uint8_t>& b, std::uint16_t v) {
+  b.push_back(static_cast<std::uint8_t>(v & 0xFFU));
+  b.push_back(static_cast<std::uint8_t>(v >> 8));
+}
+void put_u32(std::vector<std::uint8_t>& b, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) b.push_back(static_cast<std::uint8_t>((v >> (8 * i)) & 0xFFU));
+}
+void put_u64(std::vector<std::uint8_t>& b, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) b.push_back(static_cast<std::uint8_t>((v >> (8 * i)) & 0xFFU));
+}
+void put_f64(std::vector<std::uint8_t>& b, double d) {
+  std::uint64_t v = 0;
+  std::memcpy(&v, &d, sizeof v);
+  put_u64(b, v);
+}
+
+std::uint32_t zigzag(std::int32_t x) {
+  const auto u = static_cast<std::uint32_t>(x);
+  return (u << 1) ^ (x < 0 ? 0xFFFFFFFFU : 0U);
+}
+std::int32_t unzigzag(std::uint32_t u) {
+  const std::uint32_t v = (u >> 1) ^ (0U - (u & 1U));
+  std::int32_t x = 0;
+  std::memcpy(&x, &v, sizeof x);  // two's complement reinterpretation, no UB
+  return x;
+}
+std::int32_t as_i32(std::uint32_t u) {
+  std::int32_t x = 0;
+  std::memcpy(&x, &u, sizeof x);
+  return x;
+}
+
+/// planes(v): byte k·n + i is byte k of v[i] (formats/alphabet.md §1).
+void put_planes(std::vector<std::uint8_t>& raw, const std::vector<std::uint32_t>& v) {
+  const std::size_t n = v.size();
+  const std::size_t at = raw.size();
+  raw.resize(at + 4 * n);
+  for (std::size_t k = 0; k < 4; ++k)
+    for (std::size_t i = 0; i < n; ++i)
+      raw[at + k * n + i] = static_cast<std::uint8_t>((v[i] >> (8 * k)) & 0xFFU);
+}
+
+std::uint32_t crc_of(const std::uint8_t* data, std::size_t n, std::uint32_t crc = 0) {
+  uLong c = crc;
+  while (n > 0) {
+    const std::size_t step = std::min<std::size_t>(n, 1U << 30);
+    c = crc32(c, data, static_cast<uInt>(step));
+    data += step;
+    n -= step;
+  }
+  return static_cast<std::uint32_t>(c);
+}
+
+void put_header(std::vector<std::uint8_t>& out, const char (&magic)[8], std::uint32_t flags) {
+  out.insert(out.end(), magic, magic + 8);
+  put_u16(out, kMajor);
+  put_u16(out, kMinor);
+  put_u32(out, flags);
+  put_u32(out, crc_of(out.data() + out.size() - 16, 16));
+}
+
+/// type(4) length(u64) payload crc(u32 of type ‖ length ‖ payload).
+void put_chunk(std::vector<std::uint8_t>& out, const char* type, const std::vector<std::uint8_t>& payload) {
+  const std::size_t start = out.size();
+  out.insert(out.end(), type, type + 4);
+  put_u64(out, payload.size());
+  out.insert(out.end(), payload.begin(), payload.end());
+  put_u32(out, crc_of(out.data() + start, out.size() - start));
+}
+
+/// count u64, raw_size u64, deflate(raw) at level 9 (deterministic for a zlib build).
+std::vector<std::uint8_t> deflated_payload(std::uint64_t count, const std::vector<std::uint8_t>& raw) {
+  std::vector<std::uint8_t> p;
+  put_u64(p, count);
+  put_u64(p, raw.size());
+  uLongf bound = compressBound(static_cast<uLong>(raw.size()));
+  std::vector<std::uint8_t> z(bound);
+  if (compress2(z.data(), &bound, raw.data(), static_cast<uLong>(raw.size()), kZlibLevel) != Z_OK)
+    throw std::runtime_error("lex3d::codec: zlib compress2 failed");
+  p.insert(p.end(), z.begin(), z.begin() + static_cast<std::ptrdiff_t>(bound));
+  return p;
+}
+
+std::int32_t quantize(double value, double step, const char* what) {
+  const double x = value / step;
+  if (!std::isfinite(x) || std::abs(x) > 2147483647.0)
+    throw std::invalid_argument(std::string("lex3d::codec: ") + what + " " + std::to_string(value) +
+                                " does not fit an i32 in units of " + std::to_string(step));
+  return static_cast<std::int32_t>(std::llround(x));
+}
+
+bool orthonormal(const Eigen::Matrix3d& R) {
+  return R.allFinite() && (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() <= kOrthonormalTolerance &&
+         R.determinant() > 0.0;
+}
+
+// ---------------------------------------------------------------------------------------
+// Reading: context for errors, little-endian loads, the container
+// ---------------------------------------------------------------------------------------
+
+/// Where a byte string sits and what to call it in messages. `base` is the offset of
+/// byte 0 in the file the user gave (non-zero for an embedded alphabet).
+struct Ctx {
+  std::string what;
+  std::uint64_t base = 0;
+  [[nodiscard]] Status error(const std::string& message, std::uint64_t offset) const {
+    return bad_data(what + ": " + message, base + offset);
+  }
+};
+
+std::uint16_t ld_u16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | (p[1] << 8)); }
+std::uint32_t ld_u32(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | (static_cast<std::uint32_t>(p[1]) << 8) |
+         (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
+}
+std::uint64_t ld_u64(const std::uint8_t* p) {
+  return static_cast<std::uint64_t>(ld_u32(p)) | (static_cast<std::uint64_t>(ld_u32(p + 4)) << 32);
+}
+double ld_f64(const std::uint8_t* p) {
+  const std::uint64_t v = ld_u64(p);
+  double d = 0.0;
+  std::memcpy(&d, &v, sizeof d);
+  return d;
+}
+/// Element i of a planes() column of n values starting at `col`.
+std::uint32_t ld_plane(const std::uint8_t* col, std::size_t n, std::size_t i) {
+  return static_cast<std::uint32_t>(col[i]) | (static_cast<std::uint32_t>(col[n + i]) << 8) |
+         (static_cast<std::uint32_t>(col[2 * n + i]) << 16) | (static_cast<std::uint32_t>(col[3 * n + i]) << 24);
+}
+
+std::string hex(std::uint64_t v, int digits) {
+  static const char* kDigits = "0123456789abcdef";
+  std::string s(static_cast<std::size_t>(digits), '0');
+  for (int i = digits - 1; i >= 0; --i, v >>= 4) s[static_cast<std::size_t>(i)] = kDigits[v & 0xFU];
+  return "0x" + s;
+}
+
+/// A chunk type for messages: letters as they are, anything else as \xNN (one line).
+std::string printable_type(const std::uint8_t* t) {
+  std::string s;
+  for (int i = 0; i < 4; ++i) {
+    const std::uint8_t c = t[i];
+    if (c >= 0x20 && c < 0x7F && c != '\\' && c != '\'') {
+      s.push_back(static_cast<char>(c));
+    } else {
+      s += "\\x" + hex(c, 2).substr(2);
+    }
+  }
+  return "'" + s + "'";
+}
+
+bool is_letter(std::uint8_t c) { return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z'); }
+
+struct Header {
+  std::uint16_t major = 0;
+  std::uint16_t minor = 0;
+  std::uint32_t flags = 0;
+  bool crc_ok = false;
+};
+
+/// Checks magic, major version (and, when `strict`, the header CRC): alphabet.md §2.
+Status read_header(const std::uint8_t* d, std::size_t size, const Ctx& ctx, const char (&magic)[8],
+                   const char (&other_magic)[8], const char* other_kind, bool strict, Header& h) {
+  const std::size_t have = std::min<std::size_t>(size, 8);
+  if (have > 0 && std::memcmp(d, magic, have) != 0) {  // d may be null when size is 0
+    if (size >= 8 && std::memcmp(d, other_magic, 8) == 0)
+      return ctx.error(std::string("this is a lex3d ") + other_kind + " file", 0);
+    return ctx.error("bad magic (expected \"" + std::string(magic, 8) + "\")", 0);
+  }
+  if (size < 12) return ctx.error("truncated header (" + std::to_string(size) + " of 20 bytes)", size);
+  h.major = ld_u16(d + 8);
+  h.minor = ld_u16(d + 10);
+  if (h.major != kMajor)
+    return ctx.error("unsupported format version " + std::to_string(h.major) + "." + std::to_string(h.minor) +
+                         " (this reader reads major version 1)",
+                     8);
+  if (size < kHeaderBytes) return ctx.error("truncated header (" + std::to_string(size) + " of 20 bytes)", size);
+  h.flags = ld_u32(d + 12);
+  const std::uint32_t stored = ld_u32(d + 16);
+  const std::uint32_t computed = crc_of(d, 16);
+  h.crc_ok = stored == computed;
+  if (strict && !h.crc_ok)
+    return ctx.error("header CRC mismatch (stored " + hex(stored, 8) + ", computed " + hex(computed, 8) + ")", 16);
+  return {};
+}
+
+struct Chunk {
+  const std::uint8_t* type = nullptr;  // 4 bytes
+  std::string name;                    // printable, quoted
+  std::uint64_t offset = 0;            // of the chunk header, relative to the byte string
+  const std::uint8_t* payload = nullptr;
+  std::uint64_t length = 0;
+  std::uint64_t payload_offset = 0;
+  std::uint32_t stored_crc = 0;
+  std::uint32_t computed_crc = 0;
+  [[nodiscard]] bool is(const char* t) const { return std::memcmp(type, t, 4) == 0; }
+  [[nodiscard]] bool required() const { return type[0] >= 'A' && type[0] <= 'Z'; }
+};
+
+/// Frames one chunk at `pos`: the length is checked against the bytes left before
+/// anything else; the CRC is computed (not judged) here.
+Status frame_chunk(const std::uint8_t* d, std::size_t size, std::size_t pos, const Ctx& ctx, Chunk& c) {
+  const std::size_t left = size - pos;
+  if (left < kChunkHeadBytes)
+    return ctx.error("truncated chunk header (" + std::to_string(left) + " of 12 bytes)", pos);
+  c.type = d + pos;
+  c.name = printable_type(c.type);
+  c.offset = pos;
+  c.length = ld_u64(d + pos + 4);
+  const std::uint64_t room = left - kChunkHeadBytes;
+  if (room < kChunkCrcBytes || c.length > room - kChunkCrcBytes)
+    return ctx.error("chunk " + c.name + " length " + std::to_string(c.length) + " exceeds the " +
+                         std::to_string(room < kChunkCrcBytes ? 0 : room - kChunkCrcBytes) + " bytes left",
+                     pos + 4);
+  const auto len = static_cast<std::size_t>(c.length);
+  c.payload = d + pos + kChunkHeadBytes;
+  c.payload_offset = pos + kChunkHeadBytes;
+  c.stored_crc = ld_u32(c.payload + len);
+  c.computed_crc = crc_of(d + pos, kChunkHeadBytes + len);
+  return {};
+}
+
+/// Walks the chunks of a file: framing, type letters, CRC, known/unknown, order and the
+/// end chunk (alphabet.md §2). `sequence` lists the known chunks this file must hold, in
+/// order (the first and the last are the first and end chunks); `known` lists every
+/// chunk type of the format (a known type missing from `sequence` is out of place).
+/// `on_chunk(index in sequence, chunk)` decodes a payload.
+template <typename OnChunk>
+Status walk_chunks(const std::uint8_t* d, std::size_t size, const Ctx& ctx, const std::vector<const char*>& sequence,
+                   const std::vector<const char*>& known, OnChunk&& on_chunk) {
+  std::size_t pos = kHeaderBytes;
+  std::size_t next = 0;  // index in `sequence` of the next expected known chunk
+  for (;;) {
+    if (pos == size)
+      return ctx.error("file ends before the '" + std::string(sequence.back(), 4) + "' chunk", pos);
+    Chunk c;
+    if (Status s = frame_chunk(d, size, pos, ctx, c); !s.ok()) return s;
+    if (!(is_letter(c.type[0]) && is_letter(c.type[1]) && is_letter(c.type[2]) && is_letter(c.type[3])))
+      return ctx.error("invalid chunk type " + c.name + " (4 ASCII letters expected)", pos);
+    if (c.stored_crc != c.computed_crc)
+      return ctx.error("chunk " + c.name + " CRC mismatch (stored " + hex(c.stored_crc, 8) + ", computed " +
+                           hex(c.computed_crc, 8) + ")",
+                       c.payload_offset + c.length);
+    const auto in_seq = std::find_if(sequence.begin(), sequence.end(), [&](const char* t) { return c.is(t); });
+    const bool is_known = std::any_of(known.begin(), known.end(), [&](const char* t) { return c.is(t); });
+    if (next == 0 && in_seq != sequence.begin())
+      return ctx.error("the first chunk must be '" + std::string(sequence.front(), 4) + "', found " + c.name, pos);
+    if (in_seq == sequence.end()) {
+      if (is_known) return ctx.error("chunk " + c.name + " does not belong in this file (see its flags)", pos);
+      if (c.required()) return ctx.error("unknown required chunk " + c.name, pos);
+      pos = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);  // unknown optional: skip
+      continue;
+    }
+    const auto index = static_cast<std::size_t>(in_seq - sequence.begin());
+    if (index < next) return ctx.error("chunk " + c.name + " is repeated or out of order", pos);
+    if (index > next)
+      return ctx.error("chunk " + c.name + " comes before the required chunk '" + std::string(sequence[next], 4) + "'",
+                       pos);
+    if (Status s = on_chunk(index, c); !s.ok()) return s;
+    ++next;
+    pos = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
+    if (index + 1 == sequence.size()) {  // the end chunk
+      if (c.length != 0)
+        return ctx.error("end chunk " + c.name + " must be empty, has " + std::to_string(c.length) + " bytes",
+                         c.offset + 4);
+      if (pos != size)
+        return ctx.error(std::to_string(size - pos) + " bytes after the end chunk " + c.name, pos);
+      return {};
+    }
+  }
+}
+
+Status expect_length(const Chunk& c, std::uint64_t want, const Ctx& ctx) {
+  if (c.length != want)
+    return ctx.error("chunk " + c.name + " payload is " + std::to_string(c.length) + " bytes, expected " +
+                         std::to_string(want),
+                     c.offset + 4);
+  return {};
+}
+
+/// Inflates a zlib stream into exactly `raw_size` bytes (alphabet.md §5). `offset` is
+/// that of the stream, for messages. The output grows with what zlib produces.
+Status inflate_exact(const std::uint8_t* src, std::uint64_t src_len, std::uint64_t raw_size, const Ctx& ctx,
+                     const std::string& chunk, std::uint64_t offset, std::vector<std::uint8_t>& out) {
+  constexpr std::size_t kSlice = std::size_t{1} << 30;
+  z_stream zs{};
+  if (inflateInit(&zs) != Z_OK) return ctx.error("zlib could not start inflating chunk " + chunk, offset);
+  struct End {
+    z_stream* z;
+    ~End() { inflateEnd(z); }
+  } end{&zs};
+  out.clear();
+  out.resize(static_cast<std::size_t>(std::min<std::uint64_t>(raw_size, (std::uint64_t{1} << 16) + 4 * src_len)));
+  std::size_t produced = 0;
+  std::uint64_t fed = 0;
+  for (;;) {
+    if (zs.avail_in == 0 && fed < src_len) {
+      const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(src_len - fed, kSlice));
+      zs.next_in = const_cast<Bytef*>(src + fed);  // zlib's API is not const-correct; it does not write
+      zs.avail_in = static_cast<uInt>(n);
+      fed += n;
+    }
+    std::uint8_t probe = 0;
+    bool probing = false;
+    if (produced == out.size()) {
+      if (out.size() < raw_size)
+        out.resize(static_cast<std::size_t>(std::min<std::uint64_t>(raw_size, std::max<std::uint64_t>(2 * out.size(), 1U << 16))));
+      else
+        probing = true;  // all raw_size bytes are in: any further output is an error
+    }
+    if (probing) {
+      zs.next_out = &probe;
+      zs.avail_out = 1;
+    } else {
+      zs.next_out = out.data() + produced;
+      zs.avail_out = static_cast<uInt>(std::min(out.size() - produced, kSlice));
+    }
+    const uInt before = zs.avail_out;
+    const int ret = inflate(&zs, Z_NO_FLUSH);
+    const uInt got = before - zs.avail_out;
+    const std::uint64_t at = offset + (fed - zs.avail_in);
+    if (probing && got > 0)
+      return ctx.error("chunk " + chunk + " inflates to more than its raw_size of " + std::to_string(raw_size) + " bytes",
+                       at);
+    if (!probing) produced += got;
+    if (ret == Z_STREAM_END) break;
+    if (ret == Z_OK) continue;
+    if (ret == Z_BUF_ERROR && !(zs.avail_in == 0 && fed == src_len)) continue;
+    if (ret == Z_BUF_ERROR) return ctx.error("chunk " + chunk + " deflate stream is truncated", at);
+    return ctx.error("chunk " + chunk + " deflate stream is corrupt (" + std::string(zs.msg ? zs.msg : "zlib error") + ")",
+                     at);
+  }
+  if (produced != raw_size)
+    return ctx.error("chunk " + chunk + " inflates to " + std::to_string(produced) + " bytes, its raw_size says " +
+                         std::to_string(raw_size),
+                     offset);
+  const std::uint64_t rest = zs.avail_in + (src_len - fed);
+  if (rest != 0)
+    return ctx.error(std::to_string(rest) + " bytes after the deflate stream in chunk " + chunk, offset + src_len - rest);
+  out.resize(produced);
+  return {};
+}
+
+/// raw_size must not exceed what deflate can produce from `stored` bytes.
+bool inflatable(std::uint64_t raw_size, std::uint64_t stored) {
+  const std::uint64_t cap = stored > (std::numeric_limits<std::uint64_t>::max() - kInflateSlack) / kMaxInflateRatio
+                                ? std::numeric_limits<std::uint64_t>::max()
+                                : stored * kMaxInflateRatio + kInflateSlack;
+  return raw_size <= cap;
+}
+
+// ---------------------------------------------------------------------------------------
+// Alphabet file (alphabet.md §3)
+// ---------------------------------------------------------------------------------------
+
+void check_alphabet(const Alphabet& a) {
+  const auto fail = [](const std::string& m) { throw std::invalid_argument("lex3d::codec::encode_alphabet: " + m); };
+  if (!(std::isfinite(a.word_radius) && a.word_radius >= 0.0)) fail("word_radius must be finite and >= 0");
+  if (!(std::isfinite(a.point_spacing) && a.point_spacing >= 0.0)) fail("point_spacing must be finite and >= 0");
+  if (a.descriptor_dim < 0 || static_cast<std::uint32_t>(a.descriptor_dim) > kMaxDescriptorDim)
+    fail("descriptor_dim must be in [0, 65535]");
+  if (a.words.size() > std::numeric_limits<std::uint32_t>::max()) fail("more than 2^32 - 1 words");
+  for (std::size_t w = 0; w < a.words.size(); ++w) {
+    const Word& word = a.words[w];
+    if (word.descriptor.size() != static_cast<std::size_t>(a.descriptor_dim))
+      fail("word " + std::to_string(w) + " has " + std::to_string(word.descriptor.size()) +
+           " descriptor values, descriptor_dim is " + std::to_string(a.descriptor_dim));
+    if (word.points.size() > std::numeric_limits<std::uint32_t>::max()) fail("a word has more than 2^32 - 1 points");
+    for (const float d : word.descriptor)
+      if (!(d >= -1.0F && d <= 1.0F)) fail("word " + std::to_string(w) + " has a descriptor value outside [-1, 1]");
+  }
+}
+
+struct AhdrFields {
+  double word_radius = 0.0;
+  double point_spacing = 0.0;
+  std::uint32_t descriptor_dim = 0;
+  std::uint32_t word_count = 0;
+  double word_point_m = 0.0;
+};
+
+Status read_ahdr(const Chunk& c, const Ctx& ctx, AhdrFields& h) {
+  if (Status s = expect_length(c, kAhdrBytes, ctx); !s.ok()) return s;
+  const std::uint8_t* p = c.payload;
+  h.word_radius = ld_f64(p);
+  h.point_spacing = ld_f64(p + 8);
+  h.descriptor_dim = ld_u32(p + 16);
+  h.word_count = ld_u32(p + 20);
+  h.word_point_m = ld_f64(p + 24);
+  if (!(std::isfinite(h.word_radius) && h.word_radius >= 0.0))
+    return ctx.error("AHDR word_radius " + std::to_string(h.word_radius) + " is not finite and >= 0", c.payload_offset);
+  if (!(std::isfinite(h.point_spacing) && h.point_spacing >= 0.0))
+    return ctx.error("AHDR point_spacing " + std::to_string(h.point_spacing) + " is not finite and >= 0",
+                     c.payload_offset + 8);
+  if (h.descriptor_dim > kMaxDescriptorDim)
+    return ctx.error("AHDR descriptor_dim " + std::to_string(h.descriptor_dim) + " exceeds 65535", c.payload_offset + 16);
+  if (!(h.word_point_m > 0.0 && h.word_point_m <= 0.1))
+    return ctx.error("AHDR word_point_m " + std::to_string(h.word_point_m) + " is outside (0, 0.1]",
+                     c.payload_offset + 24);
+  return {};
+}
+
+Status read_word(const Chunk& c, const Ctx& ctx, const AhdrFields& h, Alphabet& a) {
+  if (c.length < kDeflatedHeadBytes)
+    return ctx.error("chunk 'WORD' payload is " + std::to_string(c.length) + " bytes, at least 16 expected",
+                     c.offset + 4);
+  const std::uint64_t total_points = ld_u64(c.payload);
+  const std::uint64_t raw_size = ld_u64(c.payload + 8);
+  if (total_points > (std::uint64_t{1} << 58))
+    return ctx.error("WORD total_points " + std::to_string(total_points) + " is absurd", c.payload_offset);
+  const std::uint64_t W = h.word_count;
+  const std::uint64_t expected = 4 * W + 12 * total_points + W * h.descriptor_dim;
+  if (raw_size != expected)
+    return ctx.error("WORD raw_size " + std::to_string(raw_size) + " is not 4*word_count + 12*total_points + " +
+                         "word_count*descriptor_dim = " + std::to_string(expected),
+                     c.payload_offset + 8);
+  const std::uint64_t stored = c.length - kDeflatedHeadBytes;
+  if (!inflatable(raw_size, stored))
+    return ctx.error("WORD raw_size " + std::to_string(raw_size) + " cannot come from " + std::to_string(stored) +
+                         " deflated bytes",
+                     c.payload_offset + 8);
+  std::vector<std::uint8_t> raw;
+  if (Status s = inflate_exact(c.payload + kDeflatedHeadBytes, stored, raw_size, ctx, "'WORD'",
+                               c.payload_offset + kDeflatedHeadBytes, raw);
+      !s.ok())
+    return s;
+  // raw_size == expected and the data are in memory, so every count below is backed by bytes.
+  const auto n_words = static_cast<std::size_t>(W);
+  const auto n_points = static_cast<std::size_t>(total_points);
+  const std::uint8_t* counts = raw.data();
+  std::uint64_t sum = 0;
+  for (std::size_t w = 0; w < n_words; ++w) sum += ld_plane(counts, n_words, w);
+  if (sum != total_points)
+    return ctx.error("WORD point counts add up to " + std::to_string(sum) + ", total_points is " +
+                         std::to_string(total_points),
+                     c.payload_offset);
+  const std::uint8_t* xs = counts + 4 * n_words;
+  const std::uint8_t* ys = xs + 4 * n_points;
+  const std::uint8_t* zs = ys + 4 * n_points;
+  const auto* desc = zs + 4 * n_points;
+  const std::size_t dim = h.descriptor_dim;
+  a.word_radius = h.word_radius;
+  a.point_spacing = h.point_spacing;
+  a.descriptor_dim = static_cast<int>(h.descriptor_dim);
+  a.words.assign(n_words, Word{});
+  std::size_t k = 0;
+  for (std::size_t w = 0; w < n_words; ++w) {
+    Word& word = a.words[w];
+    const std::uint32_t count = ld_plane(counts, n_words, w);
+    word.points.resize(count);
+    for (auto& p : word.points) {
+      p = Eigen::Vector3f(static_cast<float>(unzigzag(ld_plane(xs, n_points, k)) * h.word_point_m),
+                          static_cast<float>(unzigzag(ld_plane(ys, n_points, k)) * h.word_point_m),
+                          static_cast<float>(unzigzag(ld_plane(zs, n_points, k)) * h.word_point_m));
+      ++k;
+    }
+    word.descriptor.resize(dim);
+    for (std::size_t j = 0; j < dim; ++j) {
+      const auto q = static_cast<std::int8_t>(desc[w * dim + j]);
+      if (q == -128)
+        return ctx.error("WORD descriptor value -128 of word " + std::to_string(w) + " is outside [-127, 127]",
+                         c.payload_offset + kDeflatedHeadBytes);
+      word.descriptor[j] = static_cast<float>(q / kDescriptorScale);
+    }
+  }
+  return {};
+}
+
+StatusOr<Alphabet> decode_alphabet_at(const std::uint8_t* d, std::size_t size, const Ctx& ctx) {
+  Header h;
+  if (Status s = read_header(d, size, ctx, kAlphabetMagic, kModelMagic, "model", true, h); !s.ok()) return s;
+  if (h.flags != 0) return ctx.error("reserved flag bits " + hex(h.flags, 8) + " set", 12);
+  AhdrFields ahdr;
+  Alphabet a;
+  const Status s = walk_chunks(d, size, ctx, {"AHDR", "WORD", "AEND"}, {"AHDR", "WORD", "AEND"},
+                               [&](std::size_t index, const Chunk& c) -> Status {
+                                 if (index == 0) return read_ahdr(c, ctx, ahdr);
+                                 if (index == 1) return read_word(c, ctx, ahdr, a);
+                                 return {};
+                               });
+  if (!s.ok()) return s;
+  return a;
+}
+
+// ---------------------------------------------------------------------------------------
+// Model file (model.md §2)
+// ---------------------------------------------------------------------------------------
+
+struct MhdrFields {
+  std::uint64_t input_points = 0;
+  Pose T_cloud_sensor = Pose::Identity();
+  double translation_m = 0.0;
+  double rotation_rad = 0.0;
+};
+
+Status read_mhdr(const Chunk& c, const Ctx& ctx, MhdrFields& h) {
+  if (Status s = expect_length(c, kMhdrBytes, ctx); !s.ok()) return s;
+  const std::uint8_t* p = c.payload;
+  h.input_points = ld_u64(p);
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  for (int i = 0; i < 12; ++i) {
+    const double v = ld_f64(p + 8 + 8 * i);
+    if (!std::isfinite(v))
+      return ctx.error("MHDR T_cloud_sensor value " + std::to_string(i) + " is not finite",
+                       c.payload_offset + 8 + 8 * static_cast<std::uint64_t>(i));
+    if (i < 9)
+      R(i / 3, i % 3) = v;
+    else
+      t(i - 9) = v;
+  }
+  if (!orthonormal(R)) return ctx.error("MHDR T_cloud_sensor rotation is not orthonormal", c.payload_offset + 8);
+  h.T_cloud_sensor = Pose::Identity();
+  h.T_cloud_sensor.linear() = R;
+  h.T_cloud_sensor.translation() = t;
+  h.translation_m = ld_f64(p + 104);
+  h.rotation_rad = ld_f64(p + 112);
+  if (!(h.translation_m > 0.0 && h.translation_m <= 0.1))
+    return ctx.error("MHDR translation_m " + std::to_string(h.translation_m) + " is outside (0, 0.1]",
+                     c.payload_offset + 104);
+  if (!(h.rotation_rad > 0.0 && h.rotation_rad <= 0.1))
+    return ctx.error("MHDR rotation_rad " + std::to_string(h.rotation_rad) + " is outside (0, 0.1]",
+                     c.payload_offset + 112);
+  return {};
+}
+
+Status read_inst(const Chunk& c, const Ctx& ctx, const MhdrFields& h, std::size_t alphabet_words, Model& model) {
+  if (c.length < kDeflatedHeadBytes)
+    return ctx.error("chunk 'INST' payload is " + std::to_string(c.length) + " bytes, at least 16 expected",
+                     c.offset + 4);
+  const std::uint64_t instance_count = ld_u64(c.payload);
+  const std::uint64_t raw_size = ld_u64(c.payload + 8);
+  const std::uint64_t stored = c.length - kDeflatedHeadBytes;
+  if (instance_count > std::numeric_limits<std::uint64_t>::max() / kInstanceRawBytes ||
+      !inflatable(instance_count * kInstanceRawBytes, stored))
+    return ctx.error("INST instance_count " + std::to_string(instance_count) + " cannot come from " +
+                         std::to_string(stored) + " deflated bytes",
+                     c.payload_offset);
+  if (raw_size != instance_count * kInstanceRawBytes)
+    return ctx.error("INST raw_size " + std::to_string(raw_size) + " is not 28*instance_count = " +
+                         std::to_string(instance_count * kInstanceRawBytes),
+                     c.payload_offset + 8);
+  std::vector<std::uint8_t> raw;
+  const std::uint64_t data_offset = c.payload_offset + kDeflatedHeadBytes;
+  if (Status s = inflate_exact(c.payload + kDeflatedHeadBytes, stored, raw_size, ctx, "'INST'", data_offset, raw);
+      !s.ok())
+    return s;
+  const auto n = static_cast<std::size_t>(instance_count);
+  const std::uint8_t* col[7];
+  for (std::size_t k = 0; k < 7; ++k) col[k] = raw.data() + 4 * n * k;
+  model.instances.assign(n, Instance{});
+  const double max_angle = kPi + h.rotation_rad;
+  std::uint32_t tq[3] = {0, 0, 0};  // previous quantised translation, modulo 2^32
+  for (std::size_t i = 0; i < n; ++i) {
+    Instance& inst = model.instances[i];
+    inst.word = ld_plane(col[0], n, i);
+    if (inst.word >= alphabet_words)
+      return ctx.error("instance " + std::to_string(i) + " has word id " + std::to_string(inst.word) +
+                           " but the alphabet has " + std::to_string(alphabet_words) + " words",
+                       data_offset);
+    Eigen::Vector3d t;
+    Eigen::Vector3d r;
+    for (int a = 0; a < 3; ++a) {
+      const auto ua = static_cast<std::size_t>(a);
+      tq[ua] += static_cast<std::uint32_t>(unzigzag(ld_plane(col[1 + ua], n, i)));
+      t(a) = as_i32(tq[ua]) * h.translation_m;
+      r(a) = unzigzag(ld_plane(col[4 + ua], n, i)) * h.rotation_rad;
+    }
+    const double angle = r.norm();
+    if (angle > max_angle)
+      return ctx.error("instance " + std::to_string(i) + " rotation vector is longer than pi (" +
+                           std::to_string(angle) + " rad)",
+                       data_offset);
+    inst.T_cloud_word = Pose::Identity();
+    if (angle > 0.0) inst.T_cloud_word.linear() = Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+    inst.T_cloud_word.translation() = t;
+    inst.feature = 0;
+  }
+  return {};
+}
+
+std::vector<std::uint8_t> inst_payload(const Model& model, const Quantization& q) {
+  const std::size_t n = model.instances.size();
+  std::vector<std::uint32_t> cols[7];
+  for (auto& c : cols) c.resize(n);
+  std::uint32_t prev[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < n; ++i) {
+    const Instance& inst = model.instances[i];
+    const Eigen::Matrix3d R = inst.T_cloud_word.linear();
+    const Eigen::Vector3d t = inst.T_cloud_word.translation();
+    if (!t.allFinite() || !orthonormal(R))
+      throw std::invalid_argument("lex3d::codec::encode_model: instance " + std::to_string(i) +
+                                  " pose is not a finite rigid transform");
+    const Eigen::AngleAxisd aa(R);  // angle in [0, pi]
+    const Eigen::Vector3d r = aa.angle() * aa.axis();
+    cols[0][i] = inst.word;
+    for (std::size_t a = 0; a < 3; ++a) {
+      const auto tq = static_cast<std::uint32_t>(quantize(t(static_cast<int>(a)), q.translation_m, "instance translation"));
+      cols[1 + a][i] = zigzag(as_i32(tq - prev[a]));  // difference modulo 2^32
+      prev[a] = tq;
+      cols[4 + a][i] = zigzag(quantize(r(static_cast<int>(a)), q.rotation_rad, "instance rotation"));
+    }
+  }
+  std::vector<std::uint8_t> raw;
+  raw.reserve(kInstanceRawBytes * n);
+  for (const auto& c : cols) put_planes(raw, c);
+  return deflated_payload(n, raw);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// Public API
+// ---------------------------------------------------------------------------------------
+
+void Quantization::validate() const {
+  const auto check = [](double v, const char* name) {
+    if (!(v > 0.0 && v <= 0.1))
+      throw std::invalid_argument(std::string("Quantization::") + name + " must be in (0, 0.1], got " +
+                                  std::to_string(v));
+  };
+  check(translation_m, "translation_m");
+  check(rotation_rad, "rotation_rad");
+  check(word_point_m, "word_point_m");
+}
+
+std::vector<std::uint8_t> encode_alphabet(const Alphabet& alphabet, const Quantization& q) {
+  q.validate();
+  check_alphabet(alphabet);
+  std::vector<std::uint8_t> out;
+  put_header(out, kAlphabetMagic, 0);
+
+  std::vector<std::uint8_t> ahdr;
+  put_f64(ahdr, alphabet.word_radius);
+  put_f64(ahdr, alphabet.point_spacing);
+  put_u32(ahdr, static_cast<std::uint32_t>(alphabet.descriptor_dim));
+  put_u32(ahdr, static_cast<std::uint32_t>(alphabet.words.size()));
+  put_f64(ahdr, q.word_point_m);
+  put_chunk(out, "AHDR", ahdr);
+
+  std::vector<std::uint32_t> counts;
+  std::vector<std::uint32_t> xyz[3];
+  std::vector<std::uint8_t> desc;
+  for (const Word& w : alphabet.words) {
+    counts.push_back(static_cast<std::uint32_t>(w.points.size()));
+    for (const auto& p : w.points)
+      for (int a = 0; a < 3; ++a)
+        xyz[a].push_back(zigzag(quantize(static_cast<double>(p(a)), q.word_point_m, "word point coordinate")));
+    for (const float d : w.descriptor)
+      desc.push_back(static_cast<std::uint8_t>(static_cast<std::int8_t>(std::lround(d * kDescriptorScale))));
+  }
+  std::vector<std::uint8_t> raw;
+  put_planes(raw, counts);
+  for (const auto& c : xyz) put_planes(raw, c);
+  raw.insert(raw.end(), desc.begin(), desc.end());
+  put_chunk(out, "WORD", deflated_payload(xyz[0].size(), raw));
+  put_chunk(out, "AEND", {});
+  return out;
+}
+
+StatusOr<Alphabet> decode_alphabet(const std::vector<std::uint8_t>& bytes) {
+  return decode_alphabet_at(bytes.data(), bytes.size(), Ctx{"alphabet file", 0});
+}
+
+std::uint64_t alphabet_hash(const std::vector<std::uint8_t>& alphabet_file) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;
+  for (const std::uint8_t b : alphabet_file) {
+    h ^= b;
+    h *= 0x100000001b3ULL;
+  }
+  return h;
+}
+
+std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization& q) {
+  q.validate();
+  const bool embed = data.alphabet.has_value();
+  if (!embed && !data.alphabet_hash)
+    throw std::invalid_argument("lex3d::codec::encode_model: set ModelData::alphabet (embedded) or alphabet_hash");
+  if (!data.T_cloud_sensor.translation().allFinite() || !orthonormal(data.T_cloud_sensor.linear()))
+    throw std::invalid_argument("lex3d::codec::encode_model: T_cloud_sensor is not a finite rigid transform");
+  if (embed)
+    for (std::size_t i = 0; i < data.model.instances.size(); ++i)
+      if (data.model.instances[i].word >= data.alphabet->size())
+        throw std::invalid_argument("lex3d::codec::encode_model: instance " + std::to_string(i) + " has word id " +
+                                    std::to_string(data.model.instances[i].word) + ", the alphabet has " +
+                                    std::to_string(data.alphabet->size()) + " words");
+
+  std::vector<std::uint8_t> out;
+  put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced);
+
+  std::vector<std::uint8_t> mhdr;
+  put_u64(mhdr, data.input_points);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) put_f64(mhdr, data.T_cloud_sensor.linear()(r, c));
+  for (int a = 0; a < 3; ++a) put_f64(mhdr, data.T_cloud_sensor.translation()(a));
+  put_f64(mhdr, q.translation_m);
+  put_f64(mhdr, q.rotation_rad);
+  put_chunk(out, "MHDR", mhdr);
+
+  if (embed) {
+    put_chunk(out, "ALPH", encode_alphabet(*data.alphabet, q));
+  } else {
+    std::vector<std::uint8_t> aref;
+    put_u64(aref, *data.alphabet_hash);
+    put_chunk(out, "AREF", aref);
+  }
+  put_chunk(out, "INST", inst_payload(data.model, q));
+  put_chunk(out, "IEND", {});
+  return out;
+}
+
+StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
+                                 const std::vector<std::uint8_t>* external_alphabet_file) {
+  const Ctx ctx{"model file", 0};
+  const std::uint8_t* d = bytes.data();
+  Header h;
+  if (Status s = read_header(d, bytes.size(), ctx, kModelMagic, kAlphabetMagic, "alphabet", true, h); !s.ok())
+    return s;
+  if ((h.flags & ~(kFlagAlphabetEmbedded | kFlagAlphabetReferenced)) != 0)
+    return ctx.error("reserved flag bits " + hex(h.flags & ~(kFlagAlphabetEmbedded | kFlagAlphabetReferenced), 8) +
+                         " set",
+                     12);
+  const bool embedded = (h.flags & kFlagAlphabetEmbedded) != 0;
+  if (embedded == ((h.flags & kFlagAlphabetReferenced) != 0))
+    return ctx.error("flags " + hex(h.flags, 8) +
+                         " must set exactly one of bit 0 (alphabet embedded) and bit 1 (alphabet referenced)",
+                     12);
+
+  ModelData out;
+  MhdrFields mhdr;
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "IEND"};
+  const std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
+  const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
+    switch (index) {
+      case 0: return read_mhdr(c, ctx, mhdr);
+      case 1: {
+        if (embedded) {
+          auto a = decode_alphabet_at(c.payload, static_cast<std::size_t>(c.length),
+                                      Ctx{"model file: embedded alphabet (ALPH)", c.payload_offset});
+          if (!a.ok()) return a.status();
+          out.alphabet = std::move(a).value();
+          return {};
+        }
+        if (Status e = expect_length(c, kArefBytes, ctx); !e.ok()) return e;
+        const std::uint64_t want = ld_u64(c.payload);
+        out.alphabet_hash = want;
+        if (external_alphabet_file == nullptr)
+          return {ErrorCode::kInvalidArgument,
+                  "model file references an external alphabet file (hash " + hex(want, 16) + "); supply it",
+                  c.payload_offset};
+        const std::uint64_t got = alphabet_hash(*external_alphabet_file);
+        if (got != want)
+          return ctx.error("the alphabet file's hash " + hex(got, 16) + " does not match the model's alphabet_hash " +
+                               hex(want, 16),
+                           c.payload_offset);
+        auto a = decode_alphabet_at(external_alphabet_file->data(), external_alphabet_file->size(),
+                                    Ctx{"external alphabet file", 0});
+        if (!a.ok()) return a.status();
+        out.alphabet = std::move(a).value();
+        return {};
+      }
+      case 2: return read_inst(c, ctx, mhdr, out.alphabet->size(), out.model);
+      default: return {};
+    }
+  });
+  if (!s.ok()) return s;
+  out.input_points = mhdr.input_points;
+  out.T_cloud_sensor = mhdr.T_cloud_sensor;
+  return out;
+}
+
+StatusOr<FileInfo> inspect(const std::vector<std::uint8_t>& bytes) {
+  const std::uint8_t* d = bytes.data();
+  const std::size_t size = bytes.size();
+  FileInfo info;
+  info.file_bytes = size;
+  Header h;
+  const bool alphabet = size >= 8 && std::memcmp(d, kAlphabetMagic, 8) == 0;
+  info.kind = alphabet ? "alphabet" : "model";
+  const Ctx ctx{alphabet ? "alphabet file" : "model file", 0};
+  const Status hs = alphabet ? read_header(d, size, ctx, kAlphabetMagic, kModelMagic, "model", false, h)
+                             : read_header(d, size, ctx, kModelMagic, kAlphabetMagic, "alphabet", false, h);
+  if (!hs.ok()) return hs;
+  info.major = h.major;
+  info.minor = h.minor;
+  info.flags = h.flags;
+  info.header_crc_ok = h.crc_ok;
+  for (std::size_t pos = kHeaderBytes; pos < size;) {
+    Chunk c;
+    if (Status s = frame_chunk(d, size, pos, ctx, c); !s.ok()) return s;
+    std::string type(4, '?');  // four characters; anything not printable shows as '?'
+    for (std::size_t k = 0; k < 4; ++k)
+      if (c.type[k] >= 0x20 && c.type[k] < 0x7F) type[k] = static_cast<char>(c.type[k]);
+    info.chunks.push_back({type, c.offset, c.length, c.stored_crc == c.computed_crc});
+    pos = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
+  }
+  return info;
+}
+
+}  // namespace lex3d::codec

@@ -1,0 +1,447 @@
+// Matching one scan against another: correspondences by descriptor (ratio test),
+// candidate transforms from 1, 2 and 3 correspondences with the distance-consistency
+// check (steder2010 §III-B), RANSAC inlier counting (collier2012 §3.2), Umeyama
+// refinement, and steder2010's validation-point score (eq. 6-10).
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <array>
+
+#include <Eigen/Geometry>
+
+#include "lex3d/place/place.hpp"
+
+namespace lex3d {
+
+namespace {
+
+struct Correspondence {
+  std::uint32_t q = 0;
+  std::uint32_t m = 0;
+  float distance = 0.0F;
+};
+
+std::vector<Correspondence> correspondences(const PlaceScan& query, const PlaceScan& cand, double ratio) {
+  std::vector<Correspondence> out;
+  const std::size_t nq = query.features.size();
+  const std::size_t nm = cand.features.size();
+  const int dim = query.descriptor_dim;
+  if (nm < 2 || dim <= 0 || dim != cand.descriptor_dim) return out;
+  const auto ud = static_cast<std::size_t>(dim);
+  const float r2 = static_cast<float>(ratio * ratio);
+  for (std::size_t i = 0; i < nq; ++i) {
+    const float* a = query.descriptors.data() + i * ud;
+    float b1 = std::numeric_limits<float>::infinity(), b2 = b1;
+    std::size_t j1 = 0;
+    for (std::size_t j = 0; j < nm; ++j) {
+      const float d = descriptor_distance_sq(a, cand.descriptors.data() + j * ud, dim);
+      if (d < b1) {
+        b2 = b1;
+        b1 = d;
+        j1 = j;
+      } else if (d < b2) {
+        b2 = d;
+      }
+    }
+    if (b1 < r2 * b2)
+      out.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j1), std::sqrt(b1)});
+  }
+  std::stable_sort(out.begin(), out.end(),
+                   [](const Correspondence& x, const Correspondence& y) { return x.distance < y.distance; });
+  return out;
+}
+
+Pose frame(const PlaceFeature& f) {
+  Pose T = Pose::Identity();
+  T.linear() = f.rotation.cast<double>().toRotationMatrix();
+  T.translation() = f.position.cast<double>();
+  return T;
+}
+
+Pose umeyama_pose(const Eigen::Matrix3Xd& src, const Eigen::Matrix3Xd& dst) {
+  Pose T = Pose::Identity();
+  T.matrix() = Eigen::umeyama(src, dst, false);
+  return T;
+}
+
+struct Hypothesis {
+  Pose T = Pose::Identity();
+  std::size_t inliers = 0;
+  double residual = 0.0;  // sum of inlier distances
+};
+
+// SplitMix64: a small, portable, seeded generator (same sequence everywhere).
+struct SplitMix {
+  std::uint64_t s;
+  std::uint64_t next() {
+    std::uint64_t z = (s += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+  }
+  std::size_t below(std::size_t n) { return static_cast<std::size_t>(next() % n); }
+};
+
+Eigen::Matrix3d gravity_rotation(const PlaceScan& s) {
+  // Rotation of the cloud frame into a gravity-aligned frame (the world's rotation; only its
+  // roll and pitch matter, an IMU would give them).
+  return s.has_world_pose ? Eigen::Matrix3d(s.T_world_cloud.linear()) : Eigen::Matrix3d::Identity();
+}
+
+Pose rotation_pose(const Eigen::Matrix3d& R) {
+  Pose T = Pose::Identity();
+  T.linear() = R;
+  return T;
+}
+
+// Hypotheses live in the gravity-aligned frames: G maps the query's aligned frame into the
+// match's; T_match_query = Rm^T · G · Rq.
+class Matcher {
+ public:
+  Matcher(const PlaceScan& q, const PlaceScan& m, std::vector<Correspondence> c, const PlaceParams& p)
+      : q_(q), m_(m), c_(std::move(c)), p_(p), Rq_(gravity_rotation(q)), Rm_(gravity_rotation(m)) {
+    gq_.reserve(q.features.size());
+    gm_.reserve(m.features.size());
+    for (const auto& f : q.features) gq_.push_back(Rq_ * f.position.cast<double>());
+    for (const auto& f : m.features) gm_.push_back(Rm_ * f.position.cast<double>());
+    build_grid();
+  }
+
+  [[nodiscard]] Pose to_cloud(const Pose& G) const { return rotation_pose(Rm_.transpose()) * G * rotation_pose(Rq_); }
+  [[nodiscard]] Pose to_gravity(const Pose& T) const { return rotation_pose(Rm_) * T * rotation_pose(Rq_.transpose()); }
+
+  /// Query features that land in a cell within about inlier_distance of a match feature.
+  [[nodiscard]] Hypothesis evaluate(const Pose& G, std::size_t limit = std::numeric_limits<std::size_t>::max()) const {
+    Hypothesis h;
+    h.T = G;
+    const std::size_t n = std::min(limit, q_.validation.size());
+    for (std::size_t k = 0; k < n; ++k)
+      if (occupied(G * gq_[q_.validation[k]])) ++h.inliers;
+    return h;
+  }
+
+  /// Pairs (query feature, nearest match feature within inlier_distance) under G.
+  [[nodiscard]] std::vector<std::pair<std::size_t, std::size_t>> pairs(const Pose& G) const {
+    std::vector<std::pair<std::size_t, std::size_t>> out;
+    const double d2max = p_.inlier_distance * p_.inlier_distance;
+    for (std::size_t i = 0; i < gq_.size(); ++i) {
+      const Eigen::Vector3d x = G * gq_[i];
+      double best = d2max;
+      std::size_t bj = gm_.size();
+      for (std::size_t j = 0; j < gm_.size(); ++j) {
+        const double d2 = (x - gm_[j]).squaredNorm();
+        if (d2 <= best) {
+          best = d2;
+          bj = j;
+        }
+      }
+      if (bj < gm_.size()) out.emplace_back(i, bj);
+    }
+    return out;
+  }
+
+  [[nodiscard]] bool consistent(std::size_t a, std::size_t b) const {
+    if (c_[a].q == c_[b].q || c_[a].m == c_[b].m) return false;
+    const double dq = (gq_[c_[a].q] - gq_[c_[b].q]).norm();
+    const double dm = (gm_[c_[a].m] - gm_[c_[b].m]).norm();
+    return std::abs(dq - dm) <= p_.consistency_tolerance && dq > p_.consistency_tolerance;
+  }
+
+  [[nodiscard]] std::vector<Hypothesis> hypotheses() const {
+    std::vector<Hypothesis> out;
+    const std::size_t n = c_.size();
+    const auto H = static_cast<std::size_t>(p_.hypotheses_per_size);
+    SplitMix rng{p_.seed};
+    // One correspondence: the two feature frames give the whole transform.
+    for (std::size_t i = 0; i < std::min(n, H); ++i)
+      out.push_back(evaluate(to_gravity(frame(m_.features[c_[i].m]) * frame(q_.features[c_[i].q]).inverse())));
+    // Two correspondences: each point plus a virtual point 1 m along its normal.
+    if (n >= 2) {
+      std::size_t made = 0;
+      for (std::size_t tries = 0; tries < 4 * H && made < H; ++tries) {
+        const std::size_t a = rng.below(n), b = rng.below(n);
+        if (a == b || !consistent(a, b)) continue;
+        Eigen::Matrix3Xd s(3, 4), d(3, 4);
+        Eigen::Index k = 0;
+        for (const std::size_t i : {a, b}) {
+          const auto& fq = q_.features[c_[i].q];
+          const auto& fm = m_.features[c_[i].m];
+          s.col(k) = gq_[c_[i].q];
+          d.col(k) = gm_[c_[i].m];
+          s.col(k + 1) = gq_[c_[i].q] + Rq_ * (fq.rotation * Eigen::Vector3f::UnitZ()).cast<double>();
+          d.col(k + 1) = gm_[c_[i].m] + Rm_ * (fm.rotation * Eigen::Vector3f::UnitZ()).cast<double>();
+          k += 2;
+        }
+        out.push_back(evaluate(umeyama_pose(s, d)));
+        ++made;
+      }
+    }
+    // Three correspondences, pairwise consistent and not collinear.
+    if (n >= 3) {
+      std::size_t made = 0;
+      for (std::size_t tries = 0; tries < 4 * H && made < H; ++tries) {
+        const std::size_t a = rng.below(n), b = rng.below(n), c = rng.below(n);
+        if (a == b || a == c || b == c) continue;
+        if (!consistent(a, b) || !consistent(a, c) || !consistent(b, c)) continue;
+        const Eigen::Vector3d &A = gq_[c_[a].q], &B = gq_[c_[b].q], &C = gq_[c_[c].q];
+        if ((B - A).cross(C - A).norm() < 0.1) continue;
+        Eigen::Matrix3Xd s(3, 3), d(3, 3);
+        s << A, B, C;
+        d << gm_[c_[a].m], gm_[c_[b].m], gm_[c_[c].m];
+        out.push_back(evaluate(umeyama_pose(s, d)));
+        ++made;
+      }
+    }
+    gravity_hypotheses(rng, out);
+    return out;
+  }
+
+  /// Least squares on the inlier pairs, repeated (ICP on the features).
+  [[nodiscard]] Hypothesis refine(const Pose& G0) const {
+    Hypothesis h;
+    h.T = G0;
+    auto pr = pairs(G0);
+    h.inliers = pr.size();
+    for (int it = 0; it < p_.refine_iterations && pr.size() >= 3; ++it) {
+      Eigen::Matrix3Xd s(3, static_cast<Eigen::Index>(pr.size())), d(3, static_cast<Eigen::Index>(pr.size()));
+      for (std::size_t k = 0; k < pr.size(); ++k) {
+        s.col(static_cast<Eigen::Index>(k)) = gq_[pr[k].first];
+        d.col(static_cast<Eigen::Index>(k)) = gm_[pr[k].second];
+      }
+      const Pose G = umeyama_pose(s, d);
+      auto pr2 = pairs(G);
+      if (pr2.size() < pr.size()) break;
+      h.T = G;
+      h.inliers = pr2.size();
+      const bool same = pr2 == pr;
+      pr = std::move(pr2);
+      if (same) break;
+    }
+    double sum = 0.0;
+    for (const auto& [i, j] : pr) sum += (h.T * gq_[i] - gm_[j]).squaredNorm();
+    h.residual = pr.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(pr.size()));
+    return h;
+  }
+
+  /// Ratio-test correspondences consistent with G.
+  [[nodiscard]] std::size_t descriptor_inliers(const Pose& G) const {
+    std::size_t k = 0;
+    const double d2max = p_.inlier_distance * p_.inlier_distance;
+    for (const auto& c : c_)
+      if ((G * gq_[c.q] - gm_[c.m]).squaredNorm() <= d2max) ++k;
+    return k;
+  }
+
+ private:
+  struct PairEntry {
+    double h;       // horizontal distance
+    double dz;      // height difference (second minus first)
+    double angle;   // direction of the horizontal offset
+    std::uint32_t a, b;
+  };
+
+  void gravity_hypotheses(SplitMix& rng, std::vector<Hypothesis>& out) const {
+    const std::size_t nq = gq_.size(), nm = gm_.size();
+    if (p_.gravity_pairs == 0 || nq < 2 || nm < 2) return;
+    const double min_h = 1.0;
+    std::vector<PairEntry> table;
+    table.reserve(nm * (nm - 1));
+    for (std::uint32_t a = 0; a < nm; ++a)
+      for (std::uint32_t b = 0; b < nm; ++b) {
+        if (a == b) continue;
+        const Eigen::Vector3d v = gm_[b] - gm_[a];
+        const double h = std::hypot(v.x(), v.y());
+        if (h >= min_h) table.push_back({h, v.z(), std::atan2(v.y(), v.x()), a, b});
+      }
+    std::sort(table.begin(), table.end(), [](const PairEntry& x, const PairEntry& y) { return x.h < y.h; });
+    const double tol = p_.consistency_tolerance;
+    const auto want = static_cast<std::size_t>(p_.gravity_pairs);
+    std::size_t made = 0;
+    // Partial counts on the first validation points prune hopeless hypotheses early.
+    const std::size_t probe = std::min<std::size_t>(24, q_.validation.size());
+    std::size_t best_probe = 0;
+    for (std::size_t tries = 0; tries < 10 * want && made < want; ++tries) {
+      const std::size_t i = rng.below(nq), k = rng.below(nq);
+      if (i == k) continue;
+      const Eigen::Vector3d v = gq_[k] - gq_[i];
+      const double h = std::hypot(v.x(), v.y());
+      if (h < min_h) continue;
+      ++made;
+      const double aq = std::atan2(v.y(), v.x());
+      const Eigen::Vector3d cq = 0.5 * (gq_[i] + gq_[k]);
+      auto it = std::lower_bound(table.begin(), table.end(), h - tol,
+                                 [](const PairEntry& e, double x) { return e.h < x; });
+      for (; it != table.end() && it->h <= h + tol; ++it) {
+        if (std::abs(it->dz - v.z()) > tol) continue;
+        Pose G = Pose::Identity();
+        G.linear() = Eigen::AngleAxisd(it->angle - aq, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+        G.translation() = 0.5 * (gm_[it->a] + gm_[it->b]) - G.linear() * cq;
+        const Hypothesis hp = evaluate(G, probe);
+        if (hp.inliers * 2 < best_probe || hp.inliers < 3) continue;
+        best_probe = std::max(best_probe, hp.inliers);
+        out.push_back(evaluate(G));
+      }
+    }
+  }
+
+  void build_grid() {
+    cell_ = p_.inlier_distance / 2.0;
+    if (gm_.empty()) return;
+    Eigen::Vector3d lo = gm_.front(), hi = gm_.front();
+    for (const auto& g : gm_) {
+      lo = lo.cwiseMin(g);
+      hi = hi.cwiseMax(g);
+    }
+    const double r = p_.inlier_distance;
+    origin_ = lo - Eigen::Vector3d::Constant(r + cell_);
+    for (int a = 0; a < 3; ++a)
+      dims_[a] = static_cast<int>(std::ceil((hi[a] - lo[a] + 2 * (r + cell_)) / cell_)) + 1;
+    if (static_cast<double>(dims_[0]) * dims_[1] * dims_[2] > 4e7) {  // absurd extent: no grid
+      dims_ = {0, 0, 0};
+      return;
+    }
+    grid_.assign(static_cast<std::size_t>(dims_[0]) * static_cast<std::size_t>(dims_[1]) * static_cast<std::size_t>(dims_[2]), 0);
+    const int reach = static_cast<int>(std::ceil(r / cell_));
+    for (const auto& g : gm_) {
+      const Eigen::Vector3d u = (g - origin_) / cell_;
+      const int cx = static_cast<int>(u.x()), cy = static_cast<int>(u.y()), cz = static_cast<int>(u.z());
+      for (int z = cz - reach; z <= cz + reach; ++z)
+        for (int y = cy - reach; y <= cy + reach; ++y)
+          for (int x = cx - reach; x <= cx + reach; ++x) {
+            if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
+            const Eigen::Vector3d centre = origin_ + (Eigen::Vector3d(x, y, z) + Eigen::Vector3d::Constant(0.5)) * cell_;
+            if ((centre - g).norm() <= r) grid_[cell_index(x, y, z)] = 1;
+          }
+    }
+  }
+  [[nodiscard]] std::size_t cell_index(int x, int y, int z) const {
+    return (static_cast<std::size_t>(z) * static_cast<std::size_t>(dims_[1]) + static_cast<std::size_t>(y)) *
+               static_cast<std::size_t>(dims_[0]) +
+           static_cast<std::size_t>(x);
+  }
+  [[nodiscard]] bool occupied(const Eigen::Vector3d& p) const {
+    if (grid_.empty()) return false;
+    const Eigen::Vector3d u = (p - origin_) / cell_;
+    if (!(u.x() >= 0 && u.y() >= 0 && u.z() >= 0)) return false;
+    const auto x = static_cast<int>(u.x()), y = static_cast<int>(u.y()), z = static_cast<int>(u.z());
+    if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return false;
+    return grid_[cell_index(x, y, z)] != 0;
+  }
+
+  const PlaceScan& q_;
+  const PlaceScan& m_;
+  std::vector<Correspondence> c_;
+  const PlaceParams& p_;
+  Eigen::Matrix3d Rq_, Rm_;
+  std::vector<Eigen::Vector3d> gq_, gm_;
+  double cell_ = 0.25;
+  Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
+  std::array<int, 3> dims_{0, 0, 0};
+  std::vector<std::uint8_t> grid_;
+};
+
+bool close_poses(const Pose& a, const Pose& b) {
+  const Pose d = a.inverse() * b;
+  const double angle = Eigen::AngleAxisd(d.linear()).angle();
+  return d.translation().norm() < 0.1 && angle < 1.0 * M_PI / 180.0;
+}
+
+Eigen::Vector3d up_in_cloud(const PlaceScan& s) {
+  if (!s.has_world_pose) return Eigen::Vector3d::UnitZ();
+  return s.T_world_cloud.linear().transpose() * Eigen::Vector3d::UnitZ();
+}
+
+}  // namespace
+
+double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from, const PlaceParams& params) {
+  const RangeImage& img = to.coarse;
+  const std::size_t n = std::min<std::size_t>(from.validation.size(), static_cast<std::size_t>(params.validation_points));
+  if (n == 0 || img.empty()) return 0.0;
+  const Eigen::Isometry3f T = (img.T_cloud_sensor.inverse() * T_to_from).cast<float>();
+  const int e = params.error_radius_px;
+  const auto dhat = static_cast<float>(params.max_range_difference);
+  double sum = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Vector3f p = T * from.features[from.validation[k]].position;
+    float x = 0, y = 0, r = 0;
+    if (!img.project(p, x, y, r)) continue;
+    const int xi = static_cast<int>(std::floor(x));
+    const int yi = static_cast<int>(std::floor(y));
+    bool any = false;
+    float best = -1.0F;
+    for (int dy = -e; dy <= e; ++dy) {
+      const int yy = yi + dy;
+      if (yy < 0 || yy >= img.height) continue;
+      for (int dx = -e; dx <= e; ++dx) {
+        const int xx = img.wrap_x(xi + dx);
+        if (xx < 0) continue;
+        const std::size_t i = img.index(xx, yy);
+        if (img.state[i] != PixelState::kValid) continue;
+        any = true;
+        const float diff = std::abs(img.range[i] - r);
+        if (diff > dhat) continue;
+        const float lambda = 0.75F + 0.25F / std::sqrt(static_cast<float>(dx * dx + dy * dy) + 1.0F);  // eq. 9
+        best = std::max(best, (1.0F - diff / dhat) * lambda);                                           // eq. 8
+      }
+    }
+    if (!any) continue;                                          // N empty: 0
+    sum += best >= 0.0F ? static_cast<double>(best) : -params.penalty;  // N' empty: -p
+  }
+  return std::max(0.0, sum) / static_cast<double>(n);  // eq. 10
+}
+
+PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const PlaceParams& params) {
+  params.validate();
+  PlaceMatch out;
+  auto corr = correspondences(query, candidate, params.ratio);
+  out.correspondences = corr.size();
+  const Matcher matcher(query, candidate, std::move(corr), params);
+  std::vector<Hypothesis> hyps = matcher.hypotheses();
+  out.hypotheses = hyps.size();
+  std::stable_sort(hyps.begin(), hyps.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.inliers > b.inliers; });
+  std::vector<Hypothesis> refined;
+  for (const auto& h : hyps) {
+    if (refined.size() >= static_cast<std::size_t>(params.scored_hypotheses)) break;
+    if (h.inliers < static_cast<std::size_t>(params.min_inliers) / 2) break;
+    const Hypothesis r = matcher.refine(h.T);
+    bool dup = false;
+    for (const auto& x : refined) dup = dup || close_poses(x.T, r.T);
+    if (!dup) refined.push_back(r);
+  }
+  bool first = true;
+  for (const auto& h : refined) {
+    if (h.inliers < static_cast<std::size_t>(params.min_inliers)) continue;
+    PlaceMatch m;
+    m.T_match_query = matcher.to_cloud(h.T);
+    m.inliers = h.inliers;
+    m.descriptor_inliers = matcher.descriptor_inliers(h.T);
+    m.correspondences = out.correspondences;
+    m.hypotheses = out.hypotheses;
+    m.rms_inlier_m = h.residual;
+    m.valid = true;
+    if (params.ground_vehicle) {
+      const Eigen::Vector3d up_q = m.T_match_query.linear() * up_in_cloud(query);
+      const Eigen::Vector3d up_m = up_in_cloud(candidate);
+      const double tilt = std::acos(std::clamp(up_q.dot(up_m), -1.0, 1.0)) * 180.0 / M_PI;
+      const double vertical = std::abs(m.T_match_query.translation().dot(up_m));
+      if (tilt > params.max_tilt_deg || vertical > params.max_vertical_offset) {
+        m.rejected_ground = true;
+        m.valid = false;
+      }
+    }
+    if (m.valid) {
+      m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
+      m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
+      m.score = std::min(m.score_query_in_match, m.score_match_in_query);
+    }
+    const bool better = first || (m.valid && (!out.valid || m.score > out.score ||
+                                              (m.score == out.score && m.inliers > out.inliers)));
+    if (better) out = m;
+    first = false;
+  }
+  return out;
+}
+
+}  // namespace lex3d
