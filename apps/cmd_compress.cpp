@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <optional>
 #include <iostream>
 
 #include "cli_common.hpp"
@@ -11,7 +12,6 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "model_report.hpp"
-#include "progress.hpp"
 
 namespace lex3d::cli {
 
@@ -43,42 +43,21 @@ void run_compress(const CompressOptions& o) {
   Stopwatch sw;
   const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
   const ModelParams mp = o.model.params();
-  Alphabet alphabet;
+  LearnParams p;
+  p.model = mp;
+  p.max_iterations = o.iterations;
+  p.seed = o.seed;
+  std::optional<AlphabetFile> reuse;
+  if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
+  const ModelSet set = build_models(clouds, p, reuse ? &reuse->alphabet : nullptr, o.inputs);
+  const Alphabet& alphabet = set.alphabet;
+  const std::vector<Model>& models = set.models;
   std::vector<std::uint8_t> alphabet_file;
-  std::vector<Model> models;
-  std::vector<std::size_t> features(clouds.size(), 0);
-  if (!o.alphabet.empty()) {
-    auto bytes = io::read_file(o.alphabet);
-    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
-    alphabet_file = std::move(bytes).value();
-    auto a = codec::decode_alphabet(alphabet_file);
-    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
-    alphabet = std::move(a).value();
-    ProgressBar bar("encoding");
-    for (std::size_t i = 0; i < clouds.size(); ++i) {
-      const PreparedScan scan = prepare_scan(clouds[i], mp, alphabet.word_radius);
-      features[i] = scan.features.size();
-      models.push_back(encode_scan(scan, alphabet, true, mp));
-      bar.update(static_cast<long>(i + 1), static_cast<long>(clouds.size()), o.inputs[i]);
-    }
-  } else {
-    LearnParams p;
-    p.model = mp;
-    p.max_iterations = o.iterations;
-    p.seed = o.seed;
-    ProgressBar bar("learning");
-    LearnResult r = learn_alphabet(clouds, p, [&](const LearnProgress& pr) {
-      char detail[96];
-      std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
-      bar.update(pr.iteration, pr.max_iterations, detail);
-    });
-    alphabet = std::move(r.alphabet);
-    models = std::move(r.models);
-    for (std::size_t i = 0; i < clouds.size(); ++i) features[i] = r.scans[i].features.size();
-    if (!o.save_alphabet.empty()) {
-      alphabet_file = codec::encode_alphabet(alphabet);
-      throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
-    }
+  if (reuse) {
+    alphabet_file = std::move(reuse->bytes);
+  } else if (!o.save_alphabet.empty()) {
+    alphabet_file = codec::encode_alphabet(alphabet);
+    throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
   }
   const bool embed = alphabet_file.empty();
   const std::uint64_t hash = embed ? 0 : codec::alphabet_hash(alphabet_file);
@@ -105,7 +84,7 @@ void run_compress(const CompressOptions& o) {
           .value("input", o.inputs[i])
           .value("output", outputs[i])
           .value("points", d.input_points)
-          .value("features", features[i])
+          .value("features", set.scans[i].features.size())
           .value("instances", d.model.instances.size())
           .value("bytes", static_cast<std::uint64_t>(bytes.size()))
           .value("bits_per_point", bpp)

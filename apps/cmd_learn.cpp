@@ -10,7 +10,6 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "model_report.hpp"
-#include "progress.hpp"
 
 namespace lex3d::cli {
 
@@ -39,13 +38,7 @@ void run_learn(const LearnOptions& o) {
   p.patience = o.patience;
   p.seed = o.seed;
   p.prune = !o.no_prune;
-  ProgressBar bar("learning");
-  const LearnResult r = learn_alphabet(clouds, p, [&](const LearnProgress& pr) {
-    char detail[96];
-    std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
-    bar.update(pr.iteration, pr.max_iterations, detail);
-  });
-  bar.finish();
+  const LearnResult r = learn_with_progress(clouds, p);
   throw_if_error(io::write_file_atomic(o.output, codec::encode_alphabet(r.alphabet)));
   std::size_t instances = 0, points = 0;
   for (const auto& m : r.models) instances += m.instances.size();

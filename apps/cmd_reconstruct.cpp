@@ -4,14 +4,13 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <optional>
 #include <iostream>
 
 #include "cli_common.hpp"
 #include "json.hpp"
-#include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "model_report.hpp"
-#include "progress.hpp"
 
 namespace lex3d::cli {
 
@@ -39,35 +38,17 @@ void run_reconstruct(const ReconstructOptions& o) {
   Stopwatch sw;
   const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
   const ModelParams mp = o.model.params();
-  Alphabet alphabet;
-  std::vector<PreparedScan> scans;
-  std::vector<Model> models;
-  if (o.alphabet.empty()) {
-    LearnParams p;
-    p.model = mp;
-    p.max_iterations = o.iterations;
-    p.seed = o.seed;
-    p.prune = !o.no_prune;
-    ProgressBar bar("learning");
-    LearnResult r = learn_alphabet(clouds, p, [&](const LearnProgress& pr) {
-      char detail[96];
-      std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
-      bar.update(pr.iteration, pr.max_iterations, detail);
-    });
-    alphabet = std::move(r.alphabet);
-    scans = std::move(r.scans);
-    models = std::move(r.models);
-  } else {
-    auto bytes = io::read_file(o.alphabet);
-    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
-    auto a = codec::decode_alphabet(bytes.value());
-    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
-    alphabet = std::move(a).value();
-    for (const auto& c : clouds) {
-      scans.push_back(prepare_scan(c, mp, alphabet.word_radius));
-      models.push_back(encode_scan(scans.back(), alphabet, !o.no_prune, mp));
-    }
-  }
+  LearnParams p;
+  p.model = mp;
+  p.max_iterations = o.iterations;
+  p.seed = o.seed;
+  p.prune = !o.no_prune;
+  std::optional<AlphabetFile> reuse;
+  if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
+  ModelSet set = build_models(clouds, p, reuse ? &reuse->alphabet : nullptr, o.inputs);
+  const Alphabet& alphabet = set.alphabet;
+  const std::vector<PreparedScan>& scans = set.scans;
+  const std::vector<Model>& models = set.models;
   const double model_ms = sw.lap_ms();
 
   std::vector<ScanReport> reports;

@@ -3,6 +3,9 @@
 #include <cmath>
 #include <cstdio>
 
+#include "lex3d/codec/codec.hpp"
+#include "progress.hpp"
+
 namespace lex3d::cli {
 
 void ModelOptions::add_to(CLI::App& app) {
@@ -21,6 +24,43 @@ ModelParams ModelOptions::params() const {
   p.sigma_lambda = sigma_lambda;
   p.threads = threads;
   return p;
+}
+
+AlphabetFile read_alphabet_file(const std::string& path) {
+  auto bytes = io::read_file(path);
+  if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+  auto a = codec::decode_alphabet(bytes.value());
+  if (!a.ok()) throw CliError(2, path + ": " + a.status().to_string());
+  return {std::move(bytes).value(), std::move(a).value()};
+}
+
+LearnResult learn_with_progress(const std::vector<Cloud>& clouds, const LearnParams& params) {
+  ProgressBar bar("learning");
+  return learn_alphabet(clouds, params, [&](const LearnProgress& pr) {
+    char detail[96];
+    std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
+    bar.update(pr.iteration, pr.max_iterations, detail);
+  });
+}
+
+ModelSet build_models(const std::vector<Cloud>& clouds, const LearnParams& learn, const Alphabet* reuse,
+                      const std::vector<std::string>& names) {
+  ModelSet set;
+  if (reuse == nullptr) {
+    LearnResult r = learn_with_progress(clouds, learn);
+    set.alphabet = std::move(r.alphabet);
+    set.scans = std::move(r.scans);
+    set.models = std::move(r.models);
+    return set;
+  }
+  set.alphabet = *reuse;
+  ProgressBar bar("encoding");
+  for (std::size_t i = 0; i < clouds.size(); ++i) {
+    set.scans.push_back(prepare_scan(clouds[i], learn.model, set.alphabet.word_radius));
+    set.models.push_back(encode_scan(set.scans.back(), set.alphabet, learn.prune, learn.model));
+    bar.update(static_cast<long>(i + 1), static_cast<long>(clouds.size()), i < names.size() ? names[i] : "");
+  }
+  return set;
 }
 
 namespace {

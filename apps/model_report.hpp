@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/eval/metrics.hpp"
 #include "lex3d/model/model.hpp"
@@ -33,6 +34,26 @@ struct ScanReport {
   eval::InlierResult inliers;
   eval::DistanceResult distances;
 };
+
+/// An alphabet file's bytes and the alphabet they hold; throws CliError(2) when unreadable.
+struct AlphabetFile {
+  std::vector<std::uint8_t> bytes;
+  Alphabet alphabet;
+};
+AlphabetFile read_alphabet_file(const std::string& path);
+
+/// learn_alphabet with a progress bar (iteration, BIC, alphabet size) on a terminal.
+LearnResult learn_with_progress(const std::vector<Cloud>& clouds, const LearnParams& params);
+
+/// Models of `clouds`: learned with `learn` when `reuse` is null, else encoded with the
+/// reused alphabet (pruned when learn.prune), with a progress bar either way.
+struct ModelSet {
+  Alphabet alphabet;
+  std::vector<PreparedScan> scans;
+  std::vector<Model> models;
+};
+ModelSet build_models(const std::vector<Cloud>& clouds, const LearnParams& learn, const Alphabet* reuse,
+                      const std::vector<std::string>& names);
 
 /// Reconstructs `model` (thinned to the alphabet's point spacing) and measures it
 /// against the scan.

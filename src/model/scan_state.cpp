@@ -78,7 +78,7 @@ void ScanState::contribution(std::size_t f, const Word& word, std::vector<float>
   }
 }
 
-double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
+std::int64_t ScanState::stage(const std::vector<Change>& changes) {
   std::int64_t dm = 0;
   for (const auto& c : changes) {
     const auto& nearby = scan_.nearby[c.feature];
@@ -94,7 +94,10 @@ double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
     }
     dm += static_cast<std::int64_t>(c.word_points) - static_cast<std::int64_t>(word_points_[c.feature]);
   }
-  const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
+  return dm;
+}
+
+double ScanState::staged_delta(std::uint64_t m_new) const {
   const double lm_old = log_m(M_);
   const double lm_new = log_m(m_new);
   double d = 0.0;
@@ -104,46 +107,39 @@ double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
     d += log_term(j, s_new, lm_new) - log_term(j, S_[j], lm_old);
     touched_above += above(j, S_[j], lm_old) ? 1 : 0;
   }
-  d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
+  // The untouched points above the background only see M change.
+  return d - static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
+}
+
+void ScanState::unstage() {
   for (const std::uint32_t j : touched_) delta_[j] = 0.0;
   touched_.clear();
+}
+
+double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
+  const std::int64_t dm = stage(changes);
+  const double d = staged_delta(static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm));
+  unstage();
   return d;
 }
 
 void ScanState::apply(std::vector<Change>& changes) {
-  // The change of ln L is evaluated exactly as delta_log_likelihood does, then the
-  // state moves.
-  log_l_ += delta_log_likelihood(changes);
-  std::int64_t dm = 0;
-  for (const auto& c : changes)
-    dm += static_cast<std::int64_t>(c.word_points) - static_cast<std::int64_t>(word_points_[c.feature]);
-  const double lm_old = log_m(M_);
+  const std::int64_t dm = stage(changes);
   const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
+  log_l_ += staged_delta(m_new);
+  const double lm_old = log_m(M_);
   const double lm_new = log_m(m_new);
-  for (auto& c : changes) {
-    const auto& nearby = scan_.nearby[c.feature];
-    auto& old = cache_[c.feature];
-    for (std::size_t k = 0; k < nearby.size(); ++k) {
-      const std::uint32_t j = nearby[k];
-      const double before = k < old.size() ? old[k] : 0.0;
-      const double after = k < c.contrib.size() ? c.contrib[k] : 0.0;
-      if (before == 0.0 && after == 0.0) continue;
-      if (delta_[j] == 0.0) touched_.push_back(j);
-      delta_[j] += after - before;
-      if (delta_[j] == 0.0) delta_[j] = 1e-300;
-    }
-    word_[c.feature] = c.word;
-    word_points_[c.feature] = c.word_points;
-    old = std::move(c.contrib);
-  }
   for (const std::uint32_t j : touched_) {
     const bool was = above(j, S_[j], lm_old);
     S_[j] = std::max(0.0, S_[j] + delta_[j]);
-    const bool is = above(j, S_[j], lm_new);
-    above_ = above_ + (is ? 1 : 0) - (was ? 1 : 0);
-    delta_[j] = 0.0;
+    above_ = above_ + (above(j, S_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
   }
-  touched_.clear();
+  unstage();
+  for (auto& c : changes) {
+    word_[c.feature] = c.word;
+    word_points_[c.feature] = c.word_points;
+    cache_[c.feature] = std::move(c.contrib);
+  }
   M_ = m_new;
 }
 

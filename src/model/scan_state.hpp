@@ -69,6 +69,13 @@ class ScanState {
     return m > 1 ? std::log(static_cast<double>(m)) : 0.0;
   }
 
+  // Accumulates the contribution changes of `changes` into delta_ (marking touched_);
+  // returns the change of M.
+  std::int64_t stage(const std::vector<Change>& changes);
+  // ln L change of the staged changes if M became m_new.
+  [[nodiscard]] double staged_delta(std::uint64_t m_new) const;
+  void unstage();
+
   const PreparedScan& scan_;
   std::vector<Eigen::Isometry3f> pose_;               // instance pose of each feature (cloud frame)
   std::vector<std::vector<Eigen::Vector3f>> local_;  // nearby points in that pose's frame
