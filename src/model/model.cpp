@@ -14,39 +14,100 @@
 
 namespace lex3d {
 
+namespace {
+
+// Cells of a thinning grid -> the kept points in them (linked through `next`), in a
+// flat open-addressing table: a decoder thins ~10^5 points, and a node-based map
+// spends most of its time allocating.
+class CellTable {
+ public:
+  explicit CellTable(std::size_t max_cells) {
+    std::size_t cap = 16;
+    while (cap < 2 * max_cells) cap <<= 1;
+    keys_.assign(cap, kEmpty);
+    heads_.assign(cap, -1);
+    mask_ = cap - 1;
+  }
+  /// Head of the list of cell `key`, -1 when empty.
+  [[nodiscard]] std::int32_t head(std::uint64_t key) const {
+    for (std::size_t i = hash(key) & mask_;; i = (i + 1) & mask_) {
+      if (keys_[i] == key) return heads_[i];
+      if (keys_[i] == kEmpty) return -1;
+    }
+  }
+  /// The head slot of cell `key`, created when missing.
+  std::int32_t& slot(std::uint64_t key) {
+    for (std::size_t i = hash(key) & mask_;; i = (i + 1) & mask_) {
+      if (keys_[i] == key) return heads_[i];
+      if (keys_[i] == kEmpty) {
+        keys_[i] = key;
+        return heads_[i];
+      }
+    }
+  }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~0ULL;
+  static std::size_t hash(std::uint64_t k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    return static_cast<std::size_t>(k);
+  }
+  std::vector<std::uint64_t> keys_;
+  std::vector<std::int32_t> heads_;
+  std::size_t mask_ = 0;
+};
+
+std::uint64_t cell_key(int x, int y, int z) {
+  const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::int64_t>(v) + (1 << 20)) & 0x1FFFFFULL; };
+  return u(x) | (u(y) << 21) | (u(z) << 42);
+}
+
+}  // namespace
+
 Reconstruction reconstruct(const Model& model, const Alphabet& alphabet, double spacing) {
   Reconstruction out;
-  const float inv = spacing > 0.0 ? static_cast<float>(1.0 / spacing) : 0.0F;
+  std::size_t placed = 0;
+  for (const auto& inst : model.instances)
+    if (inst.word < alphabet.size()) placed += alphabet.words[inst.word].points.size();
+  out.cloud.points.reserve(placed);
+  out.word_of_point.reserve(placed);
+  // Cells are twice the spacing: the ball of radius `spacing` around a point then
+  // meets at most two cells per axis, the point's own and the neighbour on the side
+  // of the cell it is nearer to, so 8 cells hold every candidate.
+  const float inv = spacing > 0.0 ? static_cast<float>(0.5 / spacing) : 0.0F;
   const float s2 = static_cast<float>(spacing * spacing);
   // Eq. 3 greedily, in instance order: a point is kept when no kept point is closer
-  // than `spacing`, found through a hash grid of cell `spacing`.
-  std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> grid;
-  const auto key = [](const Eigen::Vector3i& c) {
-    const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::int64_t>(v) + (1 << 20)) & 0x1FFFFFULL; };
-    return u(c.x()) | (u(c.y()) << 21) | (u(c.z()) << 42);
-  };
+  // than `spacing`.
+  CellTable cells(inv > 0.0F ? placed : 0);
+  std::vector<std::int32_t> next;
   for (const auto& inst : model.instances) {
     if (inst.word >= alphabet.size()) continue;
     const Eigen::Isometry3f T = inst.T_cloud_word.cast<float>();
     for (const auto& p : alphabet.words[inst.word].points) {
       const Eigen::Vector3f q = T * p;
       if (inv > 0.0F) {
-        const Eigen::Vector3i c(static_cast<int>(std::floor(q.x() * inv)), static_cast<int>(std::floor(q.y() * inv)),
-                                static_cast<int>(std::floor(q.z() * inv)));
+        const Eigen::Vector3f g = q * inv;
+        const int cx = static_cast<int>(std::floor(g.x()));
+        const int cy = static_cast<int>(std::floor(g.y()));
+        const int cz = static_cast<int>(std::floor(g.z()));
+        const int sx = g.x() - static_cast<float>(cx) < 0.5F ? -1 : 1;
+        const int sy = g.y() - static_cast<float>(cy) < 0.5F ? -1 : 1;
+        const int sz = g.z() - static_cast<float>(cz) < 0.5F ? -1 : 1;
         bool near = false;
-        for (int dz = -1; dz <= 1 && !near; ++dz)
-          for (int dy = -1; dy <= 1 && !near; ++dy)
-            for (int dx = -1; dx <= 1 && !near; ++dx) {
-              const auto it = grid.find(key(c + Eigen::Vector3i(dx, dy, dz)));
-              if (it == grid.end()) continue;
-              for (const auto k : it->second)
-                if ((out.cloud.points[k] - q).squaredNorm() < s2) {
-                  near = true;
-                  break;
-                }
+        for (int i = 0; i < 8 && !near; ++i) {
+          const std::uint64_t key = cell_key(cx + ((i & 1) ? sx : 0), cy + ((i & 2) ? sy : 0), cz + ((i & 4) ? sz : 0));
+          for (std::int32_t k = cells.head(key); k >= 0; k = next[static_cast<std::size_t>(k)])
+            if ((out.cloud.points[static_cast<std::size_t>(k)] - q).squaredNorm() < s2) {
+              near = true;
+              break;
             }
+        }
         if (near) continue;
-        grid[key(c)].push_back(static_cast<std::uint32_t>(out.cloud.points.size()));
+        std::int32_t& head = cells.slot(cell_key(cx, cy, cz));
+        next.push_back(head);
+        head = static_cast<std::int32_t>(out.cloud.points.size());
       }
       out.cloud.points.push_back(q);
       out.word_of_point.push_back(inst.word);
