@@ -13,6 +13,8 @@ void ModelOptions::add_to(CLI::App& app) {
   app.add_option("--coverage-factor", coverage_factor, "Coverage points at most this many word radii apart");
   app.add_option("--word-spacing", word_spacing_factor, "Word points thinned to this many word radii");
   app.add_option("--sigma-lambda", sigma_lambda, "λ of σ = λ tan(α/2) range (likelihood, inliers)");
+  app.add_option("--refine-iterations", refine_iterations, "ICP rounds fitting each instance to the scan (0 = off)")
+      ->check(CLI::Range(0, 50));
   app.add_option("--threads", threads, "Worker threads")->check(CLI::Range(1, 64));
 }
 
@@ -22,6 +24,7 @@ ModelParams ModelOptions::params() const {
   p.coverage_factor = coverage_factor;
   p.word_spacing_factor = word_spacing_factor;
   p.sigma_lambda = sigma_lambda;
+  p.refine_iterations = refine_iterations;
   p.threads = threads;
   return p;
 }

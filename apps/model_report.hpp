@@ -19,6 +19,7 @@ struct ModelOptions {
   double coverage_factor = ModelParams{}.coverage_factor;
   double word_spacing_factor = ModelParams{}.word_spacing_factor;
   double sigma_lambda = ModelParams{}.sigma_lambda;
+  int refine_iterations = ModelParams{}.refine_iterations;
   int threads = 2;
   void add_to(CLI::App& app);
   [[nodiscard]] ModelParams params() const;
