@@ -15,6 +15,8 @@ void ModelOptions::add_to(CLI::App& app) {
   app.add_option("--sigma-lambda", sigma_lambda, "λ of σ = λ tan(α/2) range (likelihood, inliers)");
   app.add_option("--refine-iterations", refine_iterations, "ICP rounds fitting each instance to the scan (0 = off)")
       ->check(CLI::Range(0, 50));
+  app.add_option("--fit-candidates", fit_candidates, "Words (nearest by descriptor) an instance chooses from by fit")
+      ->check(CLI::Range(1, 64));
   app.add_option("--threads", threads, "Worker threads")->check(CLI::Range(1, 64));
 }
 
@@ -25,6 +27,7 @@ ModelParams ModelOptions::params() const {
   p.word_spacing_factor = word_spacing_factor;
   p.sigma_lambda = sigma_lambda;
   p.refine_iterations = refine_iterations;
+  p.fit_candidates = fit_candidates;
   p.threads = threads;
   return p;
 }

@@ -20,6 +20,7 @@ struct ModelOptions {
   double word_spacing_factor = ModelParams{}.word_spacing_factor;
   double sigma_lambda = ModelParams{}.sigma_lambda;
   int refine_iterations = ModelParams{}.refine_iterations;
+  int fit_candidates = ModelParams{}.fit_candidates;
   int threads = 2;
   void add_to(CLI::App& app);
   [[nodiscard]] ModelParams params() const;

@@ -173,6 +173,7 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
     state.contribution(f, w, c.contrib);
   });
   state.apply(changes);
+  state.choose_by_fit(alphabet, params.fit_candidates, threads);
   state.refine(alphabet, params.refine_iterations, params.refine_reach_factor * scan.word_radius, threads);
   if (prune) state.prune(alphabet);
   return state.model();

@@ -20,6 +20,8 @@ void ModelParams::validate() const {
   if (!(sigma_lambda > 0.0 && sigma_lambda <= 100.0))
     throw std::invalid_argument("ModelParams::sigma_lambda must be in (0, 100]");
   if (threads < 1 || threads > 64) throw std::invalid_argument("ModelParams::threads must be in [1, 64]");
+  if (fit_candidates < 1 || fit_candidates > 64)
+    throw std::invalid_argument("ModelParams::fit_candidates must be in [1, 64]");
   if (refine_iterations < 0 || refine_iterations > 50)
     throw std::invalid_argument("ModelParams::refine_iterations must be in [0, 50]");
   if (!(refine_reach_factor > 0.0 && refine_reach_factor <= 1.0))

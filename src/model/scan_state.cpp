@@ -267,6 +267,66 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
   recompute();
 }
 
+std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int threads) {
+  if (k <= 1 || alphabet.size() < 2) return 0;
+  const int dim = alphabet.descriptor_dim;
+  std::vector<std::size_t> active;
+  for (std::size_t f = 0; f < word_.size(); ++f)
+    if (word_[f] >= 0) active.push_back(f);
+  std::vector<std::int32_t> choice(active.size(), -1);
+  parallel_for(active.size(), threads, [&](std::size_t i) {
+    const std::size_t f = active[i];
+    // The k nearest words by descriptor (ties: lower id).
+    std::vector<std::pair<float, std::uint32_t>> near;
+    for (std::size_t w = 0; w < alphabet.size(); ++w)
+      near.emplace_back(descriptor_distance_sq(scan_.features.descriptor(f), alphabet.words[w].descriptor.data(), dim),
+                        static_cast<std::uint32_t>(w));
+    const auto kk = std::min<std::size_t>(static_cast<std::size_t>(k), near.size());
+    std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(kk), near.end());
+    const auto& nearby = scan_.nearby[f];
+    const auto& local = local_[f];
+    double best = -1e300;
+    for (std::size_t c = 0; c < kk; ++c) {
+      const Word& w = alphabet.words[near[c].second];
+      std::vector<char> supported(w.points.size(), 0);
+      std::size_t explained = 0;
+      for (std::size_t n = 0; n < nearby.size(); ++n) {
+        const float r2 = reach2_[nearby[n]] / 9.0F;  // σ²
+        bool hit = false;
+        for (std::size_t p = 0; p < w.points.size(); ++p)
+          if ((w.points[p] - local[n]).squaredNorm() <= r2) {
+            hit = true;
+            supported[p] = 1;
+          }
+        explained += hit ? 1 : 0;
+      }
+      std::size_t unsupported = 0;
+      for (const char sp : supported) unsupported += sp ? 0 : 1;
+      const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
+      if (score > best) {
+        best = score;
+        choice[i] = static_cast<std::int32_t>(near[c].second);
+      }
+    }
+  }, 8);
+  std::vector<Change> changes;
+  for (std::size_t i = 0; i < active.size(); ++i) {
+    const std::size_t f = active[i];
+    if (choice[i] < 0 || choice[i] == word_[f]) continue;
+    Change c;
+    c.feature = static_cast<std::uint32_t>(f);
+    c.word = choice[i];
+    c.word_points = static_cast<std::uint32_t>(alphabet.words[static_cast<std::size_t>(choice[i])].points.size());
+    changes.push_back(std::move(c));
+  }
+  parallel_for(changes.size(), threads, [&](std::size_t i) {
+    contribution(changes[i].feature, alphabet.words[static_cast<std::size_t>(changes[i].word)], changes[i].contrib);
+  }, 8);
+  apply(changes);
+  recompute();
+  return changes.size();
+}
+
 Model ScanState::model() const {
   Model m;
   for (std::size_t f = 0; f < word_.size(); ++f) {

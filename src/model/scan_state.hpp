@@ -53,6 +53,11 @@ class ScanState {
   /// then re-scores the changed instances.
   void refine(const Alphabet& alphabet, int iterations, double max_distance, int threads);
 
+  /// Re-chooses each instance's word among the `k` nearest by descriptor, by how well it
+  /// fits the scan around it: scan points it explains (a word point within σ) minus word
+  /// points nothing supports. Returns how many instances changed word.
+  std::size_t choose_by_fit(const Alphabet& alphabet, int k, int threads);
+
   /// The model: one instance per feature that holds a word.
   [[nodiscard]] Model model() const;
 

@@ -25,6 +25,10 @@ struct ModelParams {
   double word_spacing_factor = 0.05;
   /// λ of eq. 13: σ = λ · tan(α/2) · range, α the coarser beam spacing; (0, 100].
   double sigma_lambda = 2.0;
+  /// Each instance takes, among this many words nearest by descriptor, the one that fits
+  /// the scan around it best (scan points it explains minus word points nothing
+  /// supports); 1 keeps the nearest descriptor alone (ruhnke2010 §III-C); [1, 64].
+  int fit_candidates = 5;
   /// Rounds of point-to-point ICP that fit each instance's pose to the scan before
   /// pruning (0 keeps the feature frames); [0, 50].
   int refine_iterations = 5;
@@ -90,7 +94,8 @@ struct Reconstruction {
 [[nodiscard]] double bic(double log_likelihood, std::size_t alphabet_points, std::size_t data_points);
 
 /// Encodes a scan with a given alphabet: every feature takes the word with the nearest
-/// descriptor (§III-C), each instance's pose is fitted to the scan by ICP (when
+/// descriptor (§III-C), re-chosen among the fit_candidates nearest by its fit to the scan,
+/// each instance's pose is fitted to the scan by ICP (when
 /// params.refine_iterations > 0), then, when `prune`, instances whose removal does not
 /// lower the likelihood are dropped (§III-D).
 [[nodiscard]] Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune,
