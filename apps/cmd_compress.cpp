@@ -22,11 +22,8 @@ struct CompressOptions {
   std::string output;
   std::string alphabet;
   std::string save_alphabet;
-  std::string format = "auto";
-  std::string poses;
-  int iterations = LearnParams{}.max_iterations;
-  std::uint64_t seed = LearnParams{}.seed;
   bool json = false;
+  ScanSetOptions scan_set;
   ModelOptions model;
 };
 
@@ -41,12 +38,9 @@ void run_compress(const CompressOptions& o) {
   if (!o.save_alphabet.empty()) check_output_path(o.save_alphabet, protected_paths);
 
   Stopwatch sw;
-  const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
   const ModelParams mp = o.model.params();
-  LearnParams p;
-  p.model = mp;
-  p.max_iterations = o.iterations;
-  p.seed = o.seed;
+  LearnParams p = o.scan_set.learn_params(mp);
   std::optional<AlphabetFile> reuse;
   if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
   const ModelSet set = build_models(clouds, p, reuse ? &reuse->alphabet : nullptr, o.inputs);
@@ -123,11 +117,8 @@ void register_compress(CLI::App& app) {
   sub->add_option("-o,--output", o->output, "Model file (numbered _000, _001... for several scans)")->required();
   sub->add_option("--alphabet", o->alphabet, "Reuse this alphabet file (nothing is learned)");
   sub->add_option("--save-alphabet", o->save_alphabet, "Write the learned alphabet here; the models reference it");
-  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
-  sub->add_option("--poses", o->poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
-  sub->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
-  sub->add_option("--seed", o->seed, "Seed of the candidate order when learning");
   sub->add_flag("--json", o->json, "Print one JSON object");
+  o->scan_set.add_to(*sub);
   o->model.add_to(*sub);
   sub->callback([o] { run_compress(*o); });
 }

@@ -18,25 +18,19 @@ namespace {
 struct LearnOptions {
   std::vector<std::string> inputs;
   std::string output;
-  std::string format = "auto";
-  std::string poses;
-  int iterations = LearnParams{}.max_iterations;
   int patience = LearnParams{}.patience;
-  std::uint64_t seed = LearnParams{}.seed;
   bool no_prune = false;
   bool json = false;
+  ScanSetOptions scan_set;
   ModelOptions model;
 };
 
 void run_learn(const LearnOptions& o) {
   check_output_path(o.output, o.inputs);
   Stopwatch sw;
-  const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
-  LearnParams p;
-  p.model = o.model.params();
-  p.max_iterations = o.iterations;
+  const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
+  LearnParams p = o.scan_set.learn_params(o.model.params());
   p.patience = o.patience;
-  p.seed = o.seed;
   p.prune = !o.no_prune;
   const LearnResult r = learn_with_progress(clouds, p);
   throw_if_error(io::write_file_atomic(o.output, codec::encode_alphabet(r.alphabet)));
@@ -79,13 +73,10 @@ void register_learn(CLI::App& app) {
   CLI::App* sub = app.add_subcommand("learn", "Learn an alphabet of local 3D structures from one or more scans");
   sub->add_option("scans", o->inputs, "Point clouds (one alphabet for all)")->required();
   sub->add_option("-o,--output", o->output, "Alphabet file to write")->required();
-  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
-  sub->add_option("--poses", o->poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
-  sub->add_option("--iterations", o->iterations, "Candidate words drawn at most")->check(CLI::Range(1, 1000000));
   sub->add_option("--patience", o->patience, "Stop after this many rejections in a row")->check(CLI::Range(1, 1000000));
-  sub->add_option("--seed", o->seed, "Seed of the candidate order");
   sub->add_flag("--no-prune", o->no_prune, "Keep every instance (skip ruhnke2010 §III-D)");
   sub->add_flag("--json", o->json, "Print one JSON object");
+  o->scan_set.add_to(*sub);
   o->model.add_to(*sub);
   sub->callback([o] { run_learn(*o); });
 }

@@ -20,12 +20,9 @@ struct ReconstructOptions {
   std::vector<std::string> inputs;
   std::string output;
   std::string alphabet;
-  std::string format = "auto";
-  std::string poses;
-  int iterations = LearnParams{}.max_iterations;
-  std::uint64_t seed = LearnParams{}.seed;
   bool no_prune = false;
   bool json = false;
+  ScanSetOptions scan_set;
   ModelOptions model;
 };
 
@@ -36,12 +33,9 @@ void run_reconstruct(const ReconstructOptions& o) {
   if (!o.alphabet.empty()) inputs.push_back(o.alphabet);
   for (const auto& out : outputs) check_output_path(out, inputs);
   Stopwatch sw;
-  const std::vector<Cloud> clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
   const ModelParams mp = o.model.params();
-  LearnParams p;
-  p.model = mp;
-  p.max_iterations = o.iterations;
-  p.seed = o.seed;
+  LearnParams p = o.scan_set.learn_params(mp);
   p.prune = !o.no_prune;
   std::optional<AlphabetFile> reuse;
   if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
@@ -106,12 +100,9 @@ void register_reconstruct(CLI::App& app) {
   sub->add_option("scans", o->inputs, "Point clouds")->required();
   sub->add_option("-o,--output", o->output, "Reconstruction (.ply or .pcd; numbered for several scans)")->required();
   sub->add_option("--alphabet", o->alphabet, "Use this alphabet instead of learning one");
-  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
-  sub->add_option("--poses", o->poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
-  sub->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
-  sub->add_option("--seed", o->seed, "Seed of the candidate order when learning");
   sub->add_flag("--no-prune", o->no_prune, "Keep every instance");
   sub->add_flag("--json", o->json, "Print one JSON object");
+  o->scan_set.add_to(*sub);
   o->model.add_to(*sub);
   sub->callback([o] { run_reconstruct(*o); });
 }

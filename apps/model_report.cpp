@@ -32,6 +32,26 @@ ModelParams ModelOptions::params() const {
   return p;
 }
 
+void ScanSetOptions::add_to(CLI::App& app) {
+  app.add_option("--format", format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  app.add_option("--poses", poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
+  app.add_option("--iterations", iterations, "Candidate words drawn at most when learning")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--seed", seed, "Seed of the candidate order when learning");
+}
+
+std::vector<Cloud> ScanSetOptions::load(const std::vector<std::string>& inputs) const {
+  return load_scans(inputs, parse_format_option(format), poses);
+}
+
+LearnParams ScanSetOptions::learn_params(const ModelParams& model) const {
+  LearnParams p;
+  p.model = model;
+  p.max_iterations = iterations;
+  p.seed = seed;
+  return p;
+}
+
 AlphabetFile read_alphabet_file(const std::string& path) {
   auto bytes = io::read_file(path);
   if (!bytes.ok()) throw CliError(2, bytes.status().to_string());

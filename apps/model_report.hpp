@@ -26,6 +26,20 @@ struct ModelOptions {
   [[nodiscard]] ModelParams params() const;
 };
 
+/// Options of the commands that read a set of scans and may learn an alphabet for them:
+/// --format, --poses, --iterations, --seed.
+struct ScanSetOptions {
+  std::string format = "auto";
+  std::string poses;
+  int iterations = LearnParams{}.max_iterations;
+  std::uint64_t seed = LearnParams{}.seed;
+  void add_to(CLI::App& app);
+  /// Reads `inputs` with these options (formats, poses).
+  [[nodiscard]] std::vector<Cloud> load(const std::vector<std::string>& inputs) const;
+  /// Learner parameters: these options plus `model`.
+  [[nodiscard]] LearnParams learn_params(const ModelParams& model) const;
+};
+
 struct ScanReport {
   std::string file;
   std::size_t points = 0;
