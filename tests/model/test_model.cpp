@@ -48,6 +48,16 @@ bool same_words(const Alphabet& a, const Alphabet& b) {
   return true;
 }
 
+// ruhnke2010 §IV inliers/outliers of a model's reconstruction against its scan, with the
+// σ of eq. 13 the learner used.
+eval::InlierResult inliers_of(const Cloud& cloud, const PreparedScan& scan, const Model& model,
+                              const Alphabet& alphabet, double sigma_lambda) {
+  eval::RangeSigma sigma;
+  sigma.factor = sigma_lambda * std::tan(scan.beam_spacing / 2.0);
+  sigma.min_sigma = 1e-3;
+  return eval::inliers_outliers(cloud, reconstruct(model, alphabet, alphabet.point_spacing).cloud, sigma);
+}
+
 Cloud crop(const Cloud& c, float radius) {
   Cloud out;
   for (const auto& p : c.points)
@@ -162,11 +172,7 @@ TEST(SceneRebuilding, AlphabetOfOneBalmScanRebuildsAnother) {
   ASSERT_GT(r.alphabet.size(), 5U);
   const PreparedScan sb = prepare_scan(b, p.model, r.alphabet.word_radius);
   const Model mb = encode_scan(sb, r.alphabet, true);
-  const Reconstruction rec = reconstruct(mb, r.alphabet, r.alphabet.point_spacing);
-  eval::RangeSigma sigma;
-  sigma.factor = p.model.sigma_lambda * std::tan(sb.beam_spacing / 2.0);
-  sigma.min_sigma = 1e-3;
-  const eval::InlierResult io = eval::inliers_outliers(b, rec.cloud, sigma);
+  const eval::InlierResult io = inliers_of(b, sb, mb, r.alphabet, p.model.sigma_lambda);
   RecordProperty("inliers", std::to_string(io.inliers));
   RecordProperty("outliers", std::to_string(io.outliers));
   EXPECT_GT(io.inliers, 0.5) << "outliers " << io.outliers;
@@ -178,14 +184,10 @@ TEST(Refinement, FittingInstancePosesRaisesInliersAndLowersOutliers) {
   p.model.refine_iterations = 0;
   const LearnResult r = learn_alphabet({c}, p);
   ASSERT_GT(r.alphabet.size(), 3U);
-  eval::RangeSigma sigma;
-  sigma.factor = p.model.sigma_lambda * std::tan(r.scans[0].beam_spacing / 2.0);
-  sigma.min_sigma = 1e-3;
   const auto score = [&](int iterations) {
     ModelParams mp = p.model;
     mp.refine_iterations = iterations;
-    const Model m = encode_scan(r.scans[0], r.alphabet, false, mp);
-    return eval::inliers_outliers(c, reconstruct(m, r.alphabet, r.alphabet.point_spacing).cloud, sigma);
+    return inliers_of(c, r.scans[0], encode_scan(r.scans[0], r.alphabet, false, mp), r.alphabet, mp.sigma_lambda);
   };
   const eval::InlierResult plain = score(0);
   const eval::InlierResult fitted = score(5);
@@ -200,14 +202,10 @@ TEST(WordChoice, FittingTheScanAmongNearWordsLowersOutliers) {
   LearnParams p = quick_params();
   const LearnResult r = learn_alphabet({c}, p);
   ASSERT_GT(r.alphabet.size(), 5U);
-  eval::RangeSigma sigma;
-  sigma.factor = p.model.sigma_lambda * std::tan(r.scans[0].beam_spacing / 2.0);
-  sigma.min_sigma = 1e-3;
   const auto score = [&](int candidates) {
     ModelParams mp = p.model;
     mp.fit_candidates = candidates;
-    const Model m = encode_scan(r.scans[0], r.alphabet, true, mp);
-    return eval::inliers_outliers(c, reconstruct(m, r.alphabet, r.alphabet.point_spacing).cloud, sigma);
+    return inliers_of(c, r.scans[0], encode_scan(r.scans[0], r.alphabet, true, mp), r.alphabet, mp.sigma_lambda);
   };
   const eval::InlierResult descriptor_only = score(1);
   const eval::InlierResult fitted = score(5);
