@@ -11,6 +11,7 @@
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
+#include "lex3d/residual/residual.hpp"
 #include "model_report.hpp"
 
 namespace lex3d::cli {
@@ -22,14 +23,87 @@ struct CompressOptions {
   std::string output;
   std::string alphabet;
   std::string save_alphabet;
+  std::string max_error = "none";
+  double target_bpp = 0.0;
+  std::string words = "auto";
   bool json = false;
   ScanSetOptions scan_set;
   ModelOptions model;
 };
 
+/// How one scan was coded.
+struct Coded {
+  std::vector<std::uint8_t> bytes;
+  bool words = true;                    ///< instances of the alphabet used
+  std::optional<double> max_error;      ///< the residual layer's bound, when there is one
+  residual::LayerStats layer;
+};
+
+/// Parses --max-error: "none" or metres within the residual layer's range.
+std::optional<double> parse_max_error(const std::string& text) {
+  if (text == "none") return std::nullopt;
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  if (end == text.c_str() || *end != '\0' || !(v >= residual::kMinMaxError && v <= residual::kMaxMaxError))
+    throw CliError(1, "--max-error must be \"none\" or metres in [" + std::to_string(residual::kMinMaxError) + ", " +
+                          std::to_string(residual::kMaxMaxError) + "], got \"" + text + "\"");
+  return v;
+}
+
+/// Codes one scan: words only, or words and/or a residual layer of bound E (fixed, or
+/// the smallest meeting a bit budget), keeping the smallest file among the allowed forms.
+Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Alphabet* decoder_alphabet,
+                std::optional<double> max_error, double target_bpp, const std::string& words_mode) {
+  if (!max_error && target_bpp <= 0.0) return {codec::encode_model(words_data), true, std::nullopt, {}};
+  std::vector<bool> forms;  // with words?
+  if (words_mode != "off") forms.push_back(true);
+  if (words_mode != "on") forms.push_back(false);
+  std::optional<Coded> best;
+  for (const bool with_words : forms) {
+    codec::ModelData d = words_data;
+    Alphabet empty;
+    if (!with_words) {
+      d.model.instances.clear();
+      d.alphabet = empty;  // a layer-only file embeds an empty alphabet (a few dozen bytes)
+      d.alphabet_hash.reset();
+    }
+    const Alphabet& alphabet = with_words ? *decoder_alphabet : empty;
+    const Cloud placed = residual::decoder_word_cloud(d, alphabet);
+    auto code = [&](double e, residual::LayerStats* st) {
+      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st);
+      return codec::encode_model(d);
+    };
+    Coded c;
+    c.words = with_words;
+    c.max_error = max_error;
+    if (!max_error) {
+      const auto budget = static_cast<std::size_t>(target_bpp * static_cast<double>(cloud.size()) / 8.0);
+      c.max_error = residual::fit_max_error([&](double e) { return code(e, nullptr).size(); }, budget);
+      if (!c.max_error) continue;
+    }
+    c.bytes = code(*c.max_error, &c.layer);
+    const bool better = !best || (max_error ? c.bytes.size() < best->bytes.size()
+                                            : (*c.max_error < *best->max_error ||
+                                               (*c.max_error == *best->max_error && c.bytes.size() < best->bytes.size())));
+    if (better) best = std::move(c);
+  }
+  if (!best)
+    throw CliError(2, "no residual layer fits " + std::to_string(target_bpp) + " bits per point (even at a " +
+                          std::to_string(residual::kMaxMaxError) + " m error); try a larger --target-bpp or --words on");
+  return std::move(*best);
+}
+
 void run_compress(const CompressOptions& o) {
   if (!o.alphabet.empty() && !o.save_alphabet.empty())
     throw CliError(1, "--alphabet reuses an alphabet and --save-alphabet writes a learned one: give one of them");
+  const std::optional<double> max_error = parse_max_error(o.max_error);
+  if (max_error && o.target_bpp > 0.0) throw CliError(1, "give --max-error or --target-bpp, not both");
+  const bool layered = max_error || o.target_bpp > 0.0;
+  if (!layered && o.words == "off")
+    throw CliError(1, "--words off needs a residual layer: give --max-error E or --target-bpp B");
+  const bool use_words = o.words != "off";
+  if (!use_words && (!o.alphabet.empty() || !o.save_alphabet.empty()))
+    throw CliError(1, "--words off uses no alphabet: drop --alphabet / --save-alphabet");
   std::vector<std::string> outputs;
   for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
   std::vector<std::string> protected_paths = o.inputs;
@@ -43,7 +117,9 @@ void run_compress(const CompressOptions& o) {
   LearnParams p = o.scan_set.learn_params(mp);
   std::optional<AlphabetFile> reuse;
   if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
-  const ModelSet set = build_models(clouds, p, reuse ? &reuse->alphabet : nullptr, o.inputs);
+  ModelSet set;
+  if (use_words) set = build_models(clouds, p, reuse ? &reuse->alphabet : nullptr, o.inputs);
+  else set.models.resize(clouds.size());
   const Alphabet& alphabet = set.alphabet;
   const std::vector<Model>& models = set.models;
   std::vector<std::uint8_t> alphabet_file;
@@ -51,7 +127,17 @@ void run_compress(const CompressOptions& o) {
     alphabet_file = std::move(reuse->bytes);
   } else if (!o.save_alphabet.empty()) {
     alphabet_file = codec::encode_alphabet(alphabet);
-    throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
+  }
+  // The alphabet exactly as a decoder will see it, for the residual layer's reconstruction.
+  std::optional<Alphabet> decoder_alphabet;
+  if (layered && use_words) {
+    if (reuse) {
+      decoder_alphabet = reuse->alphabet;
+    } else {
+      auto a = codec::decode_alphabet(codec::encode_alphabet(alphabet));
+      throw_if_error(a.status());
+      decoder_alphabet = std::move(a).value();
+    }
   }
   const bool embed = alphabet_file.empty();
   const std::uint64_t hash = embed ? 0 : codec::alphabet_hash(alphabet_file);
@@ -60,7 +146,10 @@ void run_compress(const CompressOptions& o) {
   Json j;
   j.begin_object();
   j.begin_array("files");
-  if (!o.json) std::printf("%-32s %9s %9s %10s %10s\n", "output", "points", "instances", "bytes", "bits/pt");
+  if (!o.json)
+    std::printf("%-32s %9s %9s %10s %10s%s\n", "output", "points", "instances", "bytes", "bits/pt",
+                layered ? "  max error   coded pts" : "");
+  bool any_words = false;
   for (std::size_t i = 0; i < clouds.size(); ++i) {
     codec::ModelData d;
     d.input_points = clouds[i].size();
@@ -68,7 +157,11 @@ void run_compress(const CompressOptions& o) {
     d.model = models[i];
     if (embed) d.alphabet = alphabet;
     else d.alphabet_hash = hash;
-    const std::vector<std::uint8_t> bytes = codec::encode_model(d);
+    const Coded coded = code_scan(clouds[i], d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
+                                  use_words ? o.words : "off");
+    any_words = any_words || coded.words;
+    const std::vector<std::uint8_t>& bytes = coded.bytes;
+    if (!coded.words) d.model.instances.clear();
     throw_if_error(io::write_file_atomic(outputs[i], bytes));
     const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
     total_bytes += bytes.size();
@@ -78,19 +171,35 @@ void run_compress(const CompressOptions& o) {
           .value("input", o.inputs[i])
           .value("output", outputs[i])
           .value("points", d.input_points)
-          .value("features", set.scans[i].features.size())
+          .value("features", i < set.scans.size() ? set.scans[i].features.size() : std::size_t{0})
           .value("instances", d.model.instances.size())
           .value("bytes", static_cast<std::uint64_t>(bytes.size()))
-          .value("bits_per_point", bpp)
-          .end_object();
+          .value("bits_per_point", bpp);
+      if (coded.max_error) {
+        j.begin_object("residual")
+            .value("max_error_m", *coded.max_error)
+            .value("words_used", coded.words)
+            .value("word_points", coded.layer.word_points)
+            .value("kept_word_points", coded.layer.kept_word_points)
+            .value("explained_points", coded.layer.explained_points)
+            .value("coded_points", coded.layer.residual_points)
+            .value("escaped_points", coded.layer.escaped_points)
+            .value("bytes", coded.layer.bytes)
+            .end_object();
+      }
+      j.end_object();
     } else {
-      std::printf("%-32s %9llu %9zu %10zu %10.3f\n", outputs[i].c_str(), static_cast<unsigned long long>(d.input_points),
+      std::printf("%-32s %9llu %9zu %10zu %10.3f", outputs[i].c_str(), static_cast<unsigned long long>(d.input_points),
                   d.model.instances.size(), bytes.size(), bpp);
+      if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
+      std::printf("\n");
     }
   }
   j.end_array();
+  // A saved alphabet is written once the models are; it is counted only when a model uses it.
+  if (!o.save_alphabet.empty()) throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
   const double total_ms = sw.elapsed_ms();
-  const std::uint64_t alphabet_bytes = embed ? 0 : alphabet_file.size();
+  const std::uint64_t alphabet_bytes = embed || !any_words ? 0 : alphabet_file.size();
   const double bpp_all = total_points ? 8.0 * static_cast<double>(total_bytes + alphabet_bytes) / static_cast<double>(total_points) : 0.0;
   if (o.json) {
     j.value("alphabet_words", alphabet.size()).value("alphabet_embedded", embed);
@@ -117,6 +226,18 @@ void register_compress(CLI::App& app) {
   sub->add_option("-o,--output", o->output, "Model file (numbered _000, _001... for several scans)")->required();
   sub->add_option("--alphabet", o->alphabet, "Reuse this alphabet file (nothing is learned)");
   sub->add_option("--save-alphabet", o->save_alphabet, "Write the learned alphabet here; the models reference it");
+  sub->add_option("--max-error", o->max_error,
+                  "Add a residual layer: every input point has a decoded point within this many metres and "
+                  "vice versa; \"none\" keeps words only")
+      ->capture_default_str();
+  sub->add_option("--target-bpp", o->target_bpp,
+                  "Add the residual layer with the smallest error that fits this many bits per input point")
+      ->check(CLI::Range(1e-3, 1e3));
+  sub->add_option("--words", o->words,
+                  "With a residual layer: use the alphabet's words (on), code every point in the layer (off), "
+                  "or keep the smaller file of the two per scan (auto)")
+      ->check(CLI::IsMember({"on", "off", "auto"}))
+      ->capture_default_str();
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);
   o->model.add_to(*sub);

@@ -11,6 +11,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/eval/metrics.hpp"
+#include "lex3d/residual/residual.hpp"
 
 namespace lex3d::cli {
 
@@ -52,9 +53,9 @@ void run_decompress(const DecompressOptions& o) {
   }
   const codec::ModelData& d = decoded.value();
   const double decode_ms = sw.lap_ms();
-  const Reconstruction rec = reconstruct(d.model, *d.alphabet, d.alphabet->point_spacing);
-  Cloud cloud = rec.cloud;
-  cloud.T_cloud_sensor = d.T_cloud_sensor;
+  auto decoded_cloud = residual::decode_cloud(d);
+  if (!decoded_cloud.ok()) throw CliError(2, o.input + ": " + decoded_cloud.status().to_string());
+  Cloud cloud = std::move(decoded_cloud).value();
   const double reconstruct_ms = sw.lap_ms();
   if (!o.output.empty()) throw_if_error(io::write_cloud(o.output, cloud));
   io::OctomapStats oct;
@@ -87,6 +88,7 @@ void run_decompress(const DecompressOptions& o) {
     j.value("input_points", d.input_points).value("bits_per_point", bpp);
     j.value("instances", d.model.instances.size()).value("words", d.alphabet->size());
     j.value("points", cloud.size());
+    j.value("residual_layer", d.residual.has_value());
     if (!o.output.empty()) j.value("output", o.output);
     if (!o.octomap.empty())
       j.begin_object("octomap")

@@ -27,7 +27,8 @@ namespace {
 constexpr char kModelMagic[8] = {'L', 'E', 'X', '3', 'D', 'M', 'D', 'L'};
 constexpr char kAlphabetMagic[8] = {'L', 'E', 'X', '3', 'D', 'A', 'L', 'P'};
 constexpr std::uint16_t kMajor = 1;
-constexpr std::uint16_t kMinor = 0;
+constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
+constexpr std::uint16_t kMinorResidual = 1;  // the first minor version with the RESD chunk
 constexpr std::size_t kHeaderBytes = 20;      // magic 8, major 2, minor 2, flags 4, header_crc 4
 constexpr std::size_t kChunkHeadBytes = 12;   // type 4, length 8
 constexpr std::size_t kChunkCrcBytes = 4;
@@ -103,10 +104,11 @@ std::uint32_t crc_of(const std::uint8_t* data, std::size_t n, std::uint32_t crc 
   return static_cast<std::uint32_t>(c);
 }
 
-void put_header(std::vector<std::uint8_t>& out, const char (&magic)[8], std::uint32_t flags) {
+void put_header(std::vector<std::uint8_t>& out, const char (&magic)[8], std::uint32_t flags,
+                std::uint16_t minor = kMinor) {
   out.insert(out.end(), magic, magic + 8);
   put_u16(out, kMajor);
-  put_u16(out, kMinor);
+  put_u16(out, minor);
   put_u32(out, flags);
   put_u32(out, crc_of(out.data() + out.size() - 16, 16));
 }
@@ -270,6 +272,19 @@ Status frame_chunk(const std::uint8_t* d, std::size_t size, std::size_t pos, con
   c.stored_crc = ld_u32(c.payload + len);
   c.computed_crc = crc_of(d + pos, kChunkHeadBytes + len);
   return {};
+}
+
+/// Whether a well-framed chunk of `type` appears among the chunks after the header
+/// (framing errors end the scan; walk_chunks reports them).
+bool has_chunk(const std::uint8_t* d, std::size_t size, const char* type) {
+  const Ctx ctx{"", 0};
+  for (std::size_t pos = kHeaderBytes; pos < size;) {
+    Chunk c;
+    if (!frame_chunk(d, size, pos, ctx, c).ok()) return false;
+    if (c.is(type)) return true;
+    pos = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
+  }
+  return false;
 }
 
 /// Walks the chunks of a file: framing, type letters, CRC, known/unknown, order and the
@@ -737,8 +752,12 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
                                     std::to_string(data.model.instances[i].word) + ", the alphabet has " +
                                     std::to_string(data.alphabet->size()) + " words");
 
+  if (data.residual && data.residual->empty())
+    throw std::invalid_argument("lex3d::codec::encode_model: an empty residual layer (use nullopt for none)");
+
   std::vector<std::uint8_t> out;
-  put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced);
+  put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced,
+             data.residual ? kMinorResidual : kMinor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
@@ -757,6 +776,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
     put_chunk(out, "AREF", aref);
   }
   put_chunk(out, "INST", inst_payload(data.model, q));
+  if (data.residual) put_chunk(out, "RESD", *data.residual);
   put_chunk(out, "IEND", {});
   return out;
 }
@@ -780,8 +800,13 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
 
   ModelData out;
   MhdrFields mhdr;
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "IEND"};
-  const std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
+  // A file without a residual layer has no RESD; one with it is version 1.1 or later.
+  const bool has_residual = has_chunk(d, bytes.size(), "RESD");
+  if (has_residual && h.minor < kMinorResidual)
+    return ctx.error("chunk 'RESD' needs format version 1.1, the header says 1." + std::to_string(h.minor), 10);
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "IEND"};
+  std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
+  if (has_residual) sequence.insert(sequence.begin() + 3, "RESD");
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
     switch (index) {
       case 0: return read_mhdr(c, ctx, mhdr);
@@ -812,6 +837,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
         return {};
       }
       case 2: return read_inst(c, ctx, mhdr, out.alphabet->size(), out.model);
+      case 3:
+        if (has_residual) {
+          if (c.length == 0) return ctx.error("chunk 'RESD' is empty", c.offset + 4);
+          out.residual.emplace(c.payload, c.payload + c.length);
+        }
+        return {};
       default: return {};
     }
   });

@@ -27,6 +27,7 @@ const std::map<std::string, std::set<std::string>>& allowed() {
       {"alphabet", {"core", "range", "features", "alphabet"}},
       {"model", {"core", "range", "features", "alphabet", "model"}},
       {"codec", {"core", "range", "features", "alphabet", "model", "codec"}},
+      {"residual", {"core", "range", "features", "alphabet", "model", "codec", "residual"}},
       {"place", {"core", "range", "features", "alphabet", "model", "codec", "place"}},
       {"eval", {"core", "eval"}},
   };

@@ -36,6 +36,10 @@ struct ModelData {
   std::optional<Alphabet> alphabet;
   /// Content hash of the external alphabet file (FNV-1a 64 of its bytes) when referenced.
   std::optional<std::uint64_t> alphabet_hash;
+  /// The residual layer's payload (formats/model.md §2.5; lex3d/residual/residual.hpp
+  /// codes and decodes it), or nullopt for a words-only model. A model with one is
+  /// written as format 1.1, one without as 1.0.
+  std::optional<std::vector<std::uint8_t>> residual;
 };
 
 /// Encodes an alphabet file. Throws std::invalid_argument for an invalid `q` or alphabet

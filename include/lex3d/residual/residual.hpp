@@ -1,0 +1,86 @@
+#pragma once
+/// \file
+/// The residual layer (formats/model.md §2.5): what the placed words do not explain
+/// within a chosen error E is coded too, so that the decoded cloud meets E both ways.
+///
+/// Guarantee, for a model file with a residual layer of error E, the input cloud P
+/// it was made from and the decoded cloud D (`decode_cloud`), all coordinates as the
+/// float32 values they are stored in and distances computed in double precision:
+///  - every point of P has a point of D within E, and
+///  - every point of D has a point of P within E.
+/// D is the reconstructed word points that have an input point within E (a keep mask
+/// over the reconstruction) plus the input points no kept word point explains,
+/// quantised in sensor-centred spherical coordinates and range coded.
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/core/cloud.hpp"
+#include "lex3d/core/status.hpp"
+
+namespace lex3d::residual {
+
+/// Smallest and largest error bound a residual layer accepts, metres.
+inline constexpr double kMinMaxError = 1e-4;
+inline constexpr double kMaxMaxError = 10.0;
+
+/// What encoding a residual layer did.
+struct LayerStats {
+  double max_error = 0.0;              ///< E, metres
+  std::size_t word_points = 0;         ///< points of the word reconstruction
+  std::size_t kept_word_points = 0;    ///< of those, kept (an input point within E)
+  std::size_t explained_points = 0;    ///< input points a kept word point explains
+  std::size_t residual_points = 0;     ///< input points coded by the layer
+  std::size_t escaped_points = 0;      ///< of those, coded in Cartesian form (near the sensor or a pole)
+  std::size_t bytes = 0;               ///< payload bytes of the layer
+};
+
+/// The word reconstruction a decoder of `data` computes: the instances placed and
+/// thinned to the alphabet's point spacing (`reconstruct`), in the model's frame.
+/// `data.alphabet` must be set (decode_model sets it).
+[[nodiscard]] Cloud word_cloud(const codec::ModelData& data);
+
+/// Encodes the residual payload for `input` (the scan, model frame) against `words`
+/// (exactly what `word_cloud` gives the decoder) with error bound `max_error`
+/// ([kMinMaxError, kMaxMaxError]); `T_cloud_sensor` centres the spherical coding.
+/// Throws std::invalid_argument for a bound out of range or a point beyond 2^30
+/// quantisation steps from the sensor.
+[[nodiscard]] std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, const Pose& T_cloud_sensor,
+                                                     double max_error, LayerStats* stats = nullptr);
+
+/// Decodes a residual payload against `words`: the kept word points, then the coded
+/// points, in the model's frame. Fails with kBadData when the payload is malformed or
+/// does not belong to this reconstruction; `max_points` bounds the coded points
+/// (the model's input point count).
+[[nodiscard]] StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Cloud& words,
+                                           const Pose& T_cloud_sensor, std::uint64_t max_points);
+
+/// The word reconstruction the decoder of `data` will compute, with `alphabet` exactly as
+/// the decoder will see it (decoded from its file: for a learned alphabet,
+/// `decode_alphabet(encode_alphabet(a))`): the instances are quantised as `encode_model`
+/// stores them, then placed (`word_cloud`). `data.alphabet` is not used.
+[[nodiscard]] Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet);
+
+/// Adds a residual layer of bound `max_error` to `data` for the scan `input`. `alphabet`
+/// must be the alphabet exactly as the decoder will see it (decoded from its file: for a
+/// learned one, `decode_alphabet(encode_alphabet(a))`). The instances are quantised as
+/// `encode_model` stores them, reconstructed, and the layer coded against that
+/// reconstruction. Replaces any layer `data` had.
+LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error);
+
+/// Rate control: the smallest error bound in [kMinMaxError, kMaxMaxError] whose coded size
+/// `size_of(E)` fits `target_bytes`, by bisection on log E until the bracket is narrower
+/// than `relative_tolerance` (its upper end is returned, so the result fits). nullopt
+/// when even kMaxMaxError does not fit. Sizes are assumed to shrink as E grows.
+[[nodiscard]] std::optional<double> fit_max_error(const std::function<std::size_t(double)>& size_of,
+                                                  std::size_t target_bytes, double relative_tolerance = 0.02);
+
+/// The decoded cloud of a model file: the word reconstruction, with the residual layer
+/// applied when the file has one. The sensor pose is set from the model.
+[[nodiscard]] StatusOr<Cloud> decode_cloud(const codec::ModelData& data);
+
+}  // namespace lex3d::residual

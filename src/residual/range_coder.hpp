@@ -1,0 +1,160 @@
+#pragma once
+// An adaptive binary range coder (formats/model.md §2.5): 32-bit range, 12-bit
+// probabilities updated by 1/32 of the error after each bit, carries propagated
+// through a cached byte. Integers are binarised as a zero flag, a sign and an
+// Elias-gamma magnitude whose every binary decision has its own adaptive model.
+//
+// The decoder reads zeros past the end of its input and never fails: the callers
+// bound how many symbols they decode, so corrupt input yields wrong values, not
+// unbounded work. Every operation is integer arithmetic, so the bits are identical
+// on every platform.
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace lex3d::residual::detail {
+
+constexpr int kProbBits = 12;
+constexpr std::uint32_t kProbOne = 1U << kProbBits;
+constexpr int kAdaptShift = 5;
+constexpr std::uint32_t kTop = 1U << 24;
+
+/// An adaptive model of one binary decision: the probability of a 0, in 1/4096.
+struct BitModel {
+  std::uint16_t p0 = kProbOne / 2;
+};
+
+class RangeEncoder {
+ public:
+  void put(BitModel& m, bool bit) {
+    const std::uint32_t bound = (range_ >> kProbBits) * m.p0;
+    if (!bit) {
+      range_ = bound;
+      m.p0 = static_cast<std::uint16_t>(m.p0 + ((kProbOne - m.p0) >> kAdaptShift));
+    } else {
+      low_ += bound;
+      range_ -= bound;
+      m.p0 = static_cast<std::uint16_t>(m.p0 - (m.p0 >> kAdaptShift));
+    }
+    while (range_ < kTop) {
+      range_ <<= 8;
+      shift_low();
+    }
+  }
+  /// Flushes and returns the coded bytes; the encoder must not be used afterwards.
+  std::vector<std::uint8_t> finish() {
+    for (int i = 0; i < 5; ++i) shift_low();
+    return std::move(out_);
+  }
+
+ private:
+  void shift_low() {
+    if (static_cast<std::uint32_t>(low_) < 0xFF000000U || (low_ >> 32) != 0) {
+      const auto carry = static_cast<std::uint8_t>(low_ >> 32);
+      std::uint8_t byte = cache_;
+      do {
+        out_.push_back(static_cast<std::uint8_t>(byte + carry));
+        byte = 0xFF;
+      } while (--pending_ != 0);
+      cache_ = static_cast<std::uint8_t>((low_ >> 24) & 0xFFU);
+    }
+    ++pending_;
+    low_ = (low_ & 0x00FFFFFFU) << 8;
+  }
+
+  std::uint64_t low_ = 0;
+  std::uint32_t range_ = 0xFFFFFFFFU;
+  std::uint8_t cache_ = 0;
+  std::uint64_t pending_ = 1;
+  std::vector<std::uint8_t> out_;
+};
+
+class RangeDecoder {
+ public:
+  RangeDecoder(const std::uint8_t* data, std::size_t size) : data_(data), size_(size) {
+    for (int i = 0; i < 5; ++i) code_ = (code_ << 8) | next();
+  }
+  bool get(BitModel& m) {
+    const std::uint32_t bound = (range_ >> kProbBits) * m.p0;
+    bool bit = false;
+    if (code_ < bound) {
+      range_ = bound;
+      m.p0 = static_cast<std::uint16_t>(m.p0 + ((kProbOne - m.p0) >> kAdaptShift));
+    } else {
+      code_ -= bound;
+      range_ -= bound;
+      m.p0 = static_cast<std::uint16_t>(m.p0 - (m.p0 >> kAdaptShift));
+      bit = true;
+    }
+    while (range_ < kTop) {
+      range_ <<= 8;
+      code_ = (code_ << 8) | next();
+    }
+    return bit;
+  }
+  /// Bytes consumed beyond the input (a well-formed stream needs none).
+  [[nodiscard]] std::size_t overrun() const { return pos_ > size_ ? pos_ - size_ : 0; }
+
+ private:
+  std::uint32_t next() {
+    const std::uint32_t b = pos_ < size_ ? data_[pos_] : 0U;
+    ++pos_;
+    return b;
+  }
+  const std::uint8_t* data_;
+  std::size_t size_;
+  std::size_t pos_ = 0;
+  std::uint32_t code_ = 0;
+  std::uint32_t range_ = 0xFFFFFFFFU;
+};
+
+/// Signed integers in [-(2^31 - 1), 2^31 - 1] with kContexts conditioning classes.
+class IntModel {
+ public:
+  static constexpr int kContexts = 8;
+  static constexpr int kMaxExponent = 31;
+
+  /// The class of a context value: 0 for 0, else its bit length, capped.
+  static int context_of(std::int64_t previous) {
+    std::uint64_t a = previous < 0 ? static_cast<std::uint64_t>(-previous) : static_cast<std::uint64_t>(previous);
+    int bits = 0;
+    while (a != 0 && bits < kContexts - 1) {
+      a >>= 1;
+      ++bits;
+    }
+    return bits;
+  }
+
+  void put(RangeEncoder& enc, int ctx, std::int64_t v) {
+    enc.put(zero_[ctx], v != 0);
+    if (v == 0) return;
+    enc.put(sign_[ctx], v < 0);
+    const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
+    int e = 0;
+    while ((mag >> (e + 1)) != 0) ++e;
+    for (int j = 0; j < e; ++j) enc.put(exponent_[ctx][j], true);
+    if (e < kMaxExponent) enc.put(exponent_[ctx][e], false);
+    for (int j = e - 1; j >= 0; --j) enc.put(mantissa_[e][j], ((mag >> j) & 1U) != 0);
+  }
+
+  std::int64_t get(RangeDecoder& dec, int ctx) {
+    if (!dec.get(zero_[ctx])) return 0;
+    const bool negative = dec.get(sign_[ctx]);
+    int e = 0;
+    while (e < kMaxExponent && dec.get(exponent_[ctx][e])) ++e;
+    std::uint64_t mag = 1;
+    for (int j = e - 1; j >= 0; --j) mag = (mag << 1) | (dec.get(mantissa_[e][j]) ? 1U : 0U);
+    const auto v = static_cast<std::int64_t>(mag);
+    return negative ? -v : v;
+  }
+
+ private:
+  std::array<BitModel, kContexts> zero_{};
+  std::array<BitModel, kContexts> sign_{};
+  std::array<std::array<BitModel, kMaxExponent + 1>, kContexts> exponent_{};
+  std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1> mantissa_{};
+};
+
+}  // namespace lex3d::residual::detail

@@ -1,0 +1,518 @@
+// The residual layer (formats/model.md §2.5, include/lex3d/residual/residual.hpp).
+//
+// Encoder: mark the word points that have an input point within E (kept), mark the
+// input points a kept word point explains, and code the others. Coded points are
+// ordered along rows of elevation (half the data's vertical beam spacing high) by
+// azimuth, or in input order when that codes smaller, and predicted from the point
+// coded before: same range, same elevation, azimuth advanced by the last step. The
+// residuals are quantised with steps that make every error component at most q/2 in
+// metres (range step q, angle steps q / range), and every decoded point is checked
+// against its input point; a point that fails (near the sensor or a pole) is coded
+// as a Cartesian offset instead ("escaped").
+
+#include "lex3d/residual/residual.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <optional>
+#include <limits>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include "lex3d/core/parallel.hpp"
+#include "lex3d/model/model.hpp"
+#include "lex3d/range/range_image.hpp"
+#include "residual/range_coder.hpp"
+
+namespace lex3d::residual {
+namespace {
+
+using detail::BitModel;
+using detail::IntModel;
+using detail::RangeDecoder;
+using detail::RangeEncoder;
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr std::uint64_t kHeadBytes = 32;  // max_error f64, step f64, word_points u64, coded_points u64
+/// The step is this share of the largest step whose error bound is E (2E/sqrt(3)),
+/// leaving room for the second-order terms of spherical quantisation.
+constexpr double kStepShare = 0.95;
+/// Azimuth steps larger than this are not extrapolated (a row change or a gap), radians.
+constexpr double kMaxAzimuthStep = 0.05;
+/// Smallest |cos(elevation)| the azimuth step divides by (about 89.1 degrees).
+constexpr double kMinCosElevation = 1.0 / 64.0;
+/// Largest |residual| coded, in steps.
+constexpr double kMaxSteps = 1073741824.0;  // 2^30
+/// A decoder accepts at most this many coded points per payload byte (each point costs
+/// at least four binary decisions of >= 0.011 bits).
+constexpr std::uint64_t kMaxPointsPerByte = 200;
+
+// ---------------------------------------------------------------------------------------
+// Fixed-radius existence queries: a hash grid with cells 2E wide, so the ball of radius E
+// around any point meets at most 2x2x2 cells.
+// ---------------------------------------------------------------------------------------
+
+class BallGrid {
+ public:
+  BallGrid(const std::vector<Eigen::Vector3f>& points, const std::vector<std::uint32_t>& members, double radius)
+      : points_(points), radius_(radius), inv_cell_(1.0 / (2.0 * radius)) {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed;
+    keyed.reserve(members.size());
+    for (std::uint32_t i : members) keyed.emplace_back(key(cell_of(points[i])), i);
+    std::sort(keyed.begin(), keyed.end());
+    order_.resize(keyed.size());
+    std::size_t cells = 0;
+    for (std::size_t i = 0; i < keyed.size(); ++i) {
+      order_[i] = keyed[i].second;
+      if (i == 0 || keyed[i].first != keyed[i - 1].first) ++cells;
+    }
+    std::size_t cap = 16;
+    while (cap < 2 * cells) cap <<= 1;
+    slots_.assign(cap, Slot{});
+    mask_ = cap - 1;
+    for (std::size_t i = 0; i < keyed.size();) {
+      std::size_t j = i;
+      while (j < keyed.size() && keyed[j].first == keyed[i].first) ++j;
+      std::size_t s = hash(keyed[i].first) & mask_;
+      while (slots_[s].end != 0) s = (s + 1) & mask_;
+      slots_[s] = Slot{keyed[i].first, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j)};
+      i = j;
+    }
+  }
+
+  /// Whether some member lies within the radius of `p` (distances in double).
+  [[nodiscard]] bool any_within(const Eigen::Vector3f& p) const {
+    const double r2 = radius_ * radius_;
+    const Eigen::Vector3d pd = p.cast<double>();
+    std::int64_t base[3], step[3];
+    for (int a = 0; a < 3; ++a) {
+      const double c = pd[a] * inv_cell_;
+      base[a] = static_cast<std::int64_t>(std::floor(c));
+      step[a] = (c - static_cast<double>(base[a]) < 0.5) ? -1 : 1;
+    }
+    for (int dx = 0; dx < 2; ++dx)
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dz = 0; dz < 2; ++dz) {
+          const Slot* s = find(key({base[0] + dx * step[0], base[1] + dy * step[1], base[2] + dz * step[2]}));
+          if (s == nullptr) continue;
+          for (std::uint32_t k = s->begin; k < s->end; ++k)
+            if ((points_[order_[k]].cast<double>() - pd).squaredNorm() <= r2) return true;
+        }
+    return false;
+  }
+
+ private:
+  struct Slot {
+    std::uint64_t key = 0;
+    std::uint32_t begin = 0;
+    std::uint32_t end = 0;  // 0 marks an empty slot (a used slot holds >= 1 point)
+  };
+  struct Cell {
+    std::int64_t x, y, z;
+  };
+  [[nodiscard]] Cell cell_of(const Eigen::Vector3f& p) const {
+    return {static_cast<std::int64_t>(std::floor(p.x() * inv_cell_)), static_cast<std::int64_t>(std::floor(p.y() * inv_cell_)),
+            static_cast<std::int64_t>(std::floor(p.z() * inv_cell_))};
+  }
+  static std::uint64_t key(const Cell& c) {
+    const auto f = [](std::int64_t v) { return static_cast<std::uint64_t>(v) & 0x1FFFFFU; };
+    return f(c.x) | (f(c.y) << 21) | (f(c.z) << 42);
+  }
+  static std::uint64_t hash(std::uint64_t k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    return k;
+  }
+  [[nodiscard]] const Slot* find(std::uint64_t k) const {
+    std::size_t s = hash(k) & mask_;
+    while (slots_[s].end != 0) {
+      if (slots_[s].key == k) return &slots_[s];
+      s = (s + 1) & mask_;
+    }
+    return nullptr;
+  }
+
+  const std::vector<Eigen::Vector3f>& points_;
+  double radius_;
+  double inv_cell_;
+  std::vector<std::uint32_t> order_;
+  std::vector<Slot> slots_;
+  std::size_t mask_ = 0;
+};
+
+// ---------------------------------------------------------------------------------------
+// The point predictor and quantiser shared by encoder and decoder
+// ---------------------------------------------------------------------------------------
+
+double wrap_angle(double a) {
+  a = std::remainder(a, 2.0 * kPi);
+  return a;
+}
+
+struct Spherical {
+  double r, azimuth, elevation;
+};
+
+Spherical to_spherical(const Eigen::Vector3d& p) {
+  const double r = p.norm();
+  if (r == 0.0) return {0.0, 0.0, 0.0};
+  return {r, std::atan2(p.y(), p.x()), std::asin(std::clamp(p.z() / r, -1.0, 1.0))};
+}
+
+/// The decoder's state: the last decoded point and azimuth step.
+struct Predictor {
+  double r = 0.0, azimuth = 0.0, elevation = 0.0, azimuth_step = 0.0;
+  Eigen::Vector3d last = Eigen::Vector3d::Zero();
+  std::int64_t last_kr = 0, last_ke = 0, last_ka = 0;
+  bool last_escaped = false;
+
+  void update(const Eigen::Vector3d& decoded, const Spherical& s) {
+    const double step = wrap_angle(s.azimuth - azimuth);
+    azimuth_step = std::abs(step) <= kMaxAzimuthStep ? step : 0.0;
+    r = s.r;
+    azimuth = s.azimuth;
+    elevation = s.elevation;
+    last = decoded;
+  }
+};
+
+/// The point that residuals (kr, ke, ka) decode to, sensor frame; its spherical form in `s`.
+Eigen::Vector3d spherical_point(const Predictor& pr, double q, std::int64_t kr, std::int64_t ke, std::int64_t ka,
+                                Spherical& s) {
+  s.r = pr.r + static_cast<double>(kr) * q;
+  const double rho = std::max(s.r, q);
+  s.elevation = pr.elevation + static_cast<double>(ke) * (q / rho);
+  const double c = std::max(std::abs(std::cos(s.elevation)), kMinCosElevation);
+  s.azimuth = wrap_angle(pr.azimuth + pr.azimuth_step + static_cast<double>(ka) * (q / (rho * c)));
+  const double ce = std::cos(s.elevation);
+  return {s.r * ce * std::cos(s.azimuth), s.r * ce * std::sin(s.azimuth), s.r * std::sin(s.elevation)};
+}
+
+Eigen::Vector3f to_cloud_frame(const Pose& T_cloud_sensor, const Eigen::Vector3d& p_sensor) {
+  return (T_cloud_sensor * p_sensor).cast<float>();
+}
+
+bool quantise(double v, double step, std::int64_t& k) {
+  const double x = std::round(v / step);
+  if (!(std::abs(x) <= kMaxSteps)) return false;
+  k = static_cast<std::int64_t>(x);
+  return true;
+}
+
+/// The models of one coded-point stream.
+struct PointModels {
+  BitModel escape[2];
+  IntModel range, elevation, azimuth, cartesian[3];
+};
+
+/// Codes `points` (indices into `input`) in the given order; returns the stream and the
+/// number of escaped points.
+std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
+                                      const std::vector<std::uint32_t>& order, const Pose& T_cloud_sensor,
+                                      const Pose& T_sensor_cloud, double q, double max_error, std::size_t& escaped) {
+  PointModels m;
+  Predictor pr;
+  escaped = 0;
+  const double e2 = max_error * max_error;
+  for (std::uint32_t idx : order) {
+    const Eigen::Vector3d truth_cloud = input[idx].cast<double>();
+    const Eigen::Vector3d p = T_sensor_cloud * truth_cloud;
+    const Spherical t = to_spherical(p);
+    // Spherical attempt: range first (the angle steps depend on it), then elevation, azimuth.
+    bool ok = true;
+    std::int64_t kr = 0, ke = 0, ka = 0;
+    ok = quantise(t.r - pr.r, q, kr);
+    Spherical s{};
+    Eigen::Vector3d decoded;
+    if (ok) {
+      const double r_hat = pr.r + static_cast<double>(kr) * q;
+      const double rho = std::max(r_hat, q);
+      ok = quantise(t.elevation - pr.elevation, q / rho, ke);
+      if (ok) {
+        const double e_hat = pr.elevation + static_cast<double>(ke) * (q / rho);
+        const double c = std::max(std::abs(std::cos(e_hat)), kMinCosElevation);
+        ok = quantise(wrap_angle(t.azimuth - pr.azimuth - pr.azimuth_step), q / (rho * c), ka);
+      }
+      if (ok) {
+        decoded = spherical_point(pr, q, kr, ke, ka, s);
+        const Eigen::Vector3d back = to_cloud_frame(T_cloud_sensor, decoded).cast<double>();
+        ok = r_hat > 0.0 && (back - truth_cloud).squaredNorm() <= e2;
+      }
+    }
+    enc.put(m.escape[pr.last_escaped ? 1 : 0], !ok);
+    if (ok) {
+      m.range.put(enc, IntModel::context_of(pr.last_kr), kr);
+      m.elevation.put(enc, IntModel::context_of(pr.last_ke), ke);
+      m.azimuth.put(enc, IntModel::context_of(pr.last_ka), ka);
+      pr.last_kr = kr;
+      pr.last_ke = ke;
+      pr.last_ka = ka;
+      pr.last_escaped = false;
+      pr.update(decoded, s);
+      continue;
+    }
+    // Escape: a Cartesian offset from the last decoded point with a quarter step.
+    ++escaped;
+    const double qc = q / 4.0;
+    std::int64_t kc[3];
+    for (int a = 0; a < 3; ++a)
+      if (!quantise(p[a] - pr.last[a], qc, kc[a]))
+        throw std::invalid_argument("residual layer: a point lies beyond 2^30 steps of " + std::to_string(qc) +
+                                    " m from the one coded before it");
+    for (int a = 0; a < 3; ++a) m.cartesian[a].put(enc, 0, kc[a]);
+    Eigen::Vector3d d;
+    for (int a = 0; a < 3; ++a) d[a] = pr.last[a] + static_cast<double>(kc[a]) * qc;
+    const Eigen::Vector3d back = to_cloud_frame(T_cloud_sensor, d).cast<double>();
+    if ((back - truth_cloud).squaredNorm() > e2)
+      throw std::invalid_argument("residual layer: a max error of " + std::to_string(max_error) +
+                                  " m is below the float32 precision of a point's coordinates");
+    pr.last_escaped = true;
+    pr.update(d, to_spherical(d));
+  }
+  return enc.finish();
+}
+
+void put_u64(std::vector<std::uint8_t>& b, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) b.push_back(static_cast<std::uint8_t>((v >> (8 * i)) & 0xFFU));
+}
+void put_f64(std::vector<std::uint8_t>& b, double d) {
+  std::uint64_t v = 0;
+  std::memcpy(&v, &d, sizeof v);
+  put_u64(b, v);
+}
+std::uint64_t ld_u64(const std::uint8_t* p) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(p[i]) << (8 * i);
+  return v;
+}
+double ld_f64(const std::uint8_t* p) {
+  const std::uint64_t v = ld_u64(p);
+  double d = 0.0;
+  std::memcpy(&d, &v, sizeof d);
+  return d;
+}
+
+/// Orders the coded points along rows of elevation by azimuth.
+std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
+                                     const Pose& T_sensor_cloud, double row_height) {
+  struct Key {
+    std::int64_t row;
+    double azimuth;
+    std::uint32_t index;
+  };
+  std::vector<Key> keys;
+  keys.reserve(coded.size());
+  for (std::uint32_t i : coded) {
+    const Spherical s = to_spherical(T_sensor_cloud * input[i].cast<double>());
+    keys.push_back({static_cast<std::int64_t>(std::floor(s.elevation / row_height)), s.azimuth, i});
+  }
+  std::sort(keys.begin(), keys.end(), [](const Key& a, const Key& b) {
+    if (a.row != b.row) return a.row < b.row;
+    if (a.azimuth != b.azimuth) return a.azimuth < b.azimuth;
+    return a.index < b.index;
+  });
+  std::vector<std::uint32_t> order;
+  order.reserve(keys.size());
+  for (const Key& k : keys) order.push_back(k.index);
+  return order;
+}
+
+}  // namespace
+
+Cloud word_cloud(const codec::ModelData& data) {
+  if (!data.alphabet) throw std::invalid_argument("word_cloud: the model data has no alphabet");
+  Cloud c = reconstruct(data.model, *data.alphabet, data.alphabet->point_spacing).cloud;
+  c.T_cloud_sensor = data.T_cloud_sensor;
+  return c;
+}
+
+std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, const Pose& T_cloud_sensor,
+                                       double max_error, LayerStats* stats) {
+  if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
+    throw std::invalid_argument("residual layer: max error " + std::to_string(max_error) + " m is outside [" +
+                                std::to_string(kMinMaxError) + ", " + std::to_string(kMaxMaxError) + "]");
+  const std::size_t n_in = input.size(), n_w = words.size();
+  if (n_in > 0xFFFFFFF0U || n_w > 0xFFFFFFF0U) throw std::invalid_argument("residual layer: too many points");
+  const int threads = 2;
+
+  // Kept word points: an input point within E. Explained input points: a kept word point within E.
+  std::vector<std::uint8_t> keep(n_w, 0), explained(n_in, 0);
+  if (n_w > 0 && n_in > 0) {
+    std::vector<std::uint32_t> all_in(n_in);
+    std::iota(all_in.begin(), all_in.end(), 0U);
+    const BallGrid input_grid(input.points, all_in, max_error);
+    parallel_for(n_w, threads, [&](std::size_t i) { keep[i] = input_grid.any_within(words.points[i]) ? 1 : 0; }, 4096);
+    std::vector<std::uint32_t> kept;
+    for (std::size_t i = 0; i < n_w; ++i)
+      if (keep[i]) kept.push_back(static_cast<std::uint32_t>(i));
+    if (!kept.empty()) {
+      const BallGrid word_grid(words.points, kept, max_error);
+      parallel_for(n_in, threads, [&](std::size_t i) { explained[i] = word_grid.any_within(input.points[i]) ? 1 : 0; }, 4096);
+    }
+  }
+  std::vector<std::uint32_t> coded;
+  for (std::size_t i = 0; i < n_in; ++i)
+    if (!explained[i]) coded.push_back(static_cast<std::uint32_t>(i));
+
+  const double q = kStepShare * 2.0 * max_error / std::sqrt(3.0);
+  const Pose T_sensor_cloud = T_cloud_sensor.inverse();
+
+  // The keep mask, then the points: in row order and in input order, the smaller wins.
+  RangeEncoder head;
+  {
+    BitModel keep_model[4];
+    int ctx = 0;
+    for (std::size_t i = 0; i < n_w; ++i) {
+      head.put(keep_model[ctx], keep[i] != 0);
+      ctx = ((ctx << 1) | keep[i]) & 3;
+    }
+  }
+  Cloud sensor_frame;
+  sensor_frame.points.reserve(std::min<std::size_t>(coded.size(), 4096));
+  for (std::size_t k = 0; k < coded.size() && sensor_frame.points.size() < 4096; k += std::max<std::size_t>(1, coded.size() / 4096))
+    sensor_frame.points.push_back((T_sensor_cloud * input.points[coded[k]].cast<double>()).cast<float>());
+  const auto res = estimate_angular_resolution(sensor_frame);
+  const double row_height = res && res->elevation_rad > 0.0 ? 0.5 * res->elevation_rad : 0.5 * kPi / 180.0;
+
+  std::size_t esc_rows = 0, esc_input = 0;
+  std::vector<std::uint8_t> by_rows, by_input;
+  const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
+  parallel_for(2, threads, [&](std::size_t which) {
+    if (which == 0) by_rows = code_points(head, input.points, rows, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_rows);
+    else by_input = code_points(head, input.points, coded, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_input);
+  }, 1);
+  const bool rows_win = by_rows.size() <= by_input.size();
+  std::vector<std::uint8_t>& stream = rows_win ? by_rows : by_input;
+
+  std::vector<std::uint8_t> out;
+  out.reserve(kHeadBytes + stream.size());
+  put_f64(out, max_error);
+  put_f64(out, q);
+  put_u64(out, n_w);
+  put_u64(out, coded.size());
+  out.insert(out.end(), stream.begin(), stream.end());
+  if (stats) {
+    stats->max_error = max_error;
+    stats->word_points = n_w;
+    stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
+    stats->explained_points = n_in - coded.size();
+    stats->residual_points = coded.size();
+    stats->escaped_points = rows_win ? esc_rows : esc_input;
+    stats->bytes = out.size();
+  }
+  return out;
+}
+
+StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Cloud& words, const Pose& T_cloud_sensor,
+                             std::uint64_t max_points) {
+  if (payload.size() < kHeadBytes)
+    return bad_data("residual layer is " + std::to_string(payload.size()) + " bytes, at least 32 expected");
+  const double max_error = ld_f64(payload.data());
+  const double q = ld_f64(payload.data() + 8);
+  const std::uint64_t n_w = ld_u64(payload.data() + 16);
+  const std::uint64_t n_c = ld_u64(payload.data() + 24);
+  if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
+    return bad_data("residual layer max_error " + std::to_string(max_error) + " is outside [1e-4, 10] m", 0);
+  if (!(q > 0.0 && q <= 2.0 * max_error / std::sqrt(3.0)))
+    return bad_data("residual layer step " + std::to_string(q) + " is not in (0, 2*max_error/sqrt(3)]", 8);
+  if (n_w != words.size())
+    return bad_data("residual layer covers " + std::to_string(n_w) + " word points but the reconstruction has " +
+                        std::to_string(words.size()),
+                    16);
+  const std::uint64_t stream_bytes = payload.size() - kHeadBytes;
+  if (n_c > max_points || n_c > kMaxPointsPerByte * stream_bytes + 64)
+    return bad_data("residual layer coded_points " + std::to_string(n_c) + " exceeds what the model (" +
+                        std::to_string(max_points) + " input points) or the stored bytes can hold",
+                    24);
+
+  RangeDecoder dec(payload.data() + kHeadBytes, static_cast<std::size_t>(stream_bytes));
+  Cloud out;
+  out.T_cloud_sensor = T_cloud_sensor;
+  {
+    BitModel keep_model[4];
+    int ctx = 0;
+    for (std::size_t i = 0; i < words.size(); ++i) {
+      const bool k = dec.get(keep_model[ctx]);
+      if (k) out.points.push_back(words.points[i]);
+      ctx = ((ctx << 1) | (k ? 1 : 0)) & 3;
+    }
+  }
+  out.points.reserve(out.points.size() + static_cast<std::size_t>(n_c));
+  PointModels m;
+  Predictor pr;
+  const double qc = q / 4.0;
+  for (std::uint64_t i = 0; i < n_c; ++i) {
+    const bool escaped = dec.get(m.escape[pr.last_escaped ? 1 : 0]);
+    Eigen::Vector3d d;
+    Spherical s{};
+    if (!escaped) {
+      const std::int64_t kr = m.range.get(dec, IntModel::context_of(pr.last_kr));
+      const std::int64_t ke = m.elevation.get(dec, IntModel::context_of(pr.last_ke));
+      const std::int64_t ka = m.azimuth.get(dec, IntModel::context_of(pr.last_ka));
+      d = spherical_point(pr, q, kr, ke, ka, s);
+      pr.last_kr = kr;
+      pr.last_ke = ke;
+      pr.last_ka = ka;
+    } else {
+      for (int a = 0; a < 3; ++a) d[a] = pr.last[a] + static_cast<double>(m.cartesian[a].get(dec, 0)) * qc;
+      s = to_spherical(d);
+    }
+    if (!d.allFinite() || !(d.norm() < 1e12))
+      return bad_data("residual layer point " + std::to_string(i) + " decodes to a non-finite position", kHeadBytes);
+    pr.last_escaped = escaped;
+    pr.update(d, s);
+    out.points.push_back(to_cloud_frame(T_cloud_sensor, d));
+  }
+  if (dec.overrun() > 8)
+    return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());
+  return out;
+}
+
+Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet) {
+  // The instances as the decoder will see them: quantised by a round trip through the codec.
+  codec::ModelData words_only;
+  words_only.input_points = data.input_points;
+  words_only.T_cloud_sensor = data.T_cloud_sensor;
+  words_only.model = data.model;
+  words_only.alphabet = alphabet;  // embedded so that the round trip needs no file
+  auto decoded = codec::decode_model(codec::encode_model(words_only));
+  if (!decoded.ok()) throw std::logic_error("residual layer: the model does not round-trip: " + decoded.status().to_string());
+  codec::ModelData placed = std::move(decoded).value();
+  placed.alphabet = alphabet;
+  return word_cloud(placed);
+}
+
+LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error) {
+  const Cloud words = decoder_word_cloud(data, alphabet);
+  LayerStats stats;
+  data.residual = encode_layer(input, words, data.T_cloud_sensor, max_error, &stats);
+  return stats;
+}
+
+std::optional<double> fit_max_error(const std::function<std::size_t(double)>& size_of, std::size_t target_bytes,
+                                    double relative_tolerance) {
+  if (!(relative_tolerance > 0.0 && relative_tolerance < 1.0))
+    throw std::invalid_argument("fit_max_error: relative tolerance must be in (0, 1)");
+  if (size_of(kMaxMaxError) > target_bytes) return std::nullopt;
+  if (size_of(kMinMaxError) <= target_bytes) return kMinMaxError;
+  double lo = std::log(kMinMaxError), hi = std::log(kMaxMaxError);  // size(lo) > target >= size(hi)
+  while (hi - lo > std::log1p(relative_tolerance)) {
+    const double mid = 0.5 * (lo + hi);
+    if (size_of(std::exp(mid)) <= target_bytes) hi = mid;
+    else lo = mid;
+  }
+  return std::exp(hi);
+}
+
+StatusOr<Cloud> decode_cloud(const codec::ModelData& data) {
+  Cloud words = word_cloud(data);
+  if (!data.residual) return words;
+  return decode_layer(*data.residual, words, data.T_cloud_sensor, data.input_points);
+}
+
+}  // namespace lex3d::residual

@@ -1,0 +1,262 @@
+// The residual layer: its range coder, its error guarantee on synthetic and real
+// scans, the model file with a RESD chunk, and decoding of corrupt layers.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include <zlib.h>
+
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/eval/metrics.hpp"
+#include "lex3d/model/model.hpp"
+#include "lex3d/residual/residual.hpp"
+#include "residual/range_coder.hpp"
+#include "support/test_support.hpp"
+
+namespace lex3d {
+namespace {
+
+using Bytes = std::vector<std::uint8_t>;
+using residual::detail::BitModel;
+using residual::detail::IntModel;
+using residual::detail::RangeDecoder;
+using residual::detail::RangeEncoder;
+
+/// A synthetic spinning-lidar scan: 32 rings over a floor and walls, plus a few points
+/// right at the sensor and straight above it (where spherical coding must escape).
+Cloud synthetic_scan(std::uint32_t seed = 7) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, 0.01);
+  Cloud c;
+  for (int ring = 0; ring < 32; ++ring) {
+    const double elevation = (-25.0 + 1.0 * ring) * M_PI / 180.0;
+    for (int k = 0; k < 720; ++k) {
+      const double azimuth = -M_PI + k * (2.0 * M_PI / 720.0);
+      const Eigen::Vector3d dir(std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth),
+                                std::sin(elevation));
+      // Floor at z = -1.7, walls at |x| = 8 or |y| = 12: the first surface hit.
+      double t = 1e9;
+      if (dir.z() < 0) t = std::min(t, -1.7 / dir.z());
+      if (std::abs(dir.x()) > 1e-9) t = std::min(t, 8.0 / std::abs(dir.x()));
+      if (std::abs(dir.y()) > 1e-9) t = std::min(t, 12.0 / std::abs(dir.y()));
+      if (t > 100.0) continue;
+      c.points.push_back((dir * (t + noise(rng))).cast<float>());
+    }
+  }
+  c.points.emplace_back(0.001F, 0.0F, 0.0F);
+  c.points.emplace_back(0.0F, 0.0F, 0.0F);
+  c.points.emplace_back(0.0F, 0.0F, 3.0F);
+  c.points.emplace_back(1e-5F, -1e-5F, -2.0F);
+  return c;
+}
+
+/// Largest distance from a point of `a` to its nearest point of `b` (brute force over a grid-free loop
+/// would be slow; compare_clouds is exact).
+double hausdorff(const Cloud& a, const Cloud& b) { return eval::compare_clouds(a, b).hausdorff; }
+
+TEST(RangeCoder, BitsAndIntegersRoundTrip) {
+  std::mt19937_64 rng(3);
+  std::vector<std::int64_t> values;
+  std::vector<int> bits;
+  for (int i = 0; i < 20000; ++i) {
+    const int kind = static_cast<int>(rng() % 4);
+    std::int64_t v = 0;
+    if (kind == 1) v = static_cast<std::int64_t>(rng() % 7) - 3;
+    if (kind == 2) v = static_cast<std::int64_t>(rng() % 100000) - 50000;
+    if (kind == 3) v = (rng() % 2 ? 1 : -1) * static_cast<std::int64_t>((1ULL << 31) - 1 - rng() % 3);
+    values.push_back(v);
+    bits.push_back(static_cast<int>(rng() % 10 == 0));
+  }
+  RangeEncoder enc;
+  IntModel im;
+  BitModel bm[2];
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    enc.put(bm[i % 2], bits[i] != 0);
+    im.put(enc, IntModel::context_of(i ? values[i - 1] : 0), values[i]);
+  }
+  const Bytes out = enc.finish();
+  RangeDecoder dec(out.data(), out.size());
+  IntModel im2;
+  BitModel bm2[2];
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    ASSERT_EQ(dec.get(bm2[i % 2]), bits[i] != 0) << i;
+    ASSERT_EQ(im2.get(dec, IntModel::context_of(i ? values[i - 1] : 0)), values[i]) << i;
+  }
+  EXPECT_EQ(dec.overrun(), 0U);
+}
+
+TEST(RangeCoder, SkewedBitsCostLittle) {
+  RangeEncoder enc;
+  BitModel m;
+  for (int i = 0; i < 100000; ++i) enc.put(m, i % 100 == 0);
+  const Bytes out = enc.finish();
+  // Entropy of p = 0.01 is 0.081 bits; an adaptive model should stay within 2x of it.
+  EXPECT_LT(out.size() * 8.0 / 100000.0, 0.16);
+}
+
+TEST(ResidualLayer, WithoutWordsMeetsTheBoundBothWays) {
+  const Cloud scan = synthetic_scan();
+  for (double e : {0.002, 0.01, 0.05}) {
+    residual::LayerStats st;
+    const Bytes payload = residual::encode_layer(scan, Cloud{}, Pose::Identity(), e, &st);
+    EXPECT_EQ(st.residual_points, scan.size());
+    EXPECT_LE(st.escaped_points, 8U) << "only points at the sensor or a pole may need the Cartesian form";
+    const auto d = residual::decode_layer(payload, Cloud{}, Pose::Identity(), scan.size());
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    ASSERT_EQ(d.value().size(), scan.size());
+    EXPECT_LE(hausdorff(scan, d.value()), e) << "E = " << e;
+    // Coarser bounds cost fewer bits.
+    if (e > 0.002) EXPECT_LT(payload.size(), residual::encode_layer(scan, Cloud{}, Pose::Identity(), e / 5).size());
+  }
+}
+
+TEST(ResidualLayer, SensorPoseAndWordsAreUsed) {
+  Cloud scan = synthetic_scan();
+  Pose T = Pose::Identity();
+  T.translate(Eigen::Vector3d(100.0, -20.0, 3.0));
+  T.rotate(Eigen::AngleAxisd(0.7, Eigen::Vector3d(0.2, 0.3, 1.0).normalized()));
+  scan = transformed(scan, T);
+  // "Words": half of the scan, slightly moved, and a few points far from anything.
+  Cloud words;
+  for (std::size_t i = 0; i < scan.size(); i += 2) words.points.push_back(scan.points[i] + Eigen::Vector3f(0.003F, 0, 0));
+  words.points.emplace_back(500.0F, 500.0F, 500.0F);
+  const double e = 0.01;
+  residual::LayerStats st;
+  const Bytes payload = residual::encode_layer(scan, words, scan.T_cloud_sensor, e, &st);
+  EXPECT_EQ(st.word_points, words.size());
+  EXPECT_EQ(st.kept_word_points, words.size() - 1);
+  // Every other point has a word point 3 mm away; ring neighbours are further apart than E.
+  EXPECT_GE(st.explained_points, scan.size() / 2 - 2);
+  EXPECT_LT(st.residual_points, scan.size() * 6 / 10);
+  const auto d = residual::decode_layer(payload, words, scan.T_cloud_sensor, scan.size());
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_EQ(d.value().size(), st.kept_word_points + st.residual_points);
+  EXPECT_LE(hausdorff(scan, d.value()), e);
+  // Deterministic.
+  EXPECT_EQ(payload, residual::encode_layer(scan, words, scan.T_cloud_sensor, e));
+}
+
+TEST(ResidualLayer, EmptyInputAndCallerMistakes) {
+  const Bytes p = residual::encode_layer(Cloud{}, Cloud{}, Pose::Identity(), 0.01);
+  const auto d = residual::decode_layer(p, Cloud{}, Pose::Identity(), 0);
+  ASSERT_TRUE(d.ok());
+  EXPECT_TRUE(d.value().empty());
+  const Cloud scan = synthetic_scan();
+  EXPECT_THROW((void)residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.0), std::invalid_argument);
+  EXPECT_THROW((void)residual::encode_layer(scan, Cloud{}, Pose::Identity(), std::nan("")), std::invalid_argument);
+  EXPECT_THROW((void)residual::encode_layer(scan, Cloud{}, Pose::Identity(), 11.0), std::invalid_argument);
+}
+
+TEST(ResidualLayer, CorruptPayloadsAreRejectedOrDecodeBounded) {
+  const Cloud scan = synthetic_scan();
+  Cloud words;
+  for (std::size_t i = 0; i < scan.size(); i += 3) words.points.push_back(scan.points[i]);
+  const Bytes good = residual::encode_layer(scan, words, Pose::Identity(), 0.01);
+  // Every truncation: an error or a cloud no larger than the model allows, never a crash.
+  for (std::size_t n = 0; n < good.size(); n += (n < 64 ? 1 : 97)) {
+    const Bytes cut(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n));
+    const auto d = residual::decode_layer(cut, words, Pose::Identity(), scan.size());
+    if (n < 32) EXPECT_FALSE(d.ok()) << n;
+    if (d.ok()) EXPECT_LE(d.value().size(), words.size() + scan.size());
+  }
+  auto poke_u64 = [](Bytes b, std::size_t at, std::uint64_t v) {
+    for (int i = 0; i < 8; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
+    return b;
+  };
+  auto poke_f64 = [&](const Bytes& b, std::size_t at, double v) {
+    std::uint64_t u = 0;
+    std::memcpy(&u, &v, 8);
+    return poke_u64(b, at, u);
+  };
+  // Another reconstruction.
+  Cloud fewer = words;
+  fewer.points.pop_back();
+  EXPECT_FALSE(residual::decode_layer(good, fewer, Pose::Identity(), scan.size()).ok());
+  // Absurd counts and steps.
+  EXPECT_FALSE(residual::decode_layer(poke_u64(good, 24, scan.size() + 1), words, Pose::Identity(), scan.size()).ok());
+  EXPECT_FALSE(residual::decode_layer(poke_u64(good, 24, 1ULL << 40), words, Pose::Identity(), 1ULL << 41).ok());
+  EXPECT_FALSE(residual::decode_layer(poke_f64(good, 0, 0.0), words, Pose::Identity(), scan.size()).ok());
+  EXPECT_FALSE(residual::decode_layer(poke_f64(good, 0, std::nan("")), words, Pose::Identity(), scan.size()).ok());
+  EXPECT_FALSE(residual::decode_layer(poke_f64(good, 8, 0.5), words, Pose::Identity(), scan.size()).ok());
+  EXPECT_FALSE(residual::decode_layer(poke_f64(good, 8, -1.0), words, Pose::Identity(), scan.size()).ok());
+  // Flipped stream bytes decode to something (the file CRC catches them) without crashing.
+  for (std::size_t at = 32; at < good.size(); at += 131) {
+    Bytes b = good;
+    b[at] ^= 0x5A;
+    const auto d = residual::decode_layer(b, words, Pose::Identity(), scan.size());
+    if (d.ok()) EXPECT_LE(d.value().size(), words.size() + scan.size());
+  }
+}
+
+/// A real scan compressed with a learned alphabet and a residual layer, through the model
+/// file: the decoded cloud meets the bound both ways.
+TEST(ResidualLayer, RealScanThroughTheModelFile) {
+  const Cloud cloud = test::load_or_fail(test::sample("newer_college_00.bin"));
+  ASSERT_FALSE(cloud.empty());
+  LearnParams p;
+  p.max_iterations = 40;
+  p.model.threads = 2;
+  const LearnResult learned = learn_alphabet({cloud}, p);
+  ASSERT_GT(learned.models[0].instances.size(), 100U);
+  const auto alphabet = codec::decode_alphabet(codec::encode_alphabet(learned.alphabet));
+  ASSERT_TRUE(alphabet.ok());
+
+  Bytes previous;
+  for (double e : {0.01, 0.05, 0.2}) {
+    codec::ModelData d;
+    d.input_points = cloud.size();
+    d.T_cloud_sensor = cloud.T_cloud_sensor;
+    d.model = learned.models[0];
+    d.alphabet = learned.alphabet;
+    const residual::LayerStats st = residual::add_layer(d, alphabet.value(), cloud, e);
+    EXPECT_EQ(st.explained_points + st.residual_points, cloud.size());
+    if (e >= 0.2) EXPECT_GT(st.explained_points, cloud.size() / 4) << "words explain part of the scan at E = " << e;
+    const Bytes file = codec::encode_model(d);
+    EXPECT_EQ(file[10], 1) << "a model with a residual layer is format 1.1";
+    const auto decoded = codec::decode_model(file);
+    ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+    ASSERT_TRUE(decoded.value().residual.has_value());
+    const auto out = residual::decode_cloud(decoded.value());
+    ASSERT_TRUE(out.ok()) << out.status().to_string();
+    EXPECT_LE(hausdorff(cloud, out.value()), e) << "E = " << e;
+    if (!previous.empty()) EXPECT_LT(file.size(), previous.size());
+    previous = file;
+  }
+}
+
+TEST(ResidualLayer, ModelFileVersionRules) {
+  codec::ModelData d;
+  d.input_points = 3;
+  d.alphabet = Alphabet{};
+  const Bytes words_only = codec::encode_model(d);
+  EXPECT_EQ(words_only[10], 0) << "no residual layer: format 1.0";
+  Cloud scan;
+  scan.points = {{1, 2, 3}, {4, 5, 6}, {-7, 8, 1}};
+  residual::add_layer(d, Alphabet{}, scan, 0.01);
+  Bytes with = codec::encode_model(d);
+  ASSERT_EQ(with[10], 1);
+  const auto ok = codec::decode_model(with);
+  ASSERT_TRUE(ok.ok()) << ok.status().to_string();
+  EXPECT_EQ(*ok.value().residual, *d.residual);
+  // Claiming 1.0 while holding RESD is an error (header CRC fixed up so that the version is what fails).
+  with[10] = 0;
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, with.data(), 16));
+  for (int i = 0; i < 4; ++i) with[16 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
+  const auto bad = codec::decode_model(with);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("RESD"), std::string::npos) << bad.status().to_string();
+  EXPECT_THROW((void)codec::encode_model([&] {
+                 codec::ModelData e = d;
+                 e.residual = Bytes{};
+                 return e;
+               }()),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace lex3d
