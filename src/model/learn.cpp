@@ -50,7 +50,7 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
   states.reserve(res.scans.size());
   std::size_t total_points = 0;
   for (const auto& s : res.scans) {
-    states.emplace_back(s);
+    states.emplace_back(s, threads);
     total_points += s.cloud.size();
   }
   double log_l = 0.0;
@@ -87,6 +87,7 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
     const auto word_id = static_cast<std::int32_t>(res.alphabet.size());
     double delta_l = 0.0;
     if (word.points.size() >= 3) {
+      const detail::PackedWord packed(word);
       for (std::size_t s = 0; s < res.scans.size(); ++s) {
         const PreparedScan& sc = res.scans[s];
         auto& ch = changes[s];
@@ -104,7 +105,7 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
             nd.push_back(d);
           }
         }
-        parallel_for(ch.size(), threads, [&](std::size_t i) { states[s].contribution(ch[i].feature, word, ch[i].contrib); }, 8);
+        parallel_for(ch.size(), threads, [&](std::size_t i) { states[s].contribution(ch[i].feature, packed, ch[i].contrib); }, 8);
         delta_l += states[s].delta_log_likelihood(ch);
       }
     }
@@ -138,7 +139,8 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
   for (std::size_t s = 0; s < states.size(); ++s) {
     states[s].choose_by_fit(res.alphabet, params.model.fit_candidates, threads);
     states[s].refine(res.alphabet, params.model.refine_iterations, params.model.refine_reach_factor * radius, threads);
-    if (params.prune) states[s].prune(res.alphabet);
+    if (params.prune) states[s].prune(res.alphabet, threads);
+    else states[s].rescore(res.alphabet, threads);
   }
   res.log_likelihood = 0.0;
   for (const auto& st : states) {

@@ -160,22 +160,21 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
     throw std::invalid_argument("encode_scan: the alphabet's descriptors have " +
                                 std::to_string(alphabet.descriptor_dim) + " values, the scan's " +
                                 std::to_string(scan.features.descriptor_dim));
-  const WordIndex index(alphabet);
-  const auto matches = index.nearest(scan.features.descriptors.data(), scan.features.size(), threads);
-  detail::ScanState state(scan);
-  std::vector<detail::ScanState::Change> changes(matches.size());
-  parallel_for(matches.size(), threads, [&](std::size_t f) {
-    auto& c = changes[f];
-    c.feature = static_cast<std::uint32_t>(f);
-    c.word = static_cast<std::int32_t>(matches[f].word);
-    const Word& w = alphabet.words[matches[f].word];
-    c.word_points = static_cast<std::uint32_t>(w.points.size());
-    state.contribution(f, w, c.contrib);
-  });
-  state.apply(changes);
-  state.choose_by_fit(alphabet, params.fit_candidates, threads);
+  detail::ScanState state(scan, threads);
+  // Words: the nearest descriptor, or the best fit among the fit_candidates nearest.
+  // Nothing is scored until the words and poses are final: only pruning needs the
+  // likelihood.
+  if (params.fit_candidates > 1 && alphabet.size() > 1) {
+    state.choose_by_fit(alphabet, params.fit_candidates, threads, true);
+  } else {
+    const WordIndex index(alphabet);
+    const auto matches = index.nearest(scan.features.descriptors.data(), scan.features.size(), threads);
+    std::vector<std::int32_t> words(matches.size());
+    for (std::size_t f = 0; f < matches.size(); ++f) words[f] = static_cast<std::int32_t>(matches[f].word);
+    state.assign_words(words, alphabet);
+  }
   state.refine(alphabet, params.refine_iterations, params.refine_reach_factor * scan.word_radius, threads);
-  if (prune) state.prune(alphabet);
+  if (prune) state.prune(alphabet, threads);
   return state.model();
 }
 

@@ -10,34 +10,88 @@
 
 namespace lex3d::detail {
 
-ScanState::ScanState(const PreparedScan& scan) : scan_(scan) {
+PackedWord::PackedWord(const Word& word) {
+  const std::size_t n = word.points.size();
+  x.resize(n);
+  y.resize(n);
+  z.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    x[i] = word.points[i].x();
+    y[i] = word.points[i].y();
+    z[i] = word.points[i].z();
+  }
+  if (n > 0) {
+    lo = hi = word.points.front();
+    for (const auto& p : word.points) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+  }
+}
+
+namespace {
+
+std::vector<PackedWord> pack(const Alphabet& alphabet) {
+  std::vector<PackedWord> out;
+  out.reserve(alphabet.size());
+  for (const auto& w : alphabet.words) out.emplace_back(w);
+  return out;
+}
+
+// Squared distance from q to the box [lo, hi] (0 inside).
+inline float box_distance_sq(const PackedWord& w, float qx, float qy, float qz) {
+  const float ox = std::max(std::max(w.lo.x() - qx, qx - w.hi.x()), 0.0F);
+  const float oy = std::max(std::max(w.lo.y() - qy, qy - w.hi.y()), 0.0F);
+  const float oz = std::max(std::max(w.lo.z() - qz, qz - w.hi.z()), 0.0F);
+  return ox * ox + oy * oy + oz * oz;
+}
+
+}  // namespace
+
+ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   const std::size_t n = scan.cloud.size();
   const std::size_t nf = scan.features.size();
   inv_two_sigma2_.resize(n);
-  reach2_.resize(n);
   norm_.resize(n);
   log_floor_.resize(n);
+  std::vector<float> reach2(n);
   const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
   for (std::size_t j = 0; j < n; ++j) {
     const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
     inv_two_sigma2_[j] = static_cast<float>(1.0 / (2.0 * s * s));
-    reach2_[j] = static_cast<float>(9.0 * s * s);
-    norm_[j] = std::pow(2.0 * M_PI * s * s, -1.5);
-    log_floor_[j] = std::log(norm_[j]) - 4.5 - log_n;
+    reach2[j] = static_cast<float>(9.0 * s * s);
+    const double c = 2.0 * M_PI * s * s;
+    norm_[j] = 1.0 / (c * std::sqrt(c));  // c^(-3/2)
+    log_floor_[j] = -1.5 * std::log(c) - 4.5 - log_n;
   }
   S_.assign(n, 0.0);
   delta_.assign(n, 0.0);
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
-  cache_.resize(nf);
-  local_.resize(nf);
   pose_.resize(nf);
-  for (std::size_t f = 0; f < nf; ++f) {
+  off_.assign(nf + 1, 0);
+  for (std::size_t f = 0; f < nf; ++f) off_[f + 1] = off_[f] + scan.nearby[f].size();
+  const std::size_t entries = off_[nf];
+  idx_.resize(entries);
+  lx_.resize(entries);
+  ly_.resize(entries);
+  lz_.resize(entries);
+  reach2_e_.resize(entries);
+  cache_.assign(entries, 0.0F);
+  parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
     const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
-    local_[f].reserve(scan.nearby[f].size());
-    for (const std::uint32_t j : scan.nearby[f]) local_[f].push_back(T_feature_cloud * scan.cloud.points[j]);
-  }
+    std::size_t k = off_[f];
+    for (const std::uint32_t j : scan.nearby[f]) {
+      const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
+      idx_[k] = j;
+      lx_[k] = q.x();
+      ly_[k] = q.y();
+      lz_[k] = q.z();
+      reach2_e_[k] = reach2[j];
+      ++k;
+    }
+  }, 64);
   recompute();
 }
 
@@ -46,48 +100,55 @@ void ScanState::recompute() {
   log_l_ = 0.0;
   above_ = 0;
   for (std::size_t j = 0; j < S_.size(); ++j) {
-    log_l_ += log_term(j, S_[j], lm);
-    above_ += above(j, S_[j], lm) ? 1 : 0;
+    if (!(S_[j] > 0.0)) {
+      log_l_ += log_floor_[j];
+      continue;
+    }
+    const double v = std::log(S_[j]) - lm;
+    if (v > log_floor_[j]) {
+      log_l_ += v;
+      ++above_;
+    } else {
+      log_l_ += log_floor_[j];
+    }
   }
 }
 
-void ScanState::contribution(std::size_t f, const Word& word, std::vector<float>& out) const {
-  const auto& nearby = scan_.nearby[f];
-  const auto& local = local_[f];
-  out.assign(nearby.size(), 0.0F);
-  if (word.points.empty()) return;
-  // The word's bounding box: a point farther than 3σ from it gets nothing.
-  Eigen::Vector3f lo = word.points.front(), hi = lo;
-  for (const auto& p : word.points) {
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
-  for (std::size_t k = 0; k < nearby.size(); ++k) {
-    const std::uint32_t j = nearby[k];
-    const Eigen::Vector3f q = local[k];
-    const float reach2 = reach2_[j];
-    const Eigen::Vector3f outside = (lo - q).cwiseMax(q - hi).cwiseMax(0.0F);
-    if (outside.squaredNorm() > reach2) continue;
+void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const {
+  const std::size_t b = begin_of(f), e = end_of(f);
+  out.assign(e - b, 0.0F);
+  if (word.size() == 0) return;
+  const std::size_t np = word.size();
+  const float* wx = word.x.data();
+  const float* wy = word.y.data();
+  const float* wz = word.z.data();
+  for (std::size_t k = b; k < e; ++k) {
+    const float qx = lx_[k], qy = ly_[k], qz = lz_[k];
+    const float reach2 = reach2_e_[k];
+    // A point farther than 3σ from the word's bounding box gets nothing.
+    if (box_distance_sq(word, qx, qy, qz) > reach2) continue;
+    const std::uint32_t j = idx_[k];
     const float a = inv_two_sigma2_[j];
     float s = 0.0F;
-    for (const auto& p : word.points) {
-      const float d2 = (p - q).squaredNorm();
+    for (std::size_t p = 0; p < np; ++p) {
+      const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
+      const float d2 = dx * dx + dy * dy + dz * dz;
       if (d2 <= reach2) s += std::exp(-d2 * a);
     }
-    out[k] = static_cast<float>(s * norm_[j]);
+    out[k - b] = static_cast<float>(s * norm_[j]);
   }
 }
 
 std::int64_t ScanState::stage(const std::vector<Change>& changes) {
   std::int64_t dm = 0;
   for (const auto& c : changes) {
-    const auto& nearby = scan_.nearby[c.feature];
-    const auto& old = cache_[c.feature];
-    for (std::size_t k = 0; k < nearby.size(); ++k) {
-      const std::uint32_t j = nearby[k];
-      const double before = k < old.size() ? old[k] : 0.0;
-      const double after = k < c.contrib.size() ? c.contrib[k] : 0.0;
+    const std::size_t b = begin_of(c.feature), e = end_of(c.feature);
+    const bool has_after = !c.contrib.empty();
+    for (std::size_t k = b; k < e; ++k) {
+      const double before = cache_[k];
+      const double after = has_after ? c.contrib[k - b] : 0.0;
       if (before == 0.0 && after == 0.0) continue;
+      const std::uint32_t j = idx_[k];
       if (delta_[j] == 0.0) touched_.push_back(j);
       delta_[j] += after - before;
       if (delta_[j] == 0.0) delta_[j] = 1e-300;  // keep it marked as touched
@@ -123,7 +184,7 @@ double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
   return d;
 }
 
-void ScanState::apply(std::vector<Change>& changes) {
+void ScanState::apply(const std::vector<Change>& changes) {
   const std::int64_t dm = stage(changes);
   const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
   log_l_ += staged_delta(m_new);
@@ -135,27 +196,66 @@ void ScanState::apply(std::vector<Change>& changes) {
     above_ = above_ + (above(j, S_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
   }
   unstage();
-  for (auto& c : changes) {
+  for (const auto& c : changes) {
     word_[c.feature] = c.word;
     word_points_[c.feature] = c.word_points;
-    cache_[c.feature] = std::move(c.contrib);
+    const std::size_t b = begin_of(c.feature), e = end_of(c.feature);
+    if (c.contrib.empty()) std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(b), cache_.begin() + static_cast<std::ptrdiff_t>(e), 0.0F);
+    else std::copy(c.contrib.begin(), c.contrib.begin() + static_cast<std::ptrdiff_t>(e - b), cache_.begin() + static_cast<std::ptrdiff_t>(b));
   }
   M_ = m_new;
 }
 
-std::size_t ScanState::prune(const Alphabet& alphabet) {
+void ScanState::assign_words(const std::vector<std::int32_t>& words, const Alphabet& alphabet) {
+  for (std::size_t f = 0; f < word_.size() && f < words.size(); ++f) {
+    word_[f] = words[f];
+    word_points_[f] = words[f] >= 0 ? static_cast<std::uint32_t>(alphabet.words[static_cast<std::size_t>(words[f])].points.size()) : 0U;
+  }
+  stale_ = true;
+}
+
+void ScanState::rescore(const Alphabet& alphabet, int threads) {
+  if (!stale_) return;
+  const std::vector<PackedWord> packed = pack(alphabet);
+  parallel_for(word_.size(), threads, [&](std::size_t f) {
+    const std::size_t b = begin_of(f), e = end_of(f);
+    if (word_[f] < 0) {
+      std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(b), cache_.begin() + static_cast<std::ptrdiff_t>(e), 0.0F);
+      return;
+    }
+    thread_local std::vector<float> out;
+    contribution(f, packed[static_cast<std::size_t>(word_[f])], out);
+    std::copy(out.begin(), out.end(), cache_.begin() + static_cast<std::ptrdiff_t>(b));
+  }, 16);
+  // Sums in feature order: the same S whatever the thread count.
+  std::fill(S_.begin(), S_.end(), 0.0);
+  M_ = 0;
+  for (std::size_t f = 0; f < word_.size(); ++f) {
+    if (word_[f] < 0) continue;
+    M_ += word_points_[f];
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k) S_[idx_[k]] += static_cast<double>(cache_[k]);
+  }
+  stale_ = false;
+  recompute();
+}
+
+std::size_t ScanState::prune(const Alphabet& alphabet, int threads) {
+  rescore(alphabet, threads);
   std::vector<std::size_t> count(alphabet.size(), 0);
   for (const auto w : word_)
     if (w >= 0) ++count[static_cast<std::size_t>(w)];
   std::vector<std::uint32_t> order(alphabet.size());
   std::iota(order.begin(), order.end(), 0U);
   std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return count[a] > count[b]; });
+  // The features of each word, in feature order.
+  std::vector<std::vector<std::uint32_t>> of_word(alphabet.size());
+  for (std::size_t f = 0; f < word_.size(); ++f)
+    if (word_[f] >= 0) of_word[static_cast<std::size_t>(word_[f])].push_back(static_cast<std::uint32_t>(f));
   std::size_t dropped = 0;
   std::vector<Change> one(1);
   for (const std::uint32_t w : order) {
-    for (std::size_t f = 0; f < word_.size(); ++f) {
-      if (word_[f] != static_cast<std::int32_t>(w)) continue;
-      one[0].feature = static_cast<std::uint32_t>(f);
+    for (const std::uint32_t f : of_word[w]) {
+      one[0].feature = f;
       one[0].word = -1;
       one[0].word_points = 0;
       one[0].contrib.clear();
@@ -171,34 +271,28 @@ std::size_t ScanState::prune(const Alphabet& alphabet) {
 
 namespace {
 
-// One rigid correction D (q ≈ D p) from word points to their nearest scan points,
-// in the instance's frame; identity when fewer than 3 pairs fall within reach.
-Eigen::Isometry3f icp_step(const std::vector<Eigen::Vector3f>& word, const std::vector<Eigen::Vector3f>& scan,
-                           float reach2) {
+// One rigid correction D (q ≈ D p) from word points to their nearest targets, in the
+// instance's frame; identity when fewer than 3 pairs fall within reach. `match[i]` is the
+// target of word point i or -1.
+Eigen::Isometry3f fit_pairs(const std::vector<Eigen::Vector3f>& word, const std::vector<Eigen::Vector3f>& targets,
+                            const std::vector<std::int32_t>& match) {
   Eigen::Vector3d ca = Eigen::Vector3d::Zero(), cb = Eigen::Vector3d::Zero();
-  std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> pairs;
-  pairs.reserve(word.size());
-  for (const auto& p : word) {
-    float best = reach2;
-    const Eigen::Vector3f* match = nullptr;
-    for (const auto& q : scan) {
-      const float d = (q - p).squaredNorm();
-      if (d < best) {
-        best = d;
-        match = &q;
-      }
-    }
-    if (match == nullptr) continue;
-    pairs.emplace_back(p.cast<double>(), match->cast<double>());
-    ca += pairs.back().first;
-    cb += pairs.back().second;
+  std::size_t pairs = 0;
+  for (std::size_t i = 0; i < word.size(); ++i) {
+    if (match[i] < 0) continue;
+    ca += word[i].cast<double>();
+    cb += targets[static_cast<std::size_t>(match[i])].cast<double>();
+    ++pairs;
   }
   Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
-  if (pairs.size() < 3) return D;
-  ca /= static_cast<double>(pairs.size());
-  cb /= static_cast<double>(pairs.size());
+  if (pairs < 3) return D;
+  ca /= static_cast<double>(pairs);
+  cb /= static_cast<double>(pairs);
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-  for (const auto& [a, b] : pairs) H += (a - ca) * (b - cb).transpose();
+  for (std::size_t i = 0; i < word.size(); ++i) {
+    if (match[i] < 0) continue;
+    H += (word[i].cast<double>() - ca) * (targets[static_cast<std::size_t>(match[i])].cast<double>() - cb).transpose();
+  }
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d V = svd.matrixV();
   Eigen::Matrix3d R = V * svd.matrixU().transpose();
@@ -218,90 +312,163 @@ Eigen::Isometry3f icp_step(const std::vector<Eigen::Vector3f>& word, const std::
 void ScanState::refine(const Alphabet& alphabet, int iterations, double max_distance, int threads) {
   if (iterations <= 0) return;
   const float reach2 = static_cast<float>(max_distance * max_distance);
+  // Each word point's candidate targets are those within reach + slack of where it
+  // started; while it has moved less than the slack, its nearest target within reach
+  // is among them (the others are farther than reach), so the search stays exact.
+  const float cand2 = 4.0F * reach2 * 1.0001F;       // (reach + slack)², slack = reach
+  const float slack2 = 0.98F * reach2;               // a little under slack², for rounding
+  const std::vector<PackedWord> packed = pack(alphabet);
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (word_[f] >= 0) active.push_back(f);
-  std::vector<Change> changes(active.size());
   std::vector<Eigen::Isometry3f> correction(active.size(), Eigen::Isometry3f::Identity());
   parallel_for(active.size(), threads, [&](std::size_t i) {
     const std::size_t f = active[i];
     // ICP in the instance's frame: D moves the word onto the nearby scan points;
     // the new pose is pose · D.
-    Word moved = alphabet.words[static_cast<std::size_t>(word_[f])];
+    const Word& word = alphabet.words[static_cast<std::size_t>(word_[f])];
+    const PackedWord& pw = packed[static_cast<std::size_t>(word_[f])];
     Eigen::Isometry3f& total = correction[i];
-    if (moved.points.empty()) return;
+    const std::size_t np = word.points.size();
+    if (np == 0) return;
     // Only scan points near the word's bounding box can pair up (twice the reach
     // leaves room for the word to move).
-    Eigen::Vector3f lo = moved.points.front(), hi = lo;
-    for (const auto& p : moved.points) {
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
     const float margin = 2.0F * static_cast<float>(max_distance);
-    std::vector<Eigen::Vector3f> targets;
-    for (const auto& q : local_[f])
-      if (((lo - q).cwiseMax(q - hi).array() <= margin).all()) targets.push_back(q);
+    thread_local std::vector<Eigen::Vector3f> targets, moved;
+    thread_local std::vector<float> tx, ty, tz, d2;
+    thread_local std::vector<std::int32_t> match;
+    thread_local std::vector<std::uint32_t> cand, cand_off;
+    targets.clear();
+    tx.clear();
+    ty.clear();
+    tz.clear();
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
+      const float qx = lx_[k], qy = ly_[k], qz = lz_[k];
+      if (pw.lo.x() - qx <= margin && qx - pw.hi.x() <= margin && pw.lo.y() - qy <= margin &&
+          qy - pw.hi.y() <= margin && pw.lo.z() - qz <= margin && qz - pw.hi.z() <= margin) {
+        targets.emplace_back(qx, qy, qz);
+        tx.push_back(qx);
+        ty.push_back(qy);
+        tz.push_back(qz);
+      }
+    }
+    const std::size_t nt = targets.size();
+    // Candidate targets of each word point, in target order.
+    cand.clear();
+    cand_off.assign(np + 1, 0);
+    d2.resize(nt);
+    for (std::size_t p = 0; p < np; ++p) {
+      const float px = pw.x[p], py = pw.y[p], pz = pw.z[p];
+      for (std::size_t t = 0; t < nt; ++t) {
+        const float dx = tx[t] - px, dy = ty[t] - py, dz = tz[t] - pz;
+        d2[t] = dx * dx + dy * dy + dz * dz;
+      }
+      for (std::size_t t = 0; t < nt; ++t)
+        if (d2[t] <= cand2) cand.push_back(static_cast<std::uint32_t>(t));
+      cand_off[p + 1] = static_cast<std::uint32_t>(cand.size());
+    }
+    moved.assign(word.points.begin(), word.points.end());
+    match.assign(np, -1);
     for (int it = 0; it < iterations; ++it) {
-      const Eigen::Isometry3f D = icp_step(moved.points, targets, reach2);
-      for (auto& p : moved.points) p = D * p;
+      for (std::size_t p = 0; p < np; ++p) {
+        const Eigen::Vector3f& q = moved[p];
+        float best = reach2;
+        std::int32_t m = -1;
+        if ((q - word.points[p]).squaredNorm() <= slack2) {
+          for (std::uint32_t c = cand_off[p]; c < cand_off[p + 1]; ++c) {
+            const std::uint32_t t = cand[c];
+            const float d = (targets[t] - q).squaredNorm();
+            if (d < best) {
+              best = d;
+              m = static_cast<std::int32_t>(t);
+            }
+          }
+        } else {
+          for (std::size_t t = 0; t < nt; ++t) {
+            const float d = (targets[t] - q).squaredNorm();
+            if (d < best) {
+              best = d;
+              m = static_cast<std::int32_t>(t);
+            }
+          }
+        }
+        match[p] = m;
+      }
+      const Eigen::Isometry3f D = fit_pairs(moved, targets, match);
+      for (auto& p : moved) p = D * p;
       total = D * total;
       // Converged: under 0.1 mm and 0.1 mrad.
       const float angle = Eigen::AngleAxisf(D.linear()).angle();
       if (D.translation().norm() < 1e-4F && angle < 1e-4F) break;
     }
-    Change& c = changes[i];
-    c.feature = static_cast<std::uint32_t>(f);
-    c.word = word_[f];
-    c.word_points = word_points_[f];
-    contribution(f, moved, c.contrib);  // the moved word against the unchanged frame
   }, 8);
-  apply(changes);
-  for (std::size_t i = 0; i < active.size(); ++i) {
+  parallel_for(active.size(), threads, [&](std::size_t i) {
     const std::size_t f = active[i];
     pose_[f] = pose_[f] * correction[i];
     // Keep the rotation exactly orthonormal: float products drift.
     pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
     const Eigen::Isometry3f inv = correction[i].inverse();
-    for (auto& q : local_[f]) q = inv * q;
-  }
-  recompute();
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
+      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
+      lx_[k] = q.x();
+      ly_[k] = q.y();
+      lz_[k] = q.z();
+    }
+  }, 64);
+  stale_ = true;
 }
 
-std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int threads) {
-  if (k <= 1 || alphabet.size() < 2) return 0;
+std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int threads, bool all_features) {
+  if (alphabet.size() == 0) return 0;
+  if (!all_features && (k <= 1 || alphabet.size() < 2)) return 0;
   const int dim = alphabet.descriptor_dim;
+  const std::vector<PackedWord> packed = pack(alphabet);
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
-    if (word_[f] >= 0) active.push_back(f);
+    if (all_features || word_[f] >= 0) active.push_back(f);
   std::vector<std::int32_t> choice(active.size(), -1);
+  const auto kk = std::min<std::size_t>(static_cast<std::size_t>(std::max(k, 1)), alphabet.size());
   parallel_for(active.size(), threads, [&](std::size_t i) {
     const std::size_t f = active[i];
     // The k nearest words by descriptor (ties: lower id).
-    std::vector<std::pair<float, std::uint32_t>> near;
+    thread_local std::vector<std::pair<float, std::uint32_t>> near;
+    thread_local std::vector<std::int32_t> supported;
+    near.clear();
     for (std::size_t w = 0; w < alphabet.size(); ++w)
       near.emplace_back(descriptor_distance_sq(scan_.features.descriptor(f), alphabet.words[w].descriptor.data(), dim),
                         static_cast<std::uint32_t>(w));
-    const auto kk = std::min<std::size_t>(static_cast<std::size_t>(k), near.size());
     std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(kk), near.end());
-    const auto& nearby = scan_.nearby[f];
-    const auto& local = local_[f];
+    if (kk == 1) {
+      choice[i] = static_cast<std::int32_t>(near[0].second);
+      return;
+    }
+    const std::size_t b = begin_of(f), e = end_of(f);
     double best = -1e300;
     for (std::size_t c = 0; c < kk; ++c) {
-      const Word& w = alphabet.words[near[c].second];
-      std::vector<char> supported(w.points.size(), 0);
+      const PackedWord& w = packed[near[c].second];
+      const std::size_t np = w.size();
+      supported.assign(np, 0);
+      std::int32_t* sup = supported.data();
+      const float* wx = w.x.data();
+      const float* wy = w.y.data();
+      const float* wz = w.z.data();
       std::size_t explained = 0;
-      for (std::size_t n = 0; n < nearby.size(); ++n) {
-        const float r2 = reach2_[nearby[n]] / 9.0F;  // σ²
-        bool hit = false;
-        for (std::size_t p = 0; p < w.points.size(); ++p)
-          if ((w.points[p] - local[n]).squaredNorm() <= r2) {
-            hit = true;
-            supported[p] = 1;
-          }
-        explained += hit ? 1 : 0;
+      for (std::size_t n = b; n < e; ++n) {
+        const float r2 = reach2_e_[n] / 9.0F;  // σ²
+        const float qx = lx_[n], qy = ly_[n], qz = lz_[n];
+        // Farther than σ from the word's bounding box: explains and supports nothing.
+        if (box_distance_sq(w, qx, qy, qz) > r2) continue;
+        std::int32_t hit = 0;
+        for (std::size_t p = 0; p < np; ++p) {
+          const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
+          const std::int32_t m = (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
+          hit |= m;
+          sup[p] |= m;
+        }
+        explained += static_cast<std::size_t>(hit);
       }
       std::size_t unsupported = 0;
-      for (const char sp : supported) unsupported += sp ? 0 : 1;
+      for (std::size_t p = 0; p < np; ++p) unsupported += sup[p] ? 0 : 1;
       const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
       if (score > best) {
         best = score;
@@ -309,22 +476,16 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
       }
     }
   }, 8);
-  std::vector<Change> changes;
+  std::size_t changed = 0;
   for (std::size_t i = 0; i < active.size(); ++i) {
     const std::size_t f = active[i];
     if (choice[i] < 0 || choice[i] == word_[f]) continue;
-    Change c;
-    c.feature = static_cast<std::uint32_t>(f);
-    c.word = choice[i];
-    c.word_points = static_cast<std::uint32_t>(alphabet.words[static_cast<std::size_t>(choice[i])].points.size());
-    changes.push_back(std::move(c));
+    word_[f] = choice[i];
+    word_points_[f] = static_cast<std::uint32_t>(alphabet.words[static_cast<std::size_t>(choice[i])].points.size());
+    ++changed;
   }
-  parallel_for(changes.size(), threads, [&](std::size_t i) {
-    contribution(changes[i].feature, alphabet.words[static_cast<std::size_t>(changes[i].word)], changes[i].contrib);
-  }, 8);
-  apply(changes);
-  recompute();
-  return changes.size();
+  if (changed > 0) stale_ = true;
+  return changed;
 }
 
 Model ScanState::model() const {

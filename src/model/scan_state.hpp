@@ -9,6 +9,10 @@
 // re-scores just those; the other points only see M change, which moves those above
 // the background by -Δ ln M each (points that cross the background that way are
 // caught by recompute()).
+//
+// Word choice by fit and pose refinement change instances without scoring them (the
+// encoder needs the likelihood only for pruning); they leave the state stale until
+// rescore() scores every instance once.
 
 #include <cstdint>
 #include <vector>
@@ -18,12 +22,23 @@
 
 namespace lex3d::detail {
 
+/// A word's points as separate coordinate arrays (the inner loops over word points
+/// vectorise), with their bounding box.
+struct PackedWord {
+  std::vector<float> x, y, z;
+  Eigen::Vector3f lo = Eigen::Vector3f::Zero();
+  Eigen::Vector3f hi = Eigen::Vector3f::Zero();
+  PackedWord() = default;
+  explicit PackedWord(const Word& word);
+  [[nodiscard]] std::size_t size() const noexcept { return x.size(); }
+};
+
 class ScanState {
  public:
-  explicit ScanState(const PreparedScan& scan);
+  explicit ScanState(const PreparedScan& scan, int threads = 1);
 
   /// Contribution of `word` placed at feature f to each point of scan.nearby[f].
-  void contribution(std::size_t f, const Word& word, std::vector<float>& out) const;
+  void contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const;
 
   /// A proposed new word for feature f (-1: no word) with its contribution.
   struct Change {
@@ -34,8 +49,8 @@ class ScanState {
   };
   /// Change of ln L if `changes` were applied (each feature at most once).
   [[nodiscard]] double delta_log_likelihood(const std::vector<Change>& changes);
-  /// Applies `changes` (their contributions are moved into the cache).
-  void apply(std::vector<Change>& changes);
+  /// Applies `changes` (their contributions are copied into the cache).
+  void apply(const std::vector<Change>& changes);
 
   [[nodiscard]] double log_likelihood() const { return log_l_; }
   /// Recomputes ln L and the count of points above the background from scratch.
@@ -44,19 +59,30 @@ class ScanState {
   [[nodiscard]] std::int32_t word_of(std::size_t f) const noexcept { return word_[f]; }
   [[nodiscard]] std::uint64_t placed_points() const noexcept { return M_; }
 
+  /// Sets the word of every feature (-1: none) without scoring: the state is stale
+  /// until rescore().
+  void assign_words(const std::vector<std::int32_t>& words, const Alphabet& alphabet);
+  /// Whether instances changed since they were last scored.
+  [[nodiscard]] bool stale() const noexcept { return stale_; }
+  /// Scores every instance afresh (contributions, S, M, ln L) when the state is stale.
+  void rescore(const Alphabet& alphabet, int threads);
+
   /// Drops instances whose removal does not lower ln L, words by decreasing
-  /// occurrence count (ruhnke2010 §III-D). Returns how many were dropped.
-  std::size_t prune(const Alphabet& alphabet);
+  /// occurrence count (ruhnke2010 §III-D). Returns how many were dropped. Rescores a
+  /// stale state first.
+  std::size_t prune(const Alphabet& alphabet, int threads = 1);
 
   /// Refines the pose of every instance by point-to-point ICP of its word against the
-  /// scan points near it (correspondences within max_distance, `iterations` rounds),
-  /// then re-scores the changed instances.
+  /// scan points near it (correspondences within max_distance, `iterations` rounds).
+  /// Leaves the state stale.
   void refine(const Alphabet& alphabet, int iterations, double max_distance, int threads);
 
   /// Re-chooses each instance's word among the `k` nearest by descriptor, by how well it
   /// fits the scan around it: scan points it explains (a word point within σ) minus word
-  /// points nothing supports. Returns how many instances changed word.
-  std::size_t choose_by_fit(const Alphabet& alphabet, int k, int threads);
+  /// points nothing supports. With `all_features`, every feature gets a word this way
+  /// (the nearest descriptors of features without one included). Returns how many
+  /// instances changed word; leaves the state stale when any did.
+  std::size_t choose_by_fit(const Alphabet& alphabet, int k, int threads, bool all_features = false);
 
   /// The model: one instance per feature that holds a word.
   [[nodiscard]] Model model() const;
@@ -73,6 +99,8 @@ class ScanState {
   [[nodiscard]] static double log_m(std::uint64_t m) noexcept {
     return m > 1 ? std::log(static_cast<double>(m)) : 0.0;
   }
+  [[nodiscard]] std::size_t begin_of(std::size_t f) const noexcept { return off_[f]; }
+  [[nodiscard]] std::size_t end_of(std::size_t f) const noexcept { return off_[f + 1]; }
 
   // Accumulates the contribution changes of `changes` into delta_ (marking touched_);
   // returns the change of M.
@@ -82,19 +110,23 @@ class ScanState {
   void unstage();
 
   const PreparedScan& scan_;
-  std::vector<Eigen::Isometry3f> pose_;               // instance pose of each feature (cloud frame)
-  std::vector<std::vector<Eigen::Vector3f>> local_;  // nearby points in that pose's frame
-  std::vector<float> inv_two_sigma2_;                 // 1 / (2σ²)
-  std::vector<float> reach2_;                         // (3σ)²
-  std::vector<double> norm_;                          // (2πσ²)^(-3/2)
-  std::vector<double> log_floor_;                     // ln of the background density
+  std::vector<Eigen::Isometry3f> pose_;  // instance pose of each feature (cloud frame)
+  // The nearby points of all features, flat: feature f owns entries [off_[f], off_[f+1]).
+  std::vector<std::size_t> off_;
+  std::vector<std::uint32_t> idx_;      // the scan point of each entry
+  std::vector<float> lx_, ly_, lz_;     // the entry's point in its feature's instance frame
+  std::vector<float> reach2_e_;         // (3σ)² of the entry's point
+  std::vector<float> cache_;            // current contribution of each feature's instance
+  std::vector<float> inv_two_sigma2_;   // 1 / (2σ²), per point
+  std::vector<double> norm_;            // (2πσ²)^(-3/2), per point
+  std::vector<double> log_floor_;       // ln of the background density, per point
   std::vector<double> S_;
   std::vector<std::int32_t> word_;
   std::vector<std::uint32_t> word_points_;
-  std::vector<std::vector<float>> cache_;  // current contribution of each feature's instance
   std::uint64_t M_ = 0;
   double log_l_ = 0.0;       // ln L, kept up to date by apply() and recompute()
   std::size_t above_ = 0;    // points whose S_j / M exceeds the background
+  bool stale_ = false;
   // Scratch for delta evaluation.
   std::vector<double> delta_;
   std::vector<std::uint32_t> touched_;
