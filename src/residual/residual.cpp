@@ -411,7 +411,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
 StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Cloud& words, const Pose& T_cloud_sensor,
                              std::uint64_t max_points) {
   if (payload.size() < kHeadBytes)
-    return bad_data("residual layer is " + std::to_string(payload.size()) + " bytes, at least 32 expected");
+    return bad_data("residual layer is " + std::to_string(payload.size()) + " bytes, at least 32 expected", 0);
   const double max_error = ld_f64(payload.data());
   const double q = ld_f64(payload.data() + 8);
   const std::uint64_t n_w = ld_u64(payload.data() + 16);

@@ -8,7 +8,9 @@
 //   its alphabet file), with a one-line message and a byte offset inside the input;
 // - a success is a consistent value: word ids below the alphabet size, finite poses and
 //   points, and it encodes and decodes again to the same word ids;
-// - inspect's chunk table lies inside the input.
+// - inspect's chunk table lies inside the input;
+// - a model with a residual layer (model.md §2.5) decodes to finite points, no more than
+//   the reconstruction and the input point count allow, or fails like the codec does.
 
 #include <algorithm>
 #include <cmath>
@@ -20,6 +22,7 @@
 #include <vector>
 
 #include "lex3d/codec/codec.hpp"
+#include "lex3d/residual/residual.hpp"
 
 namespace lex3d::fuzz {
 
@@ -65,6 +68,21 @@ inline void check_alphabet_value(const Alphabet& a) {
   }
 }
 
+inline void check_residual(const codec::ModelData& d) {
+  if (!d.residual) return;
+  std::size_t placed = 0;  // reconstruction size before thinning: skip inputs that would take long
+  for (const auto& inst : d.model.instances) placed += d.alphabet->words[inst.word].points.size();
+  if (placed > 200000 || d.input_points > 2000000) return;
+  const auto c = residual::decode_cloud(d);
+  if (!c.ok()) {
+    check_status(c.status(), d.residual->size(), false);
+    return;
+  }
+  if (c.value().size() > placed + d.input_points) fail("residual layer decoded more points than allowed", "");
+  for (const auto& p : c.value().points)
+    if (!p.allFinite()) fail("residual layer decoded a non-finite point", "");
+}
+
 inline void check_inspect(const std::vector<std::uint8_t>& bytes) {
   const auto info = codec::inspect(bytes);
   if (!info.ok()) {
@@ -89,6 +107,7 @@ inline void check_model_bytes(const std::vector<std::uint8_t>& bytes, const std:
     if (inst.word >= d.alphabet->size()) fail("word id past the alphabet", std::to_string(inst.word));
     if (!inst.T_cloud_word.matrix().allFinite()) fail("non-finite instance pose", "");
   }
+  check_residual(d);
   // Encodes again (coarsest steps, so every decoded value fits) and decodes alike.
   codec::ModelData again = d;
   again.alphabet_hash.reset();
