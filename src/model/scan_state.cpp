@@ -38,6 +38,49 @@ std::vector<PackedWord> pack(const Alphabet& alphabet) {
   return out;
 }
 
+// The hot loops below are compiled twice, for AVX2 and the baseline, and picked at load
+// time; neither uses fused multiply-adds, so both give the same bits.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
+#define LEX3D_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define LEX3D_CLONES
+#endif
+
+// d2[p] = squared distance from word point p to q.
+LEX3D_CLONES void distances_sq(const float* wx, const float* wy, const float* wz, std::size_t np, float qx, float qy,
+                               float qz, float* d2) {
+  for (std::size_t p = 0; p < np; ++p) {
+    const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
+    d2[p] = dx * dx + dy * dy + dz * dz;
+  }
+}
+
+// Word choice by fit: marks in sup[] the word points within σ of some entry and
+// returns how many entries have a word point within σ. Entries farther than σ from the
+// word's bounding box are skipped (they can do neither).
+LEX3D_CLONES std::size_t fit_counts(const float* lx, const float* ly, const float* lz, const float* reach2,
+                                    std::size_t n, const float* wx, const float* wy, const float* wz, std::size_t np,
+                                    const float* lo, const float* hi, std::int32_t* sup) {
+  std::size_t explained = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const float r2 = reach2[k] / 9.0F;  // σ²
+    const float qx = lx[k], qy = ly[k], qz = lz[k];
+    const float ox = std::max(std::max(lo[0] - qx, qx - hi[0]), 0.0F);
+    const float oy = std::max(std::max(lo[1] - qy, qy - hi[1]), 0.0F);
+    const float oz = std::max(std::max(lo[2] - qz, qz - hi[2]), 0.0F);
+    if (ox * ox + oy * oy + oz * oz > r2) continue;
+    std::int32_t hit = 0;
+    for (std::size_t p = 0; p < np; ++p) {
+      const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
+      const std::int32_t m = (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
+      hit |= m;
+      sup[p] |= m;
+    }
+    explained += static_cast<std::size_t>(hit);
+  }
+  return explained;
+}
+
 // Squared distance from q to the box [lo, hi] (0 inside).
 inline float box_distance_sq(const PackedWord& w, float qx, float qy, float qz) {
   const float ox = std::max(std::max(w.lo.x() - qx, qx - w.hi.x()), 0.0F);
@@ -129,12 +172,12 @@ void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<
     if (box_distance_sq(word, qx, qy, qz) > reach2) continue;
     const std::uint32_t j = idx_[k];
     const float a = inv_two_sigma2_[j];
+    thread_local std::vector<float> d2;
+    d2.resize(np);
+    distances_sq(wx, wy, wz, np, qx, qy, qz, d2.data());
     float s = 0.0F;
-    for (std::size_t p = 0; p < np; ++p) {
-      const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
-      const float d2 = dx * dx + dy * dy + dz * dz;
-      if (d2 <= reach2) s += std::exp(-d2 * a);
-    }
+    for (std::size_t p = 0; p < np; ++p)
+      if (d2[p] <= reach2) s += std::exp(-d2[p] * a);
     out[k - b] = static_cast<float>(s * norm_[j]);
   }
 }
@@ -315,8 +358,8 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
   // Each word point's candidate targets are those within reach + slack of where it
   // started; while it has moved less than the slack, its nearest target within reach
   // is among them (the others are farther than reach), so the search stays exact.
-  const float cand2 = 4.0F * reach2 * 1.0001F;       // (reach + slack)², slack = reach
-  const float slack2 = 0.98F * reach2;               // a little under slack², for rounding
+  const float cand2 = 2.25F * reach2 * 1.0001F;      // (reach + slack)², slack = reach / 2
+  const float slack2 = 0.245F * reach2;              // a little under slack², for rounding
   const std::vector<PackedWord> packed = pack(alphabet);
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
@@ -353,46 +396,62 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
       }
     }
     const std::size_t nt = targets.size();
-    // Candidate targets of each word point, in target order.
-    cand.clear();
+    // Candidate targets of each word point, in target order; the first round's
+    // matches come from the same full scan.
+    cand.resize(np * nt);
     cand_off.assign(np + 1, 0);
-    d2.resize(nt);
-    for (std::size_t p = 0; p < np; ++p) {
-      const float px = pw.x[p], py = pw.y[p], pz = pw.z[p];
-      for (std::size_t t = 0; t < nt; ++t) {
-        const float dx = tx[t] - px, dy = ty[t] - py, dz = tz[t] - pz;
-        d2[t] = dx * dx + dy * dy + dz * dz;
-      }
-      for (std::size_t t = 0; t < nt; ++t)
-        if (d2[t] <= cand2) cand.push_back(static_cast<std::uint32_t>(t));
-      cand_off[p + 1] = static_cast<std::uint32_t>(cand.size());
-    }
-    moved.assign(word.points.begin(), word.points.end());
     match.assign(np, -1);
-    for (int it = 0; it < iterations; ++it) {
+    d2.resize(nt);
+    {
+      float* dd = d2.data();
+      std::uint32_t* cp = cand.data();
+      std::uint32_t count = 0;
       for (std::size_t p = 0; p < np; ++p) {
-        const Eigen::Vector3f& q = moved[p];
+        distances_sq(tx.data(), ty.data(), tz.data(), nt, pw.x[p], pw.y[p], pw.z[p], dd);
         float best = reach2;
         std::int32_t m = -1;
-        if ((q - word.points[p]).squaredNorm() <= slack2) {
-          for (std::uint32_t c = cand_off[p]; c < cand_off[p + 1]; ++c) {
-            const std::uint32_t t = cand[c];
-            const float d = (targets[t] - q).squaredNorm();
-            if (d < best) {
-              best = d;
-              m = static_cast<std::int32_t>(t);
-            }
-          }
-        } else {
-          for (std::size_t t = 0; t < nt; ++t) {
-            const float d = (targets[t] - q).squaredNorm();
-            if (d < best) {
-              best = d;
-              m = static_cast<std::int32_t>(t);
-            }
+        for (std::size_t t = 0; t < nt; ++t) {
+          const float d = dd[t];
+          cp[count] = static_cast<std::uint32_t>(t);
+          count += d <= cand2 ? 1U : 0U;
+          if (d < best) {
+            best = d;
+            m = static_cast<std::int32_t>(t);
           }
         }
         match[p] = m;
+        cand_off[p + 1] = count;
+      }
+    }
+    moved.assign(word.points.begin(), word.points.end());
+    for (int it = 0; it < iterations; ++it) {
+      if (it > 0) {
+        for (std::size_t p = 0; p < np; ++p) {
+          const float qx = moved[p].x(), qy = moved[p].y(), qz = moved[p].z();
+          float best = reach2;
+          std::int32_t m = -1;
+          if ((moved[p] - word.points[p]).squaredNorm() <= slack2) {
+            for (std::uint32_t c = cand_off[p]; c < cand_off[p + 1]; ++c) {
+              const std::uint32_t t = cand[c];
+              const float dx = tx[t] - qx, dy = ty[t] - qy, dz = tz[t] - qz;
+              const float d = dx * dx + dy * dy + dz * dz;
+              if (d < best) {
+                best = d;
+                m = static_cast<std::int32_t>(t);
+              }
+            }
+          } else {
+            for (std::size_t t = 0; t < nt; ++t) {
+              const float dx = tx[t] - qx, dy = ty[t] - qy, dz = tz[t] - qz;
+              const float d = dx * dx + dy * dy + dz * dz;
+              if (d < best) {
+                best = d;
+                m = static_cast<std::int32_t>(t);
+              }
+            }
+          }
+          match[p] = m;
+        }
       }
       const Eigen::Isometry3f D = fit_pairs(moved, targets, match);
       for (auto& p : moved) p = D * p;
@@ -449,24 +508,10 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
       const std::size_t np = w.size();
       supported.assign(np, 0);
       std::int32_t* sup = supported.data();
-      const float* wx = w.x.data();
-      const float* wy = w.y.data();
-      const float* wz = w.z.data();
-      std::size_t explained = 0;
-      for (std::size_t n = b; n < e; ++n) {
-        const float r2 = reach2_e_[n] / 9.0F;  // σ²
-        const float qx = lx_[n], qy = ly_[n], qz = lz_[n];
-        // Farther than σ from the word's bounding box: explains and supports nothing.
-        if (box_distance_sq(w, qx, qy, qz) > r2) continue;
-        std::int32_t hit = 0;
-        for (std::size_t p = 0; p < np; ++p) {
-          const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
-          const std::int32_t m = (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
-          hit |= m;
-          sup[p] |= m;
-        }
-        explained += static_cast<std::size_t>(hit);
-      }
+      const float lo[3] = {w.lo.x(), w.lo.y(), w.lo.z()};
+      const float hi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
+      const std::size_t explained = fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b,
+                                               e - b, w.x.data(), w.y.data(), w.z.data(), np, lo, hi, sup);
       std::size_t unsupported = 0;
       for (std::size_t p = 0; p < np; ++p) unsupported += sup[p] ? 0 : 1;
       const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
