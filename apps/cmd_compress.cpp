@@ -26,6 +26,7 @@ struct CompressOptions {
   std::string max_error = "none";
   double target_bpp = 0.0;
   std::string words = "auto";
+  bool keep_all_points = false;
   bool json = false;
   ScanSetOptions scan_set;
   ModelOptions model;
@@ -53,7 +54,8 @@ std::optional<double> parse_max_error(const std::string& text) {
 /// Codes one scan: words only, or words and/or a residual layer of bound E (fixed, or
 /// the smallest meeting a bit budget), keeping the smallest file among the allowed forms.
 Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Alphabet* decoder_alphabet,
-                std::optional<double> max_error, double target_bpp, const std::string& words_mode) {
+                std::optional<double> max_error, double target_bpp, const std::string& words_mode,
+                const residual::LayerOptions& layer_options) {
   if (!max_error && target_bpp <= 0.0) return {codec::encode_model(words_data), true, std::nullopt, {}};
   std::vector<bool> forms;  // with words?
   if (words_mode != "off") forms.push_back(true);
@@ -70,7 +72,7 @@ Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Al
     const Alphabet& alphabet = with_words ? *decoder_alphabet : empty;
     const Cloud placed = residual::decoder_word_cloud(d, alphabet);
     auto code = [&](double e, residual::LayerStats* st) {
-      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st);
+      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st, layer_options);
       return codec::encode_model(d);
     };
     Coded c;
@@ -150,6 +152,9 @@ void run_compress(const CompressOptions& o) {
     std::printf("%-32s %9s %9s %10s %10s%s\n", "output", "points", "instances", "bytes", "bits/pt",
                 layered ? "  max error   coded pts" : "");
   bool any_words = false;
+  residual::LayerOptions layer_options;
+  layer_options.thin = !o.keep_all_points;
+  layer_options.threads = mp.threads;
   for (std::size_t i = 0; i < clouds.size(); ++i) {
     codec::ModelData d;
     d.input_points = clouds[i].size();
@@ -158,7 +163,7 @@ void run_compress(const CompressOptions& o) {
     if (embed) d.alphabet = alphabet;
     else d.alphabet_hash = hash;
     const Coded coded = code_scan(clouds[i], d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
-                                  use_words ? o.words : "off");
+                                  use_words ? o.words : "off", layer_options);
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
     if (!coded.words) d.model.instances.clear();
@@ -238,6 +243,9 @@ void register_compress(CLI::App& app) {
                   "or keep the smaller file of the two per scan (auto)")
       ->check(CLI::IsMember({"on", "off", "auto"}))
       ->capture_default_str();
+  sub->add_flag("--keep-all-points", o->keep_all_points,
+                "Residual layer: give every input point its own decoded point (by default a point within the "
+                "error of one decoded before it is not coded again)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);
   o->model.add_to(*sub);

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <unordered_map>
 #include <functional>
 #include <optional>
 #include <limits>
@@ -145,6 +146,93 @@ class BallGrid {
   std::size_t mask_ = 0;
 };
 
+/// A growing set of points with the same fixed-radius query as BallGrid: cells 2E wide in
+/// an open-addressing table, points of a cell chained through `next_`.
+class DecodedGrid {
+ public:
+  DecodedGrid(double radius, std::size_t expected) : radius_(radius), inv_cell_(1.0 / (2.0 * radius)) {
+    std::size_t cap = 64;
+    while (cap < 2 * expected) cap <<= 1;
+    keys_.assign(cap, 0);
+    heads_.assign(cap, kNone);
+    mask_ = cap - 1;
+    points_.reserve(expected);
+    next_.reserve(expected);
+  }
+  void insert(const Eigen::Vector3f& p) {
+    if (2 * (used_ + 1) > keys_.size()) grow();
+    const std::size_t s = slot(key_of(cell(p.x()), cell(p.y()), cell(p.z())), true);
+    next_.push_back(heads_[s]);
+    heads_[s] = static_cast<std::uint32_t>(points_.size());
+    points_.push_back(p);
+  }
+  [[nodiscard]] bool any_within(const Eigen::Vector3d& p) const {
+    const double r2 = radius_ * radius_;
+    std::int64_t base[3], step[3];
+    for (int a = 0; a < 3; ++a) {
+      const double c = p[a] * inv_cell_;
+      base[a] = static_cast<std::int64_t>(std::floor(c));
+      step[a] = (c - static_cast<double>(base[a]) < 0.5) ? -1 : 1;
+    }
+    for (int dx = 0; dx < 2; ++dx)
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dz = 0; dz < 2; ++dz) {
+          const std::uint64_t k = key_of(base[0] + dx * step[0], base[1] + dy * step[1], base[2] + dz * step[2]);
+          std::size_t s = hash(k) & mask_;
+          while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
+          for (std::uint32_t i = heads_[s]; i != kNone; i = next_[i])
+            if ((points_[i].cast<double>() - p).squaredNorm() <= r2) return true;
+        }
+    return false;
+  }
+
+ private:
+  static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
+  [[nodiscard]] std::int64_t cell(float v) const { return static_cast<std::int64_t>(std::floor(static_cast<double>(v) * inv_cell_)); }
+  static std::uint64_t key_of(std::int64_t x, std::int64_t y, std::int64_t z) {
+    const auto f = [](std::int64_t v) { return static_cast<std::uint64_t>(v) & 0x1FFFFFU; };
+    return f(x) | (f(y) << 21) | (f(z) << 42);
+  }
+  static std::uint64_t hash(std::uint64_t k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    return k;
+  }
+  std::size_t slot(std::uint64_t k, bool create) {
+    std::size_t s = hash(k) & mask_;
+    while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
+    if (heads_[s] == kNone && create) {
+      keys_[s] = k;
+      ++used_;
+    }
+    return s;
+  }
+  void grow() {
+    std::vector<std::uint64_t> keys = std::move(keys_);
+    std::vector<std::uint32_t> heads = std::move(heads_);
+    keys_.assign(keys.size() * 2, 0);
+    heads_.assign(keys.size() * 2, kNone);
+    mask_ = keys_.size() - 1;
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      if (heads[i] == kNone) continue;
+      std::size_t s = hash(keys[i]) & mask_;
+      while (heads_[s] != kNone) s = (s + 1) & mask_;
+      keys_[s] = keys[i];
+      heads_[s] = heads[i];
+    }
+  }
+
+  double radius_;
+  double inv_cell_;
+  std::vector<std::uint64_t> keys_;
+  std::vector<std::uint32_t> heads_;
+  std::vector<std::uint32_t> next_;
+  std::vector<Eigen::Vector3f> points_;
+  std::size_t mask_ = 0;
+  std::size_t used_ = 0;
+};
+
 // ---------------------------------------------------------------------------------------
 // The point predictor and quantiser shared by encoder and decoder
 // ---------------------------------------------------------------------------------------
@@ -214,13 +302,22 @@ struct PointModels {
 /// number of escaped points.
 std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                       const std::vector<std::uint32_t>& order, const Pose& T_cloud_sensor,
-                                      const Pose& T_sensor_cloud, double q, double max_error, std::size_t& escaped) {
+                                      const Pose& T_sensor_cloud, double q, double max_error, std::size_t& escaped,
+                                      std::size_t& coded_count, bool thin) {
   PointModels m;
   Predictor pr;
   escaped = 0;
+  coded_count = 0;
   const double e2 = max_error * max_error;
+  // Thinning: the points decoded so far, to skip an input point one of them already explains.
+  DecodedGrid seen(max_error, thin ? order.size() : 0);
+  auto remember = [&](const Eigen::Vector3f& d) {
+    if (thin) seen.insert(d);
+  };
   for (std::uint32_t idx : order) {
     const Eigen::Vector3d truth_cloud = input[idx].cast<double>();
+    if (thin && seen.any_within(truth_cloud)) continue;
+    ++coded_count;
     const Eigen::Vector3d p = T_sensor_cloud * truth_cloud;
     const Spherical t = to_spherical(p);
     // Spherical attempt: range first (the angle steps depend on it), then elevation, azimuth.
@@ -240,8 +337,9 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
       }
       if (ok) {
         decoded = spherical_point(pr, q, kr, ke, ka, s);
-        const Eigen::Vector3d back = to_cloud_frame(T_cloud_sensor, decoded).cast<double>();
-        ok = r_hat > 0.0 && (back - truth_cloud).squaredNorm() <= e2;
+        const Eigen::Vector3f back_f = to_cloud_frame(T_cloud_sensor, decoded);
+        ok = r_hat > 0.0 && (back_f.cast<double>() - truth_cloud).squaredNorm() <= e2;
+        if (ok) remember(back_f);
       }
     }
     enc.put(m.escape[pr.last_escaped ? 1 : 0], !ok);
@@ -267,8 +365,9 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     for (int a = 0; a < 3; ++a) m.cartesian[a].put(enc, 0, kc[a]);
     Eigen::Vector3d d;
     for (int a = 0; a < 3; ++a) d[a] = pr.last[a] + static_cast<double>(kc[a]) * qc;
-    const Eigen::Vector3d back = to_cloud_frame(T_cloud_sensor, d).cast<double>();
-    if ((back - truth_cloud).squaredNorm() > e2)
+    const Eigen::Vector3f back_f = to_cloud_frame(T_cloud_sensor, d);
+    remember(back_f);
+    if ((back_f.cast<double>() - truth_cloud).squaredNorm() > e2)
       throw std::invalid_argument("residual layer: a max error of " + std::to_string(max_error) +
                                   " m is below the float32 precision of a point's coordinates");
     pr.last_escaped = true;
@@ -332,13 +431,13 @@ Cloud word_cloud(const codec::ModelData& data) {
 }
 
 std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, const Pose& T_cloud_sensor,
-                                       double max_error, LayerStats* stats) {
+                                       double max_error, LayerStats* stats, const LayerOptions& options) {
   if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
     throw std::invalid_argument("residual layer: max error " + std::to_string(max_error) + " m is outside [" +
                                 std::to_string(kMinMaxError) + ", " + std::to_string(kMaxMaxError) + "]");
   const std::size_t n_in = input.size(), n_w = words.size();
   if (n_in > 0xFFFFFFF0U || n_w > 0xFFFFFFF0U) throw std::invalid_argument("residual layer: too many points");
-  const int threads = 2;
+  const int threads = std::max(1, options.threads);
 
   // Kept word points: an input point within E. Explained input points: a kept word point within E.
   std::vector<std::uint8_t> keep(n_w, 0), explained(n_in, 0);
@@ -379,12 +478,13 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const auto res = estimate_angular_resolution(sensor_frame);
   const double row_height = res && res->elevation_rad > 0.0 ? 0.5 * res->elevation_rad : 0.5 * kPi / 180.0;
 
-  std::size_t esc_rows = 0, esc_input = 0;
+  std::size_t esc_rows = 0, esc_input = 0, n_rows = 0, n_input = 0;
+  const bool thin = options.thin;
   std::vector<std::uint8_t> by_rows, by_input;
   const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
   parallel_for(2, threads, [&](std::size_t which) {
-    if (which == 0) by_rows = code_points(head, input.points, rows, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_rows);
-    else by_input = code_points(head, input.points, coded, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_input);
+    if (which == 0) by_rows = code_points(head, input.points, rows, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_rows, n_rows, thin);
+    else by_input = code_points(head, input.points, coded, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_input, n_input, thin);
   }, 1);
   const bool rows_win = by_rows.size() <= by_input.size();
   std::vector<std::uint8_t>& stream = rows_win ? by_rows : by_input;
@@ -394,14 +494,14 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   put_f64(out, max_error);
   put_f64(out, q);
   put_u64(out, n_w);
-  put_u64(out, coded.size());
+  put_u64(out, rows_win ? n_rows : n_input);
   out.insert(out.end(), stream.begin(), stream.end());
   if (stats) {
     stats->max_error = max_error;
     stats->word_points = n_w;
     stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
     stats->explained_points = n_in - coded.size();
-    stats->residual_points = coded.size();
+    stats->residual_points = rows_win ? n_rows : n_input;
     stats->escaped_points = rows_win ? esc_rows : esc_input;
     stats->bytes = out.size();
   }
@@ -487,10 +587,11 @@ Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet)
   return word_cloud(placed);
 }
 
-LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error) {
+LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error,
+                     const LayerOptions& options) {
   const Cloud words = decoder_word_cloud(data, alphabet);
   LayerStats stats;
-  data.residual = encode_layer(input, words, data.T_cloud_sensor, max_error, &stats);
+  data.residual = encode_layer(input, words, data.T_cloud_sensor, max_error, &stats, options);
   return stats;
 }
 

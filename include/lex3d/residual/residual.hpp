@@ -9,8 +9,9 @@
 ///  - every point of P has a point of D within E, and
 ///  - every point of D has a point of P within E.
 /// D is the reconstructed word points that have an input point within E (a keep mask
-/// over the reconstruction) plus the input points no kept word point explains,
-/// quantised in sensor-centred spherical coordinates and range coded.
+/// over the reconstruction) plus the input points no kept word point explains (thinned:
+/// a point within E of one decoded before it is skipped), quantised in sensor-centred
+/// spherical coordinates and range coded.
 
 #include <cstddef>
 #include <cstdint>
@@ -28,13 +29,23 @@ namespace lex3d::residual {
 inline constexpr double kMinMaxError = 1e-4;
 inline constexpr double kMaxMaxError = 10.0;
 
+/// How the encoder codes a layer (the decoder needs none of it).
+struct LayerOptions {
+  /// Skip an input point that a point decoded before it already explains within E
+  /// (the bound still holds both ways; fewer points are coded where they are denser
+  /// than E). Off: every unexplained input point gets its own decoded point.
+  bool thin = true;
+  /// Worker threads; the output does not depend on it.
+  int threads = 2;
+};
+
 /// What encoding a residual layer did.
 struct LayerStats {
   double max_error = 0.0;              ///< E, metres
   std::size_t word_points = 0;         ///< points of the word reconstruction
   std::size_t kept_word_points = 0;    ///< of those, kept (an input point within E)
   std::size_t explained_points = 0;    ///< input points a kept word point explains
-  std::size_t residual_points = 0;     ///< input points coded by the layer
+  std::size_t residual_points = 0;     ///< points coded by the layer (input points, thinned)
   std::size_t escaped_points = 0;      ///< of those, coded in Cartesian form (near the sensor or a pole)
   std::size_t bytes = 0;               ///< payload bytes of the layer
 };
@@ -50,7 +61,8 @@ struct LayerStats {
 /// Throws std::invalid_argument for a bound out of range or a point beyond 2^30
 /// quantisation steps from the sensor.
 [[nodiscard]] std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, const Pose& T_cloud_sensor,
-                                                     double max_error, LayerStats* stats = nullptr);
+                                                     double max_error, LayerStats* stats = nullptr,
+                                                     const LayerOptions& options = {});
 
 /// Decodes a residual payload against `words`: the kept word points, then the coded
 /// points, in the model's frame. Fails with kBadData when the payload is malformed or
@@ -70,7 +82,8 @@ struct LayerStats {
 /// learned one, `decode_alphabet(encode_alphabet(a))`). The instances are quantised as
 /// `encode_model` stores them, reconstructed, and the layer coded against that
 /// reconstruction. Replaces any layer `data` had.
-LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error);
+LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error,
+                     const LayerOptions& options = {});
 
 /// Rate control: the smallest error bound in [kMinMaxError, kMaxMaxError] whose coded size
 /// `size_of(E)` fits `target_bytes`, by bisection on log E until the bracket is narrower
