@@ -4,8 +4,11 @@
 // One JSON line with the keys of pcmetrics.py (n_original, n_decoded, d1_mse,
 // d1_psnr_db, chamfer_m, hausdorff_m, coverage, outliers, tau_m, peak_m), so the two
 // outputs can be compared field by field. Clouds are read with lex3d::io::read_cloud
-// (format detected from extension and content). --time prints the compare_clouds
-// wall time on stderr. Exit codes: 0 ok, 1 usage, 2 bad data, 3 I/O.
+// (format detected from extension and content). After those keys it also prints
+// rmse_m (sqrt of d1_mse), mse_ab / mse_ba (each direction), and coverage_2cm /
+// coverage_5cm / outliers_2cm / outliers_5cm (fixed tolerances, for bench/rd.sh), all
+// from the same pass. --time prints the compare_clouds wall time on stderr.
+// Exit codes: 0 ok, 1 usage, 2 bad data, 3 I/O.
 
 #include <algorithm>
 #include <cmath>
@@ -86,7 +89,7 @@ int main(int argc, char** argv) {
 
   eval::DistanceParams params;
   params.peak = peak;
-  params.taus = {tau};
+  params.taus = {tau, 0.02, 0.05};
   params.threads = static_cast<int>(threads);
   eval::DistanceResult d;
   try {
@@ -100,9 +103,14 @@ int main(int argc, char** argv) {
 
   std::printf(
       "{\"n_original\": %zu, \"n_decoded\": %zu, \"d1_mse\": %s, \"d1_psnr_db\": %s, \"chamfer_m\": %s, "
-      "\"hausdorff_m\": %s, \"coverage\": %s, \"outliers\": %s, \"tau_m\": %s, \"peak_m\": %s}\n",
+      "\"hausdorff_m\": %s, \"coverage\": %s, \"outliers\": %s, \"tau_m\": %s, \"peak_m\": %s, \"rmse_m\": %s, "
+      "\"mse_ab\": %s, \"mse_ba\": %s, \"coverage_2cm\": %s, \"coverage_5cm\": %s, \"outliers_2cm\": %s, "
+      "\"outliers_5cm\": %s}\n",
       d.points_a, d.points_b, json_number(std::max(d.mse_ab, d.mse_ba)).c_str(), json_number(d.d1_psnr_db).c_str(),
       json_number(d.chamfer).c_str(), json_number(d.hausdorff).c_str(), json_number(d.coverage[0]).c_str(),
-      json_number(d.outliers[0]).c_str(), json_number(tau).c_str(), json_number(peak).c_str());
+      json_number(d.outliers[0]).c_str(), json_number(tau).c_str(), json_number(peak).c_str(),
+      json_number(d.rmse).c_str(), json_number(d.mse_ab).c_str(), json_number(d.mse_ba).c_str(),
+      json_number(d.coverage[1]).c_str(), json_number(d.coverage[2]).c_str(), json_number(d.outliers[1]).c_str(),
+      json_number(d.outliers[2]).c_str());
   return 0;
 }

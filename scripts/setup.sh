@@ -14,6 +14,7 @@ PACKAGES=(
   libcli11-dev libgtest-dev libgmock-dev
   clang libclang-rt-14-dev
   python3 python3-numpy python3-scipy
+  draco time python3-matplotlib
 )
 missing=()
 for p in "${PACKAGES[@]}"; do
