@@ -79,12 +79,20 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
   // Points within δ + 3σ of each feature point (the most a word placed there can reach).
   s.nearby.resize(s.features.size());
   if (!cloud.empty() && !s.features.features.empty()) {
-    const detail::PointGrid grid(cloud.points, static_cast<float>(s.word_radius));
-    parallel_for(s.features.size(), params.threads, [&](std::size_t f) {
+    std::vector<float> reach(s.features.size());
+    for (std::size_t f = 0; f < reach.size(); ++f) {
       const Eigen::Vector3d t = s.features.features[f].T_cloud_feature.translation();
       const double range = (t - cloud.T_cloud_sensor.translation()).norm();
-      const double reach = s.word_radius + 3.0 * factor * (range + s.word_radius) + 1e-3;
-      grid.radius(t.cast<float>(), static_cast<float>(reach), s.nearby[f]);
+      reach[f] = static_cast<float>(s.word_radius + 3.0 * factor * (range + s.word_radius) + 1e-3);
+    }
+    // Cells about as large as the typical ball: smaller ones cost more cell look-ups
+    // than they save in point tests (reaches grow with range, to several δ).
+    std::vector<float> sorted = reach;
+    const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+    std::nth_element(sorted.begin(), mid, sorted.end());
+    const detail::PointGrid grid(cloud.points, std::max(static_cast<float>(s.word_radius), *mid));
+    parallel_for(s.features.size(), params.threads, [&](std::size_t f) {
+      grid.radius(s.features.features[f].T_cloud_feature.translation().cast<float>(), reach[f], s.nearby[f]);
     });
   }
   s.prepare_ms = sw.elapsed_ms();
