@@ -27,6 +27,7 @@ struct CompressOptions {
   double target_bpp = 0.0;
   std::string words = "auto";
   bool keep_all_points = false;
+  bool one_file = false;
   bool json = false;
   ScanSetOptions scan_set;
   ModelOptions model;
@@ -66,8 +67,9 @@ Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Al
     Alphabet empty;
     if (!with_words) {
       d.model.instances.clear();
-      d.alphabet = empty;  // a layer-only file embeds an empty alphabet (a few dozen bytes)
-      d.alphabet_hash.reset();
+      // A layer-only file embeds an empty alphabet (a few dozen bytes), or keeps referencing
+      // the shared alphabet file (as a sequence file's models must).
+      if (!d.alphabet_hash) d.alphabet = empty;
     }
     const Alphabet& alphabet = with_words ? *decoder_alphabet : empty;
     const Cloud placed = residual::decoder_word_cloud(d, alphabet);
@@ -107,7 +109,9 @@ void run_compress(const CompressOptions& o) {
   if (!use_words && (!o.alphabet.empty() || !o.save_alphabet.empty()))
     throw CliError(1, "--words off uses no alphabet: drop --alphabet / --save-alphabet");
   std::vector<std::string> outputs;
-  for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
+  if (o.one_file) outputs.push_back(o.output);
+  else
+    for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
   std::vector<std::string> protected_paths = o.inputs;
   if (!o.alphabet.empty()) protected_paths.push_back(o.alphabet);
   for (const auto& out : outputs) check_output_path(out, protected_paths);
@@ -127,7 +131,7 @@ void run_compress(const CompressOptions& o) {
   std::vector<std::uint8_t> alphabet_file;
   if (reuse) {
     alphabet_file = std::move(reuse->bytes);
-  } else if (!o.save_alphabet.empty()) {
+  } else if (!o.save_alphabet.empty() || o.one_file) {
     alphabet_file = codec::encode_alphabet(alphabet);
   }
   // The alphabet exactly as a decoder will see it, for the residual layer's reconstruction.
@@ -152,6 +156,7 @@ void run_compress(const CompressOptions& o) {
     std::printf("%-32s %9s %9s %10s %10s%s\n", "output", "points", "instances", "bytes", "bits/pt",
                 layered ? "  max error   coded pts" : "");
   bool any_words = false;
+  codec::SequenceData sequence;
   residual::LayerOptions layer_options;
   layer_options.thin = !o.keep_all_points;
   layer_options.threads = mp.threads;
@@ -167,14 +172,16 @@ void run_compress(const CompressOptions& o) {
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
     if (!coded.words) d.model.instances.clear();
-    throw_if_error(io::write_file_atomic(outputs[i], bytes));
+    if (o.one_file) sequence.model_files.push_back(bytes);
+    else throw_if_error(io::write_file_atomic(outputs[i], bytes));
+    const std::string& shown = o.one_file ? o.inputs[i] : outputs[i];
     const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
     total_bytes += bytes.size();
     total_points += d.input_points;
     if (o.json) {
       j.begin_object()
           .value("input", o.inputs[i])
-          .value("output", outputs[i])
+          .value("output", o.one_file ? o.output : outputs[i])
           .value("points", d.input_points)
           .value("features", i < set.scans.size() ? set.scans[i].features.size() : std::size_t{0})
           .value("instances", d.model.instances.size())
@@ -194,7 +201,7 @@ void run_compress(const CompressOptions& o) {
       }
       j.end_object();
     } else {
-      std::printf("%-32s %9llu %9zu %10zu %10.3f", outputs[i].c_str(), static_cast<unsigned long long>(d.input_points),
+      std::printf("%-32s %9llu %9zu %10zu %10.3f", shown.c_str(), static_cast<unsigned long long>(d.input_points),
                   d.model.instances.size(), bytes.size(), bpp);
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
@@ -203,20 +210,29 @@ void run_compress(const CompressOptions& o) {
   j.end_array();
   // A saved alphabet is written once the models are; it is counted only when a model uses it.
   if (!o.save_alphabet.empty()) throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
+  std::uint64_t alphabet_bytes = embed || !any_words ? 0 : alphabet_file.size();
+  if (o.one_file) {  // one file: its size is the total (models, alphabet and framing)
+    sequence.alphabet_file = alphabet_file;
+    const std::vector<std::uint8_t> file = codec::encode_sequence(sequence);
+    throw_if_error(io::write_file_atomic(o.output, file));
+    alphabet_bytes = 0;
+    total_bytes = file.size();
+  }
   const double total_ms = sw.elapsed_ms();
-  const std::uint64_t alphabet_bytes = embed || !any_words ? 0 : alphabet_file.size();
   const double bpp_all = total_points ? 8.0 * static_cast<double>(total_bytes + alphabet_bytes) / static_cast<double>(total_points) : 0.0;
   if (o.json) {
-    j.value("alphabet_words", alphabet.size()).value("alphabet_embedded", embed);
+    j.value("alphabet_words", alphabet.size()).value("alphabet_embedded", embed).value("one_file", o.one_file);
     j.value("alphabet_bytes", alphabet_bytes).value("total_bytes", total_bytes + alphabet_bytes);
     j.value("bits_per_point", bpp_all).value("time_ms", total_ms);
     j.end_object();
     std::cout << j.str() << "\n";
     return;
   }
-  std::printf("alphabet: %zu words, %s\n", alphabet.size(),
-              embed ? "embedded in each model file"
-                    : (std::to_string(alphabet_bytes) + " bytes in " + (o.alphabet.empty() ? o.save_alphabet : o.alphabet)).c_str());
+  const std::string where = o.one_file ? "in the sequence file " + o.output
+                            : embed   ? std::string("embedded in each model file")
+                                      : std::to_string(alphabet_bytes) + " bytes in " +
+                                            (o.alphabet.empty() ? o.save_alphabet : o.alphabet);
+  std::printf("alphabet: %zu words, %s\n", alphabet.size(), where.c_str());
   std::printf("total: %llu bytes for %llu points = %.3f bits per point (alphabet included), %.0f ms\n",
               static_cast<unsigned long long>(total_bytes + alphabet_bytes), static_cast<unsigned long long>(total_points),
               bpp_all, total_ms);
@@ -228,7 +244,11 @@ void register_compress(CLI::App& app) {
   auto o = std::make_shared<CompressOptions>();
   CLI::App* sub = app.add_subcommand("compress", "Compress scans into lex3d model files");
   sub->add_option("scans", o->inputs, "Point clouds")->required();
-  sub->add_option("-o,--output", o->output, "Model file (numbered _000, _001... for several scans)")->required();
+  sub->add_option("-o,--output", o->output,
+                  "Model file (numbered _000, _001... for several scans), or the sequence file with --one-file")
+      ->required();
+  sub->add_flag("--one-file", o->one_file,
+                "Write one sequence file holding every scan's model and the shared alphabet (formats/sequence.md)");
   sub->add_option("--alphabet", o->alphabet, "Reuse this alphabet file (nothing is learned)");
   sub->add_option("--save-alphabet", o->save_alphabet, "Write the learned alphabet here; the models reference it");
   sub->add_option("--max-error", o->max_error,

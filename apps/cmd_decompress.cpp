@@ -29,6 +29,48 @@ struct DecompressOptions {
   bool json = false;
 };
 
+/// A sequence file: every scan's decoded cloud, written to OUT_000, OUT_001, ...
+void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::uint8_t>& bytes) {
+  if (o.output.empty() || !o.octomap.empty() || !o.reference.empty() || !o.alphabet.empty())
+    throw CliError(1, "a sequence file decompresses to point clouds: give -o OUT only (no --octomap, --reference, --alphabet)");
+  Stopwatch sw;
+  auto seq = codec::decode_sequence(bytes);
+  if (!seq.ok()) throw CliError(2, o.input + ": " + seq.status().to_string());
+  const codec::SequenceData& s = seq.value();
+  std::vector<std::string> outputs;
+  for (std::size_t i = 0; i < s.model_files.size(); ++i) {
+    outputs.push_back(numbered_output(o.output, i, s.model_files.size()));
+    check_output_path(outputs.back(), {o.input});
+  }
+  Json j;
+  j.begin_object().value("sequence", o.input).value("scans", s.model_files.size()).begin_array("files");
+  std::uint64_t input_points = 0, points = 0;
+  for (std::size_t i = 0; i < s.model_files.size(); ++i) {
+    auto d = codec::decode_model(s.model_files[i], &s.alphabet_file);
+    if (!d.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + d.status().to_string());
+    auto cloud = residual::decode_cloud(d.value());
+    if (!cloud.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + cloud.status().to_string());
+    throw_if_error(io::write_cloud(outputs[i], cloud.value()));
+    input_points += d.value().input_points;
+    points += cloud.value().size();
+    if (o.json)
+      j.begin_object().value("output", outputs[i]).value("input_points", d.value().input_points)
+          .value("points", cloud.value().size()).value("residual_layer", d.value().residual.has_value()).end_object();
+    else
+      std::printf("wrote %s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), cloud.value().size(), i + 1,
+                  s.model_files.size());
+  }
+  const double bpp = input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;
+  if (o.json) {
+    j.end_array().value("input_points", input_points).value("points", points).value("bits_per_point", bpp);
+    j.value("time_ms", sw.elapsed_ms()).end_object();
+    std::cout << j.str() << "\n";
+  } else {
+    std::printf("%s: %zu bytes, %zu scans, %llu input points = %.3f bits per point\n", o.input.c_str(), bytes.size(),
+                s.model_files.size(), static_cast<unsigned long long>(input_points), bpp);
+  }
+}
+
 void run_decompress(const DecompressOptions& o) {
   if (o.output.empty() && o.octomap.empty()) throw CliError(1, "give -o OUT and/or --octomap OUT.bt");
   std::vector<std::string> inputs = {o.input};
@@ -39,6 +81,10 @@ void run_decompress(const DecompressOptions& o) {
   Stopwatch sw;
   auto bytes = io::read_file(o.input);
   if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+  if (codec::is_sequence_file(bytes.value())) {
+    run_decompress_sequence(o, bytes.value());
+    return;
+  }
   std::vector<std::uint8_t> alphabet_file;
   if (!o.alphabet.empty()) {
     auto a = io::read_file(o.alphabet);
@@ -131,8 +177,9 @@ void run_decompress(const DecompressOptions& o) {
 
 void register_decompress(CLI::App& app) {
   auto o = std::make_shared<DecompressOptions>();
-  CLI::App* sub = app.add_subcommand("decompress", "Reconstruct a point cloud (or an OctoMap) from a model file");
-  sub->add_option("model", o->input, "lex3d model file")->required();
+  CLI::App* sub = app.add_subcommand("decompress", "Reconstruct a point cloud (or an OctoMap) from a model file, "
+                                                   "or every scan of a sequence file");
+  sub->add_option("model", o->input, "lex3d model file or sequence file")->required();
   sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz)");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references");
   sub->add_option("--octomap", o->octomap, "Also write an OctoMap occupancy tree (.bt)");

@@ -37,7 +37,9 @@ bool info_lex3d_file(const InfoOptions& o) {
   const auto& b = bytes.value();
   static constexpr char kModel[] = "LEX3DMDL";
   static constexpr char kAlphabet[] = "LEX3DALP";
-  if (b.size() < 8 || (std::memcmp(b.data(), kModel, 8) != 0 && std::memcmp(b.data(), kAlphabet, 8) != 0)) return false;
+  if (b.size() < 8 || (std::memcmp(b.data(), kModel, 8) != 0 && std::memcmp(b.data(), kAlphabet, 8) != 0 &&
+                       !codec::is_sequence_file(b)))
+    return false;
   auto info = codec::inspect(b);
   if (!info.ok()) throw CliError(2, o.path + ": " + info.status().to_string());
   const codec::FileInfo& fi = info.value();
@@ -47,7 +49,29 @@ bool info_lex3d_file(const InfoOptions& o) {
   std::uint64_t input_points = 0;
   std::string decode_error;
   bool referenced = false;
-  if (fi.kind == "alphabet") {
+  std::size_t scans = 0;
+  if (fi.kind == "sequence") {
+    auto q = codec::decode_sequence(b);
+    if (q.ok()) {
+      scans = q.value().model_files.size();
+      auto a = codec::decode_alphabet(q.value().alphabet_file);
+      if (a.ok()) {
+        words = a.value().size();
+        word_points = a.value().total_points();
+      }
+      for (const auto& mf : q.value().model_files) {
+        auto m = codec::decode_model(mf, &q.value().alphabet_file);
+        if (!m.ok()) {
+          decode_error = m.status().to_string();
+          break;
+        }
+        instances += m.value().model.instances.size();
+        input_points += m.value().input_points;
+      }
+    } else {
+      decode_error = q.status().to_string();
+    }
+  } else if (fi.kind == "alphabet") {
     auto a = codec::decode_alphabet(b);
     if (a.ok()) {
       words = a.value().size();
@@ -81,7 +105,8 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.begin_object().value("type", c.type).value("offset", c.offset).value("length", c.length).value("crc_ok", c.crc_ok).end_object();
     j.end_array();
     j.value("checksums_ok", all_crc_ok);
-    if (fi.kind == "model") j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
+    if (fi.kind == "sequence") j.value("scans", scans);
+    if (fi.kind != "alphabet") j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
     j.value("words", words).value("word_points", word_points);
     if (referenced) j.value("alphabet", "referenced");
     if (!decode_error.empty()) j.value("error", decode_error);
@@ -95,7 +120,8 @@ bool info_lex3d_file(const InfoOptions& o) {
     for (const auto& c : fi.chunks)
       std::printf("               %-6s %10llu %12llu  %s\n", c.type.c_str(), static_cast<unsigned long long>(c.offset),
                   static_cast<unsigned long long>(c.length), c.crc_ok ? "ok" : "MISMATCH");
-    if (fi.kind == "model") {
+    if (fi.kind == "sequence") std::printf("scans          %zu\n", scans);
+    if (fi.kind != "alphabet") {
       std::printf("instances      %zu\n", instances);
       std::printf("input points   %llu (%.3f bits per point)\n", static_cast<unsigned long long>(input_points), bpp);
       if (referenced) std::printf("alphabet       referenced by hash (external file)\n");

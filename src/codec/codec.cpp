@@ -26,6 +26,8 @@ namespace {
 
 constexpr char kModelMagic[8] = {'L', 'E', 'X', '3', 'D', 'M', 'D', 'L'};
 constexpr char kAlphabetMagic[8] = {'L', 'E', 'X', '3', 'D', 'A', 'L', 'P'};
+constexpr char kSequenceMagic[8] = {'L', 'E', 'X', '3', 'D', 'S', 'E', 'Q'};
+constexpr std::uint64_t kQhdrBytes = 8;
 constexpr std::uint16_t kMajor = 1;
 constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
 constexpr std::uint16_t kMinorResidual = 1;  // the first minor version with the RESD chunk
@@ -852,6 +854,103 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
   return out;
 }
 
+// ---------------------------------------------------------------------------------------
+// Sequence file (sequence.md)
+// ---------------------------------------------------------------------------------------
+
+bool is_sequence_file(const std::vector<std::uint8_t>& bytes) {
+  return bytes.size() >= 8 && std::memcmp(bytes.data(), kSequenceMagic, 8) == 0;
+}
+
+std::vector<std::uint8_t> encode_sequence(const SequenceData& data) {
+  auto alphabet = decode_alphabet(data.alphabet_file);
+  if (!alphabet.ok())
+    throw std::invalid_argument("lex3d::codec::encode_sequence: the alphabet file is invalid: " + alphabet.status().to_string());
+  for (std::size_t i = 0; i < data.model_files.size(); ++i) {
+    const auto m = decode_model(data.model_files[i], &data.alphabet_file);
+    if (!m.ok() || !m.value().alphabet_hash)
+      throw std::invalid_argument("lex3d::codec::encode_sequence: model " + std::to_string(i) +
+                                  " is not a model file referencing the sequence's alphabet" +
+                                  (m.ok() ? std::string() : ": " + m.status().to_string()));
+  }
+  std::vector<std::uint8_t> out;
+  put_header(out, kSequenceMagic, 0);
+  std::vector<std::uint8_t> qhdr;
+  put_u64(qhdr, data.model_files.size());
+  put_chunk(out, "QHDR", qhdr);
+  put_chunk(out, "ALPH", data.alphabet_file);
+  for (const auto& m : data.model_files) put_chunk(out, "SCAN", m);
+  put_chunk(out, "QEND", {});
+  return out;
+}
+
+StatusOr<SequenceData> decode_sequence(const std::vector<std::uint8_t>& bytes) {
+  const Ctx ctx{"sequence file", 0};
+  const std::uint8_t* d = bytes.data();
+  const std::size_t size = bytes.size();
+  Header h;
+  if (Status s = read_header(d, size, ctx, kSequenceMagic, kModelMagic, "model", true, h); !s.ok()) return s;
+  if (h.flags != 0) return ctx.error("reserved flag bits " + hex(h.flags, 8) + " set", 12);
+  SequenceData out;
+  std::uint64_t count = 0;
+  // 0: expect QHDR, 1: ALPH, 2: SCAN or QEND.
+  int state = 0;
+  for (std::size_t pos = kHeaderBytes;;) {
+    if (pos == size) return ctx.error("file ends before the 'QEND' chunk", pos);
+    Chunk c;
+    if (Status s = frame_chunk(d, size, pos, ctx, c); !s.ok()) return s;
+    if (!(is_letter(c.type[0]) && is_letter(c.type[1]) && is_letter(c.type[2]) && is_letter(c.type[3])))
+      return ctx.error("invalid chunk type " + c.name + " (4 ASCII letters expected)", pos);
+    if (c.stored_crc != c.computed_crc)
+      return ctx.error("chunk " + c.name + " CRC mismatch (stored " + hex(c.stored_crc, 8) + ", computed " +
+                           hex(c.computed_crc, 8) + ")",
+                       c.payload_offset + c.length);
+    const std::size_t next = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
+    const bool known = c.is("QHDR") || c.is("ALPH") || c.is("SCAN") || c.is("QEND");
+    if (!known) {
+      if (state == 0) return ctx.error("the first chunk must be 'QHDR', found " + c.name, pos);
+      if (c.required()) return ctx.error("unknown required chunk " + c.name, pos);
+      pos = next;
+      continue;
+    }
+    if (state == 0) {
+      if (!c.is("QHDR")) return ctx.error("the first chunk must be 'QHDR', found " + c.name, pos);
+      if (Status e = expect_length(c, kQhdrBytes, ctx); !e.ok()) return e;
+      count = ld_u64(c.payload);
+      // Every SCAN chunk takes at least 16 bytes of framing.
+      if (count > (size - next) / (kChunkHeadBytes + kChunkCrcBytes))
+        return ctx.error("QHDR scan_count " + std::to_string(count) + " cannot fit in the " +
+                             std::to_string(size - next) + " bytes left",
+                         c.payload_offset);
+      out.model_files.reserve(static_cast<std::size_t>(count));
+      state = 1;
+    } else if (state == 1) {
+      if (!c.is("ALPH")) return ctx.error("chunk " + c.name + " comes before the required chunk 'ALPH'", pos);
+      out.alphabet_file.assign(c.payload, c.payload + c.length);
+      auto a = decode_alphabet_at(c.payload, static_cast<std::size_t>(c.length),
+                                  Ctx{"sequence file: alphabet (ALPH)", c.payload_offset});
+      if (!a.ok()) return a.status();
+      state = 2;
+    } else if (c.is("SCAN")) {
+      if (out.model_files.size() >= count)
+        return ctx.error("more 'SCAN' chunks than QHDR scan_count " + std::to_string(count), pos);
+      out.model_files.emplace_back(c.payload, c.payload + c.length);
+    } else if (c.is("QEND")) {
+      if (out.model_files.size() != count)
+        return ctx.error(std::to_string(out.model_files.size()) + " 'SCAN' chunks, QHDR scan_count says " +
+                             std::to_string(count),
+                         pos);
+      if (c.length != 0)
+        return ctx.error("end chunk 'QEND' must be empty, has " + std::to_string(c.length) + " bytes", c.offset + 4);
+      if (next != size) return ctx.error(std::to_string(size - next) + " bytes after the end chunk 'QEND'", next);
+      return out;
+    } else {
+      return ctx.error("chunk " + c.name + " is repeated or out of order", pos);
+    }
+    pos = next;
+  }
+}
+
 StatusOr<FileInfo> inspect(const std::vector<std::uint8_t>& bytes) {
   const std::uint8_t* d = bytes.data();
   const std::size_t size = bytes.size();
@@ -859,10 +958,12 @@ StatusOr<FileInfo> inspect(const std::vector<std::uint8_t>& bytes) {
   info.file_bytes = size;
   Header h;
   const bool alphabet = size >= 8 && std::memcmp(d, kAlphabetMagic, 8) == 0;
-  info.kind = alphabet ? "alphabet" : "model";
-  const Ctx ctx{alphabet ? "alphabet file" : "model file", 0};
-  const Status hs = alphabet ? read_header(d, size, ctx, kAlphabetMagic, kModelMagic, "model", false, h)
-                             : read_header(d, size, ctx, kModelMagic, kAlphabetMagic, "alphabet", false, h);
+  const bool sequence = is_sequence_file(bytes);
+  info.kind = alphabet ? "alphabet" : sequence ? "sequence" : "model";
+  const Ctx ctx{info.kind + " file", 0};
+  const Status hs = alphabet   ? read_header(d, size, ctx, kAlphabetMagic, kModelMagic, "model", false, h)
+                    : sequence ? read_header(d, size, ctx, kSequenceMagic, kModelMagic, "model", false, h)
+                               : read_header(d, size, ctx, kModelMagic, kAlphabetMagic, "alphabet", false, h);
   if (!hs.ok()) return hs;
   info.major = h.major;
   info.minor = h.minor;

@@ -562,11 +562,12 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
       for (int a = 0; a < 3; ++a) d[a] = pr.last[a] + static_cast<double>(m.cartesian[a].get(dec, 0)) * qc;
       s = to_spherical(d);
     }
-    if (!d.allFinite() || !(d.norm() < 1e12))
+    const Eigen::Vector3f pc = to_cloud_frame(T_cloud_sensor, d);
+    if (!d.allFinite() || !(d.norm() < 1e12) || !pc.allFinite())
       return bad_data("residual layer point " + std::to_string(i) + " decodes to a non-finite position", kHeadBytes);
     pr.last_escaped = escaped;
     pr.update(d, s);
-    out.points.push_back(to_cloud_frame(T_cloud_sensor, d));
+    out.points.push_back(pc);
   }
   if (dec.overrun() > 8)
     return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());

@@ -9,6 +9,7 @@
 // - a success is a consistent value: word ids below the alphabet size, finite poses and
 //   points, and it encodes and decodes again to the same word ids;
 // - inspect's chunk table lies inside the input;
+// - a sequence file's scans are checked as model files with its alphabet;
 // - a model with a residual layer (model.md §2.5) decodes to finite points, no more than
 //   the reconstruction and the input point count allow, or fails like the codec does.
 
@@ -124,11 +125,23 @@ inline void check_model_bytes(const std::vector<std::uint8_t>& bytes, const std:
     if (r2.value().model.instances[i].word != d.model.instances[i].word) fail("re-encoded word id", std::to_string(i));
 }
 
+/// A sequence file (formats/sequence.md): its framing, then each scan as a model file
+/// with the sequence's alphabet.
+inline void check_sequence_bytes(const std::vector<std::uint8_t>& bytes) {
+  const auto r = codec::decode_sequence(bytes);
+  if (!r.ok()) {
+    check_status(r.status(), bytes.size(), false);
+    return;
+  }
+  for (const auto& m : r.value().model_files) check_model_bytes(m, &r.value().alphabet_file);
+}
+
 /// Everything the model fuzzer does with one input.
 inline void check_model(const std::uint8_t* data, std::size_t size) {
   const std::vector<std::uint8_t> bytes(data, data + size);
   check_model_bytes(bytes, nullptr);
   check_model_bytes(bytes, &external_alphabet());
+  check_sequence_bytes(bytes);
   check_inspect(bytes);
 }
 

@@ -66,7 +66,22 @@ struct ModelData {
 [[nodiscard]] StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                                                const std::vector<std::uint8_t>* external_alphabet_file = nullptr);
 
-/// What `lex3d info` shows of a model or alphabet file.
+/// A sequence file (formats/sequence.md): the model files of a set of scans and the one
+/// alphabet they share, in one file.
+struct SequenceData {
+  std::vector<std::uint8_t> alphabet_file;              ///< an alphabet file, byte for byte
+  std::vector<std::vector<std::uint8_t>> model_files;   ///< model files referencing it, in scan order
+};
+/// Whether `bytes` start with the sequence file's magic.
+[[nodiscard]] bool is_sequence_file(const std::vector<std::uint8_t>& bytes);
+/// Encodes a sequence file. Throws std::invalid_argument when the alphabet file is invalid
+/// or a model file does not decode as a model referencing that alphabet.
+[[nodiscard]] std::vector<std::uint8_t> encode_sequence(const SequenceData& data);
+/// Decodes a sequence file's framing and its alphabet; each model file is then decoded
+/// with `decode_model(model_files[i], &alphabet_file)`.
+[[nodiscard]] StatusOr<SequenceData> decode_sequence(const std::vector<std::uint8_t>& bytes);
+
+/// What `lex3d info` shows of a model, alphabet or sequence file.
 struct ChunkInfo {
   std::string type;          ///< four characters
   std::uint64_t offset = 0;  ///< of the chunk header
@@ -74,7 +89,7 @@ struct ChunkInfo {
   bool crc_ok = false;
 };
 struct FileInfo {
-  std::string kind;  ///< "model" or "alphabet"
+  std::string kind;  ///< "model", "alphabet" or "sequence"
   int major = 0;
   int minor = 0;
   std::uint32_t flags = 0;
