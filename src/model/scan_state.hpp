@@ -26,6 +26,7 @@ namespace lex3d::detail {
 /// vectorise), with their bounding box.
 struct PackedWord {
   std::vector<float> x, y, z;
+  std::vector<float> xp, yp, zp;  // the same, padded with far points to a multiple of 8
   Eigen::Vector3f lo = Eigen::Vector3f::Zero();
   Eigen::Vector3f hi = Eigen::Vector3f::Zero();
   PackedWord() = default;
@@ -116,6 +117,7 @@ class ScanState {
   std::vector<std::uint32_t> idx_;      // the scan point of each entry
   std::vector<float> lx_, ly_, lz_;     // the entry's point in its feature's instance frame
   std::vector<float> reach2_e_;         // (3σ)² of the entry's point
+  std::vector<float> a_e_;              // 1 / (2σ²) of the entry's point
   std::vector<float> cache_;            // current contribution of each feature's instance
   std::vector<float> inv_two_sigma2_;   // 1 / (2σ²), per point
   std::vector<double> norm_;            // (2πσ²)^(-3/2), per point
