@@ -110,50 +110,60 @@ class RangeDecoder {
   std::uint32_t range_ = 0xFFFFFFFFU;
 };
 
-/// Signed integers in [-(2^31 - 1), 2^31 - 1] with kContexts conditioning classes.
+/// Signed integers in [-(2^32 - 1), 2^32 - 1] under a number of conditioning contexts.
 class IntModel {
  public:
-  static constexpr int kContexts = 8;
+  static constexpr int kClasses = 8;  ///< classes of one context value (context_of)
   static constexpr int kMaxExponent = 31;
 
-  /// The class of a context value: 0 for 0, else its bit length, capped.
+  explicit IntModel(int contexts = kClasses) : ctx_(static_cast<std::size_t>(contexts)) {}
+
+  /// The class of a context value: 0 for 0, else its bit length, capped at 7.
   static int context_of(std::int64_t previous) {
     std::uint64_t a = previous < 0 ? static_cast<std::uint64_t>(-previous) : static_cast<std::uint64_t>(previous);
     int bits = 0;
-    while (a != 0 && bits < kContexts - 1) {
+    while (a != 0 && bits < kClasses - 1) {
       a >>= 1;
       ++bits;
     }
     return bits;
   }
+  /// The context of two context values: their classes as the digits of a base-8 number.
+  static int context_of(std::int64_t a, std::int64_t b) { return context_of(a) * kClasses + context_of(b); }
 
   void put(RangeEncoder& enc, int ctx, std::int64_t v) {
-    enc.put(zero_[ctx], v != 0);
+    Context& m = ctx_[static_cast<std::size_t>(ctx)];
+    enc.put(m.zero, v != 0);
     if (v == 0) return;
-    enc.put(sign_[ctx], v < 0);
+    enc.put(m.sign, v < 0);
     const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
     int e = 0;
     while ((mag >> (e + 1)) != 0) ++e;
-    for (int j = 0; j < e; ++j) enc.put(exponent_[ctx][j], true);
-    if (e < kMaxExponent) enc.put(exponent_[ctx][e], false);
-    for (int j = e - 1; j >= 0; --j) enc.put(mantissa_[e][j], ((mag >> j) & 1U) != 0);
+    for (int j = 0; j < e; ++j) enc.put(m.exponent[static_cast<std::size_t>(j)], true);
+    if (e < kMaxExponent) enc.put(m.exponent[static_cast<std::size_t>(e)], false);
+    for (int j = e - 1; j >= 0; --j)
+      enc.put(mantissa_[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)], ((mag >> j) & 1U) != 0);
   }
 
   std::int64_t get(RangeDecoder& dec, int ctx) {
-    if (!dec.get(zero_[ctx])) return 0;
-    const bool negative = dec.get(sign_[ctx]);
+    Context& m = ctx_[static_cast<std::size_t>(ctx)];
+    if (!dec.get(m.zero)) return 0;
+    const bool negative = dec.get(m.sign);
     int e = 0;
-    while (e < kMaxExponent && dec.get(exponent_[ctx][e])) ++e;
+    while (e < kMaxExponent && dec.get(m.exponent[static_cast<std::size_t>(e)])) ++e;
     std::uint64_t mag = 1;
-    for (int j = e - 1; j >= 0; --j) mag = (mag << 1) | (dec.get(mantissa_[e][j]) ? 1U : 0U);
+    for (int j = e - 1; j >= 0; --j)
+      mag = (mag << 1) | (dec.get(mantissa_[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)]) ? 1U : 0U);
     const auto v = static_cast<std::int64_t>(mag);
     return negative ? -v : v;
   }
 
  private:
-  std::array<BitModel, kContexts> zero_{};
-  std::array<BitModel, kContexts> sign_{};
-  std::array<std::array<BitModel, kMaxExponent + 1>, kContexts> exponent_{};
+  struct Context {
+    BitModel zero, sign;
+    std::array<BitModel, kMaxExponent + 1> exponent{};
+  };
+  std::vector<Context> ctx_;
   std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1> mantissa_{};
 };
 
