@@ -25,7 +25,7 @@ struct CompressOptions {
   std::string save_alphabet;
   std::string max_error = "none";
   double target_bpp = 0.0;
-  std::string words = "auto";
+  std::string words;  ///< on, off or auto; empty: off with a residual layer, on without
   bool keep_all_points = false;
   bool one_file = false;
   bool json = false;
@@ -105,7 +105,10 @@ void run_compress(const CompressOptions& o) {
   const bool layered = max_error || o.target_bpp > 0.0;
   if (!layered && o.words == "off")
     throw CliError(1, "--words off needs a residual layer: give --max-error E or --target-bpp B");
-  const bool use_words = o.words != "off";
+  // With a layer, words cost more than they save at every bound measured (README), so the
+  // layer alone is the default; --words on/auto brings them back.
+  const std::string words_mode = !o.words.empty() ? o.words : layered ? "off" : "on";
+  const bool use_words = words_mode != "off";
   if (!use_words && (!o.alphabet.empty() || !o.save_alphabet.empty()))
     throw CliError(1, "--words off uses no alphabet: drop --alphabet / --save-alphabet");
   std::vector<std::string> outputs;
@@ -168,7 +171,7 @@ void run_compress(const CompressOptions& o) {
     if (embed) d.alphabet = alphabet;
     else d.alphabet_hash = hash;
     const Coded coded = code_scan(clouds[i], d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
-                                  use_words ? o.words : "off", layer_options);
+                                  words_mode, layer_options);
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
     if (!coded.words) d.model.instances.clear();
@@ -259,10 +262,9 @@ void register_compress(CLI::App& app) {
                   "Add the residual layer with the smallest error that fits this many bits per input point")
       ->check(CLI::Range(1e-3, 1e3));
   sub->add_option("--words", o->words,
-                  "With a residual layer: use the alphabet's words (on), code every point in the layer (off), "
-                  "or keep the smaller file of the two per scan (auto)")
-      ->check(CLI::IsMember({"on", "off", "auto"}))
-      ->capture_default_str();
+                  "With a residual layer: code every point in the layer (off, the default), use the alphabet's "
+                  "words and code only what they do not explain (on), or keep the smaller file per scan (auto)")
+      ->check(CLI::IsMember({"on", "off", "auto"}));
   sub->add_flag("--keep-all-points", o->keep_all_points,
                 "Residual layer: give every input point its own decoded point (by default a point within the "
                 "error of one decoded before it is not coded again)");
