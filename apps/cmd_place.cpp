@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -22,6 +23,12 @@ namespace {
 
 namespace fs = std::filesystem;
 
+PlaceParams default_query_params() {
+  PlaceParams p;
+  p.threads = 2;  // candidates are verified in parallel
+  return p;
+}
+
 struct PlaceOptions {
   std::string db;
   std::vector<std::string> inputs;
@@ -30,6 +37,8 @@ struct PlaceOptions {
   std::string times;
   std::string format = "auto";
   std::string png = "place_eval";
+  std::string dump;
+  std::string cache;
   int learn_scans = 5;
   int iterations = 200;
   int top = 5;
@@ -37,7 +46,7 @@ struct PlaceOptions {
   double radius = 4.0;
   bool json = false;
   bool ground = false;
-  PlaceParams params;
+  PlaceParams params = default_query_params();
   PlaceStorageParams storage;
 };
 
@@ -177,7 +186,9 @@ struct QueryRecord {
   Pose T = Pose::Identity();
   double nearest_m = 1e9;  // planar distance to the nearest database scan
   double query_ms = 0.0;
+  double query_cpu_ms = 0.0;  // process CPU time (all threads)
   std::vector<std::pair<std::size_t, double>> scores;  // all verified candidates
+  PlaceMatch best;
 };
 
 double planar(const Pose& a, const Pose& b) { return (a.translation() - b.translation()).head<2>().norm(); }
@@ -233,7 +244,18 @@ void run_eval(const PlaceOptions& o) {
   for (const auto& f : files) names.push_back(stem(f));
   Stopwatch sw;
   Alphabet alphabet;
-  if (!o.alphabet.empty()) {
+  std::vector<PlaceScan> cached;
+  if (!o.cache.empty() && fs::exists(o.cache)) {
+    // The scans as a database stores them (a database of these scans, written by an earlier
+    // eval with the same --cache): skips learning and feature extraction.
+    PlaceDatabase c = read_db(o.cache);
+    if (c.size() != clouds.size()) throw CliError(2, o.cache + ": holds " + std::to_string(c.size()) + " scans, not " + std::to_string(clouds.size()));
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      if (c.scan(i).name != names[i]) throw CliError(2, o.cache + ": scan " + std::to_string(i) + " is " + c.scan(i).name);
+      cached.push_back(c.scan(i));
+    }
+    alphabet = c.alphabet();
+  } else if (!o.alphabet.empty()) {
     auto bytes = io::read_file(o.alphabet);
     if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
     auto a = codec::decode_alphabet(bytes.value());
@@ -244,7 +266,13 @@ void run_eval(const PlaceOptions& o) {
   }
   const double learn_ms = sw.lap_ms();
   double prep_ms = 0;
-  const auto scans = describe_all(clouds, names, alphabet, o.storage, &prep_ms);
+  const auto scans = cached.empty() ? describe_all(clouds, names, alphabet, o.storage, &prep_ms) : cached;
+  if (!o.cache.empty() && cached.empty()) {
+    PlaceDatabase c(o.storage);
+    c.set_alphabet(alphabet);
+    for (const auto& s : scans) c.add(s);
+    throw_if_error(io::write_file_atomic(o.cache, c.save()));
+  }
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
 
@@ -272,13 +300,16 @@ void run_eval(const PlaceOptions& o) {
     r.has_db = db.size() > 0;
     for (const auto j : db_to_scan) r.nearest_m = std::min(r.nearest_m, planar(clouds[q].T_world_cloud, clouds[j].T_world_cloud));
     if (r.has_db) {
+      const std::clock_t c0 = std::clock();
       const auto res = db.query(scans[q], p);
       r.query_ms = res.retrieval_ms + res.verification_ms;
+      r.query_cpu_ms = 1000.0 * static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
       if (const PlaceMatch* b = res.best(); b != nullptr && b->valid) {
         r.valid = true;
         r.score = b->score;
         r.match = db_to_scan[b->scan];
         r.T = b->T_match_query;
+        r.best = *b;
       }
       for (const auto& m : res.matches) r.scores.emplace_back(db_to_scan[m.scan], m.valid ? m.score : 0.0);
       recs.push_back(r);
@@ -329,13 +360,26 @@ void run_eval(const PlaceOptions& o) {
     et.push_back(d.translation().norm());
     er.push_back(Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI);
   }
+  // Accepted matches whose transform is wrong (more than 1 m or 5 degrees off the ground
+  // truth), whatever the distance between the scans: what a threshold on the score can
+  // separate, unlike a far but correctly aligned scan.
+  std::size_t wrong_pose = 0, right_pose = 0;
+  for (const auto& r : recs) {
+    if (!(r.valid && r.score >= p.accept_score)) continue;
+    const Pose d = (clouds[r.match].T_world_cloud.inverse() * clouds[r.query].T_world_cloud).inverse() * r.T;
+    if (d.translation().norm() > 1.0 || Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI > 5.0) ++wrong_pose;
+    else ++right_pose;
+  }
   auto median = [](std::vector<double> v) {
     if (v.empty()) return std::nan("");
     std::sort(v.begin(), v.end());
     return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
   };
-  std::vector<double> qms;
-  for (const auto& r : recs) qms.push_back(r.query_ms);
+  std::vector<double> qms, qcpu;
+  for (const auto& r : recs) {
+    qms.push_back(r.query_ms);
+    qcpu.push_back(r.query_cpu_ms);
+  }
   const double per_scan_kb = scans.empty() ? 0.0 : 0.0;
   (void)per_scan_kb;
   double bytes_all = 0;
@@ -391,14 +435,50 @@ void run_eval(const PlaceOptions& o) {
     counts(t, o.radius, a, b, c);
     fp_by_thr.push_back({t, static_cast<double>(b)});
   }
+  if (!o.dump.empty()) {
+    // One line a query: query, planar distance to the nearest database scan, best match, its
+    // planar distance, score, pose error (m, deg), query ms, then every verified candidate
+    // as name:distance:score.
+    std::string text;
+    char buf[256];
+    for (const auto& r : recs) {
+      const Pose& Tq = clouds[r.query].T_world_cloud;
+      double te = std::nan(""), re = std::nan(""), dist = std::nan(""), tf = std::nan(""), rf = std::nan("");
+      if (r.valid) {
+        const Pose truth = clouds[r.match].T_world_cloud.inverse() * Tq;
+        const Pose d = truth.inverse() * r.T;
+        te = d.translation().norm();
+        re = Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI;
+        const Pose d2 = truth.inverse() * r.best.T_feature;
+        tf = d2.translation().norm();
+        rf = Eigen::AngleAxisd(d2.linear()).angle() * 180.0 / M_PI;
+        dist = planar(Tq, clouds[r.match].T_world_cloud);
+      }
+      const auto& a = r.best.dense_q;
+      const auto& b = r.best.dense_m;
+      std::snprintf(buf, sizeof buf, "%s %.2f %s %.2f %.4f %.3f %.2f %.1f | feat %.3f %.2f | rms %.3f used %zu | q %zu %zu %zu %zu | m %zu %zu %zu %zu | inl %zu %zu %zu %.3f %.3f |",
+                    names[r.query].c_str(), r.nearest_m, r.valid ? names[r.match].c_str() : "-", dist, r.score, te, re,
+                    r.query_ms, tf, rf, r.best.dense_rms_m, r.best.dense_used, a.points, a.visible, a.support, a.conflict,
+                    b.points, b.visible, b.support, b.conflict, r.best.inliers, r.best.descriptor_inliers,
+                    r.best.correspondences, r.best.score_query_in_match, r.best.score_match_in_query);
+      text += buf;
+      for (const auto& [j, sc] : r.scores) {
+        std::snprintf(buf, sizeof buf, " %s:%.2f:%.4f", names[j].c_str(), planar(Tq, clouds[j].T_world_cloud), sc);
+        text += buf;
+      }
+      text += "\n";
+    }
+    throw_if_error(io::write_file_atomic(o.dump, std::vector<std::uint8_t>(text.begin(), text.end())));
+  }
   if (o.json) {
     Json j;
     j.begin_object().value("scans", scans.size()).value("queries", recs.size()).value("positives", pos);
     j.value("radius_m", o.radius).value("min_gap_s", o.min_gap).value("threshold", p.accept_score);
     j.value("true_positives", tp).value("false_positives", fp).value("precision", precision).value("recall", recall);
     j.value("max_f1", max_f1).value("recall_at_precision_1", recall_at_p1);
+    j.value("accepted_right_pose", right_pose).value("accepted_wrong_pose", wrong_pose);
     j.value("median_translation_error_m", median(et)).value("median_rotation_error_deg", median(er));
-    j.value("median_query_ms", median(qms)).value("kb_per_scan", kb_per_scan);
+    j.value("median_query_ms", median(qms)).value("median_query_cpu_ms", median(qcpu)).value("kb_per_scan", kb_per_scan);
     j.value("alphabet_words", alphabet.size()).value("learn_ms", learn_ms).value("prepare_ms", prep_ms);
     j.value("query_total_ms", query_total_ms);
     j.begin_array("recall_by_distance");
@@ -413,9 +493,11 @@ void run_eval(const PlaceOptions& o) {
               o.radius, pos);
   std::printf("threshold %.2f: TP %zu FP %zu  precision %.3f recall %.3f\n", p.accept_score, tp, fp, precision, recall);
   std::printf("max F1 %.3f, recall at 100%% precision %.3f\n", max_f1, recall_at_p1);
+  std::printf("accepted: %zu with the right transform (within 1 m, 5 deg), %zu with a wrong one, any distance\n",
+              right_pose, wrong_pose);
   std::printf("accepted true matches: median error %.3f m, %.2f deg (%zu)\n", median(et), median(er), et.size());
-  std::printf("query (excluding feature extraction): median %.1f ms; database %.1f KB a scan; alphabet %zu words\n",
-              median(qms), kb_per_scan, alphabet.size());
+  std::printf("query (excluding feature extraction): median %.1f ms (CPU %.1f ms, %d threads); database %.1f KB a scan; alphabet %zu words\n",
+              median(qms), median(qcpu), p.threads, kb_per_scan, alphabet.size());
   std::printf("recall against distance:");
   for (const auto& d : by_distance) std::printf("  %.0fm %g/%g", d[0], d[1], d[2]);
   std::printf("\nfalse positives against threshold:");
@@ -456,6 +538,11 @@ void register_place(CLI::App& app) {
     s->add_option("--threshold", o->params.accept_score, "Acceptance threshold on the score")->check(CLI::Range(0.0, 1.0));
     s->add_option("--candidates", o->params.top_k, "Scans retrieved by tf-idf and verified")->check(CLI::Range(1, 1000000));
     s->add_flag("--ground-vehicle", o->ground, "Reject large roll/pitch or vertical offsets");
+    s->add_option("--dense-iterations", o->params.dense_iterations, "Dense alignment iterations (0 = none)")->check(CLI::Range(0, 100));
+    s->add_option("--dense-points", o->params.dense_points, "Dense points a scan at most")->check(CLI::Range(16, 1000000));
+    s->add_option("--dense-candidates", o->params.dense_candidates, "Candidates aligned densely")->check(CLI::Range(1, 1000000));
+    s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
+    s->add_option("--threads", o->params.threads, "Worker threads of a query")->check(CLI::Range(1, 64));
   };
   CLI::App* query = sub->add_subcommand("query", "Find a scan's place in a database");
   query->add_option("db", o->db, "Database file")->required();
@@ -473,6 +560,8 @@ void register_place(CLI::App& app) {
   ev->add_option("--alphabet", o->alphabet, "Use this alphabet (else one is learned on --learn-scans of the scans)");
   ev->add_option("--learn-scans", o->learn_scans, "Scans (evenly spaced) the alphabet is learned on")->check(CLI::Range(1, 100000));
   ev->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
+  ev->add_option("--cache", o->cache, "Place database of the scans: read when it exists (no learning, no feature extraction), else written");
+  ev->add_option("--dump", o->dump, "Write one line a query (best match, distances, scores, pose error) to this file");
   ev->add_option("--png", o->png, "Prefix of the PNGs written (PREFIX_confusion.png, PREFIX_pr.png)");
   add_match(ev);
   add_common(ev, *o);

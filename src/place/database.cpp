@@ -80,20 +80,35 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   r.retrieved = cands.size();
   r.retrieval_ms = sw.lap_ms();
   r.matches.resize(cands.size());
+  // Feature transforms of every candidate, then dense alignment of the best few.
+  PlaceParams coarse = params;
+  coarse.dense_iterations = 0;
   parallel_for(
       cands.size(), params.threads,
       [&](std::size_t i) {
-        PlaceMatch m = match_scans(query, scans_[cands[i].first], params);
+        PlaceMatch m = match_scans(query, scans_[cands[i].first], coarse);
         m.scan = cands[i].first;
         m.retrieval_similarity = cands[i].second;
         r.matches[i] = std::move(m);
       },
       1);
-  std::stable_sort(r.matches.begin(), r.matches.end(), [](const PlaceMatch& a, const PlaceMatch& b) {
+  auto order = [](const PlaceMatch& a, const PlaceMatch& b) {
     if (a.valid != b.valid) return a.valid;
     if (a.score != b.score) return a.score > b.score;
     return a.scan < b.scan;
-  });
+  };
+  std::stable_sort(r.matches.begin(), r.matches.end(), order);
+  if (params.dense_iterations > 0) {
+    const std::size_t nd = std::min(r.matches.size(), static_cast<std::size_t>(params.dense_candidates));
+    parallel_for(
+        nd, params.threads, [&](std::size_t i) { refine_match(query, scans_[r.matches[i].scan], r.matches[i], params); },
+        1);
+    // Densely aligned candidates first: their scores are not comparable with the others'.
+    std::stable_sort(r.matches.begin(), r.matches.end(), [&](const PlaceMatch& a, const PlaceMatch& b) {
+      if (a.dense_refined != b.dense_refined) return a.dense_refined;
+      return order(a, b);
+    });
+  }
   r.accepted = !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
   r.verification_ms = sw.lap_ms();
   return r;

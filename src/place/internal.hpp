@@ -9,6 +9,8 @@
 
 namespace lex3d::detail {
 
+/// Fills scan.dense_points / dense_normals / dense_index from scan.coarse.
+void make_dense_points(PlaceScan& scan);
 /// The coarse range image a database stores (ranges already quantised).
 RangeImage make_coarse_image(const RangeImage& fine, const PlaceStorageParams& storage);
 /// Range code: round(r / step) clamped to [1, 65534]; 0 and 65535 mark unobserved / max range.

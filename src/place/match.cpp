@@ -105,6 +105,7 @@ class Matcher {
     gm_.reserve(m.features.size());
     for (const auto& f : q.features) gq_.push_back(Rq_ * f.position.cast<double>());
     for (const auto& f : m.features) gm_.push_back(Rm_ * f.position.cast<double>());
+    for (const auto k : q.validation) gv_.push_back(gq_[k].cast<float>());
     build_grid();
   }
 
@@ -112,12 +113,24 @@ class Matcher {
   [[nodiscard]] Pose to_gravity(const Pose& T) const { return rotation_pose(Rm_) * T * rotation_pose(Rq_.transpose()); }
 
   /// Query features that land in a cell within about inlier_distance of a match feature.
-  [[nodiscard]] Hypothesis evaluate(const Pose& G, std::size_t limit = std::numeric_limits<std::size_t>::max()) const {
+  [[nodiscard]] Hypothesis evaluate(const Pose& G, std::size_t limit = std::numeric_limits<std::size_t>::max(),
+                                    std::size_t need = 0) const {
     Hypothesis h;
     h.T = G;
-    const std::size_t n = std::min(limit, q_.validation.size());
-    for (std::size_t k = 0; k < n; ++k)
-      if (occupied(G * gq_[q_.validation[k]])) ++h.inliers;
+    const std::size_t n = std::min(limit, gv_.size());
+    if (grid_.empty()) return h;
+    // In grid units, single precision: the hot loop of hypothesis counting.
+    const Eigen::Matrix3f R = G.linear().cast<float>() / static_cast<float>(cell_);
+    const Eigen::Vector3f t = ((G.translation() - origin_) / cell_).cast<float>();
+    for (std::size_t k = 0; k < n; ++k) {
+      // Stop early when even all remaining points could not reach `need`.
+      if (h.inliers + (n - k) < need) break;
+      const Eigen::Vector3f u = R * gv_[k] + t;
+      if (!(u.x() >= 0 && u.y() >= 0 && u.z() >= 0)) continue;
+      const auto x = static_cast<int>(u.x()), y = static_cast<int>(u.y()), z = static_cast<int>(u.z());
+      if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
+      if (grid_[cell_index(x, y, z)] != 0) ++h.inliers;
+    }
     return h;
   }
 
@@ -234,27 +247,12 @@ class Matcher {
   }
 
  private:
-  struct PairEntry {
-    double h;       // horizontal distance
-    double dz;      // height difference (second minus first)
-    double angle;   // direction of the horizontal offset
-    std::uint32_t a, b;
-  };
 
   void gravity_hypotheses(SplitMix& rng, std::vector<Hypothesis>& out) const {
     const std::size_t nq = gq_.size(), nm = gm_.size();
     if (p_.gravity_pairs == 0 || nq < 2 || nm < 2) return;
     const double min_h = 1.0;
-    std::vector<PairEntry> table;
-    table.reserve(nm * (nm - 1));
-    for (std::uint32_t a = 0; a < nm; ++a)
-      for (std::uint32_t b = 0; b < nm; ++b) {
-        if (a == b) continue;
-        const Eigen::Vector3d v = gm_[b] - gm_[a];
-        const double h = std::hypot(v.x(), v.y());
-        if (h >= min_h) table.push_back({h, v.z(), std::atan2(v.y(), v.x()), a, b});
-      }
-    std::sort(table.begin(), table.end(), [](const PairEntry& x, const PairEntry& y) { return x.h < y.h; });
+    const auto& table = m_.pairs;  // precomputed with the scan (same upright frame as gm_)
     const double tol = p_.consistency_tolerance;
     const auto want = static_cast<std::size_t>(p_.gravity_pairs);
     std::size_t made = 0;
@@ -271,16 +269,21 @@ class Matcher {
       const double aq = std::atan2(v.y(), v.x());
       const Eigen::Vector3d cq = 0.5 * (gq_[i] + gq_[k]);
       auto it = std::lower_bound(table.begin(), table.end(), h - tol,
-                                 [](const PairEntry& e, double x) { return e.h < x; });
-      for (; it != table.end() && it->h <= h + tol; ++it) {
-        if (std::abs(it->dz - v.z()) > tol) continue;
-        Pose G = Pose::Identity();
-        G.linear() = Eigen::AngleAxisd(it->angle - aq, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-        G.translation() = 0.5 * (gm_[it->a] + gm_[it->b]) - G.linear() * cq;
-        const Hypothesis hp = evaluate(G, probe);
-        if (hp.inliers * 2 < best_probe || hp.inliers < 3) continue;
-        best_probe = std::max(best_probe, hp.inliers);
-        out.push_back(evaluate(G));
+                                 [](const PlaceScan::FeaturePair& e, double x) { return e.horizontal < x; });
+      for (; it != table.end() && it->horizontal <= h + tol; ++it) {
+        // The table holds each pair once (a < b): i, k map onto a, b and onto b, a.
+        for (const int dir : {1, -1}) {
+          if (std::abs(static_cast<float>(dir) * it->dz - v.z()) > tol) continue;
+          const double yaw = it->angle + (dir > 0 ? 0.0 : M_PI) - aq;
+          Pose G = Pose::Identity();
+          G.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+          G.translation() = 0.5 * (gm_[it->a] + gm_[it->b]) - G.linear() * cq;
+          const std::size_t need = std::max<std::size_t>(3, (best_probe + 1) / 2);
+          const Hypothesis hp = evaluate(G, probe, need);
+          if (hp.inliers < need) continue;
+          best_probe = std::max(best_probe, hp.inliers);
+          out.push_back(evaluate(G));
+        }
       }
     }
   }
@@ -335,6 +338,7 @@ class Matcher {
   const PlaceParams& p_;
   Eigen::Matrix3d Rq_, Rm_;
   std::vector<Eigen::Vector3d> gq_, gm_;
+  std::vector<Eigen::Vector3f> gv_;  // upright query features in validation order
   double cell_ = 0.25;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   std::array<int, 3> dims_{0, 0, 0};
@@ -352,7 +356,153 @@ Eigen::Vector3d up_in_cloud(const PlaceScan& s) {
   return s.T_world_cloud.linear().transpose() * Eigen::Vector3d::UnitZ();
 }
 
+// Looks up the dense point of `to` nearest to x (cloud frame of `to`) among the pixels
+// around x's projection (±1 pixel); returns its index or -1.
+int nearest_dense(const PlaceScan& to, const Eigen::Isometry3f& T_sensor_cloud, const Eigen::Vector3f& x,
+                  float max_d2) {
+  const RangeImage& img = to.coarse;
+  float fx = 0, fy = 0, r = 0;
+  if (!img.project(T_sensor_cloud * x, fx, fy, r)) return -1;
+  const int xi = static_cast<int>(std::floor(fx)), yi = static_cast<int>(std::floor(fy));
+  int best = -1;
+  float bd = max_d2;
+  for (int dy = -1; dy <= 1; ++dy) {
+    const int yy = yi + dy;
+    if (yy < 0 || yy >= img.height) continue;
+    for (int dx = -1; dx <= 1; ++dx) {
+      const int xx = img.wrap_x(xi + dx);
+      if (xx < 0) continue;
+      const std::int32_t k = to.dense_index[img.index(xx, yy)];
+      if (k < 0) continue;
+      const float d2 = (to.dense_points[static_cast<std::size_t>(k)] - x).squaredNorm();
+      if (d2 < bd) {
+        bd = d2;
+        best = k;
+      }
+    }
+  }
+  return best;
+}
+
+Pose small_motion(const Eigen::Matrix<double, 6, 1>& xi) {
+  Pose D = Pose::Identity();
+  const Eigen::Vector3d w = xi.head<3>();
+  const double a = w.norm();
+  if (a > 0) D.linear() = Eigen::AngleAxisd(a, w / a).toRotationMatrix();
+  D.translation() = xi.tail<3>();
+  return D;
+}
+
 }  // namespace
+
+DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const Pose& T0, const PlaceParams& params) {
+  DenseAlignment out;
+  out.T_match_query = T0;
+  if (query.dense_points.empty() || match.dense_points.empty()) return out;
+  const Eigen::Isometry3f Sm = match.coarse.T_cloud_sensor.inverse().cast<float>();
+  const Eigen::Isometry3f Sq = query.coarse.T_cloud_sensor.inverse().cast<float>();
+  const std::size_t nq = query.dense_points.size(), nm = match.dense_points.size();
+  const std::size_t stride_q = std::max<std::size_t>(1, nq / static_cast<std::size_t>(params.dense_points));
+  const std::size_t stride_m = std::max<std::size_t>(1, nm / static_cast<std::size_t>(params.dense_points));
+  Pose T = T0;
+  double gate = params.dense_gate_start;
+  for (int it = 0; it < params.dense_iterations; ++it) {
+    Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> b = Eigen::Matrix<double, 6, 1>::Zero();
+    const Eigen::Isometry3f Tf = T.cast<float>();
+    const Eigen::Isometry3f Ti = T.inverse().cast<float>();
+    const auto g2 = static_cast<float>(gate * gate);
+    const double c = gate / 2.0;  // Cauchy weight scale
+    std::size_t used = 0;
+    double sq = 0;
+    auto add = [&](const Eigen::Vector3d& Jr, const Eigen::Vector3d& Jt, double e) {
+      Eigen::Matrix<double, 6, 1> J;
+      J << Jr, Jt;
+      const double w = 1.0 / (1.0 + (e * e) / (c * c));
+      A.noalias() += w * J * J.transpose();
+      b.noalias() += w * e * J;
+      ++used;
+      sq += e * e;
+    };
+    // Query points against the match's tangent planes.
+    for (std::size_t i = 0; i < nq; i += stride_q) {
+      const Eigen::Vector3f x = Tf * query.dense_points[i];
+      const int k = nearest_dense(match, Sm, x, g2);
+      if (k < 0) continue;
+      const Eigen::Vector3d n = match.dense_normals[static_cast<std::size_t>(k)].cast<double>();
+      const Eigen::Vector3d xd = x.cast<double>();
+      add(xd.cross(n), n, n.dot(xd - match.dense_points[static_cast<std::size_t>(k)].cast<double>()));
+    }
+    // Match points against the query's tangent planes (moved into the match frame).
+    for (std::size_t i = 0; i < nm; i += stride_m) {
+      const Eigen::Vector3f xm = match.dense_points[i];
+      const int k = nearest_dense(query, Sq, Ti * xm, g2);
+      if (k < 0) continue;
+      const auto ku = static_cast<std::size_t>(k);
+      const Eigen::Vector3d n = T.linear() * query.dense_normals[ku].cast<double>();
+      const Eigen::Vector3d y = T * query.dense_points[ku].cast<double>();
+      const Eigen::Vector3d xd = xm.cast<double>();
+      add(-xd.cross(n), -n, n.dot(xd - y));
+    }
+    out.used = used;
+    out.rms_m = used ? std::sqrt(sq / static_cast<double>(used)) : 0.0;
+    if (used < 12) return out;
+    A += 1e-6 * Eigen::Matrix<double, 6, 6>::Identity();
+    const Eigen::Matrix<double, 6, 1> xi = A.ldlt().solve(-b);
+    if (!xi.allFinite()) return out;
+    T = small_motion(xi) * T;
+    T.linear() = Eigen::Quaterniond(T.linear()).normalized().toRotationMatrix();
+    out.T_match_query = T;
+    out.iterations = it + 1;
+    gate = std::max(params.dense_gate_end, gate * 0.7);
+    if (xi.head<3>().norm() < 1e-5 && xi.tail<3>().norm() < 1e-4 && gate <= params.dense_gate_end) break;
+  }
+  return out;
+}
+
+DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from,
+                                   const PlaceParams& params) {
+  DenseConsistency out;
+  const RangeImage& img = to.coarse;
+  if (from.dense_points.empty() || img.empty()) return out;
+  const Eigen::Isometry3f T = (img.T_cloud_sensor.inverse() * T_to_from).cast<float>();
+  const auto dhat = static_cast<float>(params.max_range_difference);
+  const std::size_t n = from.dense_points.size();
+  const std::size_t stride = std::max<std::size_t>(1, n / static_cast<std::size_t>(params.dense_points));
+  for (std::size_t i = 0; i < n; i += stride) {
+    ++out.points;
+    const Eigen::Vector3f p = T * from.dense_points[i];
+    float fx = 0, fy = 0, r = 0;
+    if (!img.project(p, fx, fy, r)) continue;
+    const int xi = img.wrap_x(static_cast<int>(std::floor(fx))), yi = static_cast<int>(std::floor(fy));
+    if (xi < 0 || yi < 0 || yi >= img.height) continue;
+    const std::size_t ci = img.index(xi, yi);
+    if (img.state[ci] == PixelState::kUnobserved) continue;
+    bool support = false;
+    for (int dy = -1; dy <= 1 && !support; ++dy) {
+      const int yy = yi + dy;
+      if (yy < 0 || yy >= img.height) continue;
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xx = img.wrap_x(xi + dx);
+        if (xx < 0) continue;
+        const std::size_t j = img.index(xx, yy);
+        if (img.state[j] == PixelState::kValid && std::abs(img.range[j] - r) <= dhat) {
+          support = true;
+          break;
+        }
+      }
+    }
+    if (support) {
+      ++out.visible;
+      ++out.support;
+    } else if (img.state[ci] == PixelState::kMaxRange || img.range[ci] > r + dhat) {
+      ++out.visible;
+      ++out.conflict;  // the other scan's beam passed through this point
+    }
+    // else: occluded in the other scan, no evidence
+  }
+  return out;
+}
 
 double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from, const PlaceParams& params) {
   const RangeImage& img = to.coarse;
@@ -441,7 +591,23 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     if (better) out = m;
     first = false;
   }
+  out.T_feature = out.T_match_query;
+  if (out.valid && params.dense_iterations > 0) refine_match(query, candidate, out, params);
   return out;
+}
+
+void refine_match(const PlaceScan& query, const PlaceScan& candidate, PlaceMatch& m, const PlaceParams& params) {
+  if (!m.valid) return;
+  const DenseAlignment a = dense_align(query, candidate, m.T_feature, params);
+  m.dense_rms_m = a.rms_m;
+  m.dense_used = a.used;
+  m.T_match_query = a.T_match_query;
+  m.dense_q = dense_consistency(query, candidate, m.T_match_query, params);
+  m.dense_m = dense_consistency(candidate, query, m.T_match_query.inverse(), params);
+  m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
+  m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
+  m.score = std::min(m.score_query_in_match, m.score_match_in_query);
+  m.dense_refined = true;
 }
 
 }  // namespace lex3d

@@ -50,6 +50,12 @@ void PlaceParams::validate() const {
   check(max_tilt_deg >= 0.0 && max_tilt_deg <= 180.0, "PlaceParams::max_tilt_deg must be in [0, 180]");
   check(max_vertical_offset >= 0.0 && max_vertical_offset <= 100.0,
         "PlaceParams::max_vertical_offset must be in [0, 100] m");
+  check(dense_iterations >= 0 && dense_iterations <= 100, "PlaceParams::dense_iterations must be in [0, 100]");
+  check(dense_points >= 16 && dense_points <= 1000000, "PlaceParams::dense_points must be in [16, 1e6]");
+  check(dense_gate_start > 0.0 && dense_gate_start <= 10.0, "PlaceParams::dense_gate_start must be in (0, 10] m");
+  check(dense_gate_end > 0.0 && dense_gate_end <= dense_gate_start,
+        "PlaceParams::dense_gate_end must be in (0, dense_gate_start] m");
+  check(dense_candidates >= 1 && dense_candidates <= 1000000, "PlaceParams::dense_candidates must be in [1, 1e6]");
   check(threads >= 1 && threads <= 64, "PlaceParams::threads must be in [1, 64]");
 }
 
@@ -71,6 +77,27 @@ void finish_place_scan(PlaceScan& scan) {
   scan.descriptors.resize(scan.descriptor_codes.size());
   for (std::size_t i = 0; i < scan.descriptor_codes.size(); ++i)
     scan.descriptors[i] = dequantise_descriptor_value(scan.descriptor_codes[i], scan.descriptor_bits);
+  detail::make_dense_points(scan);
+  // Upright pair table.
+  scan.pairs.clear();
+  {
+    const Eigen::Matrix3f R = scan.has_world_pose ? Eigen::Matrix3f(scan.T_world_cloud.linear().cast<float>())
+                                                  : Eigen::Matrix3f::Identity();
+    std::vector<Eigen::Vector3f> g;
+    g.reserve(n);
+    for (const auto& f : scan.features) g.push_back(R * f.position);
+    const std::size_t np = std::min<std::size_t>(n, 65535);
+    for (std::size_t a = 0; a < np; ++a)
+      for (std::size_t b = a + 1; b < np; ++b) {
+        const Eigen::Vector3f v = g[b] - g[a];
+        const float h = std::hypot(v.x(), v.y());
+        if (h >= 1.0F)
+          scan.pairs.push_back({h, v.z(), std::atan2(v.y(), v.x()), static_cast<std::uint16_t>(a), static_cast<std::uint16_t>(b)});
+      }
+    std::sort(scan.pairs.begin(), scan.pairs.end(), [](const PlaceScan::FeaturePair& x, const PlaceScan::FeaturePair& y) {
+      return x.horizontal != y.horizontal ? x.horizontal < y.horizontal : (x.a != y.a ? x.a < y.a : x.b < y.b);
+    });
+  }
   // Farthest-point order: the strongest feature first, then always the feature
   // farthest from those chosen (ties: lower index).
   scan.validation.clear();
@@ -96,6 +123,59 @@ void finish_place_scan(PlaceScan& scan) {
     if (best == n) break;
     next = best;
   }
+}
+
+void make_dense_points(PlaceScan& scan) {
+  const RangeImage& c = scan.coarse;
+  scan.dense_points.clear();
+  scan.dense_normals.clear();
+  scan.dense_index.clear();
+  if (c.empty() || c.state.size() != static_cast<std::size_t>(c.width) * static_cast<std::size_t>(c.height) ||
+      c.range.size() != c.state.size() || c.row_edges.size() != static_cast<std::size_t>(c.height) + 1)
+    return;
+  // Sensor-frame points along the pixel-centre rays.
+  std::vector<Eigen::Vector3f> pts(c.state.size(), Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+  for (int y = 0; y < c.height; ++y)
+    for (int x = 0; x < c.width; ++x) {
+      const std::size_t i = c.index(x, y);
+      if (c.state[i] == PixelState::kValid) pts[i] = c.ray(x + 0.5, y + 0.5) * c.range[i];
+    }
+  // Normals from the neighbours left/right and up/down on the same surface: a neighbour
+  // counts when its range differs by at most what a surface inclined by 75 degrees to the
+  // ray gives across one pixel (tan 75° ≈ 3.7 pixel footprints), plus a quantisation step.
+  const auto px = static_cast<float>(std::max(c.azimuth_resolution_rad, c.elevation_resolution_rad));
+  scan.dense_index.assign(c.state.size(), -1);
+  const Eigen::Matrix3f R = c.T_cloud_sensor.linear().cast<float>();
+  const Eigen::Vector3f t = c.T_cloud_sensor.translation().cast<float>();
+  auto neighbour = [&](int x, int y, float r, Eigen::Vector3f& out) {
+    const int xx = c.wrap_x(x);
+    if (xx < 0 || y < 0 || y >= c.height) return false;
+    const std::size_t j = c.index(xx, y);
+    if (c.state[j] != PixelState::kValid) return false;
+    if (std::abs(c.range[j] - r) > 3.7F * px * r + 0.05F) return false;
+    out = pts[j];
+    return true;
+  };
+  for (int y = 0; y < c.height; ++y)
+    for (int x = 0; x < c.width; ++x) {
+      const std::size_t i = c.index(x, y);
+      if (c.state[i] != PixelState::kValid) continue;
+      const float r = c.range[i];
+      Eigen::Vector3f l, rr, u, d;
+      const bool hl = neighbour(x - 1, y, r, l), hr = neighbour(x + 1, y, r, rr);
+      const bool hu = neighbour(x, y - 1, r, u), hd = neighbour(x, y + 1, r, d);
+      if (!(hl || hr) || !(hu || hd)) continue;
+      const Eigen::Vector3f a = (hr ? rr : pts[i]) - (hl ? l : pts[i]);
+      const Eigen::Vector3f b = (hd ? d : pts[i]) - (hu ? u : pts[i]);
+      Eigen::Vector3f n = a.cross(b);
+      const float nn = n.norm();
+      if (!(nn > 0.0F)) continue;
+      n /= nn;
+      if (n.dot(pts[i]) > 0.0F) n = -n;  // towards the sensor
+      scan.dense_index[i] = static_cast<std::int32_t>(scan.dense_points.size());
+      scan.dense_points.push_back(R * pts[i] + t);
+      scan.dense_normals.push_back(R * n);
+    }
 }
 
 RangeImage make_coarse_image(const RangeImage& fine, const PlaceStorageParams& storage) {
