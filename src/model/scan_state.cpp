@@ -55,15 +55,6 @@ std::vector<PackedWord> pack(const Alphabet& alphabet) {
 #define LEX3D_CLONES
 #endif
 
-// d2[p] = squared distance from word point p to q.
-LEX3D_CLONES void distances_sq(const float* wx, const float* wy, const float* wz, std::size_t np, float qx, float qy,
-                               float qz, float* d2) {
-  for (std::size_t p = 0; p < np; ++p) {
-    const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
-    d2[p] = dx * dx + dy * dy + dz * dz;
-  }
-}
-
 // e^x for x in [-87, 0] (Cody-Waite reduction, the Cephes polynomial; relative error
 // about 2e-7), branch-free so that the loops calling it vectorise (the caller keeps x
 // in range: a clamp here would be a branch to the compiler).
@@ -122,29 +113,53 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
 }
 
-// Word choice by fit: marks in sup[] the word points within σ of some entry and
-// returns how many entries have a word point within σ. Entries farther than σ from the
-// word's bounding box are skipped (they can do neither).
-LEX3D_CLONES std::size_t fit_counts(const float* lx, const float* ly, const float* lz, const float* reach2,
-                                    std::size_t n, const float* wx, const float* wy, const float* wz, std::size_t np,
-                                    const float* lo, const float* hi, std::int32_t* sup) {
-  std::size_t explained = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    const float r2 = reach2[k] / 9.0F;  // σ²
-    const float qx = lx[k], qy = ly[k], qz = lz[k];
-    const float ox = std::max(std::max(lo[0] - qx, qx - hi[0]), 0.0F);
-    const float oy = std::max(std::max(lo[1] - qy, qy - hi[1]), 0.0F);
-    const float oz = std::max(std::max(lo[2] - qz, qz - hi[2]), 0.0F);
-    if (ox * ox + oy * oy + oz * oz > r2) continue;
-    std::int32_t hit = 0;
-    for (std::size_t p = 0; p < np; ++p) {
-      const float dx = wx[p] - qx, dy = wy[p] - qy, dz = wz[p] - qz;
-      const std::int32_t m = (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
-      hit |= m;
-      sup[p] |= m;
-    }
-    explained += static_cast<std::size_t>(hit);
+// For each of the npad word points (mx, my, mz), the first target strictly nearest
+// within reach (match -1 when none). Targets in the outer loop, word points inner, with
+// selects done on bits: the inner loop vectorises.
+LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, std::size_t nt, const float* mx,
+                                  const float* my, const float* mz, std::size_t npad, float reach2, float* best,
+                                  std::int32_t* match) {
+  for (std::size_t p = 0; p < npad; ++p) {
+    best[p] = reach2;
+    match[p] = -1;
   }
+  for (std::size_t t = 0; t < nt; ++t) {
+    const float x = tx[t], y = ty[t], z = tz[t];
+    const auto ti = static_cast<std::int32_t>(t);
+    for (std::size_t p = 0; p < npad; ++p) {
+      const float dx = x - mx[p], dy = y - my[p], dz = z - mz[p];
+      const float d2 = dx * dx + dy * dy + dz * dz;
+      const std::int32_t m = -static_cast<std::int32_t>(d2 < best[p]);
+      std::int32_t bb, db;
+      std::memcpy(&bb, &best[p], sizeof bb);
+      std::memcpy(&db, &d2, sizeof db);
+      bb = (bb & ~m) | (db & m);
+      std::memcpy(&best[p], &bb, sizeof bb);
+      match[p] = (match[p] & ~m) | (ti & m);
+    }
+  }
+}
+
+// Word choice by fit: sets sup[p] when word point p is within σ of some entry and
+// returns how many entries have a word point within σ (sig2: σ² of each entry). Word
+// points outside, entries inside, so the inner loop runs over many entries and vectorises.
+LEX3D_CLONES std::size_t fit_counts(const float* lx, const float* ly, const float* lz, const float* sig2, std::size_t n,
+                                    const float* wx, const float* wy, const float* wz, std::size_t np,
+                                    std::int32_t* hit, std::int32_t* sup) {
+  for (std::size_t k = 0; k < n; ++k) hit[k] = 0;
+  for (std::size_t p = 0; p < np; ++p) {
+    const float px = wx[p], py = wy[p], pz = wz[p];
+    std::int32_t any = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const float dx = px - lx[k], dy = py - ly[k], dz = pz - lz[k];
+      const std::int32_t m = (dx * dx + dy * dy + dz * dz <= sig2[k]) ? 1 : 0;
+      hit[k] |= m;
+      any |= m;
+    }
+    sup[p] = any;
+  }
+  std::size_t explained = 0;
+  for (std::size_t k = 0; k < n; ++k) explained += static_cast<std::size_t>(hit[k]);
   return explained;
 }
 
@@ -188,6 +203,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   lz_.resize(entries);
   reach2_e_.resize(entries);
   a_e_.resize(entries);
+  sig2_e_.resize(entries);
   cache_.assign(entries, 0.0F);
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
@@ -201,6 +217,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
       lz_[k] = q.z();
       reach2_e_[k] = reach2[j];
       a_e_[k] = inv_two_sigma2_[j];
+      sig2_e_[k] = reach2[j] / 9.0F;
       ++k;
     }
   }, 64);
@@ -411,11 +428,6 @@ Eigen::Isometry3f fit_pairs(const std::vector<Eigen::Vector3f>& word, const std:
 void ScanState::refine(const Alphabet& alphabet, int iterations, double max_distance, int threads) {
   if (iterations <= 0) return;
   const float reach2 = static_cast<float>(max_distance * max_distance);
-  // Each word point's candidate targets are those within reach + slack of where it
-  // started; while it has moved less than the slack, its nearest target within reach
-  // is among them (the others are farther than reach), so the search stays exact.
-  const float cand2 = 2.25F * reach2 * 1.0001F;      // (reach + slack)², slack = reach / 2
-  const float slack2 = 0.245F * reach2;              // a little under slack², for rounding
   const std::vector<PackedWord> packed = pack(alphabet);
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
@@ -434,9 +446,8 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // leaves room for the word to move).
     const float margin = 2.0F * static_cast<float>(max_distance);
     thread_local std::vector<Eigen::Vector3f> targets, moved;
-    thread_local std::vector<float> tx, ty, tz, d2;
+    thread_local std::vector<float> tx, ty, tz, mx, my, mz, best;
     thread_local std::vector<std::int32_t> match;
-    thread_local std::vector<std::uint32_t> cand, cand_off;
     targets.clear();
     tx.clear();
     ty.clear();
@@ -452,65 +463,23 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
       }
     }
     const std::size_t nt = targets.size();
-    // Candidate targets of each word point, in target order; the first round's
-    // matches come from the same full scan.
-    cand.resize(np * nt);
-    cand_off.assign(np + 1, 0);
-    match.assign(np, -1);
-    d2.resize(nt);
-    {
-      float* dd = d2.data();
-      std::uint32_t* cp = cand.data();
-      std::uint32_t count = 0;
-      for (std::size_t p = 0; p < np; ++p) {
-        distances_sq(tx.data(), ty.data(), tz.data(), nt, pw.x[p], pw.y[p], pw.z[p], dd);
-        float best = reach2;
-        std::int32_t m = -1;
-        for (std::size_t t = 0; t < nt; ++t) {
-          const float d = dd[t];
-          cp[count] = static_cast<std::uint32_t>(t);
-          count += d <= cand2 ? 1U : 0U;
-          if (d < best) {
-            best = d;
-            m = static_cast<std::int32_t>(t);
-          }
-        }
-        match[p] = m;
-        cand_off[p + 1] = count;
-      }
-    }
+    const std::size_t npad = pw.xp.size();
+    mx.assign(pw.xp.begin(), pw.xp.end());
+    my.assign(pw.yp.begin(), pw.yp.end());
+    mz.assign(pw.zp.begin(), pw.zp.end());
+    best.resize(npad);
+    match.resize(npad);
     moved.assign(word.points.begin(), word.points.end());
     for (int it = 0; it < iterations; ++it) {
-      if (it > 0) {
-        for (std::size_t p = 0; p < np; ++p) {
-          const float qx = moved[p].x(), qy = moved[p].y(), qz = moved[p].z();
-          float best = reach2;
-          std::int32_t m = -1;
-          if ((moved[p] - word.points[p]).squaredNorm() <= slack2) {
-            for (std::uint32_t c = cand_off[p]; c < cand_off[p + 1]; ++c) {
-              const std::uint32_t t = cand[c];
-              const float dx = tx[t] - qx, dy = ty[t] - qy, dz = tz[t] - qz;
-              const float d = dx * dx + dy * dy + dz * dz;
-              if (d < best) {
-                best = d;
-                m = static_cast<std::int32_t>(t);
-              }
-            }
-          } else {
-            for (std::size_t t = 0; t < nt; ++t) {
-              const float dx = tx[t] - qx, dy = ty[t] - qy, dz = tz[t] - qz;
-              const float d = dx * dx + dy * dy + dz * dz;
-              if (d < best) {
-                best = d;
-                m = static_cast<std::int32_t>(t);
-              }
-            }
-          }
-          match[p] = m;
-        }
-      }
+      nearest_targets(tx.data(), ty.data(), tz.data(), nt, mx.data(), my.data(), mz.data(), npad, reach2, best.data(),
+                      match.data());
       const Eigen::Isometry3f D = fit_pairs(moved, targets, match);
-      for (auto& p : moved) p = D * p;
+      for (std::size_t p = 0; p < np; ++p) {
+        moved[p] = D * moved[p];
+        mx[p] = moved[p].x();
+        my[p] = moved[p].y();
+        mz[p] = moved[p].z();
+      }
       total = D * total;
       // Converged: under 0.1 mm and 0.1 mrad.
       const float angle = Eigen::AngleAxisf(D.linear()).angle();
@@ -547,7 +516,7 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     const std::size_t f = active[i];
     // The k nearest words by descriptor (ties: lower id).
     thread_local std::vector<std::pair<float, std::uint32_t>> near;
-    thread_local std::vector<std::int32_t> supported;
+    thread_local std::vector<std::int32_t> supported, hits;
     near.clear();
     for (std::size_t w = 0; w < alphabet.size(); ++w)
       near.emplace_back(descriptor_distance_sq(scan_.features.descriptor(f), alphabet.words[w].descriptor.data(), dim),
@@ -563,11 +532,10 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
       const PackedWord& w = packed[near[c].second];
       const std::size_t np = w.size();
       supported.assign(np, 0);
-      std::int32_t* sup = supported.data();
-      const float lo[3] = {w.lo.x(), w.lo.y(), w.lo.z()};
-      const float hi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
-      const std::size_t explained = fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b,
-                                               e - b, w.x.data(), w.y.data(), w.z.data(), np, lo, hi, sup);
+      hits.resize(e - b);
+      const std::size_t explained = fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b,
+                                               w.x.data(), w.y.data(), w.z.data(), np, hits.data(), supported.data());
+      const std::int32_t* sup = supported.data();
       std::size_t unsupported = 0;
       for (std::size_t p = 0; p < np; ++p) unsupported += sup[p] ? 0 : 1;
       const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
