@@ -586,14 +586,14 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
   return out;
 }
 
-Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet) {
+Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet, const codec::Quantization& q) {
   // The instances as the decoder will see them: quantised by a round trip through the codec.
   codec::ModelData words_only;
   words_only.input_points = data.input_points;
   words_only.T_cloud_sensor = data.T_cloud_sensor;
   words_only.model = data.model;
   words_only.alphabet = alphabet;  // embedded so that the round trip needs no file
-  auto decoded = codec::decode_model(codec::encode_model(words_only));
+  auto decoded = codec::decode_model(codec::encode_model(words_only, q));
   if (!decoded.ok()) throw std::logic_error("residual layer: the model does not round-trip: " + decoded.status().to_string());
   codec::ModelData placed = std::move(decoded).value();
   placed.alphabet = alphabet;
@@ -601,8 +601,8 @@ Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet)
 }
 
 LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error,
-                     const LayerOptions& options) {
-  const Cloud words = decoder_word_cloud(data, alphabet);
+                     const LayerOptions& options, const codec::Quantization& q) {
+  const Cloud words = decoder_word_cloud(data, alphabet, q);
   LayerStats stats;
   data.residual = encode_layer(input, words, data.T_cloud_sensor, max_error, &stats, options);
   return stats;

@@ -74,16 +74,19 @@ struct LayerStats {
 /// The word reconstruction the decoder of `data` will compute, with `alphabet` exactly as
 /// the decoder will see it (decoded from its file: for a learned alphabet,
 /// `decode_alphabet(encode_alphabet(a))`): the instances are quantised as `encode_model`
-/// stores them, then placed (`word_cloud`). `data.alphabet` is not used.
-[[nodiscard]] Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet);
+/// stores them with steps `q` (those the file will be written with), then placed
+/// (`word_cloud`). `data.alphabet` is not used.
+[[nodiscard]] Cloud decoder_word_cloud(const codec::ModelData& data, const Alphabet& alphabet,
+                                       const codec::Quantization& q = {});
 
 /// Adds a residual layer of bound `max_error` to `data` for the scan `input`. `alphabet`
 /// must be the alphabet exactly as the decoder will see it (decoded from its file: for a
 /// learned one, `decode_alphabet(encode_alphabet(a))`). The instances are quantised as
 /// `encode_model` stores them, reconstructed, and the layer coded against that
-/// reconstruction. Replaces any layer `data` had.
+/// reconstruction. `q`: the steps the file will be written with. Replaces any layer
+/// `data` had.
 LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Cloud& input, double max_error,
-                     const LayerOptions& options = {});
+                     const LayerOptions& options = {}, const codec::Quantization& q = {});
 
 /// Rate control: the smallest error bound in [kMinMaxError, kMaxMaxError] whose coded size
 /// `size_of(E)` fits `target_bytes`, by bisection on log E until the bracket is narrower
