@@ -455,7 +455,8 @@ DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const
     out.T_match_query = T;
     out.iterations = it + 1;
     gate = std::max(params.dense_gate_end, gate * 0.7);
-    if (xi.head<3>().norm() < 1e-5 && xi.tail<3>().norm() < 1e-4 && gate <= params.dense_gate_end) break;
+    // Converged: a step under 0.01 degrees and 1 mm once the gate is at its end.
+    if (xi.head<3>().norm() < 1.7e-4 && xi.tail<3>().norm() < 1e-3 && gate <= params.dense_gate_end) break;
   }
   return out;
 }

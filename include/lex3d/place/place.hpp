@@ -7,7 +7,9 @@
 /// frame, quantised descriptor) for correspondences, and a coarse, quantised range
 /// image for scoring candidate transforms. A PlaceDatabase holds PlaceScans, retrieves
 /// the top-K by tf-idf similarity through an inverted index, and verifies each with
-/// RANSAC over feature correspondences and steder2010's validation-point score.
+/// RANSAC over feature correspondences and steder2010's validation-point score. The best
+/// few candidates are then aligned densely (point-to-plane ICP of the points of both
+/// coarse images, projective association) and scored again at the aligned transform.
 ///
 /// Transforms: a match carries T_match_query, which maps a point from the query scan's
 /// cloud frame into the matched scan's cloud frame. With world <- sensor poses T_q and
