@@ -542,6 +542,7 @@ void register_place(CLI::App& app) {
     s->add_option("--dense-points", o->params.dense_points, "Dense points a scan at most")->check(CLI::Range(16, 1000000));
     s->add_option("--dense-candidates", o->params.dense_candidates, "Candidates aligned densely")->check(CLI::Range(1, 1000000));
     s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
+    s->add_option("--validation-points", o->params.validation_points, "Validation points a scan (steder2010: 100)")->check(CLI::Range(1, 4096));
     s->add_option("--threads", o->params.threads, "Worker threads of a query")->check(CLI::Range(1, 64));
   };
   CLI::App* query = sub->add_subcommand("query", "Find a scan's place in a database");
