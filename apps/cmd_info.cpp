@@ -4,13 +4,15 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <cstdio>
+#include <cstring>
 #include <iostream>
+#include <optional>
 
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
+#include "lex3d/residual/residual.hpp"
 #include "lex3d/range/range_image.hpp"
 
 namespace lex3d::cli {
@@ -94,6 +96,16 @@ bool info_lex3d_file(const InfoOptions& o) {
       decode_error = m.status().to_string();
     }
   }
+  // The residual layer's header, read from its (CRC-checked) chunk.
+  std::optional<residual::LayerHeader> layer;
+  std::uint64_t layer_bytes = 0;
+  if (fi.kind == "model")
+    for (const auto& c : fi.chunks)
+      if (c.type == "RESD" && c.crc_ok) {
+        auto h = residual::read_layer_header(b.data() + c.offset + 12, static_cast<std::size_t>(c.length));
+        if (h.ok()) layer = h.value();
+        layer_bytes = c.length;
+      }
   const double bpp = input_points ? 8.0 * static_cast<double>(b.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {
     Json j;
@@ -109,6 +121,14 @@ bool info_lex3d_file(const InfoOptions& o) {
     if (fi.kind != "alphabet") j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
     j.value("words", words).value("word_points", word_points);
     if (referenced) j.value("alphabet", "referenced");
+    if (layer)
+      j.begin_object("residual")
+          .value("max_error_m", layer->max_error)
+          .value("step_m", layer->step)
+          .value("word_points", layer->word_points)
+          .value("coded_points", layer->coded_points)
+          .value("bytes", layer_bytes)
+          .end_object();
     if (!decode_error.empty()) j.value("error", decode_error);
     j.end_object();
     std::cout << j.str() << "\n";
@@ -125,6 +145,10 @@ bool info_lex3d_file(const InfoOptions& o) {
       std::printf("instances      %zu\n", instances);
       std::printf("input points   %llu (%.3f bits per point)\n", static_cast<unsigned long long>(input_points), bpp);
       if (referenced) std::printf("alphabet       referenced by hash (external file)\n");
+      if (layer)
+        std::printf("residual layer max error %.4g m (step %.4g m), %llu coded points, a keep mask over %llu word points, %llu bytes\n",
+                    layer->max_error, layer->step, static_cast<unsigned long long>(layer->coded_points),
+                    static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
     }
     if (words) std::printf("words          %zu (%zu points)\n", words, word_points);
     if (!decode_error.empty()) std::printf("error          %s\n", decode_error.c_str());

@@ -318,15 +318,15 @@ struct PointModels {
 /// number of escaped points.
 std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                       const std::vector<std::uint32_t>& order, const Pose& T_cloud_sensor,
-                                      const Pose& T_sensor_cloud, double q, double max_error, std::size_t& escaped,
+                                      const Pose& T_sensor_cloud, double q, double bound, std::size_t& escaped,
                                       std::size_t& coded_count, bool thin) {
   PointModels m;
   Predictor pr;
   escaped = 0;
   coded_count = 0;
-  const double e2 = max_error * max_error;
+  const double e2 = bound * bound;  // E' of formats/model.md §2.5.4
   // Thinning: the points decoded so far, to skip an input point one of them already explains.
-  DecodedGrid seen(max_error, thin ? order.size() : 0);
+  DecodedGrid seen(bound, thin ? order.size() : 0);
   auto remember = [&](const Eigen::Vector3f& d) {
     if (thin) seen.insert(d);
   };
@@ -382,7 +382,7 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     const Eigen::Vector3f back_f = to_cloud_frame(T_cloud_sensor, d);
     remember(back_f);
     if ((back_f.cast<double>() - truth_cloud).squaredNorm() > e2)
-      throw std::invalid_argument("residual layer: a max error of " + std::to_string(max_error) +
+      throw std::invalid_argument("residual layer: an error bound of " + std::to_string(bound) +
                                   " m is below the float32 precision of a point's coordinates");
     pr.last_escaped = true;
     pr.update(d, to_spherical(d));
@@ -437,6 +437,11 @@ std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, 
 
 }  // namespace
 
+StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size) {
+  if (size < kHeadBytes) return bad_data("residual layer is " + std::to_string(size) + " bytes, at least 32 expected", 0);
+  return LayerHeader{ld_f64(payload), ld_f64(payload + 8), ld_u64(payload + 16), ld_u64(payload + 24)};
+}
+
 Cloud word_cloud(const codec::ModelData& data) {
   if (!data.alphabet) throw std::invalid_argument("word_cloud: the model data has no alphabet");
   Cloud c = reconstruct(data.model, *data.alphabet, data.alphabet->point_spacing).cloud;
@@ -453,18 +458,31 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   if (n_in > 0xFFFFFFF0U || n_w > 0xFFFFFFF0U) throw std::invalid_argument("residual layer: too many points");
   const int threads = std::max(1, options.threads);
 
+  // Every decision below uses E less a margin (check_error), so that a decoder whose
+  // floating-point results differ from this machine's in the last bits (another libm, fused
+  // multiply-adds) still meets E: 1e-5 of E plus two float32 ulps of the largest coordinate.
+  float extent = 0.0F;
+  for (const auto& p : input.points) extent = std::max(extent, p.cwiseAbs().maxCoeff());
+  for (const auto& p : words.points) extent = std::max(extent, p.cwiseAbs().maxCoeff());
+  extent = std::max(extent, static_cast<float>(T_cloud_sensor.translation().cwiseAbs().maxCoeff()));
+  const double check_error = max_error * (1.0 - 1e-5) - 2.5e-7 * static_cast<double>(extent);
+  if (!(check_error > 0.5 * max_error))
+    throw std::invalid_argument("residual layer: a max error of " + std::to_string(max_error) +
+                                " m is below the float32 resolution of coordinates as large as " +
+                                std::to_string(extent) + " m");
+
   // Kept word points: an input point within E. Explained input points: a kept word point within E.
   std::vector<std::uint8_t> keep(n_w, 0), explained(n_in, 0);
   if (n_w > 0 && n_in > 0) {
     std::vector<std::uint32_t> all_in(n_in);
     std::iota(all_in.begin(), all_in.end(), 0U);
-    const BallGrid input_grid(input.points, all_in, max_error);
+    const BallGrid input_grid(input.points, all_in, check_error);
     parallel_for(n_w, threads, [&](std::size_t i) { keep[i] = input_grid.any_within(words.points[i]) ? 1 : 0; }, 4096);
     std::vector<std::uint32_t> kept;
     for (std::size_t i = 0; i < n_w; ++i)
       if (keep[i]) kept.push_back(static_cast<std::uint32_t>(i));
     if (!kept.empty()) {
-      const BallGrid word_grid(words.points, kept, max_error);
+      const BallGrid word_grid(words.points, kept, check_error);
       parallel_for(n_in, threads, [&](std::size_t i) { explained[i] = word_grid.any_within(input.points[i]) ? 1 : 0; }, 4096);
     }
   }
@@ -497,8 +515,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::vector<std::uint8_t> by_rows, by_input;
   const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
   parallel_for(2, threads, [&](std::size_t which) {
-    if (which == 0) by_rows = code_points(head, input.points, rows, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_rows, n_rows, thin);
-    else by_input = code_points(head, input.points, coded, T_cloud_sensor, T_sensor_cloud, q, max_error, esc_input, n_input, thin);
+    if (which == 0) by_rows = code_points(head, input.points, rows, T_cloud_sensor, T_sensor_cloud, q, check_error, esc_rows, n_rows, thin);
+    else by_input = code_points(head, input.points, coded, T_cloud_sensor, T_sensor_cloud, q, check_error, esc_input, n_input, thin);
   }, 1);
   const bool rows_win = by_rows.size() <= by_input.size();
   std::vector<std::uint8_t>& stream = rows_win ? by_rows : by_input;

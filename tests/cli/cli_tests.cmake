@@ -147,6 +147,8 @@ run(1 compress.overwrite compress "${NC}" -o "${NC}")
 # --- the residual layer: --max-error, --target-bpp, --words ---
 run(0 compress.layer compress "${NC}" -o "${WORK}/nc_e.lex3dm" --max-error 0.02 --words off --json)
 expect_match(compress.layer "${LAST_OUT}" "\"max_error_m\":0\\.02")
+run(0 info.layer info "${WORK}/nc_e.lex3dm")
+expect_match(info.layer "${LAST_OUT}" "residual layer max error 0\\.02 m")
 run(0 decompress.layer decompress "${WORK}/nc_e.lex3dm" -o "${WORK}/nc_e.ply" --reference "${NC}" --json)
 expect_match(decompress.layer "${LAST_OUT}" "\"residual_layer\":true")
 # The bound holds both ways: the Hausdorff distance is at most 2 cm (printed as 0.0nnn).

@@ -50,6 +50,16 @@ struct LayerStats {
   std::size_t bytes = 0;               ///< payload bytes of the layer
 };
 
+/// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5).
+struct LayerHeader {
+  double max_error = 0.0;          ///< E, metres
+  double step = 0.0;               ///< q, metres
+  std::uint64_t word_points = 0;   ///< reconstruction points the keep mask covers
+  std::uint64_t coded_points = 0;  ///< points coded by the layer
+};
+/// Reads the header of a residual payload (no checks beyond its length).
+[[nodiscard]] StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size);
+
 /// The word reconstruction a decoder of `data` computes: the instances placed and
 /// thinned to the alphabet's point spacing (`reconstruct`), in the model's frame.
 /// `data.alphabet` must be set (decode_model sets it).
