@@ -189,7 +189,7 @@ def plot(summary, targets, out_dir):
         ax.set_xscale("log")
         ax.set_xlabel("bits per input point (log)")
         ax.set_ylabel("D1 PSNR, dB (peak 59.70 m, symmetric)")
-        ax.set_title(f"{ds}: median over scans; open markers: PCL profiles", fontsize=10)
+        ax.set_title(f"{ds}: median over scans; open markers: PCL profiles, lex3d word-only", fontsize=10)
         ax.grid(True, which="both", linewidth=0.3)
         ax.legend(fontsize=8, loc="lower right")
         path = os.path.join(out_dir, f"rd_{ds}.png")
