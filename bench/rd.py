@@ -25,7 +25,8 @@ Codecs and settings:
                each scan compressed with --alphabet; the alphabet file's bytes are shared
                out equally over the dataset's scans in this run
   Both lex3d modes are word-only unless `lex3d compress --help` lists --max-error; then
-  lex3d-seq sweeps LEX3D_E and lex3d sweeps LEX3D_OWN_E (and word-only for both).
+  lex3d sweeps LEX3D_E with the residual layer alone (lex3d's default with --max-error) and
+  lex3d-seq sweeps LEX3D_SEQ_E with words + layer (--words on); both also run word-only.
 
 Times: encode_ms / decode_ms are what each codec reports about itself (Draco's "ms to
 encode/decode", the bench tools' timers around PCL's / OctoMap's calls, lex3d compress's
@@ -51,7 +52,7 @@ PCL_PROFILES = ["LOW_RES_ONLINE", "MED_RES_ONLINE", "HIGH_RES_ONLINE",
 PCL_RES = [0.002, 0.005, 0.01, 0.02, 0.05, 0.1]
 OCTOMAP_RES = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2]
 LEX3D_E = [0.005, 0.008, 0.012, 0.02, 0.035, 0.1]
-LEX3D_OWN_E = [0.02]
+LEX3D_SEQ_E = [0.02, 0.1]
 LEARN_SCANS = 4
 
 
@@ -234,13 +235,18 @@ class Bench:
 
         fmt_args = ["--format", fmt] if fmt else []
         stream, decoded = os.path.join(w, "l.lex3dm"), os.path.join(w, "l.ply")
-        own_e = [None] + (env_list("RD_LEX3D_OWN_E", LEX3D_OWN_E) if self.has_max_error else [])
-        seq_e = [None] + (env_list("RD_LEX3D_E", LEX3D_E) if self.has_max_error else [])
+        # lex3d: words alone (alphabet learned on the scan, embedded), then the residual layer
+        # alone (the default with --max-error). lex3d-seq: the dataset's shared alphabet, words
+        # alone and words + layer (--words on), its bytes shared by the scans of the run.
+        own_e = [None] + (env_list("RD_LEX3D_E", LEX3D_E) if self.has_max_error else [])
+        seq_e = [None] + (env_list("RD_LEX3D_SEQ_E", LEX3D_SEQ_E) if self.has_max_error else [])
         for mode, es in (("lex3d", own_e), ("lex3d-seq", seq_e)):
             if mode == "lex3d-seq" and alphabet is None:
                 continue
             for e in es:
                 e_args = ["--max-error", e] if e is not None else []
+                if e is not None and mode == "lex3d-seq":
+                    e_args += ["--words", "on"]
                 a_args = ["--alphabet", alphabet["path"]] if mode == "lex3d-seq" else []
 
                 def parse_enc(out, err, e=e):
