@@ -157,7 +157,8 @@ void patch_descriptor(const RangeImage& img, const Keypoint& kp, const Eigen::Ma
   const float rad = static_cast<float>(params.support_radius);
   const float inv_cell = static_cast<float>(s) / (2.0F * rad);
   const float kEmpty = -std::numeric_limits<float>::infinity();
-  std::vector<float> depth(static_cast<std::size_t>(s * s), kEmpty);
+  thread_local std::vector<float> depth, next;
+  depth.assign(static_cast<std::size_t>(s * s), kEmpty);
   const Eigen::Matrix3f Rt = R.transpose();
   const Eigen::Vector3f p = kp.point_sensor;
   for_window(img, kp, params.support_radius * std::sqrt(3.0), s, [&](const Eigen::Vector3f& q) {
@@ -171,7 +172,7 @@ void patch_descriptor(const RangeImage& img, const Keypoint& kp, const Eigen::Ma
   // Interpolate small holes from filled neighbours (two passes); what stays empty
   // is "nothing seen within the support" and gets the far value -radius.
   for (int pass = 0; pass < 2; ++pass) {
-    std::vector<float> next = depth;
+    next = depth;
     for (int y = 0; y < s; ++y)
       for (int x = 0; x < s; ++x) {
         if (depth[static_cast<std::size_t>(y * s + x)] != kEmpty) continue;

@@ -99,6 +99,10 @@ struct RangeImage {
   /// Wraps a column index around for 360° images; returns -1 when off a partial image.
   [[nodiscard]] int wrap_x(int x) const noexcept {
     if (full_circle) {
+      // Windows reach at most one turn past either edge: no division needed then.
+      if (x >= 0 && x < width) return x;
+      if (x < 0 && x >= -width) return x + width;
+      if (x >= width && x < 2 * width) return x - width;
       x %= width;
       return x < 0 ? x + width : x;
     }
