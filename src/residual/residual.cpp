@@ -46,6 +46,8 @@ constexpr double kStepShare = 0.95;
 constexpr double kMaxAzimuthStep = 0.05;
 /// Smallest |cos(elevation)| the azimuth step divides by (about 89.1 degrees).
 constexpr double kMinCosElevation = 1.0 / 64.0;
+/// Points of the window on which the two coding orders are compared (encoder only).
+constexpr std::size_t kOrderTrialPoints = 8192;
 /// Largest |residual| coded, in steps.
 constexpr double kMaxSteps = 1073741824.0;  // 2^30
 /// A decoder accepts at most this many coded points per payload byte (each point costs
@@ -510,15 +512,38 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const auto res = estimate_angular_resolution(sensor_frame);
   const double row_height = res && res->elevation_rad > 0.0 ? 0.5 * res->elevation_rad : 0.5 * kPi / 180.0;
 
-  std::size_t esc_rows = 0, esc_input = 0, n_rows = 0, n_input = 0;
+  // Row order or input order: on a large layer, both code a window from the middle of the
+  // sequence and only the smaller is coded in full; a small layer is coded both ways.
   const bool thin = options.thin;
-  std::vector<std::uint8_t> by_rows, by_input;
   const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
-  parallel_for(2, threads, [&](std::size_t which) {
-    if (which == 0) by_rows = code_points(head, input.points, rows, T_cloud_sensor, T_sensor_cloud, q, check_error, esc_rows, n_rows, thin);
-    else by_input = code_points(head, input.points, coded, T_cloud_sensor, T_sensor_cloud, q, check_error, esc_input, n_input, thin);
-  }, 1);
-  const bool rows_win = by_rows.size() <= by_input.size();
+  auto code = [&](const std::vector<std::uint32_t>& order, std::size_t& escaped, std::size_t& count) {
+    return code_points(head, input.points, order, T_cloud_sensor, T_sensor_cloud, q, check_error, escaped, count, thin);
+  };
+  std::size_t esc_rows = 0, esc_input = 0, n_rows = 0, n_input = 0;
+  std::vector<std::uint8_t> by_rows, by_input;
+  bool rows_win = true;
+  if (coded.size() > 4 * kOrderTrialPoints) {
+    const auto window = [&](const std::vector<std::uint32_t>& order) {
+      const std::size_t begin = order.size() / 2 - kOrderTrialPoints / 2;
+      return std::vector<std::uint32_t>(order.begin() + static_cast<std::ptrdiff_t>(begin),
+                                        order.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
+    };
+    std::size_t trial_rows = 0, trial_input = 0;
+    parallel_for(2, threads, [&](std::size_t which) {
+      std::size_t e = 0, n = 0;
+      if (which == 0) trial_rows = code(window(rows), e, n).size();
+      else trial_input = code(window(coded), e, n).size();
+    }, 1);
+    rows_win = trial_rows <= trial_input;
+    if (rows_win) by_rows = code(rows, esc_rows, n_rows);
+    else by_input = code(coded, esc_input, n_input);
+  } else {
+    parallel_for(2, threads, [&](std::size_t which) {
+      if (which == 0) by_rows = code(rows, esc_rows, n_rows);
+      else by_input = code(coded, esc_input, n_input);
+    }, 1);
+    rows_win = by_rows.size() <= by_input.size();
+  }
   std::vector<std::uint8_t>& stream = rows_win ? by_rows : by_input;
 
   std::vector<std::uint8_t> out;
