@@ -10,3 +10,6 @@ mkdir -p out
 "$BUILD_DIR/lex3d" compress "$SCAN" -o out/kitti00_000000.lex3dm
 "$BUILD_DIR/lex3d" info out/kitti00_000000.lex3dm
 "$BUILD_DIR/lex3d" decompress out/kitti00_000000.lex3dm -o out/kitti00_000000_decoded.ply --reference "$SCAN"
+# The same scan with a residual layer: every point within 14 mm, both ways.
+"$BUILD_DIR/lex3d" compress "$SCAN" -o out/kitti00_000000_e14mm.lex3dm --max-error 0.014
+"$BUILD_DIR/lex3d" decompress out/kitti00_000000_e14mm.lex3dm -o out/kitti00_000000_e14mm.ply --reference "$SCAN"
