@@ -512,8 +512,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const auto res = estimate_angular_resolution(sensor_frame);
   const double row_height = res && res->elevation_rad > 0.0 ? 0.5 * res->elevation_rad : 0.5 * kPi / 180.0;
 
-  // Row order or input order: on a large layer, both code a window from the middle of the
-  // sequence and only the smaller is coded in full; a small layer is coded both ways.
+  // Row order or input order: on a large layer, a window of consecutive input points is
+  // coded both ways and only the winner is coded in full; a small layer is coded both ways.
   const bool thin = options.thin;
   const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
   auto code = [&](const std::vector<std::uint32_t>& order, std::size_t& escaped, std::size_t& count) {
@@ -523,16 +523,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::vector<std::uint8_t> by_rows, by_input;
   bool rows_win = true;
   if (coded.size() > 4 * kOrderTrialPoints) {
-    const auto window = [&](const std::vector<std::uint32_t>& order) {
-      const std::size_t begin = order.size() / 2 - kOrderTrialPoints / 2;
-      return std::vector<std::uint32_t>(order.begin() + static_cast<std::ptrdiff_t>(begin),
-                                        order.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
-    };
+    // The same points both ways: a window of consecutive input points, and those points
+    // sorted into rows.
+    const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
+    const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
+                                            coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
     std::size_t trial_rows = 0, trial_input = 0;
     parallel_for(2, threads, [&](std::size_t which) {
       std::size_t e = 0, n = 0;
-      if (which == 0) trial_rows = code(window(rows), e, n).size();
-      else trial_input = code(window(coded), e, n).size();
+      if (which == 0) trial_rows = code(row_order(input.points, window, T_sensor_cloud, row_height), e, n).size();
+      else trial_input = code(window, e, n).size();
     }, 1);
     rows_win = trial_rows <= trial_input;
     if (rows_win) by_rows = code(rows, esc_rows, n_rows);
