@@ -19,7 +19,6 @@
 #include <functional>
 #include <optional>
 #include <limits>
-#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -55,104 +54,15 @@ constexpr double kMaxSteps = 1073741824.0;  // 2^30
 constexpr std::uint64_t kMaxPointsPerByte = 200;
 
 // ---------------------------------------------------------------------------------------
-// Fixed-radius existence queries: a hash grid with cells 2E wide, so the ball of radius E
-// around any point meets at most 2x2x2 cells.
+// Fixed-radius existence queries
 // ---------------------------------------------------------------------------------------
 
-class BallGrid {
+/// A growing set of points answering "is any within the radius of p?": cells twice the
+/// radius wide, so the ball around any point meets at most 2x2x2 cells, in an
+/// open-addressing table, the points of a cell chained through `next_`.
+class PointBallGrid {
  public:
-  BallGrid(const std::vector<Eigen::Vector3f>& points, const std::vector<std::uint32_t>& members, double radius)
-      : points_(points), radius_(radius), inv_cell_(1.0 / (2.0 * radius)) {
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed;
-    keyed.reserve(members.size());
-    for (std::uint32_t i : members) keyed.emplace_back(key(cell_of(points[i])), i);
-    std::sort(keyed.begin(), keyed.end());
-    order_.resize(keyed.size());
-    std::size_t cells = 0;
-    for (std::size_t i = 0; i < keyed.size(); ++i) {
-      order_[i] = keyed[i].second;
-      if (i == 0 || keyed[i].first != keyed[i - 1].first) ++cells;
-    }
-    std::size_t cap = 16;
-    while (cap < 2 * cells) cap <<= 1;
-    slots_.assign(cap, Slot{});
-    mask_ = cap - 1;
-    for (std::size_t i = 0; i < keyed.size();) {
-      std::size_t j = i;
-      while (j < keyed.size() && keyed[j].first == keyed[i].first) ++j;
-      std::size_t s = hash(keyed[i].first) & mask_;
-      while (slots_[s].end != 0) s = (s + 1) & mask_;
-      slots_[s] = Slot{keyed[i].first, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j)};
-      i = j;
-    }
-  }
-
-  /// Whether some member lies within the radius of `p` (distances in double).
-  [[nodiscard]] bool any_within(const Eigen::Vector3f& p) const {
-    const double r2 = radius_ * radius_;
-    const Eigen::Vector3d pd = p.cast<double>();
-    std::int64_t base[3], step[3];
-    for (int a = 0; a < 3; ++a) {
-      const double c = pd[a] * inv_cell_;
-      base[a] = static_cast<std::int64_t>(std::floor(c));
-      step[a] = (c - static_cast<double>(base[a]) < 0.5) ? -1 : 1;
-    }
-    for (int dx = 0; dx < 2; ++dx)
-      for (int dy = 0; dy < 2; ++dy)
-        for (int dz = 0; dz < 2; ++dz) {
-          const Slot* s = find(key({base[0] + dx * step[0], base[1] + dy * step[1], base[2] + dz * step[2]}));
-          if (s == nullptr) continue;
-          for (std::uint32_t k = s->begin; k < s->end; ++k)
-            if ((points_[order_[k]].cast<double>() - pd).squaredNorm() <= r2) return true;
-        }
-    return false;
-  }
-
- private:
-  struct Slot {
-    std::uint64_t key = 0;
-    std::uint32_t begin = 0;
-    std::uint32_t end = 0;  // 0 marks an empty slot (a used slot holds >= 1 point)
-  };
-  struct Cell {
-    std::int64_t x, y, z;
-  };
-  [[nodiscard]] Cell cell_of(const Eigen::Vector3f& p) const {
-    return {static_cast<std::int64_t>(std::floor(p.x() * inv_cell_)), static_cast<std::int64_t>(std::floor(p.y() * inv_cell_)),
-            static_cast<std::int64_t>(std::floor(p.z() * inv_cell_))};
-  }
-  static std::uint64_t key(const Cell& c) {
-    const auto f = [](std::int64_t v) { return static_cast<std::uint64_t>(v) & 0x1FFFFFU; };
-    return f(c.x) | (f(c.y) << 21) | (f(c.z) << 42);
-  }
-  static std::uint64_t hash(std::uint64_t k) {
-    k ^= k >> 33;
-    k *= 0xff51afd7ed558ccdULL;
-    k ^= k >> 33;
-    return k;
-  }
-  [[nodiscard]] const Slot* find(std::uint64_t k) const {
-    std::size_t s = hash(k) & mask_;
-    while (slots_[s].end != 0) {
-      if (slots_[s].key == k) return &slots_[s];
-      s = (s + 1) & mask_;
-    }
-    return nullptr;
-  }
-
-  const std::vector<Eigen::Vector3f>& points_;
-  double radius_;
-  double inv_cell_;
-  std::vector<std::uint32_t> order_;
-  std::vector<Slot> slots_;
-  std::size_t mask_ = 0;
-};
-
-/// A growing set of points with the same fixed-radius query as BallGrid: cells 2E wide in
-/// an open-addressing table, points of a cell chained through `next_`.
-class DecodedGrid {
- public:
-  DecodedGrid(double radius, std::size_t expected) : radius_(radius), inv_cell_(1.0 / (2.0 * radius)) {
+  PointBallGrid(double radius, std::size_t expected) : radius_(radius), inv_cell_(1.0 / (2.0 * radius)) {
     std::size_t cap = 64;
     while (cap < 2 * expected) cap <<= 1;
     keys_.assign(cap, 0);
@@ -328,7 +238,7 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
   coded_count = 0;
   const double e2 = bound * bound;  // E' of formats/model.md §2.5.4
   // Thinning: the points decoded so far, to skip an input point one of them already explains.
-  DecodedGrid seen(bound, thin ? order.size() : 0);
+  PointBallGrid seen(bound, thin ? order.size() : 0);
   auto remember = [&](const Eigen::Vector3f& d) {
     if (thin) seen.insert(d);
   };
@@ -476,16 +386,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // Kept word points: an input point within E. Explained input points: a kept word point within E.
   std::vector<std::uint8_t> keep(n_w, 0), explained(n_in, 0);
   if (n_w > 0 && n_in > 0) {
-    std::vector<std::uint32_t> all_in(n_in);
-    std::iota(all_in.begin(), all_in.end(), 0U);
-    const BallGrid input_grid(input.points, all_in, check_error);
-    parallel_for(n_w, threads, [&](std::size_t i) { keep[i] = input_grid.any_within(words.points[i]) ? 1 : 0; }, 4096);
+    PointBallGrid input_grid(check_error, n_in);
+    for (const auto& p : input.points) input_grid.insert(p);
+    parallel_for(n_w, threads, [&](std::size_t i) { keep[i] = input_grid.any_within(words.points[i].cast<double>()) ? 1 : 0; }, 4096);
     std::vector<std::uint32_t> kept;
     for (std::size_t i = 0; i < n_w; ++i)
       if (keep[i]) kept.push_back(static_cast<std::uint32_t>(i));
     if (!kept.empty()) {
-      const BallGrid word_grid(words.points, kept, check_error);
-      parallel_for(n_in, threads, [&](std::size_t i) { explained[i] = word_grid.any_within(input.points[i]) ? 1 : 0; }, 4096);
+      PointBallGrid word_grid(check_error, kept.size());
+      for (std::uint32_t i : kept) word_grid.insert(words.points[i]);
+      parallel_for(n_in, threads, [&](std::size_t i) { explained[i] = word_grid.any_within(input.points[i].cast<double>()) ? 1 : 0; }, 4096);
     }
   }
   std::vector<std::uint32_t> coded;
