@@ -276,6 +276,18 @@ Status frame_chunk(const std::uint8_t* d, std::size_t size, std::size_t pos, con
   return {};
 }
 
+/// Frames the chunk at `pos` and checks its type letters and its CRC (alphabet.md §2).
+Status read_chunk(const std::uint8_t* d, std::size_t size, std::size_t pos, const Ctx& ctx, Chunk& c) {
+  if (Status s = frame_chunk(d, size, pos, ctx, c); !s.ok()) return s;
+  if (!(is_letter(c.type[0]) && is_letter(c.type[1]) && is_letter(c.type[2]) && is_letter(c.type[3])))
+    return ctx.error("invalid chunk type " + c.name + " (4 ASCII letters expected)", pos);
+  if (c.stored_crc != c.computed_crc)
+    return ctx.error("chunk " + c.name + " CRC mismatch (stored " + hex(c.stored_crc, 8) + ", computed " +
+                         hex(c.computed_crc, 8) + ")",
+                     c.payload_offset + c.length);
+  return {};
+}
+
 /// Whether a well-framed chunk of `type` appears among the chunks after the header
 /// (framing errors end the scan; walk_chunks reports them).
 bool has_chunk(const std::uint8_t* d, std::size_t size, const char* type) {
@@ -303,13 +315,7 @@ Status walk_chunks(const std::uint8_t* d, std::size_t size, const Ctx& ctx, cons
     if (pos == size)
       return ctx.error("file ends before the '" + std::string(sequence.back(), 4) + "' chunk", pos);
     Chunk c;
-    if (Status s = frame_chunk(d, size, pos, ctx, c); !s.ok()) return s;
-    if (!(is_letter(c.type[0]) && is_letter(c.type[1]) && is_letter(c.type[2]) && is_letter(c.type[3])))
-      return ctx.error("invalid chunk type " + c.name + " (4 ASCII letters expected)", pos);
-    if (c.stored_crc != c.computed_crc)
-      return ctx.error("chunk " + c.name + " CRC mismatch (stored " + hex(c.stored_crc, 8) + ", computed " +
-                           hex(c.computed_crc, 8) + ")",
-                       c.payload_offset + c.length);
+    if (Status s = read_chunk(d, size, pos, ctx, c); !s.ok()) return s;
     const auto in_seq = std::find_if(sequence.begin(), sequence.end(), [&](const char* t) { return c.is(t); });
     const bool is_known = std::any_of(known.begin(), known.end(), [&](const char* t) { return c.is(t); });
     if (next == 0 && in_seq != sequence.begin())
@@ -898,13 +904,7 @@ StatusOr<SequenceData> decode_sequence(const std::vector<std::uint8_t>& bytes) {
   for (std::size_t pos = kHeaderBytes;;) {
     if (pos == size) return ctx.error("file ends before the 'QEND' chunk", pos);
     Chunk c;
-    if (Status s = frame_chunk(d, size, pos, ctx, c); !s.ok()) return s;
-    if (!(is_letter(c.type[0]) && is_letter(c.type[1]) && is_letter(c.type[2]) && is_letter(c.type[3])))
-      return ctx.error("invalid chunk type " + c.name + " (4 ASCII letters expected)", pos);
-    if (c.stored_crc != c.computed_crc)
-      return ctx.error("chunk " + c.name + " CRC mismatch (stored " + hex(c.stored_crc, 8) + ", computed " +
-                           hex(c.computed_crc, 8) + ")",
-                       c.payload_offset + c.length);
+    if (Status s = read_chunk(d, size, pos, ctx, c); !s.ok()) return s;
     const std::size_t next = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
     const bool known = c.is("QHDR") || c.is("ALPH") || c.is("SCAN") || c.is("QEND");
     if (!known) {
