@@ -17,6 +17,8 @@
 
 #include <zlib.h>
 
+#include "codec/bytes.hpp"
+
 namespace lex3d::codec {
 namespace {
 
@@ -50,24 +52,17 @@ constexpr double kDescriptorScale = 127.0;
 constexpr double kPi = 3.14159265358979323846;
 
 // ---------------------------------------------------------------------------------------
-// Little-endian writing
+// Little-endian fields (codec/bytes.hpp)
 // ---------------------------------------------------------------------------------------
 
-void put_u16(std::vector<std::uint8_t>& b, std::uint16_t v) {
-  b.push_back(static_cast<std::uint8_t>(v & 0xFFU));
-  b.push_back(static_cast<std::uint8_t>(v >> 8));
-}
-void put_u32(std::vector<std::uint8_t>& b, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) b.push_back(static_cast<std::uint8_t>((v >> (8 * i)) & 0xFFU));
-}
-void put_u64(std::vector<std::uint8_t>& b, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) b.push_back(static_cast<std::uint8_t>((v >> (8 * i)) & 0xFFU));
-}
-void put_f64(std::vector<std::uint8_t>& b, double d) {
-  std::uint64_t v = 0;
-  std::memcpy(&v, &d, sizeof v);
-  put_u64(b, v);
-}
+using bytes::ld_f64;
+using bytes::ld_u16;
+using bytes::ld_u32;
+using bytes::ld_u64;
+using bytes::put_f64;
+using bytes::put_u16;
+using bytes::put_u32;
+using bytes::put_u64;
 
 std::uint32_t zigzag(std::int32_t x) {
   const auto u = static_cast<std::uint32_t>(x);
@@ -164,20 +159,6 @@ struct Ctx {
   }
 };
 
-std::uint16_t ld_u16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | (p[1] << 8)); }
-std::uint32_t ld_u32(const std::uint8_t* p) {
-  return static_cast<std::uint32_t>(p[0]) | (static_cast<std::uint32_t>(p[1]) << 8) |
-         (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
-}
-std::uint64_t ld_u64(const std::uint8_t* p) {
-  return static_cast<std::uint64_t>(ld_u32(p)) | (static_cast<std::uint64_t>(ld_u32(p + 4)) << 32);
-}
-double ld_f64(const std::uint8_t* p) {
-  const std::uint64_t v = ld_u64(p);
-  double d = 0.0;
-  std::memcpy(&d, &v, sizeof d);
-  return d;
-}
 /// Element i of a planes() column of n values starting at `col`.
 std::uint32_t ld_plane(const std::uint8_t* col, std::size_t n, std::size_t i) {
   return static_cast<std::uint32_t>(col[i]) | (static_cast<std::uint32_t>(col[n + i]) << 8) |

@@ -26,6 +26,7 @@
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/model/model.hpp"
 #include "lex3d/range/range_image.hpp"
+#include "codec/bytes.hpp"
 #include "residual/range_coder.hpp"
 
 namespace lex3d::residual {
@@ -302,25 +303,10 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
   return enc.finish();
 }
 
-void put_u64(std::vector<std::uint8_t>& b, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) b.push_back(static_cast<std::uint8_t>((v >> (8 * i)) & 0xFFU));
-}
-void put_f64(std::vector<std::uint8_t>& b, double d) {
-  std::uint64_t v = 0;
-  std::memcpy(&v, &d, sizeof v);
-  put_u64(b, v);
-}
-std::uint64_t ld_u64(const std::uint8_t* p) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(p[i]) << (8 * i);
-  return v;
-}
-double ld_f64(const std::uint8_t* p) {
-  const std::uint64_t v = ld_u64(p);
-  double d = 0.0;
-  std::memcpy(&d, &v, sizeof d);
-  return d;
-}
+using codec::bytes::ld_f64;
+using codec::bytes::ld_u64;
+using codec::bytes::put_f64;
+using codec::bytes::put_u64;
 
 /// Orders the coded points along rows of elevation by azimuth.
 std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
@@ -477,12 +463,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
 
 StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Cloud& words, const Pose& T_cloud_sensor,
                              std::uint64_t max_points) {
-  if (payload.size() < kHeadBytes)
-    return bad_data("residual layer is " + std::to_string(payload.size()) + " bytes, at least 32 expected", 0);
-  const double max_error = ld_f64(payload.data());
-  const double q = ld_f64(payload.data() + 8);
-  const std::uint64_t n_w = ld_u64(payload.data() + 16);
-  const std::uint64_t n_c = ld_u64(payload.data() + 24);
+  const auto header = read_layer_header(payload.data(), payload.size());
+  if (!header.ok()) return header.status();
+  const double max_error = header.value().max_error;
+  const double q = header.value().step;
+  const std::uint64_t n_w = header.value().word_points;
+  const std::uint64_t n_c = header.value().coded_points;
   if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
     return bad_data("residual layer max_error " + std::to_string(max_error) + " is outside [1e-4, 10] m", 0);
   if (!(q > 0.0 && q <= 2.0 * max_error / std::sqrt(3.0)))
