@@ -46,6 +46,7 @@ struct PlaceOptions {
   double radius = 4.0;
   bool json = false;
   bool ground = false;
+  double max_distance = -1.0;  // < 0: not given
   PlaceParams params = default_query_params();
   PlaceStorageParams storage;
 };
@@ -144,6 +145,7 @@ void run_query(const PlaceOptions& o) {
   const auto scans = describe_all(clouds, {stem(o.inputs[0])}, db.alphabet(), db.storage(), &prep);
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
+  p.max_distance = std::max(0.0, o.max_distance);
   const PlaceQueryResult r = db.query(scans[0], p);
   const std::size_t k = std::min<std::size_t>(r.matches.size(), static_cast<std::size_t>(o.top));
   if (o.json) {
@@ -155,7 +157,9 @@ void run_query(const PlaceOptions& o) {
       const PlaceMatch& m = r.matches[i];
       j.begin_object().value("scan", db.scan(m.scan).name).value("score", m.score).value("valid", m.valid);
       j.value("accepted", m.valid && m.score >= p.accept_score).value("inliers", m.inliers);
-      j.value("similarity", m.retrieval_similarity);
+      j.value("similarity", m.retrieval_similarity).value("sensor_distance_m", m.sensor_distance_m);
+      j.value("rejected_distance", m.rejected_distance).value("rejected_ground", m.rejected_ground);
+      j.value("rejected_conflict", m.rejected_conflict);
       pose_json(j, m.T_match_query);
       j.end_object();
     }
@@ -171,7 +175,11 @@ void run_query(const PlaceOptions& o) {
     const Eigen::Vector3d ypr = m.T_match_query.linear().eulerAngles(2, 1, 0) * 180.0 / M_PI;
     std::printf("  %-12s score %.3f  inliers %3zu  t = (%.3f, %.3f, %.3f) m  ypr = (%.2f, %.2f, %.2f) deg%s\n",
                 db.scan(m.scan).name.c_str(), m.score, m.inliers, t.x(), t.y(), t.z(), ypr.x(), ypr.y(), ypr.z(),
-                m.valid ? "" : "  (no transform)");
+                m.valid               ? ""
+                : m.rejected_distance ? "  (rejected: sensors farther apart than --max-distance)"
+                : m.rejected_ground   ? "  (rejected: ground-vehicle check)"
+                : m.rejected_conflict ? "  (rejected: points in the other scan's free space)"
+                                      : "  (no transform)");
   }
 }
 
@@ -275,6 +283,8 @@ void run_eval(const PlaceOptions& o) {
   }
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
+  // A revisit is a scan recorded within --radius: the recogniser is asked the same question.
+  p.max_distance = o.max_distance >= 0.0 ? o.max_distance : o.radius;
 
   // Queries in time order against the scans at least min_gap seconds older.
   std::vector<std::size_t> order(scans.size());
@@ -474,6 +484,7 @@ void run_eval(const PlaceOptions& o) {
     Json j;
     j.begin_object().value("scans", scans.size()).value("queries", recs.size()).value("positives", pos);
     j.value("radius_m", o.radius).value("min_gap_s", o.min_gap).value("threshold", p.accept_score);
+    j.value("max_distance_m", p.max_distance).value("max_conflict", p.max_conflict);
     j.value("true_positives", tp).value("false_positives", fp).value("precision", precision).value("recall", recall);
     j.value("max_f1", max_f1).value("recall_at_precision_1", recall_at_p1);
     j.value("accepted_right_pose", right_pose).value("accepted_wrong_pose", wrong_pose);
@@ -491,6 +502,8 @@ void run_eval(const PlaceOptions& o) {
   }
   std::printf("scans %zu, queries with a database %zu, with a true revisit within %.1f m: %zu\n", scans.size(), recs.size(),
               o.radius, pos);
+  if (p.max_distance > 0.0) std::printf("transforms limited to sensors within %.1f m (--max-distance)\n", p.max_distance);
+  if (p.max_conflict < 1.0) std::printf("transforms with more than %.3f of the points in free space rejected (--max-conflict)\n", p.max_conflict);
   std::printf("threshold %.2f: TP %zu FP %zu  precision %.3f recall %.3f\n", p.accept_score, tp, fp, precision, recall);
   std::printf("max F1 %.3f, recall at 100%% precision %.3f\n", max_f1, recall_at_p1);
   std::printf("accepted: %zu with the right transform (within 1 m, 5 deg), %zu with a wrong one, any distance\n",
@@ -538,6 +551,14 @@ void register_place(CLI::App& app) {
     s->add_option("--threshold", o->params.accept_score, "Acceptance threshold on the score")->check(CLI::Range(0.0, 1.0));
     s->add_option("--candidates", o->params.top_k, "Scans retrieved by tf-idf and verified")->check(CLI::Range(1, 1000000));
     s->add_flag("--ground-vehicle", o->ground, "Reject large roll/pitch or vertical offsets");
+    s->add_option("--max-distance", o->max_distance,
+                  "Reject transforms that put the two sensors farther apart than this, m (0 = any distance; "
+                  "default: any for a query, --radius for place eval)")
+        ->check(CLI::Range(0.0, 1e4));
+    s->add_option("--max-conflict", o->params.max_conflict,
+                  "Reject a densely aligned transform when more than this share of either scan's visible points lies "
+                  "in the other's free space (1 = off)")
+        ->check(CLI::Range(1e-6, 1.0));
     s->add_option("--dense-iterations", o->params.dense_iterations, "Dense alignment iterations (0 = none)")->check(CLI::Range(0, 100));
     s->add_option("--dense-points", o->params.dense_points, "Dense points a scan at most")->check(CLI::Range(16, 1000000));
     s->add_option("--dense-candidates", o->params.dense_candidates, "Candidates aligned densely")->check(CLI::Range(1, 1000000));

@@ -393,6 +393,16 @@ Pose small_motion(const Eigen::Matrix<double, 6, 1>& xi) {
   return D;
 }
 
+/// Records the sensor distance `m.T_match_query` implies and applies PlaceParams::max_distance.
+void check_distance(const PlaceScan& query, const PlaceScan& candidate, PlaceMatch& m, const PlaceParams& params) {
+  const Eigen::Vector3d o_q = m.T_match_query * query.coarse.T_cloud_sensor.translation();
+  m.sensor_distance_m = (o_q - candidate.coarse.T_cloud_sensor.translation()).norm();
+  if (params.max_distance > 0.0 && m.sensor_distance_m > params.max_distance) {
+    m.rejected_distance = true;
+    m.valid = false;
+  }
+}
+
 }  // namespace
 
 DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const Pose& T0, const PlaceParams& params) {
@@ -582,6 +592,7 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
         m.valid = false;
       }
     }
+    if (m.valid) check_distance(query, candidate, m, params);
     if (m.valid) {
       m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
       m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
@@ -609,6 +620,14 @@ void refine_match(const PlaceScan& query, const PlaceScan& candidate, PlaceMatch
   m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
   m.score = std::min(m.score_query_in_match, m.score_match_in_query);
   m.dense_refined = true;
+  check_distance(query, candidate, m, params);
+  const auto conflict_share = [](const DenseConsistency& c) {
+    return c.visible > 0 ? static_cast<double>(c.conflict) / static_cast<double>(c.visible) : 0.0;
+  };
+  if (params.max_conflict < 1.0 && std::max(conflict_share(m.dense_q), conflict_share(m.dense_m)) > params.max_conflict) {
+    m.rejected_conflict = true;
+    m.valid = false;
+  }
 }
 
 }  // namespace lex3d

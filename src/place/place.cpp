@@ -48,6 +48,8 @@ void PlaceParams::validate() const {
   check(penalty >= 0.0 && penalty <= 1.0, "PlaceParams::penalty must be in [0, 1]");
   check(accept_score >= 0.0 && accept_score <= 1.0, "PlaceParams::accept_score must be in [0, 1]");
   check(max_tilt_deg >= 0.0 && max_tilt_deg <= 180.0, "PlaceParams::max_tilt_deg must be in [0, 180]");
+  check(max_distance >= 0.0 && max_distance <= 1e4, "PlaceParams::max_distance must be in [0, 1e4] m");
+  check(max_conflict > 0.0 && max_conflict <= 1.0, "PlaceParams::max_conflict must be in (0, 1]");
   check(max_vertical_offset >= 0.0 && max_vertical_offset <= 100.0,
         "PlaceParams::max_vertical_offset must be in [0, 100] m");
   check(dense_iterations >= 0 && dense_iterations <= 100, "PlaceParams::dense_iterations must be in [0, 100]");

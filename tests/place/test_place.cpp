@@ -88,6 +88,12 @@ TEST(PlaceParams, ValidateNamesTheField) {
   p = PlaceParams{};
   p.dense_candidates = 0;
   EXPECT_THROW(p.validate(), std::invalid_argument);
+  p = PlaceParams{};
+  p.max_distance = -1.0;
+  EXPECT_THROW(p.validate(), std::invalid_argument);
+  p = PlaceParams{};
+  p.max_conflict = 0.0;
+  EXPECT_THROW(p.validate(), std::invalid_argument);
   PlaceStorageParams s;
   s.descriptor_bits = 5;
   EXPECT_THROW(s.validate(), std::invalid_argument);
@@ -227,6 +233,56 @@ TEST(PlaceMatch, FarScansAreRejected) {
     const PlaceMatch m = match_scans(b.place(qf), b.place(mf), PlaceParams{});
     EXPECT_LT(m.score, PlaceParams{}.accept_score) << qf << " vs " << mf << ": " << m.inliers << " inliers";
   }
+}
+
+// A transform that aligns two scans well can still put them farther apart than the
+// question asks: max_distance rejects it, on the distance the transform itself implies.
+TEST(PlaceMatch, MaxDistanceLimitsTheImpliedSensorDistance) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  Balm& b = Balm::get();
+  const PlaceScan q = b.place("000124"), m = b.place("000000");
+  const Pose truth = b.pose("000000").inverse() * b.pose("000124");
+  const double true_distance = truth.translation().norm();  // ~4.3 m
+  PlaceParams p;
+  const PlaceMatch any = match_scans(q, m, p);
+  ASSERT_TRUE(any.valid);
+  EXPECT_NEAR(any.sensor_distance_m, true_distance, 0.3);
+  EXPECT_FALSE(any.rejected_distance);
+  p.max_distance = true_distance + 1.0;
+  const PlaceMatch within = match_scans(q, m, p);
+  EXPECT_TRUE(within.valid);
+  EXPECT_GE(within.score, p.accept_score);
+  p.max_distance = true_distance - 1.0;
+  const PlaceMatch beyond = match_scans(q, m, p);
+  // The right transform is gone; whatever is left implies at most the allowed distance.
+  EXPECT_TRUE(!beyond.valid || beyond.sensor_distance_m <= p.max_distance) << beyond.sensor_distance_m << " m";
+  EXPECT_FALSE(beyond.valid && (truth.inverse() * beyond.T_match_query).translation().norm() < 0.3);
+}
+
+// Scans 17.7 m apart in a courtyard with a 90-degree symmetry: a transform turned by 90
+// degrees aligns them with a score above the threshold, but many points of one scan then
+// lie where the other scan's beams passed through; the free-space check rejects it.
+TEST(PlaceMatch, FreeSpaceCheckRejectsASymmetricWrongTransform) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  Balm& b = Balm::get();
+  const PlaceScan q = b.place("000088"), m = b.place("000036");
+  PlaceParams off;
+  off.max_conflict = 1.0;
+  const PlaceMatch wrong = match_scans(q, m, off);
+  ASSERT_TRUE(wrong.valid);
+  const Pose truth = b.pose("000036").inverse() * b.pose("000088");
+  const Pose d = truth.inverse() * wrong.T_match_query;
+  EXPECT_GT(Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI, 45.0) << "the transform is not the wrong one any more";
+  const auto share = [](const DenseConsistency& c) { return static_cast<double>(c.conflict) / static_cast<double>(std::max<std::size_t>(c.visible, 1)); };
+  EXPECT_GT(std::max(share(wrong.dense_q), share(wrong.dense_m)), PlaceParams{}.max_conflict);
+  const PlaceMatch checked = match_scans(q, m, PlaceParams{});
+  EXPECT_FALSE(checked.valid);
+  EXPECT_TRUE(checked.rejected_conflict);
+  // A true revisit passes the same check.
+  const PlaceMatch right = match_scans(b.place("000176"), b.place("000114"), PlaceParams{});
+  EXPECT_TRUE(right.valid);
+  EXPECT_FALSE(right.rejected_conflict);
+  EXPECT_LE(std::max(share(right.dense_q), share(right.dense_m)), PlaceParams{}.max_conflict);
 }
 
 TEST(PlaceDatabase, SaveLoadRoundTrip) {
