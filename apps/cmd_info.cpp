@@ -21,6 +21,7 @@ namespace {
 
 struct InfoOptions {
   std::string path;
+  std::string alphabet;  // the alphabet file a model references
   std::string format = "auto";
   bool json = false;
 };
@@ -82,7 +83,13 @@ bool info_lex3d_file(const InfoOptions& o) {
       decode_error = a.status().to_string();
     }
   } else {
-    auto m = codec::decode_model(b);
+    std::vector<std::uint8_t> alphabet_file;
+    if (!o.alphabet.empty()) {
+      auto a = io::read_file(o.alphabet);
+      if (!a.ok()) throw CliError(3, a.status().to_string());
+      alphabet_file = std::move(a).value();
+    }
+    auto m = codec::decode_model(b, o.alphabet.empty() ? nullptr : &alphabet_file);
     if (m.ok()) {
       instances = m.value().model.instances.size();
       input_points = m.value().input_points;
@@ -90,7 +97,7 @@ bool info_lex3d_file(const InfoOptions& o) {
         words = m.value().alphabet->size();
         word_points = m.value().alphabet->total_points();
       }
-    } else if (m.status().message().find("alphabet") != std::string::npos && (fi.flags & 2U) != 0) {
+    } else if (o.alphabet.empty() && m.status().message().find("alphabet") != std::string::npos && (fi.flags & 2U) != 0) {
       referenced = true;  // counts of the model itself need no alphabet: report the chunks only
     } else {
       decode_error = m.status().to_string();
@@ -118,7 +125,8 @@ bool info_lex3d_file(const InfoOptions& o) {
     j.end_array();
     j.value("checksums_ok", all_crc_ok);
     if (fi.kind == "sequence") j.value("scans", scans);
-    if (fi.kind != "alphabet") j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
+    if (fi.kind != "alphabet" && !referenced && decode_error.empty())
+      j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
     j.value("words", words).value("word_points", word_points);
     if (referenced) j.value("alphabet", "referenced");
     if (layer)
@@ -142,9 +150,12 @@ bool info_lex3d_file(const InfoOptions& o) {
                   static_cast<unsigned long long>(c.length), c.crc_ok ? "ok" : "MISMATCH");
     if (fi.kind == "sequence") std::printf("scans          %zu\n", scans);
     if (fi.kind != "alphabet") {
-      std::printf("instances      %zu\n", instances);
-      std::printf("input points   %llu (%.3f bits per point)\n", static_cast<unsigned long long>(input_points), bpp);
-      if (referenced) std::printf("alphabet       referenced by hash (external file)\n");
+      if (referenced) {
+        std::printf("alphabet       referenced by hash (external file; give --alphabet for the counts)\n");
+      } else if (decode_error.empty()) {
+        std::printf("instances      %zu\n", instances);
+        std::printf("input points   %llu (%.3f bits per point)\n", static_cast<unsigned long long>(input_points), bpp);
+      }
       if (layer)
         std::printf("residual layer max error %.4g m (step %.4g m), %llu coded points, a keep mask over %llu word points, %llu bytes\n",
                     layer->max_error, layer->step, static_cast<unsigned long long>(layer->coded_points),
@@ -225,8 +236,9 @@ void run_info(const InfoOptions& o) {
 void register_info(CLI::App& app) {
   auto o = std::make_shared<InfoOptions>();
   CLI::App* sub = app.add_subcommand("info", "Describe a point cloud, model or alphabet file");
-  sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d)")->required();
+  sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d), or a lex3d model, alphabet or sequence file")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references (for its counts)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   sub->callback([o] { run_info(*o); });
 }

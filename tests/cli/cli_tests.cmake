@@ -133,9 +133,19 @@ expect_match(info.alphabet "${LAST_OUT}" "\"kind\":\"alphabet\"")
 run(0 compress.reuse compress "${NC}" -o "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da")
 run(1 decompress.no_alphabet decompress "${WORK}/nc_reuse.lex3dm" -o "${WORK}/x.ply")
 run(0 decompress.with_alphabet decompress "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da" -o "${WORK}/nc_reuse.ply")
+# info on a model that references its alphabet: the chunks without it, the counts with it.
+run(0 info.referenced info "${WORK}/nc_reuse.lex3dm")
+expect_match(info.referenced "${LAST_OUT}" "referenced by hash")
+if("${LAST_OUT}" MATCHES "instances")
+  message(SEND_ERROR "[info.referenced] counts printed without the alphabet:\n${LAST_OUT}")
+endif()
+run(0 info.with_alphabet info --json "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da")
+expect_match(info.with_alphabet "${LAST_OUT}" "\"instances\":[1-9]")
+expect_match(info.with_alphabet "${LAST_OUT}" "\"input_points\":[1-9]")
 # A wrong alphabet is bad data; a corrupt model is bad data; no partial outputs.
 run(0 learn.other learn "${SAMPLES}/room_scan1.pcd" -o "${WORK}/other.lex3da" --iterations 10)
 run(2 decompress.wrong_alphabet decompress "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/other.lex3da" -o "${WORK}/y.ply")
+run(2 info.wrong_alphabet info "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/other.lex3da")
 # Truncated and corrupt model files are covered byte by byte in test_codec; here a
 # file that is not a model at all.
 run(2 decompress.garbage decompress "${WORK}/garbage.alpha" -o "${WORK}/z.ply")
