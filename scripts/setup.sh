@@ -10,7 +10,7 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 
 PACKAGES=(
   build-essential cmake pkg-config
-  libeigen3-dev libpcl-dev libflann-dev liboctomap-dev zlib1g-dev
+  libeigen3-dev libpcl-dev libflann-dev liboctomap-dev zlib1g-dev liblzf-dev
   libcli11-dev libgtest-dev libgmock-dev
   clang libclang-rt-14-dev
   python3 python3-numpy python3-scipy

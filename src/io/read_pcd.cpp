@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include <pcl/io/lzf.h>
+#include <lzf.h>
 
 #include "io/internal.hpp"
 #include "lex3d/io/io.hpp"
@@ -342,8 +342,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                         data_start);
       }
       decompressed.resize(static_cast<std::size_t>(need));
-      const unsigned got = pcl::lzfDecompress(data + data_start + 8, comp, decompressed.data(),
-                                              static_cast<unsigned>(need));
+      const unsigned got = lzf_decompress(data + data_start + 8, comp, decompressed.data(),
+                                          static_cast<unsigned>(need));
       if (got != need) {
         return bad_data(msg(path, "corrupt binary_compressed data: LZF unpacked " +
                                       std::to_string(got) + " of " + std::to_string(need) + " bytes"),

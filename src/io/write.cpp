@@ -17,7 +17,7 @@
 #include <new>
 #include <string>
 
-#include <pcl/io/lzf.h>
+#include <lzf.h>
 
 #include "io/internal.hpp"
 #include "lex3d/io/io.hpp"
@@ -150,8 +150,8 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
       unsigned comp_size = 0;
       if (raw_size > 0) {
         comp.resize(static_cast<std::size_t>(raw_size * 3 / 2 + 64));
-        comp_size = pcl::lzfCompress(raw.vec().data(), static_cast<unsigned>(raw_size), comp.data(),
-                                     static_cast<unsigned>(comp.size()));
+        comp_size = lzf_compress(raw.vec().data(), static_cast<unsigned>(raw_size), comp.data(),
+                                 static_cast<unsigned>(comp.size()));
         if (comp_size == 0) return io_error(msg(path, "LZF compression failed"));
       }
       b.le(static_cast<std::uint32_t>(comp_size));
