@@ -564,6 +564,10 @@ Model ScanState::model() const {
     Instance inst;
     inst.word = static_cast<std::uint32_t>(word_[f]);
     inst.T_cloud_word = pose_[f].cast<double>();
+    // Orthonormal to double precision (the file format checks it to 1e-6): a feature frame
+    // built in float from a short tangent vector, left as it is without ICP fitting
+    // (refine_iterations 0), is off by up to ~1e-5.
+    inst.T_cloud_word.linear() = Eigen::Quaterniond(inst.T_cloud_word.linear()).normalized().toRotationMatrix();
     inst.feature = static_cast<std::uint32_t>(f);
     m.instances.push_back(inst);
   }
