@@ -1,7 +1,8 @@
 // Matching one scan against another: correspondences by descriptor (ratio test),
 // candidate transforms from 1, 2 and 3 correspondences with the distance-consistency
 // check (steder2010 §III-B), RANSAC inlier counting (collier2012 §3.2), Umeyama
-// refinement, and steder2010's validation-point score (eq. 6-10).
+// refinement, transforms from the dominant surfaces of the coarse images (normal-direction
+// and wall-offset histograms), and steder2010's validation-point score (eq. 6-10).
 
 #include <algorithm>
 #include <cmath>
@@ -237,6 +238,98 @@ class Matcher {
     return h;
   }
 
+  /// Hypotheses from the scans' dominant surfaces, for revisits whose interest points barely
+  /// repeat. In the upright frames only yaw and translation are unknown. The yaw comes from
+  /// the circular correlation of the two scans' histograms of horizontal normal directions
+  /// (walls, facades, poles); for each of its strongest peaks, the translation along a
+  /// dominant horizontal direction u is the shift that best overlays the offsets u·p of the
+  /// points whose normals face ±u (walls seen from the same side), the same along the second
+  /// dominant direction, and the height from the points with vertical normals (ground,
+  /// ceiling). Nothing here depends on the yaw of the upright frames.
+  [[nodiscard]] std::vector<Pose> surface_hypotheses() const {
+    std::vector<Pose> out;
+    const auto nyaw = static_cast<std::size_t>(p_.surface_yaws);
+    if (nyaw == 0 || q_.dense_points.empty() || m_.dense_points.empty()) return out;
+    const Surfaces sq = surfaces(q_, Rq_), sm = surfaces(m_, Rm_);
+    // Azimuth histograms of horizontal normals, kBins bins over 360 degrees.
+    const std::vector<double> hq = azimuth_histogram(sq), hm = azimuth_histogram(sm);
+    std::vector<double> corr(kBins, 0.0);  // corr[s]: query azimuth phi lands on phi + s bins
+    for (int s = 0; s < kBins; ++s)
+      for (int i = 0; i < kBins; ++i) corr[static_cast<std::size_t>(s)] += hq[static_cast<std::size_t>(i)] * hm[static_cast<std::size_t>((i + s) % kBins)];
+    std::vector<std::pair<double, double>> yaws;  // (correlation, yaw in bins, interpolated)
+    for (int s = 0; s < kBins; ++s) {
+      const double c0 = corr[static_cast<std::size_t>((s + kBins - 1) % kBins)], c1 = corr[static_cast<std::size_t>(s)],
+                   c2 = corr[static_cast<std::size_t>((s + 1) % kBins)];
+      if (!(c1 > c0 && c1 >= c2)) continue;
+      const double den = c0 - 2 * c1 + c2;
+      yaws.emplace_back(c1, s + (den < 0 ? 0.5 * (c0 - c2) / den : 0.0));
+    }
+    std::stable_sort(yaws.begin(), yaws.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    // Peaks of less than a third of the best are dropped: on balm the four 90-degree-symmetric
+    // peaks of a courtyard reach 0.5-1 of the best, the next ones 0.15 and less.
+    while (!yaws.empty() && (yaws.size() > nyaw || yaws.back().first < yaws.front().first / 3.0)) yaws.pop_back();
+    // Two dominant horizontal directions of the match scan (axial, at least 30 degrees apart:
+    // the 2x2 system for the horizontal translation amplifies offset errors by at most 2).
+    std::vector<double> axial(kBins / 2, 0.0);
+    for (int b = 0; b < kBins; ++b) axial[static_cast<std::size_t>(b % (kBins / 2))] += hm[static_cast<std::size_t>(b)];
+    const int a1 = static_cast<int>(std::max_element(axial.begin(), axial.end()) - axial.begin());
+    int a2 = -1;
+    for (int b = 0; b < kBins / 2; ++b) {
+      const int d = std::abs(b - a1), dist = std::min(d, kBins / 2 - d);
+      if (dist * 360 / kBins >= 30 && (a2 < 0 || axial[static_cast<std::size_t>(b)] > axial[static_cast<std::size_t>(a2)])) a2 = b;
+    }
+    if (a2 < 0 || axial[static_cast<std::size_t>(a2)] <= 0.0) return out;
+    const auto direction = [](int b) {
+      const double a = (b + 0.5) * 2.0 * M_PI / kBins;
+      return Eigen::Vector3d(std::cos(a), std::sin(a), 0.0);
+    };
+    const Eigen::Vector3d u1 = direction(a1), u2 = direction(a2);
+    // Sensor origins in the upright frames, for the max_distance bound on each offset.
+    const Eigen::Vector3d oq = Rq_ * q_.coarse.T_cloud_sensor.translation();
+    const Eigen::Vector3d om = Rm_ * m_.coarse.T_cloud_sensor.translation();
+    // Walls facing a dominant direction within 15 degrees (cos 15° = 0.966); ground and
+    // ceiling within 30 degrees of vertical (cos 30° = 0.866). The match's histograms and
+    // the vertical shifts do not depend on the yaw.
+    const float wall = 0.966F, level = 0.866F;
+    const OffsetHistogram m1 = offset_histogram(sm, u1.cast<float>(), wall), m2 = offset_histogram(sm, u2.cast<float>(), wall);
+    const std::vector<double> oz =
+        best_shifts(offset_histogram(sq, Eigen::Vector3f::UnitZ(), level), offset_histogram(sm, Eigen::Vector3f::UnitZ(), level),
+                    (om - oq).z(), 1);
+    for (const auto& [c, ybins] : yaws) {
+      const double yaw = ybins * 2.0 * M_PI / kBins;
+      const Eigen::Matrix3d R = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+      const Eigen::Vector3d shift0 = om - R * oq;  // translation that puts the sensors together
+      // Query offsets along u are offsets along R^T u in its own upright frame.
+      const auto o1 = best_shifts(offset_histogram(sq, (R.transpose() * u1).cast<float>(), wall), m1, shift0.dot(u1), 2);
+      const auto o2 = best_shifts(offset_histogram(sq, (R.transpose() * u2).cast<float>(), wall), m2, shift0.dot(u2), 2);
+      if (o1.empty() || o2.empty()) continue;
+      Eigen::Matrix2d A;
+      A << u1.x(), u1.y(), u2.x(), u2.y();
+      const double z = oz.empty() ? shift0.z() : oz.front();
+      for (const double t1 : o1)
+        for (const double t2 : o2) {
+          const Eigen::Vector2d xy = A.inverse() * Eigen::Vector2d(t1, t2);
+          Pose G = Pose::Identity();
+          G.linear() = R;
+          G.translation() = Eigen::Vector3d(xy.x(), xy.y(), z);
+          out.push_back(G);
+        }
+    }
+    return out;
+  }
+
+  /// Query features within inlier_distance of a match feature under G (no refinement).
+  [[nodiscard]] Hypothesis unrefined(const Pose& G) const {
+    Hypothesis h = evaluate(G);  // the grid count first: cheap, and most hypotheses end here
+    if (h.inliers < static_cast<std::size_t>(p_.min_inliers)) return h;
+    const auto pr = pairs(G);
+    h.inliers = pr.size();
+    double sum = 0.0;
+    for (const auto& [i, j] : pr) sum += (G * gq_[i] - gm_[j]).squaredNorm();
+    h.residual = pr.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(pr.size()));
+    return h;
+  }
+
   /// Ratio-test correspondences consistent with G.
   [[nodiscard]] std::size_t descriptor_inliers(const Pose& G) const {
     std::size_t k = 0;
@@ -247,6 +340,117 @@ class Matcher {
   }
 
  private:
+
+  // Surface hypotheses: 2-degree azimuth bins (the coarse image's pixels are 1.5 degrees
+  // wide, so neighbouring-pixel normals scatter by a few degrees) and 0.1 m offset bins (what
+  // dense alignment refines from easily; it converges from 0.3 m and 2 degrees).
+  static constexpr int kBins = 180;
+  static constexpr double kOffsetBin = 0.1;
+  struct Surfaces {
+    std::vector<Eigen::Vector3f> p, n;  // upright points and normals of the dense points
+  };
+  // About PlaceParams::dense_points of them, evenly strided (as dense alignment takes them):
+  // the histograms need the dominant surfaces, not every point (on balm the four revisits
+  // give the same hypotheses from all ~8000 points as from ~1600, at a fifth of the cost).
+  [[nodiscard]] Surfaces surfaces(const PlaceScan& s, const Eigen::Matrix3d& R) const {
+    Surfaces out;
+    const Eigen::Matrix3f Rf = R.cast<float>();
+    const std::size_t n = s.dense_points.size();
+    const std::size_t stride = std::max<std::size_t>(1, n / static_cast<std::size_t>(p_.dense_points));
+    out.p.reserve(n / stride + 1);
+    out.n.reserve(n / stride + 1);
+    for (std::size_t i = 0; i < n; i += stride) {
+      out.p.push_back(Rf * s.dense_points[i]);
+      out.n.push_back(Rf * s.dense_normals[i]);
+    }
+    return out;
+  }
+  // atan2 to about 0.22 degrees (atan z ≈ z·π/4 + 0.273·z·(1 - |z|) on |z| <= 1), which is
+  // plenty for 2-degree bins and several times cheaper than std::atan2.
+  static double fast_atan2(float y, float x) {
+    const double ax = std::abs(static_cast<double>(x)), ay = std::abs(static_cast<double>(y));
+    if (ax == 0.0 && ay == 0.0) return 0.0;
+    const double z = std::min(ax, ay) / std::max(ax, ay);
+    double a = z * (M_PI / 4 + 0.273 * (1.0 - z));
+    if (ay > ax) a = M_PI / 2 - a;
+    if (x < 0) a = M_PI - a;
+    return y < 0 ? -a : a;
+  }
+  // Horizontal normals: within 30 degrees of horizontal (|n_z| < 0.5).
+  static std::vector<double> azimuth_histogram(const Surfaces& s) {
+    std::vector<double> h(kBins, 0.0);
+    for (const auto& n : s.n) {
+      if (std::abs(n.z()) >= 0.5F) continue;
+      const double a = fast_atan2(n.y(), n.x());
+      const int b = static_cast<int>(std::floor((a + M_PI) / (2.0 * M_PI) * kBins));
+      h[static_cast<std::size_t>((b % kBins + kBins) % kBins)] += 1.0;
+    }
+    // Light circular smoothing [1 2 1] / 4: a wall's normals straddle bin borders.
+    std::vector<double> sm(kBins);
+    for (int b = 0; b < kBins; ++b)
+      sm[static_cast<std::size_t>(b)] = 0.25 * h[static_cast<std::size_t>((b + kBins - 1) % kBins)] +
+                                        0.5 * h[static_cast<std::size_t>(b)] + 0.25 * h[static_cast<std::size_t>((b + 1) % kBins)];
+    return sm;
+  }
+  // Offsets u·p, in kOffsetBin bins, of the points whose normals face +u (side 0) or -u
+  // (side 1) within the angle whose cosine is cmin: (bin, count) runs by bin, per side.
+  struct OffsetHistogram {
+    std::array<std::vector<std::pair<int, float>>, 2> side;
+  };
+  static OffsetHistogram offset_histogram(const Surfaces& s, const Eigen::Vector3f& u, float cmin) {
+    OffsetHistogram h;
+    std::array<std::vector<int>, 2> bins;
+    int lo = std::numeric_limits<int>::max(), hi = std::numeric_limits<int>::min();
+    for (std::size_t i = 0; i < s.p.size(); ++i) {
+      const float c = s.n[i].dot(u);
+      if (std::abs(c) < cmin) continue;
+      const int b = static_cast<int>(std::floor(s.p[i].dot(u) / static_cast<float>(kOffsetBin)));
+      bins[c > 0 ? 0 : 1].push_back(b);
+      lo = std::min(lo, b);
+      hi = std::max(hi, b);
+    }
+    if (lo > hi) return h;
+    std::vector<float> count(static_cast<std::size_t>(hi - lo + 1));
+    for (int side = 0; side < 2; ++side) {
+      std::fill(count.begin(), count.end(), 0.0F);
+      for (const int b : bins[static_cast<std::size_t>(side)]) count[static_cast<std::size_t>(b - lo)] += 1.0F;
+      for (std::size_t k = 0; k < count.size(); ++k)
+        if (count[k] > 0.0F) h.side[static_cast<std::size_t>(side)].emplace_back(lo + static_cast<int>(k), count[k]);
+    }
+    return h;
+  }
+  // The best `keep` shifts t (metres; match offset = query offset + t) overlaying the two
+  // histograms, same sides only (a wall is seen from one side); of those, the ones within
+  // max_distance of `centre` (the shift that puts the sensors together) when it is set.
+  [[nodiscard]] std::vector<double> best_shifts(const OffsetHistogram& hq, const OffsetHistogram& hm, double centre,
+                                                std::size_t keep) const {
+    int s0 = std::numeric_limits<int>::max(), s1 = std::numeric_limits<int>::min();
+    for (std::size_t side = 0; side < 2; ++side) {
+      if (hq.side[side].empty() || hm.side[side].empty()) continue;
+      s0 = std::min(s0, hm.side[side].front().first - hq.side[side].back().first);
+      s1 = std::max(s1, hm.side[side].back().first - hq.side[side].front().first);
+    }
+    if (s0 > s1) return {};
+    --s0;  // one spare bin each side for the smoothing and the peak test
+    ++s1;
+    std::vector<double> corr(static_cast<std::size_t>(s1 - s0 + 1), 0.0);
+    for (std::size_t side = 0; side < 2; ++side)
+      for (const auto& [bq, cq] : hq.side[side])
+        for (const auto& [bm, cm] : hm.side[side]) corr[static_cast<std::size_t>(bm - bq - s0)] += static_cast<double>(cq * cm);
+    // Smoothing [1 2 1] / 4: the offsets of a wall straddle bin borders.
+    std::vector<double> c(corr.size(), 0.0);
+    for (std::size_t i = 1; i + 1 < corr.size(); ++i) c[i] = 0.25 * corr[i - 1] + 0.5 * corr[i] + 0.25 * corr[i + 1];
+    std::vector<std::pair<double, double>> peaks;  // (value, shift in metres)
+    for (std::size_t i = 1; i + 1 < c.size(); ++i)
+      if (c[i] > c[i - 1] && c[i] >= c[i + 1]) peaks.emplace_back(c[i], (static_cast<double>(i) + s0) * kOffsetBin);
+    std::stable_sort(peaks.begin(), peaks.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    // The best `keep` overlays, of any distance; those beyond max_distance are dropped after
+    // (not replaced by weaker overlays within it, which are what sliding ambiguities give).
+    std::vector<double> out;
+    for (std::size_t k = 0; k < std::min(keep, peaks.size()); ++k)
+      if (p_.max_distance <= 0.0 || std::abs(peaks[k].second - centre) <= p_.max_distance) out.push_back(peaks[k].second);
+    return out;
+  }
 
   void gravity_hypotheses(SplitMix& rng, std::vector<Hypothesis>& out) const {
     const std::size_t nq = gq_.size(), nm = gm_.size();
@@ -570,6 +774,16 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     bool dup = false;
     for (const auto& x : refined) dup = dup || close_poses(x.T, r.T);
     if (!dup) refined.push_back(r);
+  }
+  // Surface hypotheses are scored as they are: feature ICP would pull their 0.1 m / 2 degree
+  // estimate towards interest points that repeat only to 0.3-0.5 m.
+  const std::vector<Pose> surface = matcher.surface_hypotheses();
+  out.hypotheses += surface.size();
+  for (const Pose& G : surface) {
+    const Hypothesis h = matcher.unrefined(G);
+    bool dup = false;
+    for (const auto& x : refined) dup = dup || close_poses(x.T, h.T);
+    if (!dup) refined.push_back(h);
   }
   bool first = true;
   for (const auto& h : refined) {

@@ -39,6 +39,7 @@ void PlaceParams::validate() const {
   check(hypotheses_per_size >= 1 && hypotheses_per_size <= 100000,
         "PlaceParams::hypotheses_per_size must be in [1, 1e5]");
   check(gravity_pairs >= 0 && gravity_pairs <= 100000, "PlaceParams::gravity_pairs must be in [0, 1e5]");
+  check(surface_yaws >= 0 && surface_yaws <= 36, "PlaceParams::surface_yaws must be in [0, 36]");
   check(scored_hypotheses >= 1 && scored_hypotheses <= 100, "PlaceParams::scored_hypotheses must be in [1, 100]");
   check(refine_iterations >= 0 && refine_iterations <= 50, "PlaceParams::refine_iterations must be in [0, 50]");
   check(validation_points >= 1 && validation_points <= 4096, "PlaceParams::validation_points must be in [1, 4096]");
