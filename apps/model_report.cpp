@@ -17,6 +17,9 @@ void ModelOptions::add_to(CLI::App& app) {
       ->check(CLI::Range(0, 50));
   app.add_option("--fit-candidates", fit_candidates, "Words (nearest by descriptor) an instance chooses from by fit")
       ->check(CLI::Range(1, 64));
+  app.add_flag("--prune-keep-cover", prune_keep_cover,
+               "Pruning keeps an instance that is the last to explain some scan point within sigma (more "
+               "inliers, larger models; by default ruhnke2010's likelihood rule alone)");
   app.add_option("--threads", threads, "Worker threads")->check(CLI::Range(1, 64));
 }
 
@@ -28,6 +31,7 @@ ModelParams ModelOptions::params() const {
   p.sigma_lambda = sigma_lambda;
   p.refine_iterations = refine_iterations;
   p.fit_candidates = fit_candidates;
+  p.prune_keeps_sole_cover = prune_keep_cover;
   p.threads = threads;
   return p;
 }

@@ -21,6 +21,7 @@ struct ModelOptions {
   double sigma_lambda = ModelParams{}.sigma_lambda;
   int refine_iterations = ModelParams{}.refine_iterations;
   int fit_candidates = ModelParams{}.fit_candidates;
+  bool prune_keep_cover = false;
   int threads = 2;
   void add_to(CLI::App& app);
   [[nodiscard]] ModelParams params() const;

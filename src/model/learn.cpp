@@ -139,7 +139,7 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
   for (std::size_t s = 0; s < states.size(); ++s) {
     states[s].choose_by_fit(res.alphabet, params.model.fit_candidates, threads);
     states[s].refine(res.alphabet, params.model.refine_iterations, params.model.refine_reach_factor * radius, threads);
-    if (params.prune) states[s].prune(res.alphabet, threads);
+    if (params.prune) states[s].prune(res.alphabet, threads, params.model.prune_keeps_sole_cover);
     else states[s].rescore(res.alphabet, threads);
   }
   res.log_likelihood = 0.0;

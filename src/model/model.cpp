@@ -227,7 +227,7 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
     state.assign_words(words, alphabet);
   }
   state.refine(alphabet, params.refine_iterations, params.refine_reach_factor * scan.word_radius, threads);
-  if (prune) state.prune(alphabet, threads);
+  if (prune) state.prune(alphabet, threads, params.prune_keeps_sole_cover);
   return state.model();
 }
 

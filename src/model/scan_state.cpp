@@ -355,7 +355,7 @@ void ScanState::rescore(const Alphabet& alphabet, int threads) {
   recompute();
 }
 
-std::size_t ScanState::prune(const Alphabet& alphabet, int threads) {
+std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_sole_cover) {
   rescore(alphabet, threads);
   std::vector<std::size_t> count(alphabet.size(), 0);
   for (const auto w : word_)
@@ -367,6 +367,29 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads) {
   std::vector<std::vector<std::uint32_t>> of_word(alphabet.size());
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (word_[f] >= 0) of_word[static_cast<std::size_t>(word_[f])].push_back(static_cast<std::uint32_t>(f));
+  // With keep_sole_cover: which entries (instance, nearby scan point) have a word point
+  // within the point's σ, and how many instances cover each scan point so.
+  std::vector<std::uint8_t> covers;
+  std::vector<std::uint32_t> cover_count;
+  if (keep_sole_cover) {
+    covers.assign(cache_.size(), 0);
+    cover_count.assign(S_.size(), 0);
+    const std::vector<PackedWord> packed = pack(alphabet);
+    parallel_for(word_.size(), threads, [&](std::size_t f) {
+      if (word_[f] < 0) return;
+      const std::size_t b = begin_of(f), e = end_of(f);
+      const PackedWord& w = packed[static_cast<std::size_t>(word_[f])];
+      thread_local std::vector<std::int32_t> hits, sup;
+      hits.resize(e - b);
+      sup.resize(w.size());
+      fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, w.x.data(), w.y.data(),
+                 w.z.data(), w.size(), hits.data(), sup.data());
+      for (std::size_t k = b; k < e; ++k) covers[k] = hits[k - b] != 0 ? 1 : 0;
+    }, 16);
+    for (std::size_t f = 0; f < word_.size(); ++f)
+      if (word_[f] >= 0)
+        for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] += covers[k];
+  }
   std::size_t dropped = 0;
   std::vector<Change> one(1);
   for (const std::uint32_t w : order) {
@@ -375,10 +398,15 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads) {
       one[0].word = -1;
       one[0].word_points = 0;
       one[0].contrib.clear();
-      if (delta_log_likelihood(one) >= 0.0) {
-        apply(one);
-        ++dropped;
+      if (delta_log_likelihood(one) < 0.0) continue;
+      if (keep_sole_cover) {
+        bool sole = false;
+        for (std::size_t k = begin_of(f); k < end_of(f) && !sole; ++k) sole = covers[k] != 0 && cover_count[idx_[k]] == 1;
+        if (sole) continue;
+        for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] -= covers[k];
       }
+      apply(one);
+      ++dropped;
     }
   }
   recompute();

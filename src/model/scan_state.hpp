@@ -69,9 +69,10 @@ class ScanState {
   void rescore(const Alphabet& alphabet, int threads);
 
   /// Drops instances whose removal does not lower ln L, words by decreasing
-  /// occurrence count (ruhnke2010 §III-D). Returns how many were dropped. Rescores a
-  /// stale state first.
-  std::size_t prune(const Alphabet& alphabet, int threads = 1);
+  /// occurrence count (ruhnke2010 §III-D), except, with `keep_sole_cover`, an instance
+  /// that is the last one with a word point within σ of some scan point. Returns how many
+  /// were dropped. Rescores a stale state first.
+  std::size_t prune(const Alphabet& alphabet, int threads = 1, bool keep_sole_cover = false);
 
   /// Refines the pose of every instance by point-to-point ICP of its word against the
   /// scan points near it (correspondences within max_distance, `iterations` rounds).
