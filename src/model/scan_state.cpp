@@ -36,18 +36,6 @@ PackedWord::PackedWord(const Word& word) {
       hi = hi.cwiseMax(p);
     }
   }
-  block_box.resize(npad / 8 * 6);
-  for (std::size_t b = 0; b < npad / 8; ++b) {
-    Eigen::Vector3f blo = word.points[8 * b], bhi = word.points[8 * b];
-    for (std::size_t i = 8 * b; i < std::min(n, 8 * b + 8); ++i) {
-      blo = blo.cwiseMin(word.points[i]);
-      bhi = bhi.cwiseMax(word.points[i]);
-    }
-    for (int a = 0; a < 3; ++a) {
-      block_box[6 * b + static_cast<std::size_t>(a)] = blo[a];
-      block_box[6 * b + 3 + static_cast<std::size_t>(a)] = bhi[a];
-    }
-  }
 }
 
 namespace {
@@ -101,7 +89,7 @@ inline float mask(float v, std::uint32_t m) {
 // SSE and AVX2 builds give the same bits.
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
                                 const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
-                                std::size_t npad, const float* lo, const float* hi, const float* block_box, float* out) {
+                                std::size_t npad, const float* lo, const float* hi, float* out) {
   for (std::size_t k = 0; k < n; ++k) {
     const float qx = lx[k], qy = ly[k], qz = lz[k];
     const float r2 = reach2[k];
@@ -113,13 +101,7 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     if (ox * ox + oy * oy + oz * oz > r2) continue;
     const float ak = a[k];
     float acc[8] = {0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F};
-    for (std::size_t p = 0; p < npad; p += 8) {
-      // A block whose box is beyond reach adds only zeros: skipped (the same sums).
-      const float* bb = block_box + 6 * (p / 8);
-      const float bx = std::max(std::max(bb[0] - qx, qx - bb[3]), 0.0F);
-      const float by = std::max(std::max(bb[1] - qy, qy - bb[4]), 0.0F);
-      const float bz = std::max(std::max(bb[2] - qz, qz - bb[5]), 0.0F);
-      if (bx * bx + by * by + bz * bz > r2) continue;
+    for (std::size_t p = 0; p < npad; p += 8)
       for (std::size_t l = 0; l < 8; ++l) {
         const float dx = wx[p + l] - qx, dy = wy[p + l] - qy, dz = wz[p + l] - qz;
         const float d2 = dx * dx + dy * dy + dz * dz;
@@ -127,7 +109,6 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
         const std::uint32_t m = static_cast<std::uint32_t>(-static_cast<std::int32_t>(d2 <= r2));
         acc[l] += mask(exp_neg(-mask(d2, m) * ak), m);
       }
-    }
     out[k] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
   }
 }
@@ -269,7 +250,7 @@ void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
   gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, a_e_.data() + b, e - b,
-                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, word.block_box.data(), out.data());
+                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, out.data());
   for (std::size_t k = b; k < e; ++k)
     if (out[k - b] != 0.0F) out[k - b] = static_cast<float>(static_cast<double>(out[k - b]) * norm_[idx_[k]]);
 }

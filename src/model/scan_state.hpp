@@ -29,9 +29,6 @@ struct PackedWord {
   std::vector<float> xp, yp, zp;  // the same, padded with far points to a multiple of 8
   Eigen::Vector3f lo = Eigen::Vector3f::Zero();
   Eigen::Vector3f hi = Eigen::Vector3f::Zero();
-  /// Bounding box of each block of 8 padded points (its real points): 6 floats a block,
-  /// lo x y z then hi x y z.
-  std::vector<float> block_box;
   PackedWord() = default;
   explicit PackedWord(const Word& word);
   [[nodiscard]] std::size_t size() const noexcept { return x.size(); }
