@@ -25,11 +25,14 @@
 #include <octomap/OcTree.h>
 
 #include "lex3d/core/timer.hpp"
+#include "bench_driver.hpp"
 #include "lex3d/io/io.hpp"
 
 using namespace lex3d;
 
 namespace {
+
+constexpr char kTool[] = "lex3d_bench_octomap";
 
 int usage() {
   std::fprintf(stderr,
@@ -39,12 +42,10 @@ int usage() {
 }
 
 int encode(const std::string& input, const std::string& tree_path, double resolution) {
-  auto r = io::read_cloud(input);
-  if (!r.ok()) {
-    std::fprintf(stderr, "lex3d_bench_octomap: %s\n", r.status().to_string().c_str());
-    return exit_code_for(r.status().code());
-  }
-  const Cloud cloud = std::move(r).value().cloud;
+  int rc = 0;
+  const auto input_cloud = bench::read_input(kTool, input, rc);
+  if (!input_cloud) return rc;
+  const Cloud& cloud = *input_cloud;
   const Stopwatch sw;
   octomap::OcTree tree(resolution);
   std::size_t dropped = 0;
@@ -64,13 +65,7 @@ int encode(const std::string& input, const std::string& tree_path, double resolu
   }
   const double ms = sw.elapsed_ms();
   const std::string bytes = out.str();
-  std::ofstream file(tree_path, std::ios::binary);
-  file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  file.close();
-  if (!file) {
-    std::fprintf(stderr, "lex3d_bench_octomap: %s: cannot write\n", tree_path.c_str());
-    return 3;
-  }
+  if (const int w = bench::write_stream(kTool, tree_path, bytes); w != 0) return w;
   std::printf("{\"points\": %zu, \"dropped\": %zu, \"bytes\": %zu, \"encode_ms\": %.3f, \"leaf_nodes\": %zu}\n",
               cloud.size(), dropped, bytes.size(), ms, tree.getNumLeafNodes());
   return 0;
@@ -115,14 +110,7 @@ int decode(const std::string& tree_path, const std::string& output) {
       }
     }
   }
-  const double ms = sw.elapsed_ms();
-  const Status s = io::write_cloud(output, cloud);
-  if (!s.ok()) {
-    std::fprintf(stderr, "lex3d_bench_octomap: %s\n", s.to_string().c_str());
-    return exit_code_for(s.code());
-  }
-  std::printf("{\"points\": %zu, \"decode_ms\": %.3f}\n", cloud.size(), ms);
-  return 0;
+  return bench::write_decoded(kTool, output, cloud, sw.elapsed_ms());
 }
 
 }  // namespace

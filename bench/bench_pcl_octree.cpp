@@ -28,11 +28,14 @@
 #include <pcl/point_types.h>
 
 #include "lex3d/core/timer.hpp"
+#include "bench_driver.hpp"
 #include "lex3d/io/io.hpp"
 
 using namespace lex3d;
 
 namespace {
+
+constexpr char kTool[] = "lex3d_bench_pcl_octree";
 
 using Compression = pcl::io::OctreePointCloudCompression<pcl::PointXYZ>;
 
@@ -60,12 +63,10 @@ bool parse_profile(std::string name, pcl::io::compression_Profiles_e& out) {
 
 int encode(const std::string& input, const std::string& stream_path, const std::string& profile_name,
            double resolution) {
-  auto r = io::read_cloud(input);
-  if (!r.ok()) {
-    std::fprintf(stderr, "lex3d_bench_pcl_octree: %s\n", r.status().to_string().c_str());
-    return exit_code_for(r.status().code());
-  }
-  const Cloud cloud = std::move(r).value().cloud;
+  int rc = 0;
+  const auto input_cloud = bench::read_input(kTool, input, rc);
+  if (!input_cloud) return rc;
+  const Cloud& cloud = *input_cloud;
   pcl::PointCloud<pcl::PointXYZ>::Ptr pcl_cloud(new pcl::PointCloud<pcl::PointXYZ>);
   pcl_cloud->reserve(cloud.size());
   for (const auto& p : cloud.points) pcl_cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
@@ -80,13 +81,7 @@ int encode(const std::string& input, const std::string& stream_path, const std::
   encoder.encodePointCloud(pcl_cloud, out);
   const double ms = sw.elapsed_ms();
   const std::string bytes = out.str();
-  std::ofstream file(stream_path, std::ios::binary);
-  file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  file.close();
-  if (!file) {
-    std::fprintf(stderr, "lex3d_bench_pcl_octree: %s: cannot write\n", stream_path.c_str());
-    return 3;
-  }
+  if (const int w = bench::write_stream(kTool, stream_path, bytes); w != 0) return w;
   std::printf("{\"points\": %zu, \"bytes\": %zu, \"encode_ms\": %.3f}\n", cloud.size(), bytes.size(), ms);
   return 0;
 }
@@ -107,13 +102,7 @@ int decode(const std::string& stream_path, const std::string& output) {
   Cloud cloud;
   cloud.points.reserve(pcl_cloud->size());
   for (const auto& p : *pcl_cloud) cloud.points.emplace_back(p.x, p.y, p.z);
-  const Status s = io::write_cloud(output, cloud);
-  if (!s.ok()) {
-    std::fprintf(stderr, "lex3d_bench_pcl_octree: %s\n", s.to_string().c_str());
-    return exit_code_for(s.code());
-  }
-  std::printf("{\"points\": %zu, \"decode_ms\": %.3f}\n", cloud.size(), ms);
-  return 0;
+  return bench::write_decoded(kTool, output, cloud, ms);
 }
 
 }  // namespace

@@ -114,11 +114,19 @@ TEST(Learner, DeterministicForASeedAndAnyThreadCount) {
   EXPECT_FALSE(same_words(a.alphabet, other.alphabet));
 }
 
+namespace {
+// An alphabet learned on `c` without pruning; `p` gets the parameters used.
+LearnResult learn_unpruned(const Cloud& c, LearnParams& p) {
+  p = quick_params();
+  p.prune = false;
+  return learn_alphabet({c}, p);
+}
+}  // namespace
+
 TEST(Pruning, NeverLowersTheLikelihood) {
   const Cloud c = test::load_or_fail(test::sample("newer_college_00.bin"));
-  LearnParams p = quick_params();
-  p.prune = false;
-  const LearnResult r = learn_alphabet({c}, p);
+  LearnParams p;
+  const LearnResult r = learn_unpruned(c, p);
   ASSERT_GT(r.alphabet.size(), 0U);
   const Model full = encode_scan(r.scans[0], r.alphabet, false);
   const Model pruned = encode_scan(r.scans[0], r.alphabet, true);
@@ -132,9 +140,8 @@ TEST(Pruning, NeverLowersTheLikelihood) {
 // only ever drop instances the likelihood does not need.
 TEST(Pruning, KeepingSoleCoversKeepsTheInliers) {
   const Cloud c = test::load_or_fail(test::sample("newer_college_00.bin"));
-  LearnParams p = quick_params();
-  p.prune = false;
-  const LearnResult r = learn_alphabet({c}, p);
+  LearnParams p;
+  const LearnResult r = learn_unpruned(c, p);
   ASSERT_GT(r.alphabet.size(), 0U);
   ModelParams keep_cover = p.model;
   keep_cover.prune_keeps_sole_cover = true;
