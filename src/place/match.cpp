@@ -835,10 +835,7 @@ void refine_match(const PlaceScan& query, const PlaceScan& candidate, PlaceMatch
   m.score = std::min(m.score_query_in_match, m.score_match_in_query);
   m.dense_refined = true;
   check_distance(query, candidate, m, params);
-  const auto conflict_share = [](const DenseConsistency& c) {
-    return c.visible > 0 ? static_cast<double>(c.conflict) / static_cast<double>(c.visible) : 0.0;
-  };
-  if (params.max_conflict < 1.0 && std::max(conflict_share(m.dense_q), conflict_share(m.dense_m)) > params.max_conflict) {
+  if (params.max_conflict < 1.0 && std::max(m.dense_q.conflict_share(), m.dense_m.conflict_share()) > params.max_conflict) {
     m.rejected_conflict = true;
     m.valid = false;
   }

@@ -300,8 +300,7 @@ TEST(PlaceMatch, FreeSpaceCheckRejectsASymmetricWrongTransform) {
   const Pose truth = b.pose("000036").inverse() * b.pose("000088");
   const Pose d = truth.inverse() * wrong.T_match_query;
   EXPECT_GT(Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI, 45.0) << "the transform is not the wrong one any more";
-  const auto share = [](const DenseConsistency& c) { return static_cast<double>(c.conflict) / static_cast<double>(std::max<std::size_t>(c.visible, 1)); };
-  EXPECT_GT(std::max(share(wrong.dense_q), share(wrong.dense_m)), PlaceParams{}.max_conflict);
+  EXPECT_GT(std::max(wrong.dense_q.conflict_share(), wrong.dense_m.conflict_share()), PlaceParams{}.max_conflict);
   const PlaceMatch checked = match_scans(q, m, PlaceParams{});
   EXPECT_FALSE(checked.valid);
   EXPECT_TRUE(checked.rejected_conflict);
@@ -309,7 +308,7 @@ TEST(PlaceMatch, FreeSpaceCheckRejectsASymmetricWrongTransform) {
   const PlaceMatch right = match_scans(b.place("000176"), b.place("000114"), PlaceParams{});
   EXPECT_TRUE(right.valid);
   EXPECT_FALSE(right.rejected_conflict);
-  EXPECT_LE(std::max(share(right.dense_q), share(right.dense_m)), PlaceParams{}.max_conflict);
+  EXPECT_LE(std::max(right.dense_q.conflict_share(), right.dense_m.conflict_share()), PlaceParams{}.max_conflict);
 }
 
 TEST(PlaceDatabase, SaveLoadRoundTrip) {

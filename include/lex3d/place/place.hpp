@@ -200,6 +200,10 @@ struct DenseConsistency {
   std::size_t visible = 0;   ///< support + conflict
   std::size_t support = 0;   ///< a pixel within ±1 sees a surface within d̂ of the point
   std::size_t conflict = 0;  ///< the other scan's beam passed through the point (free space)
+  /// conflict / visible (0 when nothing is visible): what PlaceParams::max_conflict bounds.
+  [[nodiscard]] double conflict_share() const noexcept {
+    return visible > 0 ? static_cast<double>(conflict) / static_cast<double>(visible) : 0.0;
+  }
 };
 
 /// The result of matching a query against one scan.
