@@ -127,6 +127,7 @@ void run_compress(const CompressOptions& o) {
 
   Stopwatch sw;
   const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
+  const double read_ms = sw.elapsed_ms();
   const ModelParams mp = o.model.params();
   LearnParams p = o.scan_set.learn_params(mp);
   std::optional<AlphabetFile> reuse;
@@ -169,6 +170,7 @@ void run_compress(const CompressOptions& o) {
   layer_options.thin = !o.keep_all_points;
   layer_options.threads = mp.threads;
   for (std::size_t i = 0; i < clouds.size(); ++i) {
+    Stopwatch code_sw;
     codec::ModelData d;
     d.input_points = clouds[i].size();
     d.T_cloud_sensor = clouds[i].T_cloud_sensor;
@@ -182,6 +184,7 @@ void run_compress(const CompressOptions& o) {
     if (!coded.words) d.model.instances.clear();
     if (o.one_file) sequence.model_files.push_back(bytes);
     else throw_if_error(io::write_file_atomic(outputs[i], bytes));
+    const double code_ms = code_sw.elapsed_ms();
     const std::string& shown = o.one_file ? o.inputs[i] : outputs[i];
     const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
     total_bytes += bytes.size();
@@ -195,6 +198,22 @@ void run_compress(const CompressOptions& o) {
           .value("instances", d.model.instances.size())
           .value("bytes", static_cast<std::uint64_t>(bytes.size()))
           .value("bits_per_point", bpp);
+      if (i < set.timings.size()) {  // an alphabet reused: where each scan's time went
+        const PreparedScan& ps = set.scans[i];
+        const EncodeTimings& et = set.timings[i];
+        j.begin_object("timings_ms")
+            .value("range_image", ps.timings.range_image_ms)
+            .value("interest_points", ps.timings.interest_ms)
+            .value("coverage_points", ps.timings.coverage_ms)
+            .value("descriptors", ps.timings.descriptor_ms)
+            .value("neighbourhoods", ps.prepare_ms - ps.timings.total_ms())
+            .value("frames", et.frames_ms)
+            .value("words", et.words_ms)
+            .value("refine", et.refine_ms)
+            .value("prune", et.prune_ms)
+            .value("code_and_write", code_ms)
+            .end_object();
+      }
       if (coded.max_error) {
         j.begin_object("residual")
             .value("max_error_m", *coded.max_error)
@@ -231,7 +250,7 @@ void run_compress(const CompressOptions& o) {
   if (o.json) {
     j.value("alphabet_words", alphabet.size()).value("alphabet_embedded", embed).value("one_file", o.one_file);
     j.value("alphabet_bytes", alphabet_bytes).value("total_bytes", total_bytes + alphabet_bytes);
-    j.value("bits_per_point", bpp_all).value("time_ms", total_ms);
+    j.value("bits_per_point", bpp_all).value("time_ms", total_ms).value("read_ms", read_ms);
     j.end_object();
     std::cout << j.str() << "\n";
     return;

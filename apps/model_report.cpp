@@ -87,7 +87,8 @@ ModelSet build_models(const std::vector<Cloud>& clouds, const LearnParams& learn
   ProgressBar bar("encoding");
   for (std::size_t i = 0; i < clouds.size(); ++i) {
     set.scans.push_back(prepare_scan(clouds[i], learn.model, set.alphabet.word_radius));
-    set.models.push_back(encode_scan(set.scans.back(), set.alphabet, learn.prune, learn.model));
+    set.timings.emplace_back();
+    set.models.push_back(encode_scan(set.scans.back(), set.alphabet, learn.prune, learn.model, &set.timings.back()));
     bar.update(static_cast<long>(i + 1), static_cast<long>(clouds.size()), i < names.size() ? names[i] : "");
   }
   return set;

@@ -68,6 +68,7 @@ struct ModelSet {
   Alphabet alphabet;
   std::vector<PreparedScan> scans;
   std::vector<Model> models;
+  std::vector<EncodeTimings> timings;  ///< per scan, when an alphabet was reused
 };
 ModelSet build_models(const std::vector<Cloud>& clouds, const LearnParams& learn, const Alphabet* reuse,
                       const std::vector<std::string>& names);

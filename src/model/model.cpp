@@ -9,6 +9,7 @@
 #include <pcl/point_types.h>
 
 #include "lex3d/core/parallel.hpp"
+#include "lex3d/core/timer.hpp"
 #include "lex3d/model/model.hpp"
 #include "model/scan_state.hpp"
 
@@ -205,8 +206,11 @@ double bic(double log_likelihood, std::size_t alphabet_points, std::size_t data_
   return -2.0 * log_likelihood + k * std::log(static_cast<double>(std::max<std::size_t>(data_points, 1)));
 }
 
-Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune, const ModelParams& params) {
+Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune, const ModelParams& params,
+                  EncodeTimings* timings) {
   params.validate();
+  Stopwatch sw;
+  EncodeTimings t;
   const int threads = params.threads;
   if (alphabet.size() == 0 || scan.features.size() == 0) return {};
   if (alphabet.descriptor_dim != scan.features.descriptor_dim)
@@ -214,6 +218,7 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
                                 std::to_string(alphabet.descriptor_dim) + " values, the scan's " +
                                 std::to_string(scan.features.descriptor_dim));
   detail::ScanState state(scan, threads);
+  t.frames_ms = sw.lap_ms();
   // Words: the nearest descriptor, or the best fit among the fit_candidates nearest.
   // Nothing is scored until the words and poses are final: only pruning needs the
   // likelihood.
@@ -226,8 +231,12 @@ Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune
     for (std::size_t f = 0; f < matches.size(); ++f) words[f] = static_cast<std::int32_t>(matches[f].word);
     state.assign_words(words, alphabet);
   }
+  t.words_ms = sw.lap_ms();
   state.refine(alphabet, params.refine_iterations, params.refine_reach_factor * scan.word_radius, threads);
+  t.refine_ms = sw.lap_ms();
   if (prune) state.prune(alphabet, threads, params.prune_keeps_sole_cover);
+  t.prune_ms = sw.lap_ms();
+  if (timings != nullptr) *timings = t;
   return state.model();
 }
 

@@ -105,8 +105,16 @@ struct Reconstruction {
 /// each instance's pose is fitted to the scan by ICP (when
 /// params.refine_iterations > 0), then, when `prune`, instances whose removal does not
 /// lower the likelihood are dropped (§III-D).
+/// Where encode_scan's time went, milliseconds.
+struct EncodeTimings {
+  double frames_ms = 0.0;  ///< the points near each feature, moved into its frame
+  double words_ms = 0.0;   ///< word choice (descriptor search, fit)
+  double refine_ms = 0.0;  ///< ICP fitting of the instance poses
+  double prune_ms = 0.0;   ///< scoring and pruning
+};
+
 [[nodiscard]] Model encode_scan(const PreparedScan& scan, const Alphabet& alphabet, bool prune,
-                                const ModelParams& params = {});
+                                const ModelParams& params = {}, EncodeTimings* timings = nullptr);
 
 struct LearnParams {
   ModelParams model;
