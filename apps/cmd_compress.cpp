@@ -28,11 +28,9 @@ struct CompressOptions {
   std::string words;  ///< on, off or auto; empty: off with a residual layer, on without
   bool keep_all_points = false;
   bool one_file = false;
-  /// Instance steps coarser than the codec's defaults: 2 mm / 1 mrad add at most 3 mm to a
-  /// point of a 1 m word (formats/model.md §3), far below a word's own fit error (a D1
-  /// RMSE near 10 cm), and save ~11 % of a words-only file (kitti00/000000: 5.38 -> 4.78
-  /// bits/pt, D1 PSNR and inliers unchanged to 0.01).
-  codec::Quantization quantization{0.002, 0.001, 0.0005};
+  /// Instance steps; 0 (the default) scales them to the alphabet's word radius
+  /// (codec::quantization_for_word_radius).
+  codec::Quantization quantization{0.0, 0.0, 0.0005};
   bool json = false;
   ScanSetOptions scan_set;
   ModelOptions model;
@@ -137,11 +135,17 @@ void run_compress(const CompressOptions& o) {
   else set.models.resize(clouds.size());
   const Alphabet& alphabet = set.alphabet;
   const std::vector<Model>& models = set.models;
+  codec::Quantization quantization = o.quantization;
+  {
+    const codec::Quantization derived = codec::quantization_for_word_radius(alphabet.word_radius);
+    if (quantization.translation_m == 0.0) quantization.translation_m = derived.translation_m;
+    if (quantization.rotation_rad == 0.0) quantization.rotation_rad = derived.rotation_rad;
+  }
   std::vector<std::uint8_t> alphabet_file;
   if (reuse) {
     alphabet_file = std::move(reuse->bytes);
   } else if (!o.save_alphabet.empty() || o.one_file) {
-    alphabet_file = codec::encode_alphabet(alphabet, o.quantization);
+    alphabet_file = codec::encode_alphabet(alphabet, quantization);
   }
   // The alphabet exactly as a decoder will see it, for the residual layer's reconstruction.
   std::optional<Alphabet> decoder_alphabet;
@@ -149,7 +153,7 @@ void run_compress(const CompressOptions& o) {
     if (reuse) {
       decoder_alphabet = reuse->alphabet;
     } else {
-      auto a = codec::decode_alphabet(codec::encode_alphabet(alphabet, o.quantization));
+      auto a = codec::decode_alphabet(codec::encode_alphabet(alphabet, quantization));
       throw_if_error(a.status());
       decoder_alphabet = std::move(a).value();
     }
@@ -178,7 +182,7 @@ void run_compress(const CompressOptions& o) {
     if (embed) d.alphabet = alphabet;
     else d.alphabet_hash = hash;
     const Coded coded = code_scan(clouds[i], d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
-                                  words_mode, layer_options, o.quantization);
+                                  words_mode, layer_options, quantization);
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
     if (!coded.words) d.model.instances.clear();
@@ -289,13 +293,23 @@ void register_compress(CLI::App& app) {
                   "With a residual layer: code every point in the layer (off, the default), use the alphabet's "
                   "words and code only what they do not explain (on), or keep the smaller file per scan (auto)")
       ->check(CLI::IsMember({"on", "off", "auto"}));
+  // A step is 0 (derived) or in [1e-6, 0.1].
+  const CLI::Validator step_check(
+      [](std::string& in) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(in.c_str(), &end);
+        if (end == in.c_str() || *end != '\0') return "not a number: " + in;
+        return v == 0.0 || (v >= 1e-6 && v <= 0.1) ? "" : "must be 0 or in [1e-6, 0.1], got " + in;
+      },
+      "0 OR [1e-6, 0.1]");
   sub->add_option("--translation-step", o->quantization.translation_m,
-                  "Quantisation step of instance translations, m (formats/model.md §3)")
-      ->check(CLI::Range(1e-6, 0.1))
+                  "Quantisation step of instance translations, m, in [1e-6, 0.1] (formats/model.md §3); "
+                  "0: the word radius / 32")
+      ->check(step_check)
       ->capture_default_str();
   sub->add_option("--rotation-step", o->quantization.rotation_rad,
-                  "Quantisation step of instance rotations, rad")
-      ->check(CLI::Range(1e-6, 0.1))
+                  "Quantisation step of instance rotations, rad, in [1e-6, 0.1]; 0: 1/32 rad")
+      ->check(step_check)
       ->capture_default_str();
   sub->add_flag("--keep-all-points", o->keep_all_points,
                 "Residual layer: give every input point its own decoded point (by default a point within the "

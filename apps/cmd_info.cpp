@@ -113,6 +113,27 @@ bool info_lex3d_file(const InfoOptions& o) {
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
       }
+  // Quantisation steps and the word geometry, read from the (CRC-checked) header chunks:
+  // MHDR bytes 104..119 (formats/model.md §2.1), AHDR bytes 0..15 and 24..31 (alphabet.md).
+  const auto f64_at = [&](const codec::ChunkInfo& c, std::size_t at) {
+    std::uint64_t u = 0;
+    for (int k = 7; k >= 0; --k) u = (u << 8) | b[static_cast<std::size_t>(c.offset) + 12 + at + static_cast<std::size_t>(k)];
+    double v = 0.0;
+    std::memcpy(&v, &u, sizeof v);
+    return v;
+  };
+  std::optional<double> translation_step, rotation_step, word_radius, point_spacing, word_point_step;
+  for (const auto& c : fi.chunks) {
+    if (!c.crc_ok) continue;
+    if (c.type == "MHDR" && c.length == 120) {
+      translation_step = f64_at(c, 104);
+      rotation_step = f64_at(c, 112);
+    } else if (c.type == "AHDR" && c.length >= 32) {
+      word_radius = f64_at(c, 0);
+      point_spacing = f64_at(c, 8);
+      word_point_step = f64_at(c, 24);
+    }
+  }
   const double bpp = input_points ? 8.0 * static_cast<double>(b.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {
     Json j;
@@ -128,6 +149,9 @@ bool info_lex3d_file(const InfoOptions& o) {
     if (fi.kind != "alphabet" && !referenced && decode_error.empty())
       j.value("instances", instances).value("input_points", input_points).value("bits_per_point", bpp);
     j.value("words", words).value("word_points", word_points);
+    if (translation_step) j.value("translation_step_m", *translation_step).value("rotation_step_rad", *rotation_step);
+    if (word_radius)
+      j.value("word_radius_m", *word_radius).value("point_spacing_m", *point_spacing).value("word_point_step_m", *word_point_step);
     if (referenced) j.value("alphabet", "referenced");
     if (layer)
       j.begin_object("residual")
@@ -161,7 +185,12 @@ bool info_lex3d_file(const InfoOptions& o) {
                     layer->max_error, layer->step, static_cast<unsigned long long>(layer->coded_points),
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
     }
+    if (translation_step)
+      std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);
     if (words) std::printf("words          %zu (%zu points)\n", words, word_points);
+    if (word_radius)
+      std::printf("word radius    %.4g m (points %.4g m apart, stored in steps of %.4g m)\n", *word_radius, *point_spacing,
+                  *word_point_step);
     if (!decode_error.empty()) std::printf("error          %s\n", decode_error.c_str());
   }
   if (!all_crc_ok || !decode_error.empty())

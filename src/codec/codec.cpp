@@ -680,6 +680,19 @@ void Quantization::validate() const {
   check(word_point_m, "word_point_m");
 }
 
+Quantization quantization_for_word_radius(double word_radius) {
+  Quantization q;
+  q.word_point_m = 0.0005;
+  if (!(word_radius > 0.0) || !std::isfinite(word_radius)) {
+    q.translation_m = 0.002;
+    q.rotation_rad = 0.001;
+    return q;
+  }
+  q.translation_m = std::min(0.1, word_radius / 32.0);
+  q.rotation_rad = 1.0 / 32.0;
+  return q;
+}
+
 std::vector<std::uint8_t> encode_alphabet(const Alphabet& alphabet, const Quantization& q) {
   q.validate();
   check_alphabet(alphabet);

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -317,6 +318,24 @@ TEST(CodecRoundTrip, SyntheticModelWithinBounds) {
     EXPECT_FALSE(r.value().alphabet_hash.has_value());
     for (const auto& inst : r.value().model.instances) EXPECT_EQ(inst.feature, 0U);
   }
+}
+
+TEST(CodecQuantization, StepsScaleWithTheWordRadius) {
+  const Quantization q = quantization_for_word_radius(0.32);
+  EXPECT_DOUBLE_EQ(q.translation_m, 0.01);
+  EXPECT_DOUBLE_EQ(q.rotation_rad, 1.0 / 32.0);
+  EXPECT_DOUBLE_EQ(q.word_point_m, 0.0005);
+  EXPECT_NO_THROW(q.validate());
+  // Capped to what the format allows; no words: fine fixed steps.
+  EXPECT_DOUBLE_EQ(quantization_for_word_radius(8.0).translation_m, 0.1);
+  for (const double r : {0.0, -1.0, std::numeric_limits<double>::quiet_NaN()}) {
+    const Quantization f = quantization_for_word_radius(r);
+    EXPECT_DOUBLE_EQ(f.translation_m, 0.002);
+    EXPECT_DOUBLE_EQ(f.rotation_rad, 0.001);
+  }
+  // The bound of formats/model.md §3 for a point at the word radius: under 0.06 δ.
+  const double bound = std::sqrt(3.0) / 2.0 * (q.translation_m + q.rotation_rad * 0.32 + q.word_point_m);
+  EXPECT_LT(bound, 0.06 * 0.32);
 }
 
 TEST(CodecRoundTrip, RealModelOfNewerCollegeWithinBounds) {
