@@ -46,7 +46,9 @@ constexpr std::uint64_t kInstanceRawBytes = 28;   // 7 columns of u32
 constexpr std::uint32_t kMaxDescriptorDim = 65535;
 constexpr std::uint64_t kMaxInflateRatio = 1032;  // deflate's best case is ~1032:1
 constexpr std::uint64_t kInflateSlack = 64;
-constexpr int kZlibLevel = 9;
+// zlib's default level: on a KITTI model (170 KB of instance columns) 5x faster than
+// level 9 (3.8 against 20 ms) for 0.4 % more bytes.
+constexpr int kZlibLevel = 6;
 constexpr double kOrthonormalTolerance = 1e-6;
 constexpr double kDescriptorScale = 127.0;
 constexpr double kPi = 3.14159265358979323846;
@@ -119,7 +121,7 @@ void put_chunk(std::vector<std::uint8_t>& out, const char* type, const std::vect
   put_u32(out, crc_of(out.data() + start, out.size() - start));
 }
 
-/// count u64, raw_size u64, deflate(raw) at level 9 (deterministic for a zlib build).
+/// count u64, raw_size u64, deflate(raw) at kZlibLevel (deterministic for a zlib build).
 std::vector<std::uint8_t> deflated_payload(std::uint64_t count, const std::vector<std::uint8_t>& raw) {
   std::vector<std::uint8_t> p;
   put_u64(p, count);
