@@ -33,6 +33,7 @@ constexpr std::uint64_t kQhdrBytes = 8;
 constexpr std::uint16_t kMajor = 1;
 constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
 constexpr std::uint16_t kMinorResidual = 1;  // the first minor version with the RESD chunk
+constexpr std::uint16_t kMinorSweep = 2;     // the first minor version with the RESW chunk
 constexpr std::size_t kHeaderBytes = 20;      // magic 8, major 2, minor 2, flags 4, header_crc 4
 constexpr std::size_t kChunkHeadBytes = 12;   // type 4, length 8
 constexpr std::size_t kChunkCrcBytes = 4;
@@ -682,6 +683,12 @@ void Quantization::validate() const {
   check(word_point_m, "word_point_m");
 }
 
+bool is_sweep_layer(const std::vector<std::uint8_t>& payload) {
+  // coding u32, then the marker 0xFFFFFFFF, which as the high half of a RESD payload's
+  // first field (max_error f64) would make it a NaN.
+  return payload.size() >= 8 && payload[4] == 0xFF && payload[5] == 0xFF && payload[6] == 0xFF && payload[7] == 0xFF;
+}
+
 Quantization quantization_for_word_radius(double word_radius) {
   Quantization q;
   q.word_point_m = 0.0005;
@@ -759,9 +766,12 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual && data.residual->empty())
     throw std::invalid_argument("lex3d::codec::encode_model: an empty residual layer (use nullopt for none)");
 
+  // A layer of the sweep coding is an RESW chunk (format 1.2); any other one a RESD chunk,
+  // in a file of format 1.1 that older readers still take.
+  const bool resw = data.residual && is_sweep_layer(*data.residual);
   std::vector<std::uint8_t> out;
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced,
-             data.residual ? kMinorResidual : kMinor);
+             resw ? kMinorSweep : data.residual ? kMinorResidual : kMinor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
@@ -780,7 +790,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
     put_chunk(out, "AREF", aref);
   }
   put_chunk(out, "INST", inst_payload(data.model, q));
-  if (data.residual) put_chunk(out, "RESD", *data.residual);
+  if (data.residual) put_chunk(out, resw ? "RESW" : "RESD", *data.residual);
   put_chunk(out, "IEND", {});
   return out;
 }
@@ -804,13 +814,20 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
 
   ModelData out;
   MhdrFields mhdr;
-  // A file without a residual layer has no RESD; one with it is version 1.1 or later.
-  const bool has_residual = has_chunk(d, bytes.size(), "RESD");
-  if (has_residual && h.minor < kMinorResidual)
+  // A file without a residual layer has neither RESD nor RESW; one with RESD is version
+  // 1.1 or later, one with RESW 1.2 or later; a file has at most one of them.
+  const bool has_resd = has_chunk(d, bytes.size(), "RESD");
+  const bool has_resw = has_chunk(d, bytes.size(), "RESW");
+  if (has_resd && has_resw) return ctx.error("a model file holds at most one of the chunks 'RESD' and 'RESW'", 20);
+  const bool has_residual = has_resd || has_resw;
+  const char* const residual_chunk = has_resw ? "RESW" : "RESD";
+  if (has_resd && h.minor < kMinorResidual)
     return ctx.error("chunk 'RESD' needs format version 1.1, the header says 1." + std::to_string(h.minor), 10);
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "IEND"};
+  if (has_resw && h.minor < kMinorSweep)
+    return ctx.error("chunk 'RESW' needs format version 1.2, the header says 1." + std::to_string(h.minor), 10);
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "IEND"};
   std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
-  if (has_residual) sequence.insert(sequence.begin() + 3, "RESD");
+  if (has_residual) sequence.insert(sequence.begin() + 3, residual_chunk);
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
     switch (index) {
       case 0: return read_mhdr(c, ctx, mhdr);
@@ -843,8 +860,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
       case 2: return read_inst(c, ctx, mhdr, out.alphabet->size(), out.model);
       case 3:
         if (has_residual) {
-          if (c.length == 0) return ctx.error("chunk 'RESD' is empty", c.offset + 4);
+          if (c.length == 0) return ctx.error(std::string("chunk '") + residual_chunk + "' is empty", c.offset + 4);
           out.residual.emplace(c.payload, c.payload + c.length);
+          if (is_sweep_layer(*out.residual) != has_resw)
+            return ctx.error(has_resw ? "chunk 'RESW' does not hold a sweep-coded layer (formats/model.md §2.6)"
+                                      : "chunk 'RESD' holds a sweep-coded layer, which belongs in an 'RESW' chunk",
+                             c.payload_offset);
         }
         return {};
       default: return {};

@@ -13,6 +13,7 @@
 #include "lex3d/residual/residual.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <unordered_map>
@@ -39,6 +40,16 @@ using detail::RangeEncoder;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::uint64_t kHeadBytes = 32;  // max_error f64, step f64, word_points u64, coded_points u64
+/// An RESW payload (formats/model.md §2.6) starts with coding u32 and this marker, which
+/// no RESD payload can start with (its first field, max_error, would read as a NaN).
+constexpr std::uint32_t kSweepMarker = 0xFFFFFFFFU;
+constexpr std::uint32_t kCodingSweep = 1;
+constexpr std::uint64_t kSweepPrefixBytes = 8;  // coding u32, marker u32
+constexpr std::uint64_t kSweepExtraBytes = 8;   // cell f64, after the RESD header fields
+/// Sweep coding: the elevation follows the slope over this many decoded points back.
+constexpr unsigned kSlopeSpan = 7;
+/// Largest |elevation / azimuth| slope the sweep coding extrapolates.
+constexpr double kMaxSlope = 8.0;
 /// The step is this share of the largest step whose error bound is E (2E/sqrt(3)),
 /// leaving room for the second-order terms of spherical quantisation.
 constexpr double kStepShare = 0.95;
@@ -165,12 +176,15 @@ Spherical to_spherical(const Eigen::Vector3d& p) {
   return {r, std::atan2(p.y(), p.x()), std::asin(std::clamp(p.z() / r, -1.0, 1.0))};
 }
 
-/// The decoder's state: the last decoded point and azimuth step.
+/// The decoder's state: the last decoded point, azimuth step and (for the sweep coding)
+/// the elevation-over-azimuth slope across the last kSlopeSpan points.
 struct Predictor {
-  double r = 0.0, azimuth = 0.0, elevation = 0.0, azimuth_step = 0.0;
+  double r = 0.0, azimuth = 0.0, elevation = 0.0, azimuth_step = 0.0, slope = 0.0;
   Eigen::Vector3d last = Eigen::Vector3d::Zero();
   std::int64_t last_kr = 0, last_kl = 0, last_ka = 0;
   bool last_escaped = false;
+  std::array<double, 8> past_elevation{}, past_azimuth{};  // ring of the last 8 points
+  std::uint64_t decoded_points = 0;
 
   void update(const Eigen::Vector3d& decoded, const Spherical& s) {
     const double step = wrap_angle(s.azimuth - azimuth);
@@ -179,7 +193,49 @@ struct Predictor {
     azimuth = s.azimuth;
     elevation = s.elevation;
     last = decoded;
+    past_elevation[decoded_points % 8] = s.elevation;
+    past_azimuth[decoded_points % 8] = s.azimuth;
+    ++decoded_points;
+    slope = 0.0;
+    if (decoded_points > kSlopeSpan && azimuth_step != 0.0) {
+      const std::size_t back = (decoded_points - 1 - kSlopeSpan) % 8;
+      const double da = wrap_angle(s.azimuth - past_azimuth[back]);
+      if (std::abs(da) > 1e-7 && std::abs(da) <= kSlopeSpan * kMaxAzimuthStep)
+        slope = std::clamp((s.elevation - past_elevation[back]) / da, -kMaxSlope, kMaxSlope);
+    }
   }
+};
+
+/// The ranges decoded so far by direction (sweep coding): cells `cell` radians wide in
+/// elevation and azimuth, each holding the range and index of the last point decoded in it.
+class AngularMemory {
+ public:
+  explicit AngularMemory(double cell) : inv_(cell > 0.0 ? 1.0 / cell : 0.0) {}
+  void insert(const Spherical& s, std::uint64_t index) {
+    if (inv_ == 0.0) return;
+    cells_[key(s.elevation, s.azimuth, 0, 0)] = {s.r, index};
+  }
+  /// The range of a point decoded before `index` - 3 in the cell of (elevation, azimuth)
+  /// or, failing that, the first of its four neighbours (up, down, right, left) with one.
+  [[nodiscard]] std::optional<double> near(double elevation, double azimuth, std::uint64_t index) const {
+    if (inv_ == 0.0) return std::nullopt;
+    static constexpr int kOffsets[5][2] = {{0, 0}, {1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+    for (const auto& o : kOffsets) {
+      const auto it = cells_.find(key(elevation, azimuth, o[0], o[1]));
+      if (it != cells_.end() && it->second.second + 3 < index) return it->second.first;
+    }
+    return std::nullopt;
+  }
+
+ private:
+  [[nodiscard]] std::uint64_t key(double elevation, double azimuth, int drow, int dcol) const {
+    const auto cell = [&](double a) { return static_cast<std::int64_t>(std::floor(std::clamp(a * inv_, -1e9, 1e9))); };
+    const auto row = static_cast<std::uint64_t>(cell(elevation) + drow);
+    const auto col = static_cast<std::uint64_t>(cell(azimuth) + dcol);
+    return (row << 32) ^ (col & 0xFFFFFFFFULL);
+  }
+  double inv_;
+  std::unordered_map<std::uint64_t, std::pair<double, std::uint64_t>> cells_;
 };
 
 /// The point that residuals (kr, ke, ka) decode to, sensor frame; its spherical form in `s`.
@@ -190,6 +246,22 @@ Eigen::Vector3d spherical_point(const Predictor& pr, double q, std::int64_t kr, 
   s.elevation = pr.elevation + static_cast<double>(ke) * (q / rho);
   const double c = std::max(std::abs(std::cos(s.elevation)), kMinCosElevation);
   s.azimuth = wrap_angle(pr.azimuth + pr.azimuth_step + static_cast<double>(ka) * (q / (rho * c)));
+  const double ce = std::cos(s.elevation);
+  return {s.r * ce * std::cos(s.azimuth), s.r * ce * std::sin(s.azimuth), s.r * std::sin(s.elevation)};
+}
+
+/// Sweep coding: the azimuth step is taken at the last elevation, and the elevation is
+/// predicted along the slope for the decoded azimuth change.
+double sweep_azimuth_step(const Predictor& pr, double q, double rho) {
+  return q / (rho * std::max(std::abs(std::cos(pr.elevation)), kMinCosElevation));
+}
+Eigen::Vector3d sweep_point(const Predictor& pr, double q, std::int64_t kr, std::int64_t ke, std::int64_t ka,
+                            Spherical& s) {
+  s.r = pr.r + static_cast<double>(kr) * q;
+  const double rho = std::max(s.r, q);
+  const double da = pr.azimuth_step + static_cast<double>(ka) * sweep_azimuth_step(pr, q, rho);
+  s.azimuth = wrap_angle(pr.azimuth + da);
+  s.elevation = pr.elevation + pr.slope * da + static_cast<double>(ke) * (q / rho);
   const double ce = std::cos(s.elevation);
   return {s.r * ce * std::cos(s.azimuth), s.r * ce * std::sin(s.azimuth), s.r * std::sin(s.elevation)};
 }
@@ -216,6 +288,12 @@ struct PointModels {
   std::int64_t kr2 = 0, ka2 = 0;  // the range and azimuth residuals before the last ones
 
   int range_ctx(const Predictor& p) const { return IntModel::context_of(p.last_kr, kr2); }
+  /// Sweep coding: the second class is that of the range step to the point decoded
+  /// earlier in the predicted direction (0 when there is none).
+  static int sweep_range_ctx(const Predictor& p, std::optional<double> near, double q) {
+    const double d = near ? std::clamp((*near - p.r) / q, -1e9, 1e9) : 0.0;
+    return IntModel::context_of(p.last_kr, static_cast<std::int64_t>(std::llround(d)));
+  }
   int elevation_ctx(const Predictor& p, std::int64_t kr) const { return IntModel::context_of(p.last_kl, kr); }
   int azimuth_ctx(const Predictor& p) const { return IntModel::context_of(p.last_ka, ka2); }
   void shift(Predictor& p, std::int64_t kr, std::int64_t kl, std::int64_t ka) {
@@ -232,7 +310,9 @@ struct PointModels {
 std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                       const std::vector<std::uint32_t>& order, const Pose& T_cloud_sensor,
                                       const Pose& T_sensor_cloud, double q, double bound, std::size_t& escaped,
-                                      std::size_t& coded_count, bool thin) {
+                                      std::size_t& coded_count, bool thin, double sweep_cell) {
+  const bool sweep = sweep_cell > 0.0;
+  AngularMemory memory(sweep_cell);
   PointModels m;
   Predictor pr;
   escaped = 0;
@@ -255,7 +335,21 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     ok = quantise(t.r - pr.r, q, kr);
     Spherical s{};
     Eigen::Vector3d decoded;
-    if (ok) {
+    if (ok && sweep) {
+      const double r_hat = pr.r + static_cast<double>(kr) * q;
+      const double rho = std::max(r_hat, q);
+      ok = quantise(wrap_angle(t.azimuth - pr.azimuth - pr.azimuth_step), sweep_azimuth_step(pr, q, rho), ka);
+      if (ok) {
+        const double da = pr.azimuth_step + static_cast<double>(ka) * sweep_azimuth_step(pr, q, rho);
+        ok = quantise(t.elevation - (pr.elevation + pr.slope * da), q / rho, ke);
+      }
+      if (ok) {
+        decoded = sweep_point(pr, q, kr, ke, ka, s);
+        const Eigen::Vector3f back_f = to_cloud_frame(T_cloud_sensor, decoded);
+        ok = r_hat > 0.0 && (back_f.cast<double>() - truth_cloud).squaredNorm() <= e2;
+        if (ok) remember(back_f);
+      }
+    } else if (ok) {
       const double r_hat = pr.r + static_cast<double>(kr) * q;
       const double rho = std::max(r_hat, q);
       ok = quantise(t.elevation - pr.elevation, q / rho, ke);
@@ -273,12 +367,16 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     }
     enc.put(m.escape[pr.last_escaped ? 1 : 0], !ok);
     if (ok) {
-      m.range.put(enc, m.range_ctx(pr), kr);
+      const int range_ctx = sweep ? PointModels::sweep_range_ctx(
+                                        pr, memory.near(pr.elevation, wrap_angle(pr.azimuth + pr.azimuth_step), coded_count), q)
+                                  : m.range_ctx(pr);
+      m.range.put(enc, range_ctx, kr);
       m.elevation.put(enc, m.elevation_ctx(pr, kr), ke);
       m.azimuth.put(enc, m.azimuth_ctx(pr), ka);
       m.shift(pr, kr, ke, ka);
       pr.last_escaped = false;
       pr.update(decoded, s);
+      memory.insert(s, coded_count);
       continue;
     }
     // Escape: a Cartesian offset from the last decoded point with a quarter step.
@@ -298,7 +396,9 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
       throw std::invalid_argument("residual layer: an error bound of " + std::to_string(bound) +
                                   " m is below the float32 precision of a point's coordinates");
     pr.last_escaped = true;
-    pr.update(d, to_spherical(d));
+    const Spherical sd = to_spherical(d);
+    pr.update(d, sd);
+    memory.insert(sd, coded_count);
   }
   return enc.finish();
 }
@@ -335,9 +435,34 @@ std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, 
 
 }  // namespace
 
+bool is_sweep_payload(const std::uint8_t* payload, std::size_t size) {
+  return size >= kSweepPrefixBytes && codec::bytes::ld_u32(payload + 4) == kSweepMarker;  // codec::is_sweep_layer
+}
+
 StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size) {
-  if (size < kHeadBytes) return bad_data("residual layer is " + std::to_string(size) + " bytes, at least 32 expected", 0);
-  return LayerHeader{ld_f64(payload), ld_f64(payload + 8), ld_u64(payload + 16), ld_u64(payload + 24)};
+  LayerHeader h;
+  std::size_t at = 0;
+  if (is_sweep_payload(payload, size)) {
+    h.coding = codec::bytes::ld_u32(payload);
+    if (h.coding != kCodingSweep)
+      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1 expected)", 0);
+    at = kSweepPrefixBytes;
+    if (size < at + kHeadBytes + kSweepExtraBytes)
+      return bad_data("residual layer is " + std::to_string(size) + " bytes, at least 48 expected", 0);
+  } else if (size < kHeadBytes) {
+    return bad_data("residual layer is " + std::to_string(size) + " bytes, at least 32 expected", 0);
+  }
+  h.fields_offset = at;
+  h.max_error = ld_f64(payload + at);
+  h.step = ld_f64(payload + at + 8);
+  h.word_points = ld_u64(payload + at + 16);
+  h.coded_points = ld_u64(payload + at + 24);
+  h.stream_offset = at + kHeadBytes;
+  if (h.coding == kCodingSweep) {
+    h.cell = ld_f64(payload + at + kHeadBytes);
+    h.stream_offset += kSweepExtraBytes;
+  }
+  return h;
 }
 
 Cloud word_cloud(const codec::ModelData& data) {
@@ -408,54 +533,72 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const auto res = estimate_angular_resolution(sensor_frame);
   const double row_height = res && res->elevation_rad > 0.0 ? 0.5 * res->elevation_rad : 0.5 * kPi / 180.0;
 
-  // Row order or input order: on a large layer, a window of consecutive input points is
-  // coded both ways and only the winner is coded in full; a small layer is coded both ways.
+  // Row order or input order, each with the previous-point coding (RESD) and the sweep
+  // coding (RESW): on a large layer, a window of consecutive input points is coded the
+  // four ways and only the winner is coded in full; a small layer is coded all four ways.
   const bool thin = options.thin;
+  // Sweep coding's direction cells: half the angular spacing of the coded points.
+  const double sweep_cell = res ? 0.5 * std::max(res->azimuth_rad, res->elevation_rad) : 0.0;
   const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
-  auto code = [&](const std::vector<std::uint32_t>& order, std::size_t& escaped, std::size_t& count) {
-    return code_points(head, input.points, order, T_cloud_sensor, T_sensor_cloud, q, check_error, escaped, count, thin);
+  struct Way {
+    bool by_rows;
+    bool sweep;
   };
-  std::size_t esc_rows = 0, esc_input = 0, n_rows = 0, n_input = 0;
-  std::vector<std::uint8_t> by_rows, by_input;
-  bool rows_win = true;
+  std::vector<Way> ways = {{true, false}, {false, false}};
+  if (options.sweep && sweep_cell > 0.0) {
+    ways.push_back({true, true});
+    ways.push_back({false, true});
+  }
+  auto code = [&](const std::vector<std::uint32_t>& order, bool sweep, std::size_t& escaped, std::size_t& count) {
+    return code_points(head, input.points, order, T_cloud_sensor, T_sensor_cloud, q, check_error, escaped, count, thin,
+                       sweep ? sweep_cell : 0.0);
+  };
+  std::vector<std::vector<std::uint8_t>> streams(ways.size());
+  std::vector<std::size_t> escaped(ways.size(), 0), counts(ways.size(), 0);
+  std::size_t best = 0;
   if (coded.size() > 4 * kOrderTrialPoints) {
-    // The same points both ways: a window of consecutive input points, and those points
-    // sorted into rows.
     const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
     const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
                                             coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
-    std::size_t trial_rows = 0, trial_input = 0;
-    parallel_for(2, threads, [&](std::size_t which) {
+    const std::vector<std::uint32_t> window_rows = row_order(input.points, window, T_sensor_cloud, row_height);
+    std::vector<std::size_t> trial(ways.size(), 0);
+    parallel_for(ways.size(), threads, [&](std::size_t w) {
       std::size_t e = 0, n = 0;
-      if (which == 0) trial_rows = code(row_order(input.points, window, T_sensor_cloud, row_height), e, n).size();
-      else trial_input = code(window, e, n).size();
+      trial[w] = code(ways[w].by_rows ? window_rows : window, ways[w].sweep, e, n).size();
     }, 1);
-    rows_win = trial_rows <= trial_input;
-    if (rows_win) by_rows = code(rows, esc_rows, n_rows);
-    else by_input = code(coded, esc_input, n_input);
+    for (std::size_t w = 1; w < ways.size(); ++w)
+      if (trial[w] < trial[best]) best = w;
+    streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
   } else {
-    parallel_for(2, threads, [&](std::size_t which) {
-      if (which == 0) by_rows = code(rows, esc_rows, n_rows);
-      else by_input = code(coded, esc_input, n_input);
+    parallel_for(ways.size(), threads, [&](std::size_t w) {
+      streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w]);
     }, 1);
-    rows_win = by_rows.size() <= by_input.size();
+    for (std::size_t w = 1; w < ways.size(); ++w)
+      if (streams[w].size() < streams[best].size()) best = w;
   }
-  std::vector<std::uint8_t>& stream = rows_win ? by_rows : by_input;
+  const std::vector<std::uint8_t>& stream = streams[best];
+  const bool sweep = ways[best].sweep;
 
   std::vector<std::uint8_t> out;
-  out.reserve(kHeadBytes + stream.size());
+  out.reserve(kSweepPrefixBytes + kHeadBytes + kSweepExtraBytes + stream.size());
+  if (sweep) {
+    codec::bytes::put_u32(out, kCodingSweep);
+    codec::bytes::put_u32(out, kSweepMarker);
+  }
   put_f64(out, max_error);
   put_f64(out, q);
   put_u64(out, n_w);
-  put_u64(out, rows_win ? n_rows : n_input);
+  put_u64(out, counts[best]);
+  if (sweep) put_f64(out, sweep_cell);
   out.insert(out.end(), stream.begin(), stream.end());
   if (stats) {
     stats->max_error = max_error;
     stats->word_points = n_w;
     stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
     stats->explained_points = n_in - coded.size();
-    stats->residual_points = rows_win ? n_rows : n_input;
-    stats->escaped_points = rows_win ? esc_rows : esc_input;
+    stats->residual_points = counts[best];
+    stats->escaped_points = escaped[best];
+    stats->sweep = sweep;
     stats->bytes = out.size();
   }
   return out;
@@ -465,25 +608,30 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
                              std::uint64_t max_points) {
   const auto header = read_layer_header(payload.data(), payload.size());
   if (!header.ok()) return header.status();
-  const double max_error = header.value().max_error;
-  const double q = header.value().step;
-  const std::uint64_t n_w = header.value().word_points;
-  const std::uint64_t n_c = header.value().coded_points;
+  const LayerHeader& h = header.value();
+  const double max_error = h.max_error;
+  const double q = h.step;
+  const std::uint64_t n_w = h.word_points;
+  const std::uint64_t n_c = h.coded_points;
+  const std::uint64_t at = h.fields_offset;
   if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
-    return bad_data("residual layer max_error " + std::to_string(max_error) + " is outside [1e-4, 10] m", 0);
+    return bad_data("residual layer max_error " + std::to_string(max_error) + " is outside [1e-4, 10] m", at);
   if (!(q > 0.0 && q <= 2.0 * max_error / std::sqrt(3.0)))
-    return bad_data("residual layer step " + std::to_string(q) + " is not in (0, 2*max_error/sqrt(3)]", 8);
+    return bad_data("residual layer step " + std::to_string(q) + " is not in (0, 2*max_error/sqrt(3)]", at + 8);
   if (n_w != words.size())
     return bad_data("residual layer covers " + std::to_string(n_w) + " word points but the reconstruction has " +
                         std::to_string(words.size()),
-                    16);
-  const std::uint64_t stream_bytes = payload.size() - kHeadBytes;
+                    at + 16);
+  const std::uint64_t stream_bytes = payload.size() - h.stream_offset;
   if (n_c > max_points || n_c > kMaxPointsPerByte * stream_bytes + 64)
     return bad_data("residual layer coded_points " + std::to_string(n_c) + " exceeds what the model (" +
                         std::to_string(max_points) + " input points) or the stored bytes can hold",
-                    24);
+                    at + 24);
+  const bool sweep = h.coding == kCodingSweep;
+  if (sweep && !(h.cell >= 1e-6 && h.cell <= kPi))
+    return bad_data("residual layer direction cell " + std::to_string(h.cell) + " rad is not in [1e-6, pi]", at + 32);
 
-  RangeDecoder dec(payload.data() + kHeadBytes, static_cast<std::size_t>(stream_bytes));
+  RangeDecoder dec(payload.data() + h.stream_offset, static_cast<std::size_t>(stream_bytes));
   Cloud out;
   out.T_cloud_sensor = T_cloud_sensor;
   {
@@ -498,16 +646,20 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
   out.points.reserve(out.points.size() + static_cast<std::size_t>(n_c));
   PointModels m;
   Predictor pr;
+  AngularMemory memory(sweep ? h.cell : 0.0);
   const double qc = q / 4.0;
   for (std::uint64_t i = 0; i < n_c; ++i) {
     const bool escaped = dec.get(m.escape[pr.last_escaped ? 1 : 0]);
     Eigen::Vector3d d;
     Spherical s{};
     if (!escaped) {
-      const std::int64_t kr = m.range.get(dec, m.range_ctx(pr));
+      const int range_ctx =
+          sweep ? PointModels::sweep_range_ctx(pr, memory.near(pr.elevation, wrap_angle(pr.azimuth + pr.azimuth_step), i + 1), q)
+                : m.range_ctx(pr);
+      const std::int64_t kr = m.range.get(dec, range_ctx);
       const std::int64_t ke = m.elevation.get(dec, m.elevation_ctx(pr, kr));
       const std::int64_t ka = m.azimuth.get(dec, m.azimuth_ctx(pr));
-      d = spherical_point(pr, q, kr, ke, ka, s);
+      d = sweep ? sweep_point(pr, q, kr, ke, ka, s) : spherical_point(pr, q, kr, ke, ka, s);
       m.shift(pr, kr, ke, ka);
     } else {
       for (int a = 0; a < 3; ++a) d[a] = pr.last[a] + static_cast<double>(m.cartesian[a].get(dec, 0)) * qc;
@@ -515,9 +667,10 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
     }
     const Eigen::Vector3f pc = to_cloud_frame(T_cloud_sensor, d);
     if (!d.allFinite() || !(d.norm() < 1e12) || !pc.allFinite())
-      return bad_data("residual layer point " + std::to_string(i) + " decodes to a non-finite position", kHeadBytes);
+      return bad_data("residual layer point " + std::to_string(i) + " decodes to a non-finite position", h.stream_offset);
     pr.last_escaped = escaped;
     pr.update(d, s);
+    memory.insert(s, i + 1);
     out.points.push_back(pc);
   }
   if (dec.overrun() > 8)

@@ -36,6 +36,10 @@ struct Quantization {
 /// δ <= 0 (no words): 2 mm / 1 mrad.
 [[nodiscard]] Quantization quantization_for_word_radius(double word_radius);
 
+/// Whether a residual payload is of the sweep coding, stored as an RESW chunk
+/// (formats/model.md §2.6): its bytes 4..7 are 0xFF.
+[[nodiscard]] bool is_sweep_layer(const std::vector<std::uint8_t>& payload);
+
 /// Everything a model file holds.
 struct ModelData {
   std::uint64_t input_points = 0;             ///< points of the scan the model was made from
@@ -45,9 +49,10 @@ struct ModelData {
   std::optional<Alphabet> alphabet;
   /// Content hash of the external alphabet file (FNV-1a 64 of its bytes) when referenced.
   std::optional<std::uint64_t> alphabet_hash;
-  /// The residual layer's payload (formats/model.md §2.5; lex3d/residual/residual.hpp
+  /// The residual layer's payload (formats/model.md §2.5-2.6; lex3d/residual/residual.hpp
   /// codes and decodes it), or nullopt for a words-only model. A model with one is
-  /// written as format 1.1, one without as 1.0.
+  /// written as format 1.1 (a RESD chunk) or, when the payload is of the sweep coding
+  /// (is_sweep_layer), 1.2 (an RESW chunk); one without as 1.0.
   std::optional<std::vector<std::uint8_t>> residual;
 };
 

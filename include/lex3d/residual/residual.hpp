@@ -35,6 +35,9 @@ struct LayerOptions {
   /// (the bound still holds both ways; fewer points are coded where they are denser
   /// than E). Off: every unexplained input point gets its own decoded point.
   bool thin = true;
+  /// Also try the sweep coding (formats/model.md §2.6: a file of format 1.2) and keep it
+  /// when it codes smaller; off: the layer is always a RESD one (format 1.1).
+  bool sweep = true;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
 };
@@ -48,16 +51,24 @@ struct LayerStats {
   std::size_t residual_points = 0;     ///< points coded by the layer (input points, thinned)
   std::size_t escaped_points = 0;      ///< of those, coded in Cartesian form (near the sensor or a pole)
   std::size_t bytes = 0;               ///< payload bytes of the layer
+  bool sweep = false;                  ///< coded with the sweep coding (an RESW chunk)
 };
 
-/// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5).
+/// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5,
+/// RESW: §2.6).
 struct LayerHeader {
   double max_error = 0.0;          ///< E, metres
   double step = 0.0;               ///< q, metres
   std::uint64_t word_points = 0;   ///< reconstruction points the keep mask covers
   std::uint64_t coded_points = 0;  ///< points coded by the layer
+  std::uint32_t coding = 0;        ///< 0: previous-point coding (RESD); 1: sweep coding (RESW)
+  double cell = 0.0;               ///< sweep coding: direction cell, radians
+  std::uint64_t fields_offset = 0; ///< where max_error starts (8 in an RESW payload)
+  std::uint64_t stream_offset = 0; ///< where the range-coded stream starts
 };
-/// Reads the header of a residual payload (no checks beyond its length).
+/// Whether a payload is an RESW one (the chunk type a model file stores it under).
+[[nodiscard]] bool is_sweep_payload(const std::uint8_t* payload, std::size_t size);
+/// Reads the header of a residual payload (no checks beyond its length and coding).
 [[nodiscard]] StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size);
 
 /// The word reconstruction a decoder of `data` computes: the instances placed and
