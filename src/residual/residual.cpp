@@ -207,13 +207,20 @@ struct Predictor {
 };
 
 /// The ranges decoded so far by direction (sweep coding): cells `cell` radians wide in
-/// elevation and azimuth, each holding the range and index of the last point decoded in it.
+/// elevation and azimuth, each holding the range and index of the last point decoded in
+/// it, in an open-addressing table (kept at most half full).
 class AngularMemory {
  public:
-  explicit AngularMemory(double cell) : inv_(cell > 0.0 ? 1.0 / cell : 0.0) {}
+  explicit AngularMemory(double cell) : inv_(cell > 0.0 ? 1.0 / cell : 0.0) {
+    if (inv_ != 0.0) slots_.assign(1024, Slot{});
+  }
   void insert(const Spherical& s, std::uint64_t index) {
     if (inv_ == 0.0) return;
-    cells_[key(s.elevation, s.azimuth, 0, 0)] = {s.r, index};
+    if (2 * (used_ + 1) > slots_.size()) grow();
+    Slot& slot = find(key(s.elevation, s.azimuth, 0, 0));
+    if (slot.index == 0) ++used_;
+    slot.range = s.r;
+    slot.index = index;
   }
   /// The range of a point decoded before `index` - 3 in the cell of (elevation, azimuth)
   /// or, failing that, the first of its four neighbours (up, down, right, left) with one.
@@ -221,21 +228,51 @@ class AngularMemory {
     if (inv_ == 0.0) return std::nullopt;
     static constexpr int kOffsets[5][2] = {{0, 0}, {1, 0}, {-1, 0}, {0, 1}, {0, -1}};
     for (const auto& o : kOffsets) {
-      const auto it = cells_.find(key(elevation, azimuth, o[0], o[1]));
-      if (it != cells_.end() && it->second.second + 3 < index) return it->second.first;
+      const Slot& slot = slots_[position(key(elevation, azimuth, o[0], o[1]))];
+      if (slot.index != 0 && slot.index + 3 < index) return slot.range;
     }
     return std::nullopt;
   }
 
  private:
+  struct Slot {
+    std::uint64_t key = 0;
+    std::uint64_t index = 0;  // 1-based; 0: empty
+    double range = 0.0;
+  };
   [[nodiscard]] std::uint64_t key(double elevation, double azimuth, int drow, int dcol) const {
     const auto cell = [&](double a) { return static_cast<std::int64_t>(std::floor(std::clamp(a * inv_, -1e9, 1e9))); };
     const auto row = static_cast<std::uint64_t>(cell(elevation) + drow);
     const auto col = static_cast<std::uint64_t>(cell(azimuth) + dcol);
     return (row << 32) ^ (col & 0xFFFFFFFFULL);
   }
+  static std::size_t hash(std::uint64_t k) {
+    k ^= k >> 33;
+    k *= 0xff51afd7ed558ccdULL;
+    k ^= k >> 33;
+    return static_cast<std::size_t>(k);
+  }
+  /// Where `k` is, or the empty slot where it would go.
+  [[nodiscard]] std::size_t position(std::uint64_t k) const {
+    const std::size_t mask = slots_.size() - 1;
+    std::size_t i = hash(k) & mask;
+    while (slots_[i].index != 0 && slots_[i].key != k) i = (i + 1) & mask;
+    return i;
+  }
+  Slot& find(std::uint64_t k) {
+    Slot& slot = slots_[position(k)];
+    slot.key = k;
+    return slot;
+  }
+  void grow() {
+    std::vector<Slot> old = std::move(slots_);
+    slots_.assign(2 * old.size(), Slot{});
+    for (const Slot& o : old)
+      if (o.index != 0) slots_[position(o.key)] = o;
+  }
   double inv_;
-  std::unordered_map<std::uint64_t, std::pair<double, std::uint64_t>> cells_;
+  std::vector<Slot> slots_;
+  std::size_t used_ = 0;
 };
 
 /// The point that residuals (kr, ke, ka) decode to, sensor frame; its spherical form in `s`.
