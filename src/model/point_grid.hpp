@@ -2,9 +2,11 @@
 // A static voxel grid over a point set for radius queries. Points are bucketed by cell
 // in two linear passes (a counting sort, points of a cell in index order) and stored
 // with their coordinates in cell order, so a query reads each cell it visits
-// contiguously; cells live in a flat open-addressing table. A query visits only the
-// cells its ball touches. For the neighbourhoods of thousands of features this beats
-// a kd-tree, because radii are a few cells at most.
+// contiguously. The cells live in a compact open-addressing table (key and range in one
+// 16-byte slot, sized by the number of cells, not of points), so the probes of a query
+// mostly hit the cache. A query visits only the cells its ball touches. For the
+// neighbourhoods of thousands of features this beats a kd-tree, because radii are a few
+// cells at most.
 
 #include <algorithm>
 #include <cmath>
@@ -19,45 +21,57 @@ class PointGrid {
  public:
   PointGrid(const std::vector<Eigen::Vector3f>& points, float cell) : cell_(cell), inv_(1.0F / cell) {
     const std::size_t n = points.size();
+    // Pass 1: the cell of every point and the size of every cell, in a table sized for
+    // the worst case (one cell per point); the query table below is sized by the cells.
     std::size_t cap = 16;
     while (cap < 2 * n) cap <<= 1;
-    keys_.assign(cap, kEmpty);
-    begin_.assign(cap, 0);
-    end_.assign(cap, 0);
-    mask_ = cap - 1;
-    // Pass 1: the cell of every point and the size of every cell.
+    std::vector<Slot> build(cap, Slot{kEmpty, 0, 0});
+    const std::size_t build_mask = cap - 1;
     std::vector<std::uint32_t> slot_of(n);
+    std::vector<std::uint32_t> first;  // build slots in the order their cells were first met
     for (std::size_t i = 0; i < n; ++i) {
-      const std::size_t s = insert(key(cell_of(points[i])));
+      const std::uint64_t k = key(cell_of(points[i]));
+      std::size_t s = hash(k) & build_mask;
+      while (build[s].key != k && build[s].key != kEmpty) s = (s + 1) & build_mask;
+      if (build[s].key == kEmpty) {
+        build[s].key = k;
+        first.push_back(static_cast<std::uint32_t>(s));
+      }
       slot_of[i] = static_cast<std::uint32_t>(s);
-      ++end_[s];
+      ++build[s].end;
     }
-    // Cells in the order they were first met; each gets a contiguous range.
+    // Cells in the order they were first met; each gets a contiguous range (begin, and
+    // end as the fill cursor).
     std::uint32_t at = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::size_t s = slot_of[i];
-      if (begin_[s] != 0 || end_[s] == 0) continue;  // placed already (begin is stored + 1)
-      const std::uint32_t count = end_[s];
-      begin_[s] = at + 1;
-      end_[s] = at;  // fill cursor
+    for (const std::uint32_t s : first) {
+      const std::uint32_t count = build[s].end;
+      build[s].begin = at;
+      build[s].end = at;
       at += count;
     }
     // Pass 2: scatter, in index order within each cell.
     pts_.resize(n);
     idx_.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
-      const std::size_t s = slot_of[i];
-      const std::uint32_t k = end_[s]++;
+      const std::uint32_t k = build[slot_of[i]].end++;
       pts_[k] = points[i];
       idx_[k] = static_cast<std::uint32_t>(i);
     }
-    for (std::size_t s = 0; s < cap; ++s)
-      if (keys_[s] != kEmpty) --begin_[s];
+    // The query table: at most a quarter full.
+    std::size_t qcap = 16;
+    while (qcap < 4 * first.size()) qcap <<= 1;
+    slots_.assign(qcap, Slot{kEmpty, 0, 0});
+    mask_ = qcap - 1;
+    for (const std::uint32_t s : first) {
+      std::size_t i = hash(build[s].key) & mask_;
+      while (slots_[i].key != kEmpty) i = (i + 1) & mask_;
+      slots_[i] = build[s];
+    }
   }
 
-  /// Indices of the points within `radius` of `c`, sorted ascending.
+  /// Appends to `out` the indices of the points within `radius` of `c`, sorted ascending.
   void radius(const Eigen::Vector3f& c, float radius, std::vector<std::uint32_t>& out) const {
-    out.clear();
+    const std::size_t base = out.size();
     const Eigen::Vector3i lo = cell_of(c - Eigen::Vector3f::Constant(radius));
     const Eigen::Vector3i hi = cell_of(c + Eigen::Vector3f::Constant(radius));
     const float r2 = radius * radius;
@@ -65,6 +79,7 @@ class PointGrid {
     // rounded products, so it may sit a hair outside the cell's exact bounds.
     const float rc = radius + 1e-4F * cell_;
     const float rc2 = rc * rc;
+    const float cx = c.x(), cy = c.y(), cz = c.z();
     // Distance along one axis from c to cell v's slab (0 inside).
     const auto gap = [&](int v, float cv) {
       const float a = static_cast<float>(v) * cell_;
@@ -72,29 +87,41 @@ class PointGrid {
       return cv < a ? a - cv : (cv > b ? cv - b : 0.0F);
     };
     for (int z = lo.z(); z <= hi.z(); ++z) {
-      const float gz = gap(z, c.z());
+      const float gz = gap(z, cz);
       const float gz2 = gz * gz;
       if (gz2 > rc2) continue;
       for (int y = lo.y(); y <= hi.y(); ++y) {
-        const float gy = gap(y, c.y());
+        const float gy = gap(y, cy);
         const float gyz2 = gz2 + gy * gy;
         if (gyz2 > rc2) continue;
         for (int x = lo.x(); x <= hi.x(); ++x) {
-          const float gx = gap(x, c.x());
+          const float gx = gap(x, cx);
           if (gyz2 + gx * gx > rc2) continue;  // the cell lies outside the ball
-          const std::size_t s = find(key({x, y, z}));
-          if (s == kNone) continue;
-          for (std::uint32_t k = begin_[s]; k < end_[s]; ++k)
-            if ((pts_[k] - c).squaredNorm() <= r2) out.push_back(idx_[k]);
+          const Slot* s = find(key({x, y, z}));
+          if (s == nullptr) continue;
+          // Branch-free append: room for the whole cell, then keep the hits.
+          std::size_t n = out.size();
+          out.resize(n + (s->end - s->begin));
+          std::uint32_t* dst = out.data();
+          for (std::uint32_t k = s->begin; k < s->end; ++k) {
+            const Eigen::Vector3f& p = pts_[k];
+            const float dx = p.x() - cx, dy = p.y() - cy, dz = p.z() - cz;
+            dst[n] = idx_[k];
+            n += (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
+          }
+          out.resize(n);
         }
       }
     }
-    std::sort(out.begin(), out.end());
+    std::sort(out.begin() + static_cast<std::ptrdiff_t>(base), out.end());
   }
 
  private:
+  struct Slot {
+    std::uint64_t key;
+    std::uint32_t begin, end;  // the cell's range in pts_/idx_
+  };
   static constexpr std::uint64_t kEmpty = ~0ULL;
-  static constexpr std::size_t kNone = ~static_cast<std::size_t>(0);
 
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
     return {static_cast<int>(std::floor(p.x() * inv_)), static_cast<int>(std::floor(p.y() * inv_)),
@@ -110,29 +137,19 @@ class PointGrid {
     k ^= k >> 33;
     return static_cast<std::size_t>(k);
   }
-  std::size_t insert(std::uint64_t k) {
+  [[nodiscard]] const Slot* find(std::uint64_t k) const {
     for (std::size_t i = hash(k) & mask_;; i = (i + 1) & mask_) {
-      if (keys_[i] == k) return i;
-      if (keys_[i] == kEmpty) {
-        keys_[i] = k;
-        return i;
-      }
-    }
-  }
-  [[nodiscard]] std::size_t find(std::uint64_t k) const {
-    for (std::size_t i = hash(k) & mask_;; i = (i + 1) & mask_) {
-      if (keys_[i] == k) return i;
-      if (keys_[i] == kEmpty) return kNone;
+      if (slots_[i].key == k) return &slots_[i];
+      if (slots_[i].key == kEmpty) return nullptr;
     }
   }
 
   float cell_;
   float inv_;
   std::size_t mask_ = 0;
-  std::vector<std::uint64_t> keys_;
-  std::vector<std::uint32_t> begin_, end_;  // per table slot: the cell's range in pts_/idx_
-  std::vector<Eigen::Vector3f> pts_;        // points in cell order
-  std::vector<std::uint32_t> idx_;          // their indices
+  std::vector<Slot> slots_;
+  std::vector<Eigen::Vector3f> pts_;  // points in cell order
+  std::vector<std::uint32_t> idx_;    // their indices
 };
 
 }  // namespace lex3d::detail
