@@ -184,25 +184,72 @@ LEX3D_CLONES void descriptor_distances(const float* q, const float* words, std::
   }
 }
 
-// The entries of one feature bucketed into slabs along x at least as wide as the
+// keep[k] = 1 when entry k may be within its σ of the box [blo, bhi], else 0. The margin
+// (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the box's centre and half sizes, so
+// no entry that could pass the fit test is dropped.
+LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
+                           const float* blo, const float* bhi, std::int32_t* keep) {
+  const float cx = 0.5F * (blo[0] + bhi[0]), cy = 0.5F * (blo[1] + bhi[1]), cz = 0.5F * (blo[2] + bhi[2]);
+  const float hx = 0.5F * (bhi[0] - blo[0]), hy = 0.5F * (bhi[1] - blo[1]), hz = 0.5F * (bhi[2] - blo[2]);
+  for (std::size_t k = 0; k < n; ++k) {
+    float ox = std::fabs(lx[k] - cx) - hx;
+    float oy = std::fabs(ly[k] - cy) - hy;
+    float oz = std::fabs(lz[k] - cz) - hz;
+    // max(o, 0) as bits, so that the loop vectorises.
+    ox = mask(ox, static_cast<std::uint32_t>(-static_cast<std::int32_t>(ox > 0.0F)));
+    oy = mask(oy, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oy > 0.0F)));
+    oz = mask(oz, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oz > 0.0F)));
+    keep[k] = (ox * ox + oy * oy + oz * oz <= s2[k] * 1.002F + 1e-8F) ? 1 : 0;
+  }
+}
+
+// The entries of one feature that can be within their σ of a box (the union of the
+// candidate words' bounding boxes), bucketed into slabs along x at least as wide as the
 // largest σ among them (a counting sort), for the fit test of several words: an entry
 // within its σ of a word point lies in the point's slab or one next to it, and those
-// three slabs are one contiguous run.
+// three slabs are one contiguous run. Entries left out are farther than σ from every
+// point of those words.
 struct Slabs {
-  std::vector<float> x, y, z, sig2;
+  std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8
   std::vector<std::uint32_t> start;  // slab b holds [start[b], start[b + 1])
-  std::vector<std::uint32_t> slab;   // scratch: the slab of each entry
   float x0 = 0.0F, inv = 0.0F;
   int count = 0;
-  std::size_t size = 0;  // entries (the arrays hold them padded to a multiple of 8)
+  std::size_t size = 0;  // entries kept
 
-  void build(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n) {
+  void build(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n, const float* blo,
+             const float* bhi) {
     constexpr int kMaxSlabs = 64;
-    float lo = lx[0], hi = lx[0], smax = s2[0];
-    for (std::size_t k = 1; k < n; ++k) {
-      lo = std::min(lo, lx[k]);
-      hi = std::max(hi, lx[k]);
-      smax = std::max(smax, s2[k]);
+    keep_.resize(n);
+    box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
+    kept_.resize(n);
+    std::size_t m = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      kept_[m] = static_cast<std::uint32_t>(k);
+      m += static_cast<std::size_t>(keep_[k]);
+    }
+    kept_.resize(m);
+    float lo = 0.0F, hi = 0.0F, smax = 0.0F;
+    if (m > 0) {
+      lo = hi = lx[kept_[0]];
+      smax = s2[kept_[0]];
+    }
+    for (std::size_t i = 1; i < m; ++i) {
+      const float v = lx[kept_[i]];
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+      smax = std::max(smax, s2[kept_[i]]);
+    }
+    size = kept_.size();
+    const std::size_t npad = (size + 7) / 8 * 8;
+    // Padded with entries nothing reaches (tests run in blocks of 8).
+    x.assign(npad, 1e9F);
+    y.assign(npad, 1e9F);
+    z.assign(npad, 1e9F);
+    sig2.assign(npad, -1.0F);
+    if (size == 0) {
+      count = 0;
+      start.assign(1, 0);
+      return;
     }
     // 0.1 % wider than the largest σ: floors of the scaled coordinates of an entry and a
     // word point within σ of it then differ by at most one despite rounding.
@@ -212,23 +259,17 @@ struct Slabs {
     inv = 1.0F / width;
     count = std::min(kMaxSlabs, static_cast<int>((hi - lo) * inv) + 1);
     start.assign(static_cast<std::size_t>(count) + 1, 0);
-    slab.resize(n);
-    for (std::size_t k = 0; k < n; ++k) {
-      const int b = std::min(count - 1, std::max(0, static_cast<int>((lx[k] - x0) * inv)));
-      slab[k] = static_cast<std::uint32_t>(b);
+    slab_.resize(size);
+    for (std::size_t i = 0; i < size; ++i) {
+      const int b = std::min(count - 1, std::max(0, static_cast<int>((lx[kept_[i]] - x0) * inv)));
+      slab_[i] = static_cast<std::uint32_t>(b);
       ++start[static_cast<std::size_t>(b) + 1];
     }
     for (int b = 0; b < count; ++b) start[static_cast<std::size_t>(b) + 1] += start[static_cast<std::size_t>(b)];
-    // Padded to a multiple of 8 with entries nothing reaches (tests run in blocks of 8).
-    const std::size_t npad = (n + 7) / 8 * 8;
-    x.assign(npad, 1e9F);
-    y.assign(npad, 1e9F);
-    z.assign(npad, 1e9F);
-    sig2.assign(npad, -1.0F);
-    size = n;
     cursor_.assign(start.begin(), start.end() - 1);
-    for (std::size_t k = 0; k < n; ++k) {
-      const std::uint32_t at = cursor_[slab[k]]++;
+    for (std::size_t i = 0; i < size; ++i) {
+      const std::uint32_t k = kept_[i];
+      const std::uint32_t at = cursor_[slab_[i]]++;
       x[at] = lx[k];
       y[at] = ly[k];
       z[at] = lz[k];
@@ -249,7 +290,8 @@ struct Slabs {
   }
 
  private:
-  std::vector<std::uint32_t> cursor_;
+  std::vector<std::uint32_t> kept_, slab_, cursor_;
+  std::vector<std::int32_t> keep_;
 };
 
 // Word choice by fit with slabs: the counts of fit_counts (entries with a word point
@@ -302,12 +344,19 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   inv_two_sigma2_.resize(n);
   norm_.resize(n);
   log_floor_.resize(n);
-  std::vector<float> reach2(n);
+  // Per point, what its entries copy: the point and its (3σ)², 1 / (2σ²) and σ², side
+  // by side, so that an entry reads one place.
+  struct PointTerms {
+    float x, y, z, reach2, a, sig2;
+  };
+  std::vector<PointTerms> terms(n);
   const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
   for (std::size_t j = 0; j < n; ++j) {
     const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
     inv_two_sigma2_[j] = static_cast<float>(1.0 / (2.0 * s * s));
-    reach2[j] = static_cast<float>(9.0 * s * s);
+    const auto reach2 = static_cast<float>(9.0 * s * s);
+    const Eigen::Vector3f& p = scan.cloud.points[j];
+    terms[j] = {p.x(), p.y(), p.z(), reach2, inv_two_sigma2_[j], reach2 / 9.0F};
     const double c = 2.0 * M_PI * s * s;
     norm_[j] = 1.0 / (c * std::sqrt(c));  // c^(-3/2)
     log_floor_[j] = -1.5 * std::log(c) - 4.5 - log_n;
@@ -317,10 +366,9 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
   pose_.resize(nf);
-  off_.assign(nf + 1, 0);
-  for (std::size_t f = 0; f < nf; ++f) off_[f + 1] = scan.nearby_offset[f + 1];
+  off_.assign(scan.nearby_offset.begin(), scan.nearby_offset.end());
   const std::size_t entries = off_[nf];
-  idx_.resize(entries);
+  idx_.assign(scan.nearby_index.begin(), scan.nearby_index.end());
   lx_.resize(entries);
   ly_.resize(entries);
   lz_.resize(entries);
@@ -331,19 +379,15 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
     const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
-    std::size_t k = off_[f];
-    const std::uint32_t* near = scan.nearby(f);
-    for (std::size_t i = 0; i < scan.nearby_count(f); ++i) {
-      const std::uint32_t j = near[i];
-      const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
-      idx_[k] = j;
+    for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
+      const PointTerms& t = terms[idx_[k]];
+      const Eigen::Vector3f q = T_feature_cloud * Eigen::Vector3f(t.x, t.y, t.z);
       lx_[k] = q.x();
       ly_[k] = q.y();
       lz_[k] = q.z();
-      reach2_e_[k] = reach2[j];
-      a_e_[k] = inv_two_sigma2_[j];
-      sig2_e_[k] = reach2[j] / 9.0F;
-      ++k;
+      reach2_e_[k] = t.reach2;
+      a_e_[k] = t.a;
+      sig2_e_[k] = t.sig2;
     }
   }, 64);
   recompute();
@@ -697,14 +741,22 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
       return;
     }
     const std::size_t b = begin_of(f), e = end_of(f);
-    if (e > b) slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b);
-    else slabs = Slabs{};
+    float lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = packed[near[0].second].lo[a];
+      hi[a] = packed[near[0].second].hi[a];
+      for (std::size_t c = 1; c < kk; ++c) {
+        lo[a] = std::min(lo[a], packed[near[c].second].lo[a]);
+        hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
+      }
+    }
+    slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, lo, hi);
     hits.resize(slabs.x.size());
     double best = -1e300;
     for (std::size_t c = 0; c < kk; ++c) {
       const PackedWord& w = packed[near[c].second];
       std::size_t explained = 0, unsupported = w.size();
-      if (e > b) fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), hits.data(), explained, unsupported);
+      if (slabs.size > 0) fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), hits.data(), explained, unsupported);
       const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
       if (score > best) {
         best = score;
