@@ -1,6 +1,5 @@
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <stdexcept>
 #include <string>
 
@@ -92,8 +91,7 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
     std::vector<float> sorted = reach;
     const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
     std::nth_element(sorted.begin(), mid, sorted.end());
-    static const float kf = getenv("CELLF") ? std::atof(getenv("CELLF")) : 1.0F;
-    const detail::PointGrid grid(cloud.points, kf * std::max(static_cast<float>(s.word_radius), *mid));
+    const detail::PointGrid grid(cloud.points, std::max(static_cast<float>(s.word_radius), *mid));
     const auto centre = [&](std::size_t f) { return s.features.features[f].T_cloud_feature.translation().cast<float>(); };
     // Blocks of features, each appending to its own list (one list, in order, with one
     // thread), then joined in feature order.
