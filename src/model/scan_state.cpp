@@ -344,19 +344,12 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   inv_two_sigma2_.resize(n);
   norm_.resize(n);
   log_floor_.resize(n);
-  // Per point, what its entries copy: the point and its (3σ)², 1 / (2σ²) and σ², side
-  // by side, so that an entry reads one place.
-  struct PointTerms {
-    float x, y, z, reach2, a, sig2;
-  };
-  std::vector<PointTerms> terms(n);
+  std::vector<float> reach2(n);
   const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
   for (std::size_t j = 0; j < n; ++j) {
     const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
     inv_two_sigma2_[j] = static_cast<float>(1.0 / (2.0 * s * s));
-    const auto reach2 = static_cast<float>(9.0 * s * s);
-    const Eigen::Vector3f& p = scan.cloud.points[j];
-    terms[j] = {p.x(), p.y(), p.z(), reach2, inv_two_sigma2_[j], reach2 / 9.0F};
+    reach2[j] = static_cast<float>(9.0 * s * s);
     const double c = 2.0 * M_PI * s * s;
     norm_[j] = 1.0 / (c * std::sqrt(c));  // c^(-3/2)
     log_floor_[j] = -1.5 * std::log(c) - 4.5 - log_n;
@@ -368,7 +361,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   pose_.resize(nf);
   off_.assign(scan.nearby_offset.begin(), scan.nearby_offset.end());
   const std::size_t entries = off_[nf];
-  idx_.assign(scan.nearby_index.begin(), scan.nearby_index.end());
+  idx_.resize(entries);
   lx_.resize(entries);
   ly_.resize(entries);
   lz_.resize(entries);
@@ -376,18 +369,20 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   a_e_.resize(entries);
   sig2_e_.resize(entries);
   cache_.assign(entries, 0.0F);
+  const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
     const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
     for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
-      const PointTerms& t = terms[idx_[k]];
-      const Eigen::Vector3f q = T_feature_cloud * Eigen::Vector3f(t.x, t.y, t.z);
+      const std::uint32_t j = near[k];
+      const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
+      idx_[k] = j;
       lx_[k] = q.x();
       ly_[k] = q.y();
       lz_[k] = q.z();
-      reach2_e_[k] = t.reach2;
-      a_e_[k] = t.a;
-      sig2_e_[k] = t.sig2;
+      reach2_e_[k] = reach2[j];
+      a_e_[k] = inv_two_sigma2_[j];
+      sig2_e_[k] = reach2[j] / 9.0F;
     }
   }, 64);
   recompute();
