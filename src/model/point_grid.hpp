@@ -80,6 +80,9 @@ class PointGrid {
     const float rc = radius + 1e-4F * cell_;
     const float rc2 = rc * rc;
     const float cx = c.x(), cy = c.y(), cz = c.z();
+    // Each cell's hits come in index order: the query ends by merging these runs.
+    thread_local std::vector<std::size_t> runs;
+    runs.assign(1, base);
     // Distance along one axis from c to cell v's slab (0 inside).
     const auto gap = [&](int v, float cv) {
       const float a = static_cast<float>(v) * cell_;
@@ -110,13 +113,54 @@ class PointGrid {
             n += (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
           }
           out.resize(n);
+          if (n > runs.back()) runs.push_back(n);
         }
       }
     }
-    std::sort(out.begin() + static_cast<std::ptrdiff_t>(base), out.end());
+    merge_runs(out, runs);
   }
 
  private:
+  // Sorts out[runs.front(), runs.back()), made of the sorted runs [runs[i], runs[i + 1]),
+  // by merging pairs of runs (branch-free) until one is left. Indices are distinct.
+  static void merge_runs(std::vector<std::uint32_t>& out, std::vector<std::size_t>& runs) {
+    if (runs.size() <= 2) return;
+    const std::size_t base = runs.front();
+    const std::size_t n = runs.back() - base;
+    thread_local std::vector<std::uint32_t> scratch;
+    scratch.resize(n);
+    std::uint32_t* src = out.data() + base;
+    std::uint32_t* dst = scratch.data();
+    for (std::size_t& r : runs) r -= base;
+    while (runs.size() > 2) {
+      std::size_t w = 0;  // runs written so far (their ends overwrite runs[1..])
+      std::size_t i = 0;
+      for (; i + 2 < runs.size(); i += 2) {
+        const std::uint32_t* a = src + runs[i];
+        const std::uint32_t* a_end = src + runs[i + 1];
+        const std::uint32_t* b = a_end;
+        const std::uint32_t* b_end = src + runs[i + 2];
+        std::uint32_t* d = dst + runs[i];
+        while (a < a_end && b < b_end) {
+          const bool take_b = *b < *a;
+          *d++ = take_b ? *b : *a;
+          b += take_b ? 1 : 0;
+          a += take_b ? 0 : 1;
+        }
+        d = std::copy(a, a_end, d);
+        std::copy(b, b_end, d);
+        runs[++w] = runs[i + 2];
+      }
+      if (i + 1 < runs.size()) {  // an odd run left: copied as it is
+        std::copy(src + runs[i], src + runs[i + 1], dst + runs[i]);
+        runs[++w] = runs[i + 1];
+      }
+      runs.resize(w + 1);
+      std::swap(src, dst);
+    }
+    if (src != out.data() + base) std::copy(src, src + n, out.data() + base);
+  }
+
   struct Slot {
     std::uint64_t key;
     std::uint32_t begin, end;  // the cell's range in pts_/idx_
