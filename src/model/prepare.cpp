@@ -98,10 +98,14 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
     constexpr std::size_t kBlock = 256;
     const std::size_t blocks = (nf + kBlock - 1) / kBlock;
     if (params.threads <= 1 || blocks <= 1) {
-      s.nearby_index.reserve(80 * nf);
+      auto& index = s.nearby_index;
+      index.reserve(80 * nf);
       for (std::size_t f = 0; f < nf; ++f) {
-        grid.radius(centre(f), reach[f], s.nearby_index);
-        s.nearby_offset[f + 1] = s.nearby_index.size();
+        // Nearly full: room for the rest at the mean so far, plus 15 %.
+        if (index.size() + 4096 > index.capacity())
+          index.reserve(index.size() + index.size() / std::max<std::size_t>(f, 1) * (nf - f) * 115 / 100 + 8192);
+        grid.radius(centre(f), reach[f], index);
+        s.nearby_offset[f + 1] = index.size();
       }
     } else {
       std::vector<std::vector<std::uint32_t>> part(blocks);
