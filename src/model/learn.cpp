@@ -82,7 +82,8 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
     ++iteration;
     const PreparedScan& src = res.scans[s0];
     const Eigen::Isometry3f T = src.features.features[f0].T_cloud_feature.cast<float>();
-    Word word = cut_word(src.cloud.points, src.nearby[f0], T, src.features.descriptor(f0), dim, radius,
+    const std::vector<std::uint32_t> nearby(src.nearby(f0), src.nearby(f0) + src.nearby_count(f0));
+    Word word = cut_word(src.cloud.points, nearby, T, src.features.descriptor(f0), dim, radius,
                          res.alphabet.point_spacing);
     const auto word_id = static_cast<std::int32_t>(res.alphabet.size());
     double delta_l = 0.0;

@@ -163,6 +163,171 @@ LEX3D_CLONES std::size_t fit_counts(const float* lx, const float* ly, const floa
   return explained;
 }
 
+// Squared descriptor distances from q to each of `count` descriptors stored one after
+// another: the arithmetic of descriptor_distance_sq (eight running sums, element i in
+// sum i % 8, added pairwise), so the same bits, with one dispatch for all words.
+LEX3D_CLONES void descriptor_distances(const float* q, const float* words, std::size_t count, int dim, float* out) {
+  const int blocks = dim / 8;
+  for (std::size_t w = 0; w < count; ++w) {
+    const float* b = words + w * static_cast<std::size_t>(dim);
+    float acc[8] = {0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F};
+    for (int k = 0; k < blocks; ++k)
+      for (int l = 0; l < 8; ++l) {
+        const float d = q[8 * k + l] - b[8 * k + l];
+        acc[l] += d * d;
+      }
+    for (int i = 8 * blocks; i < dim; ++i) {
+      const float d = q[i] - b[i];
+      acc[i - 8 * blocks] += d * d;
+    }
+    out[w] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+  }
+}
+
+// keep[k] = 1 when entry k may be within its σ of the box [blo, bhi], else 0. The margin
+// (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the box's centre and half sizes, so
+// no entry that could pass the fit test is dropped.
+LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
+                           const float* blo, const float* bhi, std::int32_t* keep) {
+  const float cx = 0.5F * (blo[0] + bhi[0]), cy = 0.5F * (blo[1] + bhi[1]), cz = 0.5F * (blo[2] + bhi[2]);
+  const float hx = 0.5F * (bhi[0] - blo[0]), hy = 0.5F * (bhi[1] - blo[1]), hz = 0.5F * (bhi[2] - blo[2]);
+  for (std::size_t k = 0; k < n; ++k) {
+    float ox = std::fabs(lx[k] - cx) - hx;
+    float oy = std::fabs(ly[k] - cy) - hy;
+    float oz = std::fabs(lz[k] - cz) - hz;
+    // max(o, 0) as bits, so that the loop vectorises.
+    ox = mask(ox, static_cast<std::uint32_t>(-static_cast<std::int32_t>(ox > 0.0F)));
+    oy = mask(oy, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oy > 0.0F)));
+    oz = mask(oz, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oz > 0.0F)));
+    keep[k] = (ox * ox + oy * oy + oz * oz <= s2[k] * 1.002F + 1e-8F) ? 1 : 0;
+  }
+}
+
+// The entries of one feature that can be within their σ of a box (the union of the
+// candidate words' bounding boxes), bucketed into slabs along x at least as wide as the
+// largest σ among them (a counting sort), for the fit test of several words: an entry
+// within its σ of a word point lies in the point's slab or one next to it, and those
+// three slabs are one contiguous run. Entries left out are farther than σ from every
+// point of those words.
+struct Slabs {
+  std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8
+  std::vector<std::uint32_t> start;  // slab b holds [start[b], start[b + 1])
+  float x0 = 0.0F, inv = 0.0F;
+  int count = 0;
+  std::size_t size = 0;  // entries kept
+
+  void build(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n, const float* blo,
+             const float* bhi) {
+    constexpr int kMaxSlabs = 64;
+    keep_.resize(n);
+    box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
+    kept_.resize(n);
+    std::size_t m = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      kept_[m] = static_cast<std::uint32_t>(k);
+      m += static_cast<std::size_t>(keep_[k]);
+    }
+    kept_.resize(m);
+    float lo = 0.0F, hi = 0.0F, smax = 0.0F;
+    if (m > 0) {
+      lo = hi = lx[kept_[0]];
+      smax = s2[kept_[0]];
+    }
+    for (std::size_t i = 1; i < m; ++i) {
+      const float v = lx[kept_[i]];
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+      smax = std::max(smax, s2[kept_[i]]);
+    }
+    size = kept_.size();
+    const std::size_t npad = (size + 7) / 8 * 8;
+    // Padded with entries nothing reaches (tests run in blocks of 8).
+    x.assign(npad, 1e9F);
+    y.assign(npad, 1e9F);
+    z.assign(npad, 1e9F);
+    sig2.assign(npad, -1.0F);
+    if (size == 0) {
+      count = 0;
+      start.assign(1, 0);
+      return;
+    }
+    // 0.1 % wider than the largest σ: floors of the scaled coordinates of an entry and a
+    // word point within σ of it then differ by at most one despite rounding.
+    float width = std::sqrt(smax) * 1.001F + 1e-6F;
+    if ((hi - lo) / width > static_cast<float>(kMaxSlabs - 1)) width = (hi - lo) / static_cast<float>(kMaxSlabs - 1);
+    x0 = lo;
+    inv = 1.0F / width;
+    count = std::min(kMaxSlabs, static_cast<int>((hi - lo) * inv) + 1);
+    start.assign(static_cast<std::size_t>(count) + 1, 0);
+    slab_.resize(size);
+    for (std::size_t i = 0; i < size; ++i) {
+      const int b = std::min(count - 1, std::max(0, static_cast<int>((lx[kept_[i]] - x0) * inv)));
+      slab_[i] = static_cast<std::uint32_t>(b);
+      ++start[static_cast<std::size_t>(b) + 1];
+    }
+    for (int b = 0; b < count; ++b) start[static_cast<std::size_t>(b) + 1] += start[static_cast<std::size_t>(b)];
+    cursor_.assign(start.begin(), start.end() - 1);
+    for (std::size_t i = 0; i < size; ++i) {
+      const std::uint32_t k = kept_[i];
+      const std::uint32_t at = cursor_[slab_[i]]++;
+      x[at] = lx[k];
+      y[at] = ly[k];
+      z[at] = lz[k];
+      sig2[at] = s2[k];
+    }
+  }
+  // The run of entries that can be within σ of a point at x = px ([lo, hi), maybe empty).
+  void window(float px, std::uint32_t& lo, std::uint32_t& hi) const {
+    const float g = (px - x0) * inv;
+    if (!(g > -2.0F && g < static_cast<float>(count) + 1.0F)) {
+      lo = hi = 0;
+      return;
+    }
+    const int b = static_cast<int>(std::floor(g));
+    lo = start[static_cast<std::size_t>(std::max(b - 1, 0))];
+    hi = start[static_cast<std::size_t>(std::min(b + 2, count))];
+    if (hi < lo) hi = lo;
+  }
+
+ private:
+  std::vector<std::uint32_t> kept_, slab_, cursor_;
+  std::vector<std::int32_t> keep_;
+};
+
+// Word choice by fit with slabs: the counts of fit_counts (entries with a word point
+// within their σ, and the word points with no entry within σ), testing each word point
+// against its three slabs only, widened to whole blocks of 8 entries. Every pair tested
+// is compared as in fit_counts; the pairs skipped are farther than σ apart along x.
+LEX3D_CLONES void fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
+                                   std::int32_t* hit, std::size_t& explained, std::size_t& unsupported) {
+  const std::size_t npad = s.x.size();
+  const float* lx = s.x.data();
+  const float* ly = s.y.data();
+  const float* lz = s.z.data();
+  const float* sig2 = s.sig2.data();
+  for (std::size_t k = 0; k < npad; ++k) hit[k] = 0;
+  std::size_t lonely = 0;
+  for (std::size_t p = 0; p < np; ++p) {
+    const float px = wx[p], py = wy[p], pz = wz[p];
+    std::uint32_t lo = 0, hi = 0;
+    s.window(px, lo, hi);
+    std::int32_t any[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (std::size_t k = lo & ~7U; k < hi; k += 8)
+      for (std::size_t l = 0; l < 8; ++l) {
+        const float dx = px - lx[k + l], dy = py - ly[k + l], dz = pz - lz[k + l];
+        const std::int32_t m = (dx * dx + dy * dy + dz * dz <= sig2[k + l]) ? 1 : 0;
+        hit[k + l] |= m;
+        any[l] |= m;
+      }
+    const std::int32_t a = (any[0] | any[1] | any[2] | any[3]) | (any[4] | any[5] | any[6] | any[7]);
+    lonely += a ? 0 : 1;
+  }
+  std::size_t e = 0;
+  for (std::size_t k = 0; k < s.size; ++k) e += static_cast<std::size_t>(hit[k]);
+  explained = e;
+  unsupported = lonely;
+}
+
 // Squared distance from q to the box [lo, hi] (0 inside).
 inline float box_distance_sq(const PackedWord& w, float qx, float qy, float qz) {
   const float ox = std::max(std::max(w.lo.x() - qx, qx - w.hi.x()), 0.0F);
@@ -194,8 +359,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
   pose_.resize(nf);
-  off_.assign(nf + 1, 0);
-  for (std::size_t f = 0; f < nf; ++f) off_[f + 1] = off_[f] + scan.nearby[f].size();
+  off_.assign(scan.nearby_offset.begin(), scan.nearby_offset.end());
   const std::size_t entries = off_[nf];
   idx_.resize(entries);
   lx_.resize(entries);
@@ -205,11 +369,12 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   a_e_.resize(entries);
   sig2_e_.resize(entries);
   cache_.assign(entries, 0.0F);
+  const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
     const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
-    std::size_t k = off_[f];
-    for (const std::uint32_t j : scan.nearby[f]) {
+    for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
+      const std::uint32_t j = near[k];
       const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
       idx_[k] = j;
       lx_[k] = q.x();
@@ -218,7 +383,6 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
       reach2_e_[k] = reach2[j];
       a_e_[k] = inv_two_sigma2_[j];
       sig2_e_[k] = reach2[j] / 9.0F;
-      ++k;
     }
   }, 64);
   recompute();
@@ -534,38 +698,60 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
   if (alphabet.size() == 0) return 0;
   if (!all_features && (k <= 1 || alphabet.size() < 2)) return 0;
   const int dim = alphabet.descriptor_dim;
+  const std::size_t nw = alphabet.size();
   const std::vector<PackedWord> packed = pack(alphabet);
+  // The words' descriptors one after another.
+  std::vector<float> descriptors(nw * static_cast<std::size_t>(dim));
+  for (std::size_t w = 0; w < nw; ++w)
+    std::copy(alphabet.words[w].descriptor.begin(), alphabet.words[w].descriptor.begin() + dim,
+              descriptors.begin() + static_cast<std::ptrdiff_t>(w * static_cast<std::size_t>(dim)));
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (all_features || word_[f] >= 0) active.push_back(f);
   std::vector<std::int32_t> choice(active.size(), -1);
-  const auto kk = std::min<std::size_t>(static_cast<std::size_t>(std::max(k, 1)), alphabet.size());
+  const auto kk = std::min<std::size_t>(static_cast<std::size_t>(std::max(k, 1)), nw);
   parallel_for(active.size(), threads, [&](std::size_t i) {
     const std::size_t f = active[i];
-    // The k nearest words by descriptor (ties: lower id).
+    thread_local std::vector<float> dist;
     thread_local std::vector<std::pair<float, std::uint32_t>> near;
-    thread_local std::vector<std::int32_t> supported, hits;
+    thread_local std::vector<std::int32_t> hits;
+    thread_local Slabs slabs;
+    // The kk nearest words by descriptor (ties: lower id), in order: words come by
+    // increasing id, so one enters the list when strictly nearer than its last.
+    dist.resize(nw);
+    descriptor_distances(scan_.features.descriptor(f), descriptors.data(), nw, dim, dist.data());
     near.clear();
-    for (std::size_t w = 0; w < alphabet.size(); ++w)
-      near.emplace_back(descriptor_distance_sq(scan_.features.descriptor(f), alphabet.words[w].descriptor.data(), dim),
-                        static_cast<std::uint32_t>(w));
-    std::partial_sort(near.begin(), near.begin() + static_cast<std::ptrdiff_t>(kk), near.end());
+    for (std::size_t w = 0; w < nw; ++w) {
+      const float d = dist[w];
+      if (near.size() == kk) {
+        if (!(d < near.back().first)) continue;
+        near.pop_back();
+      }
+      auto at = near.end();
+      while (at != near.begin() && d < (at - 1)->first) --at;
+      near.insert(at, {d, static_cast<std::uint32_t>(w)});
+    }
     if (kk == 1) {
       choice[i] = static_cast<std::int32_t>(near[0].second);
       return;
     }
     const std::size_t b = begin_of(f), e = end_of(f);
+    float lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = packed[near[0].second].lo[a];
+      hi[a] = packed[near[0].second].hi[a];
+      for (std::size_t c = 1; c < kk; ++c) {
+        lo[a] = std::min(lo[a], packed[near[c].second].lo[a]);
+        hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
+      }
+    }
+    slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, lo, hi);
+    hits.resize(slabs.x.size());
     double best = -1e300;
     for (std::size_t c = 0; c < kk; ++c) {
       const PackedWord& w = packed[near[c].second];
-      const std::size_t np = w.size();
-      supported.assign(np, 0);
-      hits.resize(e - b);
-      const std::size_t explained = fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b,
-                                               w.x.data(), w.y.data(), w.z.data(), np, hits.data(), supported.data());
-      const std::int32_t* sup = supported.data();
-      std::size_t unsupported = 0;
-      for (std::size_t p = 0; p < np; ++p) unsupported += sup[p] ? 0 : 1;
+      std::size_t explained = 0, unsupported = w.size();
+      if (slabs.size > 0) fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), hits.data(), explained, unsupported);
       const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
       if (score > best) {
         best = score;

@@ -253,3 +253,35 @@ TEST(WordChoice, FittingTheScanAmongNearWordsLowersOutliers) {
   EXPECT_LT(fitted.outliers, descriptor_only.outliers - 0.05);
   EXPECT_GT(fitted.inliers, descriptor_only.inliers - 0.03);
 }
+
+// The neighbourhoods of prepare_scan: for every feature, exactly the points within
+// δ + 3σ of it (σ at the feature's range plus δ), in increasing index order, whatever
+// the thread count.
+TEST(Neighbourhoods, MatchABruteForceSearchForAnyThreadCount) {
+  const Cloud c = crop(test::load_or_fail(test::sample("newer_college_00.bin")), 12.0F);
+  ASSERT_GT(c.size(), 500U);
+  ModelParams mp;
+  mp.threads = 1;
+  const PreparedScan s1 = prepare_scan(c, mp, 0.3);
+  mp.threads = 2;
+  const PreparedScan s2 = prepare_scan(c, mp, 0.3);
+  ASSERT_GT(s1.features.size(), 10U);
+  ASSERT_EQ(s1.nearby_offset.size(), s1.features.size() + 1);
+  EXPECT_EQ(s1.nearby_offset, s2.nearby_offset);
+  EXPECT_EQ(s1.nearby_index, s2.nearby_index);
+  const double factor = mp.sigma_lambda * std::tan(s1.beam_spacing / 2.0);
+  std::size_t total = 0;
+  for (std::size_t f = 0; f < s1.features.size(); ++f) {
+    const Eigen::Vector3d t = s1.features.features[f].T_cloud_feature.translation();
+    const double range = (t - c.T_cloud_sensor.translation()).norm();
+    const auto reach = static_cast<float>(s1.word_radius + 3.0 * factor * (range + s1.word_radius) + 1e-3);
+    const Eigen::Vector3f centre = t.cast<float>();
+    std::vector<std::uint32_t> expected;
+    for (std::size_t j = 0; j < c.size(); ++j)
+      if ((c.points[j] - centre).squaredNorm() <= reach * reach) expected.push_back(static_cast<std::uint32_t>(j));
+    const std::vector<std::uint32_t> got(s1.nearby(f), s1.nearby(f) + s1.nearby_count(f));
+    ASSERT_EQ(got, expected) << "feature " << f;
+    total += got.size();
+  }
+  EXPECT_EQ(total, s1.nearby_index.size());
+}

@@ -56,8 +56,13 @@ struct PreparedScan {
   double word_radius = 0.0;    ///< δ used, metres
   double beam_spacing = 0.0;   ///< α of eq. 13 (the coarser spacing), radians
   std::vector<float> sigma;    ///< σ of each point, metres
-  /// Indices of the points within δ + 3σ of each feature point (sorted).
-  std::vector<std::vector<std::uint32_t>> nearby;
+  /// Indices of the points within δ + 3σ of each feature point, flat: feature f's
+  /// (sorted) are nearby_index[nearby_offset[f], nearby_offset[f + 1]).
+  std::vector<std::size_t> nearby_offset;
+  std::vector<std::uint32_t> nearby_index;
+  /// How many points are near feature f, and the first of them.
+  [[nodiscard]] std::size_t nearby_count(std::size_t f) const { return nearby_offset[f + 1] - nearby_offset[f]; }
+  [[nodiscard]] const std::uint32_t* nearby(std::size_t f) const { return nearby_index.data() + nearby_offset[f]; }
   FeatureTimings timings;
   double prepare_ms = 0.0;     ///< all of prepare_scan
 };
