@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <numeric>
 
 #include <Eigen/SVD>
@@ -55,38 +56,47 @@ std::vector<PackedWord> pack(const Alphabet& alphabet) {
 #define LEX3D_CLONES
 #endif
 
-// e^x for x in [-87, 0] (Cody-Waite reduction, the Cephes polynomial; relative error
-// about 2e-7), branch-free so that the loops calling it vectorise (the caller keeps x
-// in range: a clamp here would be a branch to the compiler).
-inline float exp_neg(float x) {
-  const float kRound = 12582912.0F;  // 1.5 · 2^23: adding and subtracting it rounds to an integer
-  const float n = (x * 1.44269504088896341F + kRound) - kRound;
-  const float r = (x - n * 0.693359375F) - n * -2.12194440e-4F;
-  float y = 1.9875691500E-4F;
-  y = y * r + 1.3981999507E-3F;
-  y = y * r + 8.3334519073E-3F;
-  y = y * r + 4.1665795894E-2F;
-  y = y * r + 1.6666665459E-1F;
-  y = y * r + 5.0000001201E-1F;
-  y = y * (r * r) + r + 1.0F;
-  const std::uint32_t bits = (static_cast<std::uint32_t>(static_cast<std::int32_t>(n)) + 127U) << 23;
-  float scale;
-  std::memcpy(&scale, &bits, sizeof scale);
-  return y * scale;
+// Eight floats or 32-bit integers as one value (GCC vector extensions: one AVX register in
+// the AVX2 build, two SSE registers in the baseline one; the arithmetic is lane by lane).
+typedef float V8f __attribute__((vector_size(32)));
+typedef std::int32_t V8i __attribute__((vector_size(32)));
+
+inline V8f load8(const float* p) {
+  V8f v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+inline V8f max8(V8f a, V8f b) { return a < b ? b : a; }
+inline V8f splat8(float x) { return __builtin_shuffle(V8f{x}, V8i{0, 0, 0, 0, 0, 0, 0, 0}); }
+inline V8f mask8(V8f v, V8i m) { return reinterpret_cast<V8f>(reinterpret_cast<V8i>(v) & m); }
+typedef long long V4ll __attribute__((vector_size(32)));
+inline bool any8(V8i m) {
+  const auto q = reinterpret_cast<V4ll>(m);
+  return ((q[0] | q[1]) | (q[2] | q[3])) != 0;
 }
 
-inline float mask(float v, std::uint32_t m) {
-  std::uint32_t b;
-  std::memcpy(&b, &v, sizeof b);
-  b &= m;
-  std::memcpy(&v, &b, sizeof v);
-  return v;
+// e^x for x in [-87, 0] on eight lanes (Cody-Waite reduction, the Cephes polynomial;
+// relative error about 2e-7), branch-free (the caller keeps x in range).
+inline V8f exp_neg8(V8f x) {
+  const V8f kRound = splat8(12582912.0F);
+  const V8f n = (x * splat8(1.44269504088896341F) + kRound) - kRound;
+  const V8f r = (x - n * splat8(0.693359375F)) - n * splat8(-2.12194440e-4F);
+  V8f y = splat8(1.9875691500E-4F);
+  y = y * r + splat8(1.3981999507E-3F);
+  y = y * r + splat8(8.3334519073E-3F);
+  y = y * r + splat8(4.1665795894E-2F);
+  y = y * r + splat8(1.6666665459E-1F);
+  y = y * r + splat8(5.0000001201E-1F);
+  y = y * (r * r) + r + splat8(1.0F);
+  const V8i bits = (__builtin_convertvector(n, V8i) + 127) << 23;
+  return y * reinterpret_cast<V8f>(bits);
 }
 
 // Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), for
 // the n entries of a feature. Word arrays are padded to a multiple of 8 with far
 // points; the sum keeps eight lanes (point p in lane p % 8), added pairwise, so the
-// SSE and AVX2 builds give the same bits.
+// SSE and AVX2 builds give the same bits. A block of eight word points with none in
+// reach would add only zeros: it is skipped (about 60 % of them on KITTI).
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
                                 const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
                                 std::size_t npad, const float* lo, const float* hi, float* out) {
@@ -99,45 +109,108 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     const float oy = std::max(std::max(lo[1] - qy, qy - hi[1]), 0.0F);
     const float oz = std::max(std::max(lo[2] - qz, qz - hi[2]), 0.0F);
     if (ox * ox + oy * oy + oz * oz > r2) continue;
-    const float ak = a[k];
-    float acc[8] = {0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F};
-    for (std::size_t p = 0; p < npad; p += 8)
-      for (std::size_t l = 0; l < 8; ++l) {
-        const float dx = wx[p + l] - qx, dy = wy[p + l] - qy, dz = wz[p + l] - qz;
-        const float d2 = dx * dx + dy * dy + dz * dz;
-        // Points beyond reach: d² and the result masked to 0 (as bits, no branch).
-        const std::uint32_t m = static_cast<std::uint32_t>(-static_cast<std::int32_t>(d2 <= r2));
-        acc[l] += mask(exp_neg(-mask(d2, m) * ak), m);
-      }
+    const V8f qxv = splat8(qx), qyv = splat8(qy), qzv = splat8(qz), r2v = splat8(r2), nak = splat8(-a[k]);
+    V8f acc = splat8(0.0F);
+    for (std::size_t p = 0; p < npad; p += 8) {
+      const V8f dx = load8(wx + p) - qxv, dy = load8(wy + p) - qyv, dz = load8(wz + p) - qzv;
+      const V8f d2 = dx * dx + dy * dy + dz * dz;
+      // Points beyond reach: d² and the result masked to 0 (as bits, no branch).
+      const V8i m = d2 <= r2v;
+      if (!any8(m)) continue;
+      acc += mask8(exp_neg8(mask8(d2, m) * nak), m);
+    }
     out[k] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
   }
 }
 
 // For each of the npad word points (mx, my, mz), the first target strictly nearest
-// within reach (match -1 when none). Targets in the outer loop, word points inner, with
-// selects done on bits: the inner loop vectorises.
+// within reach (match -1 when none). Eight word points at a time, held in registers
+// while all targets pass, with selects done on bits.
 LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, std::size_t nt, const float* mx,
                                   const float* my, const float* mz, std::size_t npad, float reach2, float* best,
                                   std::int32_t* match) {
-  for (std::size_t p = 0; p < npad; ++p) {
-    best[p] = reach2;
-    match[p] = -1;
+  const V8i zero8 = {0, 0, 0, 0, 0, 0, 0, 0};
+  std::size_t p = 0;
+  // Two blocks at a time: two independent chains of compare and select.
+  for (; p + 16 <= npad; p += 16) {
+    const V8f ax = load8(mx + p), ay = load8(my + p), az = load8(mz + p);
+    const V8f bx = load8(mx + p + 8), by = load8(my + p + 8), bz = load8(mz + p + 8);
+    V8f abst = splat8(reach2), bbst = abst;
+    V8i amt = zero8 - 1, bmt = amt;
+    for (std::size_t t = 0; t < nt; ++t) {
+      const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
+      const V8i ti = __builtin_shuffle(V8i{static_cast<std::int32_t>(t)}, zero8);
+      const V8f adx = x - ax, ady = y - ay, adz = z - az;
+      const V8f bdx = x - bx, bdy = y - by, bdz = z - bz;
+      const V8f ad2 = adx * adx + ady * ady + adz * adz;
+      const V8f bd2 = bdx * bdx + bdy * bdy + bdz * bdz;
+      const V8i am = ad2 < abst, bm = bd2 < bbst;
+      abst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(abst) & ~am) | (reinterpret_cast<V8i>(ad2) & am));
+      bbst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bbst) & ~bm) | (reinterpret_cast<V8i>(bd2) & bm));
+      amt = (amt & ~am) | (ti & am);
+      bmt = (bmt & ~bm) | (ti & bm);
+    }
+    std::memcpy(best + p, &abst, sizeof abst);
+    std::memcpy(match + p, &amt, sizeof amt);
+    std::memcpy(best + p + 8, &bbst, sizeof bbst);
+    std::memcpy(match + p + 8, &bmt, sizeof bmt);
   }
-  for (std::size_t t = 0; t < nt; ++t) {
-    const float x = tx[t], y = ty[t], z = tz[t];
-    const auto ti = static_cast<std::int32_t>(t);
-    for (std::size_t p = 0; p < npad; ++p) {
-      const float dx = x - mx[p], dy = y - my[p], dz = z - mz[p];
-      const float d2 = dx * dx + dy * dy + dz * dz;
-      const std::int32_t m = -static_cast<std::int32_t>(d2 < best[p]);
-      std::int32_t bb, db;
-      std::memcpy(&bb, &best[p], sizeof bb);
-      std::memcpy(&db, &d2, sizeof db);
-      bb = (bb & ~m) | (db & m);
-      std::memcpy(&best[p], &bb, sizeof bb);
-      match[p] = (match[p] & ~m) | (ti & m);
+  for (; p < npad; p += 8) {
+    const V8f px = load8(mx + p), py = load8(my + p), pz = load8(mz + p);
+    V8f bst = splat8(reach2);
+    V8i mt = zero8 - 1;
+    for (std::size_t t = 0; t < nt; ++t) {
+      const V8f dx = splat8(tx[t]) - px, dy = splat8(ty[t]) - py, dz = splat8(tz[t]) - pz;
+      const V8f d2 = dx * dx + dy * dy + dz * dz;
+      const V8i m = d2 < bst;
+      bst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bst) & ~m) | (reinterpret_cast<V8i>(d2) & m));
+      mt = (mt & ~m) | (__builtin_shuffle(V8i{static_cast<std::int32_t>(t)}, zero8) & m);
+    }
+    std::memcpy(best + p, &bst, sizeof bst);
+    std::memcpy(match + p, &mt, sizeof mt);
+  }
+}
+
+// ICP targets: copies to (fx, fy, fz), in order, the n points (lx, ly, lz) within `margin`
+// of the box [wlo, whi] on every axis whose squared distance to the box [slo, shi] is
+// below reach2; returns how many. Eight points at a time (the tail one by one).
+LEX3D_CLONES std::size_t select_targets(const float* lx, const float* ly, const float* lz, std::size_t n,
+                                        const float* wlo, const float* whi, float margin, const float* slo,
+                                        const float* shi, float reach2, float* fx, float* fy, float* fz) {
+  std::size_t nf = 0;
+  std::size_t k = 0;
+  const V8f zero = splat8(0.0F);
+  for (; k + 8 <= n; k += 8) {
+    const V8f qx = load8(lx + k), qy = load8(ly + k), qz = load8(lz + k);
+    const V8f ox = max8(max8(splat8(slo[0]) - qx, qx - splat8(shi[0])), zero);
+    const V8f oy = max8(max8(splat8(slo[1]) - qy, qy - splat8(shi[1])), zero);
+    const V8f oz = max8(max8(splat8(slo[2]) - qz, qz - splat8(shi[2])), zero);
+    const V8f mv = splat8(margin);
+    const V8i keep = (ox * ox + oy * oy + oz * oz < splat8(reach2)) & (splat8(wlo[0]) - qx <= mv) &
+                     (qx - splat8(whi[0]) <= mv) & (splat8(wlo[1]) - qy <= mv) & (qy - splat8(whi[1]) <= mv) &
+                     (splat8(wlo[2]) - qz <= mv) & (qz - splat8(whi[2]) <= mv);
+    if (!any8(keep)) continue;
+    for (std::size_t l = 0; l < 8; ++l) {
+      fx[nf] = lx[k + l];
+      fy[nf] = ly[k + l];
+      fz[nf] = lz[k + l];
+      nf -= static_cast<std::size_t>(static_cast<std::ptrdiff_t>(keep[l]));
     }
   }
+  for (; k < n; ++k) {
+    const float qx = lx[k], qy = ly[k], qz = lz[k];
+    const float ox = std::max(std::max(slo[0] - qx, qx - shi[0]), 0.0F);
+    const float oy = std::max(std::max(slo[1] - qy, qy - shi[1]), 0.0F);
+    const float oz = std::max(std::max(slo[2] - qz, qz - shi[2]), 0.0F);
+    fx[nf] = qx;
+    fy[nf] = qy;
+    fz[nf] = qz;
+    nf += (ox * ox + oy * oy + oz * oz < reach2 && wlo[0] - qx <= margin && qx - whi[0] <= margin &&
+           wlo[1] - qy <= margin && qy - whi[1] <= margin && wlo[2] - qz <= margin && qz - whi[2] <= margin)
+              ? 1
+              : 0;
+  }
+  return nf;
 }
 
 // Word choice by fit: sets sup[p] when word point p is within σ of some entry and
@@ -224,16 +297,23 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   recompute();
 }
 
+double ScanState::log_or_minus_inf(double s) noexcept {
+  return s > 0.0 ? std::log(s) : -std::numeric_limits<double>::infinity();
+}
+
+void ScanState::refresh_logs() {
+  log_s_.resize(S_.size());
+  for (std::size_t j = 0; j < S_.size(); ++j) log_s_[j] = log_or_minus_inf(S_[j]);
+}
+
 void ScanState::recompute() {
+  // ln S is kept with S (the same values log() gives), so this needs no log() of its own.
+  if (log_s_.size() != S_.size()) refresh_logs();
   const double lm = log_m(M_);
   log_l_ = 0.0;
   above_ = 0;
   for (std::size_t j = 0; j < S_.size(); ++j) {
-    if (!(S_[j] > 0.0)) {
-      log_l_ += log_floor_[j];
-      continue;
-    }
-    const double v = std::log(S_[j]) - lm;
+    const double v = log_s_[j] - lm;
     if (v > log_floor_[j]) {
       log_l_ += v;
       ++above_;
@@ -243,16 +323,23 @@ void ScanState::recompute() {
   }
 }
 
-void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const {
+void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* out) const {
   const std::size_t b = begin_of(f), e = end_of(f);
-  out.assign(e - b, 0.0F);
-  if (word.size() == 0) return;
+  if (word.size() == 0) {
+    std::fill(out, out + (e - b), 0.0F);
+    return;
+  }
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
   gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, a_e_.data() + b, e - b,
-                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, out.data());
+                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, out);
   for (std::size_t k = b; k < e; ++k)
     if (out[k - b] != 0.0F) out[k - b] = static_cast<float>(static_cast<double>(out[k - b]) * norm_[idx_[k]]);
+}
+
+void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const {
+  out.resize(end_of(f) - begin_of(f));
+  contribution_into(f, word, out.data());
 }
 
 std::int64_t ScanState::stage(const std::vector<Change>& changes) {
@@ -274,18 +361,48 @@ std::int64_t ScanState::stage(const std::vector<Change>& changes) {
   return dm;
 }
 
-double ScanState::staged_delta(std::uint64_t m_new) const {
+std::int64_t ScanState::stage_removal(std::size_t f) {
+  for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
+    const double before = cache_[k];
+    if (before == 0.0) continue;
+    const std::uint32_t j = idx_[k];
+    if (delta_[j] == 0.0) touched_.push_back(j);
+    delta_[j] += 0.0 - before;
+    if (delta_[j] == 0.0) delta_[j] = 1e-300;  // keep it marked as touched
+  }
+  return -static_cast<std::int64_t>(word_points_[f]);
+}
+
+double ScanState::staged_delta(std::uint64_t m_new) {
   const double lm_old = log_m(M_);
   const double lm_new = log_m(m_new);
   double d = 0.0;
   std::size_t touched_above = 0;
-  for (const std::uint32_t j : touched_) {
-    const double s_new = std::max(0.0, S_[j] + delta_[j]);
-    d += log_term(j, s_new, lm_new) - log_term(j, S_[j], lm_old);
-    touched_above += above(j, S_[j], lm_old) ? 1 : 0;
+  staged_log_.resize(touched_.size());
+  for (std::size_t i = 0; i < touched_.size(); ++i) {
+    const std::uint32_t j = touched_[i];
+    const double ln_new = log_or_minus_inf(std::max(0.0, S_[j] + delta_[j]));
+    staged_log_[i] = ln_new;
+    d += term_of_log(j, ln_new, lm_new) - term_of_log(j, log_s_[j], lm_old);
+    touched_above += above_of_log(j, log_s_[j], lm_old) ? 1 : 0;
   }
   // The untouched points above the background only see M change.
   return d - static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
+}
+
+void ScanState::commit_staged(std::uint64_t m_new, double delta) {
+  log_l_ += delta;
+  const double lm_old = log_m(M_);
+  const double lm_new = log_m(m_new);
+  for (std::size_t i = 0; i < touched_.size(); ++i) {
+    const std::uint32_t j = touched_[i];
+    const bool was = above_of_log(j, log_s_[j], lm_old);
+    S_[j] = std::max(0.0, S_[j] + delta_[j]);
+    log_s_[j] = staged_log_[i];
+    above_ = above_ + (above_of_log(j, log_s_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
+  }
+  unstage();
+  M_ = m_new;
 }
 
 void ScanState::unstage() {
@@ -303,15 +420,7 @@ double ScanState::delta_log_likelihood(const std::vector<Change>& changes) {
 void ScanState::apply(const std::vector<Change>& changes) {
   const std::int64_t dm = stage(changes);
   const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
-  log_l_ += staged_delta(m_new);
-  const double lm_old = log_m(M_);
-  const double lm_new = log_m(m_new);
-  for (const std::uint32_t j : touched_) {
-    const bool was = above(j, S_[j], lm_old);
-    S_[j] = std::max(0.0, S_[j] + delta_[j]);
-    above_ = above_ + (above(j, S_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
-  }
-  unstage();
+  commit_staged(m_new, staged_delta(m_new));
   for (const auto& c : changes) {
     word_[c.feature] = c.word;
     word_points_[c.feature] = c.word_points;
@@ -319,7 +428,6 @@ void ScanState::apply(const std::vector<Change>& changes) {
     if (c.contrib.empty()) std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(b), cache_.begin() + static_cast<std::ptrdiff_t>(e), 0.0F);
     else std::copy(c.contrib.begin(), c.contrib.begin() + static_cast<std::ptrdiff_t>(e - b), cache_.begin() + static_cast<std::ptrdiff_t>(b));
   }
-  M_ = m_new;
 }
 
 void ScanState::assign_words(const std::vector<std::int32_t>& words, const Alphabet& alphabet) {
@@ -339,9 +447,7 @@ void ScanState::rescore(const Alphabet& alphabet, int threads) {
       std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(b), cache_.begin() + static_cast<std::ptrdiff_t>(e), 0.0F);
       return;
     }
-    thread_local std::vector<float> out;
-    contribution(f, packed[static_cast<std::size_t>(word_[f])], out);
-    std::copy(out.begin(), out.end(), cache_.begin() + static_cast<std::ptrdiff_t>(b));
+    contribution_into(f, packed[static_cast<std::size_t>(word_[f])], cache_.data() + b);
   }, 16);
   // Sums in feature order: the same S whatever the thread count.
   std::fill(S_.begin(), S_.end(), 0.0);
@@ -352,6 +458,7 @@ void ScanState::rescore(const Alphabet& alphabet, int threads) {
     for (std::size_t k = begin_of(f); k < end_of(f); ++k) S_[idx_[k]] += static_cast<double>(cache_[k]);
   }
   stale_ = false;
+  refresh_logs();
   recompute();
 }
 
@@ -390,22 +497,31 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       if (word_[f] >= 0)
         for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] += covers[k];
   }
+  // Each removal is scored once: a dropped instance is committed from the same staged
+  // figures (what delta_log_likelihood then apply would compute).
   std::size_t dropped = 0;
-  std::vector<Change> one(1);
   for (const std::uint32_t w : order) {
     for (const std::uint32_t f : of_word[w]) {
-      one[0].feature = f;
-      one[0].word = -1;
-      one[0].word_points = 0;
-      one[0].contrib.clear();
-      if (delta_log_likelihood(one) < 0.0) continue;
+      const std::int64_t dm = stage_removal(f);
+      const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
+      const double d = staged_delta(m_new);
+      if (d < 0.0) {
+        unstage();
+        continue;
+      }
       if (keep_sole_cover) {
         bool sole = false;
         for (std::size_t k = begin_of(f); k < end_of(f) && !sole; ++k) sole = covers[k] != 0 && cover_count[idx_[k]] == 1;
-        if (sole) continue;
+        if (sole) {
+          unstage();
+          continue;
+        }
         for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] -= covers[k];
       }
-      apply(one);
+      commit_staged(m_new, d);
+      word_[f] = -1;
+      word_points_[f] = 0;
+      std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(begin_of(f)), cache_.begin() + static_cast<std::ptrdiff_t>(end_of(f)), 0.0F);
       ++dropped;
     }
   }
@@ -417,26 +533,53 @@ namespace {
 
 // One rigid correction D (q ≈ D p) from word points to their nearest targets, in the
 // instance's frame; identity when fewer than 3 pairs fall within reach. `match[i]` is the
-// target of word point i or -1.
-Eigen::Isometry3f fit_pairs(const std::vector<Eigen::Vector3f>& word, const std::vector<Eigen::Vector3f>& targets,
-                            const std::vector<std::int32_t>& match) {
-  Eigen::Vector3d ca = Eigen::Vector3d::Zero(), cb = Eigen::Vector3d::Zero();
+// target (tx, ty, tz)[match[i]] of word point i or -1. The sums run in double, each in
+// word point order.
+Eigen::Isometry3f fit_pairs(const std::vector<Eigen::Vector3f>& word, const float* tx, const float* ty,
+                            const float* tz, const std::int32_t* match) {
+  double ca0 = 0.0, ca1 = 0.0, ca2 = 0.0, cb0 = 0.0, cb1 = 0.0, cb2 = 0.0;
   std::size_t pairs = 0;
   for (std::size_t i = 0; i < word.size(); ++i) {
     if (match[i] < 0) continue;
-    ca += word[i].cast<double>();
-    cb += targets[static_cast<std::size_t>(match[i])].cast<double>();
+    const auto t = static_cast<std::size_t>(match[i]);
+    ca0 += static_cast<double>(word[i].x());
+    ca1 += static_cast<double>(word[i].y());
+    ca2 += static_cast<double>(word[i].z());
+    cb0 += static_cast<double>(tx[t]);
+    cb1 += static_cast<double>(ty[t]);
+    cb2 += static_cast<double>(tz[t]);
     ++pairs;
   }
   Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
   if (pairs < 3) return D;
-  ca /= static_cast<double>(pairs);
-  cb /= static_cast<double>(pairs);
-  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  const auto np = static_cast<double>(pairs);
+  ca0 /= np;
+  ca1 /= np;
+  ca2 /= np;
+  cb0 /= np;
+  cb1 /= np;
+  cb2 /= np;
+  double h[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // row-major
   for (std::size_t i = 0; i < word.size(); ++i) {
     if (match[i] < 0) continue;
-    H += (word[i].cast<double>() - ca) * (targets[static_cast<std::size_t>(match[i])].cast<double>() - cb).transpose();
+    const auto t = static_cast<std::size_t>(match[i]);
+    const double a0 = static_cast<double>(word[i].x()) - ca0, a1 = static_cast<double>(word[i].y()) - ca1,
+                 a2 = static_cast<double>(word[i].z()) - ca2;
+    const double b0 = static_cast<double>(tx[t]) - cb0, b1 = static_cast<double>(ty[t]) - cb1,
+                 b2 = static_cast<double>(tz[t]) - cb2;
+    h[0] += a0 * b0;
+    h[1] += a0 * b1;
+    h[2] += a0 * b2;
+    h[3] += a1 * b0;
+    h[4] += a1 * b1;
+    h[5] += a1 * b2;
+    h[6] += a2 * b0;
+    h[7] += a2 * b1;
+    h[8] += a2 * b2;
   }
+  Eigen::Matrix3d H;
+  H << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
+  const Eigen::Vector3d ca(ca0, ca1, ca2), cb(cb0, cb1, cb2);
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d V = svd.matrixV();
   Eigen::Matrix3d R = V * svd.matrixU().transpose();
@@ -473,24 +616,20 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // Only scan points near the word's bounding box can pair up (twice the reach
     // leaves room for the word to move).
     const float margin = 2.0F * static_cast<float>(max_distance);
-    thread_local std::vector<Eigen::Vector3f> targets, moved;
-    thread_local std::vector<float> tx, ty, tz, mx, my, mz, best;
+    // Of those, a round searches only the ones within reach of a box around the moved
+    // word (the others cannot match: no squared distance to a word point is below the
+    // one to a box holding it). The box is the moved word's bounding box grown by
+    // `slack`, kept while it still holds the moved word.
+    const float slack = 0.25F * static_cast<float>(max_distance);
+    thread_local std::vector<Eigen::Vector3f> moved;
+    thread_local std::vector<float> fx, fy, fz, mx, my, mz, best;
     thread_local std::vector<std::int32_t> match;
-    targets.clear();
-    tx.clear();
-    ty.clear();
-    tz.clear();
-    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-      const float qx = lx_[k], qy = ly_[k], qz = lz_[k];
-      if (pw.lo.x() - qx <= margin && qx - pw.hi.x() <= margin && pw.lo.y() - qy <= margin &&
-          qy - pw.hi.y() <= margin && pw.lo.z() - qz <= margin && qz - pw.hi.z() <= margin) {
-        targets.emplace_back(qx, qy, qz);
-        tx.push_back(qx);
-        ty.push_back(qy);
-        tz.push_back(qz);
-      }
-    }
-    const std::size_t nt = targets.size();
+    const std::size_t b = begin_of(f), e = end_of(f);
+    fx.resize(e - b);
+    fy.resize(e - b);
+    fz.resize(e - b);
+    std::size_t nf = 0;
+    float slo[3] = {0.0F, 0.0F, 0.0F}, shi[3] = {-1.0F, -1.0F, -1.0F};  // empty: filled in the first round
     const std::size_t npad = pw.xp.size();
     mx.assign(pw.xp.begin(), pw.xp.end());
     my.assign(pw.yp.begin(), pw.yp.end());
@@ -499,9 +638,30 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     match.resize(npad);
     moved.assign(word.points.begin(), word.points.end());
     for (int it = 0; it < iterations; ++it) {
-      nearest_targets(tx.data(), ty.data(), tz.data(), nt, mx.data(), my.data(), mz.data(), npad, reach2, best.data(),
+      float lo0 = mx[0], lo1 = my[0], lo2 = mz[0], hi0 = mx[0], hi1 = my[0], hi2 = mz[0];
+      for (std::size_t p = 1; p < np; ++p) {
+        lo0 = std::min(lo0, mx[p]);
+        lo1 = std::min(lo1, my[p]);
+        lo2 = std::min(lo2, mz[p]);
+        hi0 = std::max(hi0, mx[p]);
+        hi1 = std::max(hi1, my[p]);
+        hi2 = std::max(hi2, mz[p]);
+      }
+      if (!(lo0 >= slo[0] && lo1 >= slo[1] && lo2 >= slo[2] && hi0 <= shi[0] && hi1 <= shi[1] && hi2 <= shi[2])) {
+        slo[0] = lo0 - slack;
+        slo[1] = lo1 - slack;
+        slo[2] = lo2 - slack;
+        shi[0] = hi0 + slack;
+        shi[1] = hi1 + slack;
+        shi[2] = hi2 + slack;
+        const float wlo[3] = {pw.lo.x(), pw.lo.y(), pw.lo.z()};
+        const float whi[3] = {pw.hi.x(), pw.hi.y(), pw.hi.z()};
+        nf = select_targets(lx_.data() + b, ly_.data() + b, lz_.data() + b, e - b, wlo, whi, margin, slo, shi, reach2,
+                            fx.data(), fy.data(), fz.data());
+      }
+      nearest_targets(fx.data(), fy.data(), fz.data(), nf, mx.data(), my.data(), mz.data(), npad, reach2, best.data(),
                       match.data());
-      const Eigen::Isometry3f D = fit_pairs(moved, targets, match);
+      const Eigen::Isometry3f D = fit_pairs(moved, fx.data(), fy.data(), fz.data(), match.data());
       for (std::size_t p = 0; p < np; ++p) {
         moved[p] = D * moved[p];
         mx[p] = moved[p].x();
