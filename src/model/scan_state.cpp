@@ -497,28 +497,92 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       if (word_[f] >= 0)
         for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] += covers[k];
   }
-  // Each removal is scored once: a dropped instance is committed from the same staged
-  // figures (what delta_log_likelihood then apply would compute).
+  // The entries each instance contributes to (cache_ not 0), as (point, value) lists:
+  // removing an instance is scored from its list alone. An instance whose list names a
+  // point twice goes through stage_removal instead (the points of one neighbourhood
+  // are distinct in practice).
+  const std::size_t nf = word_.size();
+  std::vector<std::size_t> nz_off(nf + 1, 0);
+  std::vector<std::uint32_t> nz_j;
+  std::vector<double> nz_c;
+  std::vector<std::uint8_t> repeats(nf, 0);
+  {
+    std::size_t total = 0;
+    for (std::size_t k = 0; k < cache_.size(); ++k) total += cache_[k] != 0.0F ? 1 : 0;
+    nz_j.resize(total);
+    nz_c.resize(total);
+    std::vector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
+    std::size_t n = 0;
+    for (std::size_t f = 0; f < nf; ++f) {
+      nz_off[f] = n;
+      for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
+        if (cache_[k] == 0.0F) continue;
+        const std::uint32_t j = idx_[k];
+        if (last[j] == f) repeats[f] = 1;
+        last[j] = static_cast<std::uint32_t>(f);
+        nz_j[n] = j;
+        nz_c[n] = static_cast<double>(cache_[k]);
+        ++n;
+      }
+    }
+    nz_off[nf] = n;
+  }
+  // Each removal is scored once: a dropped instance is committed from the same figures
+  // (what delta_log_likelihood then apply would compute).
   std::size_t dropped = 0;
   for (const std::uint32_t w : order) {
     for (const std::uint32_t f : of_word[w]) {
-      const std::int64_t dm = stage_removal(f);
-      const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
-      const double d = staged_delta(m_new);
+      const bool fast = repeats[f] == 0;
+      const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) -
+                                                    static_cast<std::int64_t>(word_points_[f]));
+      const std::size_t nb = nz_off[f], ne = nz_off[f + 1];
+      double d = 0.0;
+      if (fast) {
+        // staged_delta's sum for this one removal: Δ_j = -(the entry's value).
+        const double lm_old = log_m(M_);
+        const double lm_new = log_m(m_new);
+        std::size_t touched_above = 0;
+        staged_log_.resize(ne - nb);
+        for (std::size_t i = nb; i < ne; ++i) {
+          const std::uint32_t j = nz_j[i];
+          const double ln_new = log_or_minus_inf(std::max(0.0, S_[j] + -nz_c[i]));
+          staged_log_[i - nb] = ln_new;
+          d += term_of_log(j, ln_new, lm_new) - term_of_log(j, log_s_[j], lm_old);
+          touched_above += above_of_log(j, log_s_[j], lm_old) ? 1 : 0;
+        }
+        d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
+      } else {
+        stage_removal(f);
+        d = staged_delta(m_new);
+      }
       if (d < 0.0) {
-        unstage();
+        if (!fast) unstage();
         continue;
       }
       if (keep_sole_cover) {
         bool sole = false;
         for (std::size_t k = begin_of(f); k < end_of(f) && !sole; ++k) sole = covers[k] != 0 && cover_count[idx_[k]] == 1;
         if (sole) {
-          unstage();
+          if (!fast) unstage();
           continue;
         }
         for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] -= covers[k];
       }
-      commit_staged(m_new, d);
+      if (fast) {
+        log_l_ += d;
+        const double lm_old = log_m(M_);
+        const double lm_new = log_m(m_new);
+        for (std::size_t i = nb; i < ne; ++i) {
+          const std::uint32_t j = nz_j[i];
+          const bool was = above_of_log(j, log_s_[j], lm_old);
+          S_[j] = std::max(0.0, S_[j] + -nz_c[i]);
+          log_s_[j] = staged_log_[i - nb];
+          above_ = above_ + (above_of_log(j, log_s_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
+        }
+        M_ = m_new;
+      } else {
+        commit_staged(m_new, d);
+      }
       word_[f] = -1;
       word_points_[f] = 0;
       std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(begin_of(f)), cache_.begin() + static_cast<std::ptrdiff_t>(end_of(f)), 0.0F);
