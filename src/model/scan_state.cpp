@@ -96,29 +96,54 @@ inline V8f exp_neg8(V8f x) {
 // the n entries of a feature. Word arrays are padded to a multiple of 8 with far
 // points; the sum keeps eight lanes (point p in lane p % 8), added pairwise, so the
 // SSE and AVX2 builds give the same bits. A block of eight word points with none in
-// reach would add only zeros: it is skipped (about 60 % of them on KITTI).
+// reach would add only zeros: it is left out (about 60 % of them on KITTI). Three
+// passes, none with a data-dependent branch in its inner loop: the exponents of the
+// blocks that count, their exponentials, then each entry's sum over its blocks in order.
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
                                 const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
                                 std::size_t npad, const float* lo, const float* hi, float* out) {
+  // Scratch as plain floats, read and written without alignment assumptions.
+  thread_local std::vector<float> xs, ms;
+  thread_local std::vector<std::uint32_t> start;
+  if (xs.size() < n * npad) {
+    xs.resize(n * npad);
+    ms.resize(n * npad);
+  }
+  if (start.size() < n + 1) start.resize(n + 1);
+  float* const x = xs.data();
+  float* const m = ms.data();
+  std::uint32_t items = 0;
   for (std::size_t k = 0; k < n; ++k) {
     const float qx = lx[k], qy = ly[k], qz = lz[k];
     const float r2 = reach2[k];
-    out[k] = 0.0F;
+    start[k] = items;
     // A point farther than 3σ from the word's bounding box gets nothing.
     const float ox = std::max(std::max(lo[0] - qx, qx - hi[0]), 0.0F);
     const float oy = std::max(std::max(lo[1] - qy, qy - hi[1]), 0.0F);
     const float oz = std::max(std::max(lo[2] - qz, qz - hi[2]), 0.0F);
     if (ox * ox + oy * oy + oz * oz > r2) continue;
     const V8f qxv = splat8(qx), qyv = splat8(qy), qzv = splat8(qz), r2v = splat8(r2), nak = splat8(-a[k]);
-    V8f acc = splat8(0.0F);
     for (std::size_t p = 0; p < npad; p += 8) {
       const V8f dx = load8(wx + p) - qxv, dy = load8(wy + p) - qyv, dz = load8(wz + p) - qzv;
       const V8f d2 = dx * dx + dy * dy + dz * dz;
-      // Points beyond reach: d² and the result masked to 0 (as bits, no branch).
-      const V8i m = d2 <= r2v;
-      if (!any8(m)) continue;
-      acc += mask8(exp_neg8(mask8(d2, m) * nak), m);
+      // Points beyond reach: d² and the result masked to 0 (as bits).
+      const V8i mk = d2 <= r2v;
+      const V8f xv = mask8(d2, mk) * nak;
+      std::memcpy(x + 8 * static_cast<std::size_t>(items), &xv, sizeof xv);
+      std::memcpy(m + 8 * static_cast<std::size_t>(items), &mk, sizeof mk);
+      items += any8(mk) ? 1U : 0U;
     }
+  }
+  start[n] = items;
+  for (std::size_t i = 0; i < 8 * static_cast<std::size_t>(items); i += 8) {
+    V8i mk;
+    std::memcpy(&mk, m + i, sizeof mk);
+    const V8f e = mask8(exp_neg8(load8(x + i)), mk);
+    std::memcpy(x + i, &e, sizeof e);
+  }
+  for (std::size_t k = 0; k < n; ++k) {
+    V8f acc = splat8(0.0F);
+    for (std::size_t i = start[k]; i < start[k + 1]; ++i) acc += load8(x + 8 * i);
     out[k] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
   }
 }
