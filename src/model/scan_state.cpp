@@ -98,10 +98,12 @@ inline V8f exp_neg8(V8f x) {
 // SSE and AVX2 builds give the same bits. A block of eight word points with none in
 // reach would add only zeros: it is left out (about 60 % of them on KITTI). Three
 // passes, none with a data-dependent branch in its inner loop: the exponents of the
-// blocks that count, their exponentials, then each entry's sum over its blocks in order.
+// blocks that count, their exponentials, then each entry's sum over its blocks in order,
+// times norm[idx[k]] when not 0 (in double, rounded to float).
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
                                 const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
-                                std::size_t npad, const float* lo, const float* hi, float* out) {
+                                std::size_t npad, const float* lo, const float* hi, const std::uint32_t* idx,
+                                const double* norm, float* out) {
   // Scratch as plain floats, read and written without alignment assumptions.
   thread_local std::vector<float> xs, ms;
   thread_local std::vector<std::uint32_t> start;
@@ -144,7 +146,8 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   for (std::size_t k = 0; k < n; ++k) {
     V8f acc = splat8(0.0F);
     for (std::size_t i = start[k]; i < start[k + 1]; ++i) acc += load8(x + 8 * i);
-    out[k] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+    const float sum = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+    out[k] = start[k] == start[k + 1] || sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * norm[idx[k]]);
   }
 }
 
@@ -357,9 +360,8 @@ void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* 
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
   gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, a_e_.data() + b, e - b,
-                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, out);
-  for (std::size_t k = b; k < e; ++k)
-    if (out[k - b] != 0.0F) out[k - b] = static_cast<float>(static_cast<double>(out[k - b]) * norm_[idx_[k]]);
+                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, idx_.data() + b, norm_.data(),
+                out);
 }
 
 void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const {
@@ -522,97 +524,114 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       if (word_[f] >= 0)
         for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] += covers[k];
   }
-  // The entries each instance contributes to (cache_ not 0), as (point, value) lists:
-  // removing an instance is scored from its list alone. An instance whose list names a
-  // point twice goes through stage_removal instead (the points of one neighbourhood
-  // are distinct in practice).
+  // The entries each instance contributes to (cache_ not 0), as (point, value) lists.
+  // When some list names a point twice, every removal goes through stage_removal and
+  // staged_delta instead (the points of one neighbourhood are distinct in practice).
   const std::size_t nf = word_.size();
   std::vector<std::size_t> nz_off(nf + 1, 0);
-  std::vector<std::uint32_t> nz_j;
-  std::vector<double> nz_c;
-  std::vector<std::uint8_t> repeats(nf, 0);
+  std::vector<std::uint32_t> nz_j(cache_.size());
+  std::vector<float> nz_c(cache_.size());
+  bool repeats = false;
   {
-    std::size_t total = 0;
-    for (std::size_t k = 0; k < cache_.size(); ++k) total += cache_[k] != 0.0F ? 1 : 0;
-    nz_j.resize(total);
-    nz_c.resize(total);
     std::vector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
     std::size_t n = 0;
     for (std::size_t f = 0; f < nf; ++f) {
       nz_off[f] = n;
+      const auto ff = static_cast<std::uint32_t>(f);
       for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-        if (cache_[k] == 0.0F) continue;
+        // Written always, kept when not 0 (no branch on the value).
         const std::uint32_t j = idx_[k];
-        if (last[j] == f) repeats[f] = 1;
-        last[j] = static_cast<std::uint32_t>(f);
+        const bool nz = cache_[k] != 0.0F;
+        repeats |= nz && last[j] == ff;
+        last[j] = nz ? ff : last[j];
         nz_j[n] = j;
-        nz_c[n] = static_cast<double>(cache_[k]);
-        ++n;
+        nz_c[n] = cache_[k];
+        n += nz ? 1 : 0;
       }
     }
     nz_off[nf] = n;
   }
+  // With keep_sole_cover: whether f must stay; otherwise its cover is taken away.
+  const auto sole_cover = [&](std::size_t f) {
+    if (!keep_sole_cover) return false;
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k)
+      if (covers[k] != 0 && cover_count[idx_[k]] == 1) return true;
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] -= covers[k];
+    return false;
+  };
+  const auto drop = [&](std::size_t f) {
+    word_[f] = -1;
+    word_points_[f] = 0;
+    std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(begin_of(f)), cache_.begin() + static_cast<std::ptrdiff_t>(end_of(f)), 0.0F);
+  };
   // Each removal is scored once: a dropped instance is committed from the same figures
   // (what delta_log_likelihood then apply would compute).
   std::size_t dropped = 0;
+  if (repeats) {
+    for (const std::uint32_t w : order) {
+      for (const std::uint32_t f : of_word[w]) {
+        const std::int64_t dm = stage_removal(f);
+        const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) + dm);
+        const double d = staged_delta(m_new);
+        if (d < 0.0 || sole_cover(f)) {
+          unstage();
+          continue;
+        }
+        commit_staged(m_new, d);
+        drop(f);
+        ++dropped;
+      }
+    }
+    recompute();
+    return dropped;
+  }
+  // No instance names a point twice: a removal is scored from its list alone, Δ_j being
+  // minus the entry's value (staged_delta's sum, in the same order). S_j, ln S_j and the
+  // background of each point sit side by side meanwhile (written back at the end).
+  struct PointTerms {
+    double s, ln_s, floor;
+  };
+  std::vector<PointTerms> pt(S_.size());
+  for (std::size_t j = 0; j < S_.size(); ++j) pt[j] = {S_[j], log_s_[j], log_floor_[j]};
+  const auto term = [](const PointTerms& q, double ln_s, double lm) {
+    const double v = ln_s - lm;
+    return v > q.floor ? v : q.floor;
+  };
   for (const std::uint32_t w : order) {
     for (const std::uint32_t f : of_word[w]) {
-      const bool fast = repeats[f] == 0;
       const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) -
                                                     static_cast<std::int64_t>(word_points_[f]));
       const std::size_t nb = nz_off[f], ne = nz_off[f + 1];
+      const double lm_old = log_m(M_);
+      const double lm_new = log_m(m_new);
       double d = 0.0;
-      if (fast) {
-        // staged_delta's sum for this one removal: Δ_j = -(the entry's value).
-        const double lm_old = log_m(M_);
-        const double lm_new = log_m(m_new);
-        std::size_t touched_above = 0;
-        staged_log_.resize(ne - nb);
-        for (std::size_t i = nb; i < ne; ++i) {
-          const std::uint32_t j = nz_j[i];
-          const double ln_new = log_or_minus_inf(std::max(0.0, S_[j] + -nz_c[i]));
-          staged_log_[i - nb] = ln_new;
-          d += term_of_log(j, ln_new, lm_new) - term_of_log(j, log_s_[j], lm_old);
-          touched_above += above_of_log(j, log_s_[j], lm_old) ? 1 : 0;
-        }
-        d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
-      } else {
-        stage_removal(f);
-        d = staged_delta(m_new);
+      std::size_t touched_above = 0;
+      staged_log_.resize(ne - nb);
+      for (std::size_t i = nb; i < ne; ++i) {
+        const PointTerms& q = pt[nz_j[i]];
+        const double ln_new = log_or_minus_inf(std::max(0.0, q.s + -static_cast<double>(nz_c[i])));
+        staged_log_[i - nb] = ln_new;
+        d += term(q, ln_new, lm_new) - term(q, q.ln_s, lm_old);
+        touched_above += q.ln_s - lm_old > q.floor ? 1 : 0;
       }
-      if (d < 0.0) {
-        if (!fast) unstage();
-        continue;
+      d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
+      if (d < 0.0 || sole_cover(f)) continue;
+      log_l_ += d;
+      for (std::size_t i = nb; i < ne; ++i) {
+        PointTerms& q = pt[nz_j[i]];
+        const bool was = q.ln_s - lm_old > q.floor;
+        q.s = std::max(0.0, q.s + -static_cast<double>(nz_c[i]));
+        q.ln_s = staged_log_[i - nb];
+        above_ = above_ + (q.ln_s - lm_new > q.floor ? 1 : 0) - (was ? 1 : 0);
       }
-      if (keep_sole_cover) {
-        bool sole = false;
-        for (std::size_t k = begin_of(f); k < end_of(f) && !sole; ++k) sole = covers[k] != 0 && cover_count[idx_[k]] == 1;
-        if (sole) {
-          if (!fast) unstage();
-          continue;
-        }
-        for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] -= covers[k];
-      }
-      if (fast) {
-        log_l_ += d;
-        const double lm_old = log_m(M_);
-        const double lm_new = log_m(m_new);
-        for (std::size_t i = nb; i < ne; ++i) {
-          const std::uint32_t j = nz_j[i];
-          const bool was = above_of_log(j, log_s_[j], lm_old);
-          S_[j] = std::max(0.0, S_[j] + -nz_c[i]);
-          log_s_[j] = staged_log_[i - nb];
-          above_ = above_ + (above_of_log(j, log_s_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
-        }
-        M_ = m_new;
-      } else {
-        commit_staged(m_new, d);
-      }
-      word_[f] = -1;
-      word_points_[f] = 0;
-      std::fill(cache_.begin() + static_cast<std::ptrdiff_t>(begin_of(f)), cache_.begin() + static_cast<std::ptrdiff_t>(end_of(f)), 0.0F);
+      M_ = m_new;
+      drop(f);
       ++dropped;
     }
+  }
+  for (std::size_t j = 0; j < S_.size(); ++j) {
+    S_[j] = pt[j].s;
+    log_s_[j] = pt[j].ln_s;
   }
   recompute();
   return dropped;
@@ -759,8 +778,7 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
       }
       total = D * total;
       // Converged: under 0.1 mm and 0.1 mrad.
-      const float angle = Eigen::AngleAxisf(D.linear()).angle();
-      if (D.translation().norm() < 1e-4F && angle < 1e-4F) break;
+      if (D.translation().norm() < 1e-4F && Eigen::AngleAxisf(D.linear()).angle() < 1e-4F) break;
     }
   }, 8);
   parallel_for(active.size(), threads, [&](std::size_t i) {
