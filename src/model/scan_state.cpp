@@ -639,51 +639,62 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
 
 namespace {
 
-// One rigid correction D (q ≈ D p) from word points to their nearest targets, in the
-// instance's frame; identity when fewer than 3 pairs fall within reach. `match[i]` is the
-// target (tx, ty, tz)[match[i]] of word point i or -1. The sums run in double, each in
-// word point order.
-Eigen::Isometry3f fit_pairs(const std::vector<Eigen::Vector3f>& word, const float* tx, const float* ty,
-                            const float* tz, const std::int32_t* match) {
-  double ca0 = 0.0, ca1 = 0.0, ca2 = 0.0, cb0 = 0.0, cb1 = 0.0, cb2 = 0.0;
+// One rigid correction D (q ≈ D p) from the np word points (mx, my, mz) to their nearest
+// targets, in the instance's frame; identity when fewer than 3 pairs fall within reach.
+// `match[i]` is the target (tx, ty, tz)[match[i]] of word point i or -1. The pairs are
+// gathered first (no branch on the match); the sums run in double, in word point order.
+Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
+                            const float* ty, const float* tz, const std::int32_t* match) {
+  thread_local std::vector<double> pairs_buf;
+  pairs_buf.resize(6 * np);
+  double* const a0 = pairs_buf.data();
+  double* const a1 = a0 + np;
+  double* const a2 = a1 + np;
+  double* const b0 = a2 + np;
+  double* const b1 = b0 + np;
+  double* const b2 = b1 + np;
   std::size_t pairs = 0;
-  for (std::size_t i = 0; i < word.size(); ++i) {
-    if (match[i] < 0) continue;
-    const auto t = static_cast<std::size_t>(match[i]);
-    ca0 += static_cast<double>(word[i].x());
-    ca1 += static_cast<double>(word[i].y());
-    ca2 += static_cast<double>(word[i].z());
-    cb0 += static_cast<double>(tx[t]);
-    cb1 += static_cast<double>(ty[t]);
-    cb2 += static_cast<double>(tz[t]);
-    ++pairs;
+  for (std::size_t i = 0; i < np; ++i) {
+    const auto t = static_cast<std::size_t>(std::max(match[i], 0));
+    a0[pairs] = static_cast<double>(mx[i]);
+    a1[pairs] = static_cast<double>(my[i]);
+    a2[pairs] = static_cast<double>(mz[i]);
+    b0[pairs] = static_cast<double>(tx[t]);
+    b1[pairs] = static_cast<double>(ty[t]);
+    b2[pairs] = static_cast<double>(tz[t]);
+    pairs += match[i] >= 0 ? 1 : 0;
   }
   Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
   if (pairs < 3) return D;
-  const auto np = static_cast<double>(pairs);
-  ca0 /= np;
-  ca1 /= np;
-  ca2 /= np;
-  cb0 /= np;
-  cb1 /= np;
-  cb2 /= np;
+  double ca0 = 0.0, ca1 = 0.0, ca2 = 0.0, cb0 = 0.0, cb1 = 0.0, cb2 = 0.0;
+  for (std::size_t i = 0; i < pairs; ++i) {
+    ca0 += a0[i];
+    ca1 += a1[i];
+    ca2 += a2[i];
+    cb0 += b0[i];
+    cb1 += b1[i];
+    cb2 += b2[i];
+  }
+  const auto n = static_cast<double>(pairs);
+  ca0 /= n;
+  ca1 /= n;
+  ca2 /= n;
+  cb0 /= n;
+  cb1 /= n;
+  cb2 /= n;
   double h[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // row-major
-  for (std::size_t i = 0; i < word.size(); ++i) {
-    if (match[i] < 0) continue;
-    const auto t = static_cast<std::size_t>(match[i]);
-    const double a0 = static_cast<double>(word[i].x()) - ca0, a1 = static_cast<double>(word[i].y()) - ca1,
-                 a2 = static_cast<double>(word[i].z()) - ca2;
-    const double b0 = static_cast<double>(tx[t]) - cb0, b1 = static_cast<double>(ty[t]) - cb1,
-                 b2 = static_cast<double>(tz[t]) - cb2;
-    h[0] += a0 * b0;
-    h[1] += a0 * b1;
-    h[2] += a0 * b2;
-    h[3] += a1 * b0;
-    h[4] += a1 * b1;
-    h[5] += a1 * b2;
-    h[6] += a2 * b0;
-    h[7] += a2 * b1;
-    h[8] += a2 * b2;
+  for (std::size_t i = 0; i < pairs; ++i) {
+    const double p0 = a0[i] - ca0, p1 = a1[i] - ca1, p2 = a2[i] - ca2;
+    const double q0 = b0[i] - cb0, q1 = b1[i] - cb1, q2 = b2[i] - cb2;
+    h[0] += p0 * q0;
+    h[1] += p0 * q1;
+    h[2] += p0 * q2;
+    h[3] += p1 * q0;
+    h[4] += p1 * q1;
+    h[5] += p1 * q2;
+    h[6] += p2 * q0;
+    h[7] += p2 * q1;
+    h[8] += p2 * q2;
   }
   Eigen::Matrix3d H;
   H << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
@@ -729,7 +740,6 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // one to a box holding it). The box is the moved word's bounding box grown by
     // `slack`, kept while it still holds the moved word.
     const float slack = 0.25F * static_cast<float>(max_distance);
-    thread_local std::vector<Eigen::Vector3f> moved;
     thread_local std::vector<float> fx, fy, fz, mx, my, mz, best;
     thread_local std::vector<std::int32_t> match;
     const std::size_t b = begin_of(f), e = end_of(f);
@@ -744,7 +754,6 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     mz.assign(pw.zp.begin(), pw.zp.end());
     best.resize(npad);
     match.resize(npad);
-    moved.assign(word.points.begin(), word.points.end());
     for (int it = 0; it < iterations; ++it) {
       float lo0 = mx[0], lo1 = my[0], lo2 = mz[0], hi0 = mx[0], hi1 = my[0], hi2 = mz[0];
       for (std::size_t p = 1; p < np; ++p) {
@@ -769,12 +778,13 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
       }
       nearest_targets(fx.data(), fy.data(), fz.data(), nf, mx.data(), my.data(), mz.data(), npad, reach2, best.data(),
                       match.data());
-      const Eigen::Isometry3f D = fit_pairs(moved, fx.data(), fy.data(), fz.data(), match.data());
+      const Eigen::Isometry3f D =
+          fit_pairs(mx.data(), my.data(), mz.data(), np, fx.data(), fy.data(), fz.data(), match.data());
       for (std::size_t p = 0; p < np; ++p) {
-        moved[p] = D * moved[p];
-        mx[p] = moved[p].x();
-        my[p] = moved[p].y();
-        mz[p] = moved[p].z();
+        const Eigen::Vector3f q = D * Eigen::Vector3f(mx[p], my[p], mz[p]);
+        mx[p] = q.x();
+        my[p] = q.y();
+        mz[p] = q.z();
       }
       total = D * total;
       // Converged: under 0.1 mm and 0.1 mrad.
