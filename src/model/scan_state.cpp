@@ -655,14 +655,17 @@ Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, s
   double* const b2 = b1 + np;
   std::size_t pairs = 0;
   for (std::size_t i = 0; i < np; ++i) {
-    const auto t = static_cast<std::size_t>(std::max(match[i], 0));
+    // matched: 1 when match[i] >= 0; t: the target, 0 when none (as bits, no branch).
+    const auto mi = static_cast<std::uint32_t>(match[i]);
+    const std::uint32_t matched = (~mi) >> 31;
+    const std::size_t t = mi & (0U - matched);
     a0[pairs] = static_cast<double>(mx[i]);
     a1[pairs] = static_cast<double>(my[i]);
     a2[pairs] = static_cast<double>(mz[i]);
     b0[pairs] = static_cast<double>(tx[t]);
     b1[pairs] = static_cast<double>(ty[t]);
     b2[pairs] = static_cast<double>(tz[t]);
-    pairs += match[i] >= 0 ? 1 : 0;
+    pairs += matched;
   }
   Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
   if (pairs < 3) return D;
@@ -713,6 +716,46 @@ Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, s
   return D;
 }
 
+// Moves the n points (x, y, z) by D as Eigen's Isometry3f * Vector3f does (row r:
+// ((D(r,0) x + D(r,1) y) + D(r,2) z) + D(r,3)), eight at a time, and stores their bounding
+// box in box (lo x, y, z, hi x, y, z).
+LEX3D_CLONES void move_points_impl(const float* m, float* x, float* y, float* z, std::size_t n, float* box) {
+  V8f lo[3] = {splat8(1e30F), splat8(1e30F), splat8(1e30F)};
+  V8f hi[3] = {splat8(-1e30F), splat8(-1e30F), splat8(-1e30F)};
+  float* const c[3] = {x, y, z};
+  std::size_t p = 0;
+  for (; p + 8 <= n; p += 8) {
+    const V8f px = load8(x + p), py = load8(y + p), pz = load8(z + p);
+    for (int r = 0; r < 3; ++r) {
+      const V8f v = ((splat8(m[r]) * px + splat8(m[4 + r]) * py) + splat8(m[8 + r]) * pz) + splat8(m[12 + r]);
+      std::memcpy(c[r] + p, &v, sizeof v);
+      lo[r] = v < lo[r] ? v : lo[r];
+      hi[r] = hi[r] < v ? v : hi[r];
+    }
+  }
+  for (int r = 0; r < 3; ++r) {
+    box[r] = lo[r][0];
+    box[3 + r] = hi[r][0];
+    for (int l = 1; l < 8; ++l) {
+      box[r] = std::min(box[r], lo[r][l]);
+      box[3 + r] = std::max(box[3 + r], hi[r][l]);
+    }
+  }
+  for (; p < n; ++p) {
+    const float px = x[p], py = y[p], pz = z[p];
+    for (int r = 0; r < 3; ++r) {
+      const float v = ((m[r] * px + m[4 + r] * py) + m[8 + r] * pz) + m[12 + r];
+      c[r][p] = v;
+      box[r] = std::min(box[r], v);
+      box[3 + r] = std::max(box[3 + r], v);
+    }
+  }
+}
+
+void move_points(const Eigen::Isometry3f& D, float* x, float* y, float* z, std::size_t n, float* box) {
+  move_points_impl(D.matrix().data(), x, y, z, n, box);  // column-major 4x4
+}
+
 }  // namespace
 
 void ScanState::refine(const Alphabet& alphabet, int iterations, double max_distance, int threads) {
@@ -754,16 +797,10 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     mz.assign(pw.zp.begin(), pw.zp.end());
     best.resize(npad);
     match.resize(npad);
+    // The moved word's bounding box (lo x, y, z, hi x, y, z), kept by move_points.
+    float box[6] = {pw.lo.x(), pw.lo.y(), pw.lo.z(), pw.hi.x(), pw.hi.y(), pw.hi.z()};
     for (int it = 0; it < iterations; ++it) {
-      float lo0 = mx[0], lo1 = my[0], lo2 = mz[0], hi0 = mx[0], hi1 = my[0], hi2 = mz[0];
-      for (std::size_t p = 1; p < np; ++p) {
-        lo0 = std::min(lo0, mx[p]);
-        lo1 = std::min(lo1, my[p]);
-        lo2 = std::min(lo2, mz[p]);
-        hi0 = std::max(hi0, mx[p]);
-        hi1 = std::max(hi1, my[p]);
-        hi2 = std::max(hi2, mz[p]);
-      }
+      const float lo0 = box[0], lo1 = box[1], lo2 = box[2], hi0 = box[3], hi1 = box[4], hi2 = box[5];
       if (!(lo0 >= slo[0] && lo1 >= slo[1] && lo2 >= slo[2] && hi0 <= shi[0] && hi1 <= shi[1] && hi2 <= shi[2])) {
         slo[0] = lo0 - slack;
         slo[1] = lo1 - slack;
@@ -780,12 +817,7 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
                       match.data());
       const Eigen::Isometry3f D =
           fit_pairs(mx.data(), my.data(), mz.data(), np, fx.data(), fy.data(), fz.data(), match.data());
-      for (std::size_t p = 0; p < np; ++p) {
-        const Eigen::Vector3f q = D * Eigen::Vector3f(mx[p], my[p], mz[p]);
-        mx[p] = q.x();
-        my[p] = q.y();
-        mz[p] = q.z();
-      }
+      move_points(D, mx.data(), my.data(), mz.data(), np, box);
       total = D * total;
       // Converged: under 0.1 mm and 0.1 mrad.
       if (D.translation().norm() < 1e-4F && Eigen::AngleAxisf(D.linear()).angle() < 1e-4F) break;
