@@ -96,35 +96,60 @@ inline V8f exp_neg8(V8f x) {
 // the n entries of a feature. Word arrays are padded to a multiple of 8 with far
 // points; the sum keeps eight lanes (point p in lane p % 8), added pairwise, so the
 // SSE and AVX2 builds give the same bits. A block of eight word points with none in
-// reach would add only zeros: it is left out (about 60 % of them on KITTI). Three
-// passes, none with a data-dependent branch in its inner loop: the exponents of the
-// blocks that count, their exponentials, then each entry's sum over its blocks in order,
-// times norm[idx[k]] when not 0 (in double, rounded to float).
+// reach would add only zeros: it is left out (about 60 % of them on KITTI). Passes with
+// no data-dependent branch in their inner loops: the entries within reach of the word's
+// bounding box, eight at a time; the exponents of the blocks that count; their
+// exponentials; then each entry's sum over its blocks in order, times norm[idx[k]] when
+// not 0 (in double, rounded to float).
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
                                 const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
                                 std::size_t npad, const float* lo, const float* hi, const std::uint32_t* idx,
                                 const double* norm, float* out) {
   // Scratch as plain floats, read and written without alignment assumptions.
   thread_local std::vector<float> xs, ms;
-  thread_local std::vector<std::uint32_t> start;
+  thread_local std::vector<std::uint32_t> live, first, count;
   if (xs.size() < n * npad) {
     xs.resize(n * npad);
     ms.resize(n * npad);
   }
-  if (start.size() < n + 1) start.resize(n + 1);
+  if (live.size() < n) {
+    live.resize(n);
+    first.resize(n);
+    count.resize(n);
+  }
   float* const x = xs.data();
   float* const m = ms.data();
-  std::uint32_t items = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    const float qx = lx[k], qy = ly[k], qz = lz[k];
-    const float r2 = reach2[k];
-    start[k] = items;
-    // A point farther than 3σ from the word's bounding box gets nothing.
+  // The entries within 3σ of the word's bounding box (the others get nothing), eight
+  // at a time.
+  std::size_t nl = 0;
+  std::size_t k0 = 0;
+  const V8f zero = splat8(0.0F);
+  for (; k0 + 8 <= n; k0 += 8) {
+    const V8f qx = load8(lx + k0), qy = load8(ly + k0), qz = load8(lz + k0);
+    const V8f ox = max8(max8(splat8(lo[0]) - qx, qx - splat8(hi[0])), zero);
+    const V8f oy = max8(max8(splat8(lo[1]) - qy, qy - splat8(hi[1])), zero);
+    const V8f oz = max8(max8(splat8(lo[2]) - qz, qz - splat8(hi[2])), zero);
+    const V8i far = ox * ox + oy * oy + oz * oz > load8(reach2 + k0);
+    for (std::size_t l = 0; l < 8; ++l) {
+      live[nl] = static_cast<std::uint32_t>(k0 + l);
+      nl += static_cast<std::size_t>(far[l] + 1);
+    }
+  }
+  for (; k0 < n; ++k0) {
+    const float qx = lx[k0], qy = ly[k0], qz = lz[k0];
     const float ox = std::max(std::max(lo[0] - qx, qx - hi[0]), 0.0F);
     const float oy = std::max(std::max(lo[1] - qy, qy - hi[1]), 0.0F);
     const float oz = std::max(std::max(lo[2] - qz, qz - hi[2]), 0.0F);
-    if (ox * ox + oy * oy + oz * oz > r2) continue;
-    const V8f qxv = splat8(qx), qyv = splat8(qy), qzv = splat8(qz), r2v = splat8(r2), nak = splat8(-a[k]);
+    live[nl] = static_cast<std::uint32_t>(k0);
+    nl += ox * ox + oy * oy + oz * oz > reach2[k0] ? 0 : 1;
+  }
+  std::fill(count.begin(), count.begin() + static_cast<std::ptrdiff_t>(n), 0U);
+  std::uint32_t items = 0;
+  for (std::size_t i = 0; i < nl; ++i) {
+    const std::size_t k = live[i];
+    const V8f qxv = splat8(lx[k]), qyv = splat8(ly[k]), qzv = splat8(lz[k]), r2v = splat8(reach2[k]),
+              nak = splat8(-a[k]);
+    first[k] = items;
     for (std::size_t p = 0; p < npad; p += 8) {
       const V8f dx = load8(wx + p) - qxv, dy = load8(wy + p) - qyv, dz = load8(wz + p) - qzv;
       const V8f d2 = dx * dx + dy * dy + dz * dz;
@@ -135,8 +160,8 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
       std::memcpy(m + 8 * static_cast<std::size_t>(items), &mk, sizeof mk);
       items += any8(mk) ? 1U : 0U;
     }
+    count[k] = items - first[k];
   }
-  start[n] = items;
   for (std::size_t i = 0; i < 8 * static_cast<std::size_t>(items); i += 8) {
     V8i mk;
     std::memcpy(&mk, m + i, sizeof mk);
@@ -145,9 +170,10 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
   for (std::size_t k = 0; k < n; ++k) {
     V8f acc = splat8(0.0F);
-    for (std::size_t i = start[k]; i < start[k + 1]; ++i) acc += load8(x + 8 * i);
+    const std::size_t b = first[k], e = b + count[k];
+    for (std::size_t i = b; i < e; ++i) acc += load8(x + 8 * i);
     const float sum = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
-    out[k] = start[k] == start[k + 1] || sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * norm[idx[k]]);
+    out[k] = b == e || sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * norm[idx[k]]);
   }
 }
 
