@@ -58,6 +58,12 @@ std::vector<PackedWord> pack(const Alphabet& alphabet) {
 
 // Eight floats or 32-bit integers as one value (GCC vector extensions: one AVX register in
 // the AVX2 build, two SSE registers in the baseline one; the arithmetic is lane by lane).
+// The helpers taking and returning them are inlined into each build (hence no ABI to keep).
+#if defined(__clang__)
+#pragma clang diagnostic ignored "-Wpsabi"
+#elif defined(__GNUC__)
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
 typedef float V8f __attribute__((vector_size(32)));
 typedef std::int32_t V8i __attribute__((vector_size(32)));
 
@@ -67,7 +73,14 @@ inline V8f load8(const float* p) {
   return v;
 }
 inline V8f max8(V8f a, V8f b) { return a < b ? b : a; }
+// Lane 0 copied to all lanes (a broadcast, not eight inserts).
+#if defined(__clang__)
+inline V8f splat8(float x) { return __builtin_shufflevector(V8f{x}, V8f{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
+inline V8i splat8i(std::int32_t x) { return __builtin_shufflevector(V8i{x}, V8i{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
+#else
 inline V8f splat8(float x) { return __builtin_shuffle(V8f{x}, V8i{0, 0, 0, 0, 0, 0, 0, 0}); }
+inline V8i splat8i(std::int32_t x) { return __builtin_shuffle(V8i{x}, V8i{0, 0, 0, 0, 0, 0, 0, 0}); }
+#endif
 inline V8f mask8(V8f v, V8i m) { return reinterpret_cast<V8f>(reinterpret_cast<V8i>(v) & m); }
 typedef long long V4ll __attribute__((vector_size(32)));
 inline bool any8(V8i m) {
@@ -193,7 +206,7 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     V8i amt = zero8 - 1, bmt = amt;
     for (std::size_t t = 0; t < nt; ++t) {
       const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
-      const V8i ti = __builtin_shuffle(V8i{static_cast<std::int32_t>(t)}, zero8);
+      const V8i ti = splat8i(static_cast<std::int32_t>(t));
       const V8f adx = x - ax, ady = y - ay, adz = z - az;
       const V8f bdx = x - bx, bdy = y - by, bdz = z - bz;
       const V8f ad2 = adx * adx + ady * ady + adz * adz;
@@ -218,7 +231,7 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
       const V8f d2 = dx * dx + dy * dy + dz * dz;
       const V8i m = d2 < bst;
       bst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bst) & ~m) | (reinterpret_cast<V8i>(d2) & m));
-      mt = (mt & ~m) | (__builtin_shuffle(V8i{static_cast<std::int32_t>(t)}, zero8) & m);
+      mt = (mt & ~m) | (splat8i(static_cast<std::int32_t>(t)) & m);
     }
     std::memcpy(best + p, &bst, sizeof bst);
     std::memcpy(match + p, &mt, sizeof mt);
