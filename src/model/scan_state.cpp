@@ -821,7 +821,7 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // word (the others cannot match: no squared distance to a word point is below the
     // one to a box holding it). The box is the moved word's bounding box grown by
     // `slack`, kept while it still holds the moved word.
-    const float slack = 0.25F * static_cast<float>(max_distance);
+    const float slack = 0.1F * static_cast<float>(max_distance);
     thread_local std::vector<float> fx, fy, fz, mx, my, mz, best;
     thread_local std::vector<std::int32_t> match;
     const std::size_t b = begin_of(f), e = end_of(f);
