@@ -105,35 +105,42 @@ inline V8f exp_neg8(V8f x) {
   return y * reinterpret_cast<V8f>(bits);
 }
 
-// Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), for
-// the n entries of a feature. Word arrays are padded to a multiple of 8 with far
-// points; the sum keeps eight lanes (point p in lane p % 8), added pairwise, so the
-// SSE and AVX2 builds give the same bits. A block of eight word points with none in
-// reach would add only zeros: it is left out (about 60 % of them on KITTI). Passes with
-// no data-dependent branch in their inner loops: the entries within reach of the word's
-// bounding box, eight at a time; the exponents of the blocks that count; their
-// exponentials; then each entry's sum over its blocks in order, times norm[idx[k]] when
-// not 0 (in double, rounded to float).
+// Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), times
+// norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature.
+// Word arrays hold np points padded to npad, a multiple of 8, with far points; the sum
+// keeps eight lanes (point p in lane p % 8), each adding its blocks of eight points in
+// order, the lanes then added pairwise, so the SSE and AVX2 builds give the same bits.
+// A block with no point in reach would add only zeros and is left out (about 60 % of
+// them on KITTI). Passes with no data-dependent branch in their inner loops: the entries
+// within reach of the word's bounding box; per block, those of them within reach of the
+// block's bounding box (eight entries a test), then the exponents of the pairs with a
+// point in reach; all the exponentials; their sums into each entry's lanes (block order).
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
                                 const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
-                                std::size_t npad, const float* lo, const float* hi, const std::uint32_t* idx,
-                                const double* norm, float* out) {
+                                std::size_t np, std::size_t npad, const float* lo, const float* hi,
+                                const std::uint32_t* idx, const double* norm, float* out) {
   // Scratch as plain floats, read and written without alignment assumptions.
-  thread_local std::vector<float> xs, ms;
-  thread_local std::vector<std::uint32_t> live, first, count;
-  if (xs.size() < n * npad) {
-    xs.resize(n * npad);
-    ms.resize(n * npad);
+  thread_local std::vector<float> cx, cy, cz, cr, cna, xs, ms, acc;
+  thread_local std::vector<std::uint32_t> live, cand, owner;
+  const std::size_t nb = npad / 8;
+  const std::size_t n8 = (n + 7) / 8 * 8;
+  if (live.size() < n8) {
+    live.resize(n8);
+    cand.resize(n8);
+    cx.resize(n8);
+    cy.resize(n8);
+    cz.resize(n8);
+    cr.resize(n8);
+    cna.resize(n8);
+    acc.resize(8 * n8);
   }
-  if (live.size() < n) {
-    live.resize(n);
-    first.resize(n);
-    count.resize(n);
+  if (xs.size() < 8 * n * nb) {
+    xs.resize(8 * n * nb);
+    ms.resize(8 * n * nb);
+    owner.resize(n * nb);
   }
-  float* const x = xs.data();
-  float* const m = ms.data();
-  // The entries within 3σ of the word's bounding box (the others get nothing), eight
-  // at a time.
+  std::fill(out, out + n, 0.0F);
+  // The entries within 3σ of the word's bounding box (the others get nothing).
   std::size_t nl = 0;
   std::size_t k0 = 0;
   const V8f zero = splat8(0.0F);
@@ -156,37 +163,76 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     live[nl] = static_cast<std::uint32_t>(k0);
     nl += ox * ox + oy * oy + oz * oz > reach2[k0] ? 0 : 1;
   }
-  std::fill(count.begin(), count.begin() + static_cast<std::ptrdiff_t>(n), 0U);
+  if (nl == 0) return;
+  // The live entries side by side, padded to eight with entries nothing reaches.
+  const std::size_t nl8 = (nl + 7) / 8 * 8;
+  for (std::size_t u = 0; u < nl8; ++u) {
+    const std::size_t k = live[u < nl ? u : 0];
+    cx[u] = lx[k];
+    cy[u] = ly[k];
+    cz[u] = lz[k];
+    cr[u] = u < nl ? reach2[k] : -1.0F;
+    cna[u] = -a[k];
+  }
   std::uint32_t items = 0;
-  for (std::size_t i = 0; i < nl; ++i) {
-    const std::size_t k = live[i];
-    const V8f qxv = splat8(lx[k]), qyv = splat8(ly[k]), qzv = splat8(lz[k]), r2v = splat8(reach2[k]),
-              nak = splat8(-a[k]);
-    first[k] = items;
-    for (std::size_t p = 0; p < npad; p += 8) {
-      const V8f dx = load8(wx + p) - qxv, dy = load8(wy + p) - qyv, dz = load8(wz + p) - qzv;
+  for (std::size_t b = 0; b < nb; ++b) {
+    const std::size_t p = 8 * b;
+    if (p >= np) break;  // only far padding from here on
+    float blo[3] = {wx[p], wy[p], wz[p]}, bhi[3] = {wx[p], wy[p], wz[p]};
+    for (std::size_t q = p + 1; q < std::min(p + 8, np); ++q) {
+      blo[0] = std::min(blo[0], wx[q]);
+      blo[1] = std::min(blo[1], wy[q]);
+      blo[2] = std::min(blo[2], wz[q]);
+      bhi[0] = std::max(bhi[0], wx[q]);
+      bhi[1] = std::max(bhi[1], wy[q]);
+      bhi[2] = std::max(bhi[2], wz[q]);
+    }
+    // Live entries within reach of the block's bounding box (no squared distance to a
+    // point of the block is below the one to its box).
+    std::size_t nc = 0;
+    for (std::size_t u = 0; u < nl8; u += 8) {
+      const V8f qx = load8(cx.data() + u), qy = load8(cy.data() + u), qz = load8(cz.data() + u);
+      const V8f ox = max8(max8(splat8(blo[0]) - qx, qx - splat8(bhi[0])), zero);
+      const V8f oy = max8(max8(splat8(blo[1]) - qy, qy - splat8(bhi[1])), zero);
+      const V8f oz = max8(max8(splat8(blo[2]) - qz, qz - splat8(bhi[2])), zero);
+      const V8i near = ox * ox + oy * oy + oz * oz <= load8(cr.data() + u);
+      for (std::size_t l = 0; l < 8; ++l) {
+        cand[nc] = static_cast<std::uint32_t>(u + l);
+        nc -= static_cast<std::size_t>(near[l]);
+      }
+    }
+    const V8f bx = load8(wx + p), by = load8(wy + p), bz = load8(wz + p);
+    for (std::size_t c = 0; c < nc; ++c) {
+      const std::uint32_t u = cand[c];
+      const V8f dx = bx - splat8(cx[u]), dy = by - splat8(cy[u]), dz = bz - splat8(cz[u]);
       const V8f d2 = dx * dx + dy * dy + dz * dz;
       // Points beyond reach: d² and the result masked to 0 (as bits).
-      const V8i mk = d2 <= r2v;
-      const V8f xv = mask8(d2, mk) * nak;
-      std::memcpy(x + 8 * static_cast<std::size_t>(items), &xv, sizeof xv);
-      std::memcpy(m + 8 * static_cast<std::size_t>(items), &mk, sizeof mk);
+      const V8i mk = d2 <= splat8(cr[u]);
+      const V8f xv = mask8(d2, mk) * splat8(cna[u]);
+      std::memcpy(xs.data() + 8 * static_cast<std::size_t>(items), &xv, sizeof xv);
+      std::memcpy(ms.data() + 8 * static_cast<std::size_t>(items), &mk, sizeof mk);
+      owner[items] = u;
       items += any8(mk) ? 1U : 0U;
     }
-    count[k] = items - first[k];
   }
+  float* const x = xs.data();
   for (std::size_t i = 0; i < 8 * static_cast<std::size_t>(items); i += 8) {
     V8i mk;
-    std::memcpy(&mk, m + i, sizeof mk);
+    std::memcpy(&mk, ms.data() + i, sizeof mk);
     const V8f e = mask8(exp_neg8(load8(x + i)), mk);
     std::memcpy(x + i, &e, sizeof e);
   }
-  for (std::size_t k = 0; k < n; ++k) {
-    V8f acc = splat8(0.0F);
-    const std::size_t b = first[k], e = b + count[k];
-    for (std::size_t i = b; i < e; ++i) acc += load8(x + 8 * i);
-    const float sum = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
-    out[k] = b == e || sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * norm[idx[k]]);
+  std::fill(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(8 * nl), 0.0F);
+  for (std::size_t i = 0; i < items; ++i) {
+    float* const s = acc.data() + 8 * static_cast<std::size_t>(owner[i]);
+    const V8f v = load8(s) + load8(x + 8 * i);
+    std::memcpy(s, &v, sizeof v);
+  }
+  for (std::size_t u = 0; u < nl; ++u) {
+    const V8f v = load8(acc.data() + 8 * u);
+    const float sum = ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]));
+    const std::size_t k = live[u];
+    out[k] = sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * norm[idx[k]]);
   }
 }
 
@@ -399,8 +445,8 @@ void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* 
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
   gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, a_e_.data() + b, e - b,
-                word.xp.data(), word.yp.data(), word.zp.data(), word.xp.size(), lo, hi, idx_.data() + b, norm_.data(),
-                out);
+                word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_.data() + b,
+                norm_.data(), out);
 }
 
 void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const {
