@@ -6,6 +6,7 @@
 #include <limits>
 #include <numeric>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include "lex3d/core/parallel.hpp"
@@ -724,6 +725,40 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
 
 namespace {
 
+// The rotation R maximising tr(R H) (Kabsch: H = U S Vᵀ, R = V diag(1, 1, ±1) Uᵀ
+// with det R = 1). The two leading right singular vectors come in closed form from the
+// eigenvectors of HᵀH, the left ones as H v / |H v|; the third of each is the cross
+// product of the other two, which makes both bases right-handed and R a rotation (the
+// sign Kabsch puts in the last place). When H has rank below 2 (the pairs on one line),
+// Eigen's JacobiSVD decides.
+Eigen::Matrix3d kabsch_rotation(const Eigen::Matrix3d& H) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+  es.computeDirect(H.transpose() * H);
+  const Eigen::Vector3d v1 = es.eigenvectors().col(2);
+  Eigen::Vector3d v2 = es.eigenvectors().col(1);
+  v2 = (v2 - v2.dot(v1) * v1).normalized();
+  const Eigen::Vector3d h1 = H * v1, h2 = H * v2;
+  const double n1 = h1.norm();
+  if (n1 > 0.0 && std::isfinite(n1)) {
+    const Eigen::Vector3d u1 = h1 / n1;
+    const Eigen::Vector3d w2 = h2 - u1.dot(h2) * u1;
+    const double n2 = w2.norm();
+    if (n2 > 1e-9 * n1) {
+      const Eigen::Vector3d u2 = w2 / n2;
+      const Eigen::Vector3d v3 = v1.cross(v2), u3 = u1.cross(u2);
+      return v1 * u1.transpose() + v2 * u2.transpose() + v3 * u3.transpose();
+    }
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d V = svd.matrixV();
+  Eigen::Matrix3d R = V * svd.matrixU().transpose();
+  if (R.determinant() < 0.0) {
+    V.col(2) *= -1.0;
+    R = V * svd.matrixU().transpose();
+  }
+  return R;
+}
+
 // One rigid correction D (q ≈ D p) from the np word points (mx, my, mz) to their nearest
 // targets, in the instance's frame; identity when fewer than 3 pairs fall within reach.
 // `match[i]` is the target (tx, ty, tz)[match[i]] of word point i or -1. The pairs are
@@ -787,13 +822,7 @@ Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, s
   Eigen::Matrix3d H;
   H << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
   const Eigen::Vector3d ca(ca0, ca1, ca2), cb(cb0, cb1, cb2);
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d V = svd.matrixV();
-  Eigen::Matrix3d R = V * svd.matrixU().transpose();
-  if (R.determinant() < 0.0) {
-    V.col(2) *= -1.0;
-    R = V * svd.matrixU().transpose();
-  }
+  const Eigen::Matrix3d R = kabsch_rotation(H);
   const Eigen::Vector3d t = cb - R * ca;
   if (!R.allFinite() || !t.allFinite()) return D;
   D.linear() = R.cast<float>();
