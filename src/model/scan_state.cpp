@@ -551,8 +551,7 @@ void ScanState::assign_words(const std::vector<std::int32_t>& words, const Alpha
   stale_ = true;
 }
 
-void ScanState::rescore(const Alphabet& alphabet, int threads) {
-  if (!stale_) return;
+void ScanState::score_contributions(const Alphabet& alphabet, int threads) {
   const std::vector<PackedWord> packed = pack(alphabet);
   parallel_for(word_.size(), threads, [&](std::size_t f) {
     const std::size_t b = begin_of(f), e = end_of(f);
@@ -562,6 +561,11 @@ void ScanState::rescore(const Alphabet& alphabet, int threads) {
     }
     contribution_into(f, packed[static_cast<std::size_t>(word_[f])], cache_.data() + b);
   }, 16);
+}
+
+void ScanState::rescore(const Alphabet& alphabet, int threads) {
+  if (!stale_) return;
+  score_contributions(alphabet, threads);
   // Sums in feature order: the same S whatever the thread count.
   std::fill(S_.begin(), S_.end(), 0.0);
   M_ = 0;
@@ -576,7 +580,16 @@ void ScanState::rescore(const Alphabet& alphabet, int threads) {
 }
 
 std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_sole_cover) {
-  rescore(alphabet, threads);
+  // A stale state is scored as rescore() does, its S summed in the same order while the
+  // value lists below are made (one pass over the entries instead of two).
+  const bool fresh = stale_;
+  if (fresh) {
+    score_contributions(alphabet, threads);
+    std::fill(S_.begin(), S_.end(), 0.0);
+    M_ = 0;
+    for (std::size_t f = 0; f < word_.size(); ++f)
+      if (word_[f] >= 0) M_ += word_points_[f];
+  }
   std::vector<std::size_t> count(alphabet.size(), 0);
   for (const auto w : word_)
     if (w >= 0) ++count[static_cast<std::size_t>(w)];
@@ -624,6 +637,8 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
     for (std::size_t f = 0; f < nf; ++f) {
       nz_off[f] = n;
       const auto ff = static_cast<std::uint32_t>(f);
+      if (fresh)  // rescore's sum (the entries of features without a word hold 0)
+        for (std::size_t k = begin_of(f); k < end_of(f); ++k) S_[idx_[k]] += static_cast<double>(cache_[k]);
       for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
         // Written always, kept when not 0 (no branch on the value).
         const std::uint32_t j = idx_[k];
@@ -636,6 +651,11 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       }
     }
     nz_off[nf] = n;
+  }
+  if (fresh) {
+    stale_ = false;
+    refresh_logs();
+    recompute();
   }
   // With keep_sole_cover: whether f must stay; otherwise its cover is taken away.
   const auto sole_cover = [&](std::size_t f) {

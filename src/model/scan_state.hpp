@@ -129,6 +129,8 @@ class ScanState {
   void unstage();
   // Fills ln S from S.
   void refresh_logs();
+  // The contribution of every instance into cache_ (rescore's first part).
+  void score_contributions(const Alphabet& alphabet, int threads);
   // Contribution of `word` at feature f written to out[0, entries of f).
   void contribution_into(std::size_t f, const PackedWord& word, float* out) const;
 
