@@ -104,12 +104,35 @@ class ScanState {
   [[nodiscard]] std::size_t begin_of(std::size_t f) const noexcept { return off_[f]; }
   [[nodiscard]] std::size_t end_of(std::size_t f) const noexcept { return off_[f + 1]; }
 
+  // log_term and above from a cached ln S_j (-inf when S_j is not positive): the same
+  // values without calling log().
+  [[nodiscard]] double term_of_log(std::size_t j, double ln_s, double log_m) const noexcept {
+    const double v = ln_s - log_m;
+    return v > log_floor_[j] ? v : log_floor_[j];
+  }
+  [[nodiscard]] bool above_of_log(std::size_t j, double ln_s, double log_m) const noexcept {
+    return ln_s - log_m > log_floor_[j];
+  }
+  [[nodiscard]] static double log_or_minus_inf(double s) noexcept;
+
   // Accumulates the contribution changes of `changes` into delta_ (marking touched_);
   // returns the change of M.
   std::int64_t stage(const std::vector<Change>& changes);
-  // ln L change of the staged changes if M became m_new.
-  [[nodiscard]] double staged_delta(std::uint64_t m_new) const;
+  // The same for removing the instance of feature f.
+  std::int64_t stage_removal(std::size_t f);
+  // ln L change of the staged changes if M became m_new; keeps ln S_j + Δ_j of each
+  // touched point in staged_log_ (in touched_ order).
+  [[nodiscard]] double staged_delta(std::uint64_t m_new);
+  // Applies the staged changes to S, ln S, the count above the background, M and ln L
+  // (`delta`: what staged_delta returned), then unstages.
+  void commit_staged(std::uint64_t m_new, double delta);
   void unstage();
+  // Fills ln S from S.
+  void refresh_logs();
+  // The contribution of every instance into cache_ (rescore's first part).
+  void score_contributions(const Alphabet& alphabet, int threads);
+  // Contribution of `word` at feature f written to out[0, entries of f).
+  void contribution_into(std::size_t f, const PackedWord& word, float* out) const;
 
   const PreparedScan& scan_;
   std::vector<Eigen::Isometry3f> pose_;  // instance pose of each feature (cloud frame)
@@ -125,6 +148,7 @@ class ScanState {
   std::vector<double> norm_;            // (2πσ²)^(-3/2), per point
   std::vector<double> log_floor_;       // ln of the background density, per point
   std::vector<double> S_;
+  std::vector<double> log_s_;  // ln S_j, -inf when S_j is not positive (kept with S_)
   std::vector<std::int32_t> word_;
   std::vector<std::uint32_t> word_points_;
   std::uint64_t M_ = 0;
@@ -134,6 +158,7 @@ class ScanState {
   // Scratch for delta evaluation.
   std::vector<double> delta_;
   std::vector<std::uint32_t> touched_;
+  std::vector<double> staged_log_;
 };
 
 }  // namespace lex3d::detail
