@@ -371,6 +371,15 @@ LEX3D_CLONES void descriptor_distances(const float* q, const float* words, std::
   }
 }
 
+// v where m is all ones, +0 where it is zero (a select on bits: loops using it vectorise).
+inline float mask(float v, std::uint32_t m) {
+  std::uint32_t b;
+  std::memcpy(&b, &v, sizeof b);
+  b &= m;
+  std::memcpy(&v, &b, sizeof v);
+  return v;
+}
+
 // keep[k] = 1 when entry k may be within its σ of the box [blo, bhi], else 0. The margin
 // (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the box's centre and half sizes, so
 // no entry that could pass the fit test is dropped.
