@@ -524,14 +524,6 @@ LEX3D_CLONES void fit_counts_slabs(const Slabs& s, const float* wx, const float*
   unsupported = lonely;
 }
 
-// Squared distance from q to the box [lo, hi] (0 inside).
-inline float box_distance_sq(const PackedWord& w, float qx, float qy, float qz) {
-  const float ox = std::max(std::max(w.lo.x() - qx, qx - w.hi.x()), 0.0F);
-  const float oy = std::max(std::max(w.lo.y() - qy, qy - w.hi.y()), 0.0F);
-  const float oz = std::max(std::max(w.lo.z() - qz, qz - w.hi.z()), 0.0F);
-  return ox * ox + oy * oy + oz * oz;
-}
-
 }  // namespace
 
 ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {

@@ -5,7 +5,7 @@
 // points (eq. 9-12). A point nothing explains gets a background density instead, that
 // of one Gaussian at 3σ in a reconstruction as large as the scan, g_j(3σ_j) / N; it
 // does not depend on M, so an empty model is a valid, poor model. A word placed at
-// feature f can only reach the points in scan.nearby[f], so changing an instance
+// feature f can only reach the points in scan.nearby(f), so changing an instance
 // re-scores just those; the other points only see M change, which moves those above
 // the background by -Δ ln M each (points that cross the background that way are
 // caught by recompute()).
@@ -38,7 +38,7 @@ class ScanState {
  public:
   explicit ScanState(const PreparedScan& scan, int threads = 1);
 
-  /// Contribution of `word` placed at feature f to each point of scan.nearby[f].
+  /// Contribution of `word` placed at feature f to each point of scan.nearby(f).
   void contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const;
 
   /// A proposed new word for feature f (-1: no word) with its contribution.
