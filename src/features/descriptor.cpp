@@ -257,10 +257,11 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   const float rad = static_cast<float>(params.support_radius);
   const float inv_cell = static_cast<float>(s) / (2.0F * rad);
   const float kEmpty = -std::numeric_limits<float>::infinity();
-  // The patch with a border of empty cells, so that hole filling needs no bounds checks.
-  const int ps = s + 2;
+  // The patch with a border of empty cells, so that hole filling needs no bounds
+  // checks; rows padded to a multiple of four cells plus four, for 4-wide blocks.
+  const int ps = 4 * ((s + 5) / 4) + 4;
   thread_local std::vector<float> depth;
-  depth.assign(static_cast<std::size_t>(ps * ps), kEmpty);
+  depth.assign(static_cast<std::size_t>((s + 2) * ps), kEmpty);
   float* const d0 = depth.data() + ps + 1;  // cell (0, 0)
   // Rows of R^T; each coordinate sums its products as Eigen's 3x3 product does.
   const float a00 = R(0, 0), a01 = R(1, 0), a02 = R(2, 0);
@@ -312,7 +313,40 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   // is "nothing seen within the support" and gets the far value -radius. A hole takes
   // the mean of its filled 3x3 neighbours as they were before the pass, summed in
   // row-major order. Empty neighbours add +0, which changes nothing (a sum started at
-  // +0 never becomes -0), so the sum needs no branches.
+  // +0 never becomes -0), so the sums need no branches.
+#if defined(__SSE2__)
+  thread_local std::vector<float> next;
+  next.assign(depth.size(), kEmpty);
+  const __m128 empty = _mm_set1_ps(kEmpty), one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
+  for (int pass = 0; pass < 2; ++pass) {
+    const float* const c0 = depth.data() + ps + 1;
+    bool any_hole = false;
+    for (int y = 0; y < s && !any_hole; ++y)
+      for (int x = 0; x < s; ++x) any_hole |= c0[y * ps + x] == kEmpty;
+    if (!any_hole) break;
+    float* const n0 = next.data() + ps + 1;
+    for (int y = 0; y < s; ++y)
+      for (int x = 0; x < s; x += 4) {
+        const float* const c = c0 + y * ps + x;
+        __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const __m128 v = _mm_loadu_ps(c + dy * ps + dx);
+            const __m128 ok = _mm_cmpneq_ps(v, empty);
+            sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
+            n = _mm_add_ps(n, _mm_and_ps(ok, one));
+          }
+        const __m128 cv = _mm_loadu_ps(c);
+        __m128 fill = _mm_and_ps(_mm_cmpeq_ps(cv, empty), _mm_cmpge_ps(n, two));
+        // Lanes past the last column are border cells and stay empty.
+        if (s - x < 4)
+          fill = _mm_and_ps(fill, _mm_castsi128_ps(_mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(s - x))));
+        _mm_storeu_ps(n0 + y * ps + x,
+                      _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
+      }
+    depth.swap(next);
+  }
+#else
   thread_local std::vector<int> holes;
   thread_local std::vector<float> filled;
   holes.clear();
@@ -343,6 +377,7 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
     }
     holes.resize(kept);
   }
+#endif
   const float* const f0 = depth.data() + ps + 1;
   for (int y = 0; y < s; ++y)
     for (int x = 0; x < s; ++x) {
