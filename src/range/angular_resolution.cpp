@@ -34,7 +34,20 @@ double median_of(std::vector<double>& v) {
 // (vertical spacing up to ~30x the horizontal one) still find their vertical neighbour
 // in the 3x3 cells around a sample.
 namespace detail {
-std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& dirs, std::size_t max_samples) {
+namespace {
+// The directions as a read-only array.
+struct Directions {
+  const Direction* data;
+  std::size_t count;
+  [[nodiscard]] std::size_t size() const noexcept { return count; }
+  const Direction& operator[](std::size_t i) const noexcept { return data[i]; }
+  [[nodiscard]] const Direction* begin() const noexcept { return data; }
+  [[nodiscard]] const Direction* end() const noexcept { return data + count; }
+};
+}  // namespace
+
+std::optional<AngularResolution> estimate_spacing(const Direction* dir_data, std::size_t count, std::size_t max_samples) {
+  const Directions dirs{dir_data, count};
   if (dirs.size() < 16) return std::nullopt;
 
   // Robust elevation extent (1st..99th percentile) for the mean-spacing estimate.
@@ -44,7 +57,8 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
   std::nth_element(els.begin(), lo_it, els.end());
   const double el_lo = *lo_it;
   const auto hi_it = els.begin() + static_cast<std::ptrdiff_t>(els.size() - 1 - els.size() / 100);
-  std::nth_element(els.begin(), hi_it, els.end());
+  // Past lo_it, which the first selection left in place with nothing smaller after it.
+  std::nth_element(lo_it + 1, hi_it, els.end());
   const double el_hi = *hi_it;
   const double solid_angle =
       2.0 * M_PI * std::max(1e-4, std::sin(std::max(el_lo, el_hi)) - std::sin(std::min(el_lo, el_hi)));
@@ -80,10 +94,11 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
     ++start[cell_of[i] + 1];
   }
   std::partial_sum(start.begin(), start.end(), start.begin());
-  std::vector<std::uint32_t> order(dirs.size());
+  // The directions in cell order, so that a cell's are read contiguously.
+  std::vector<Direction> by_cell(dirs.size());
   {
     std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (std::size_t i = 0; i < dirs.size(); ++i) order[fill[cell_of[i]]++] = static_cast<std::uint32_t>(i);
+    for (std::size_t i = 0; i < dirs.size(); ++i) by_cell[fill[cell_of[i]]++] = dirs[i];
   }
 
   const std::size_t samples = std::min(max_samples, dirs.size());
@@ -109,7 +124,7 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
         const int cc = ((c0 + dc) % n + n) % n;
         const std::size_t cell_index = row_offset[static_cast<std::size_t>(rr)] + static_cast<std::size_t>(cc);
         for (std::uint32_t k = start[cell_index]; k < start[cell_index + 1]; ++k) {
-          const Direction& e = dirs[order[k]];
+          const Direction& e = by_cell[k];
           double daz = static_cast<double>(e.az) - d.az;
           if (daz > M_PI) daz -= 2 * M_PI;
           if (daz < -M_PI) daz += 2 * M_PI;
@@ -145,7 +160,7 @@ std::optional<AngularResolution> estimate_angular_resolution(const Cloud& cloud,
     if (!(r > static_cast<float>(params.min_range))) continue;
     dirs.push_back({std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z() / r, -1.0F, 1.0F))});
   }
-  return detail::estimate_spacing(dirs, params.max_samples);
+  return detail::estimate_spacing(dirs.data(), dirs.size(), params.max_samples);
 }
 
 }  // namespace lex3d
