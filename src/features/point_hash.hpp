@@ -5,7 +5,9 @@
 // Cells are kept in an open-addressing table (linear probing, power-of-two size,
 // at most half full) whose slots hold the newest point of the cell; each point
 // links to the one inserted before it in the same cell. Most cells a query looks
-// at are empty, and an empty cell costs one probe into a compact table.
+// at are empty: a bit map of the occupied cells (a cell's bit may be shared with
+// others; a clear bit proves the cell empty) answers those first. Its index is linear
+// in the cell's x, so the three cells of a query along x are neighbouring bits.
 
 #include <cmath>
 #include <cstdint>
@@ -18,7 +20,9 @@ namespace lex3d::detail {
 class PointHash {
  public:
   /// `radius`: the query distance; the cell side equals it, so 27 cells cover a query.
-  explicit PointHash(float radius) : radius_(radius), inv_cell_(1.0F / radius) { rehash(64); }
+  explicit PointHash(float radius) : radius_(radius), inv_cell_(1.0F / radius), occupied_(kBitWords, 0) {
+    rehash(64);
+  }
 
   void insert(const Eigen::Vector3f& p) {
     const auto id = static_cast<std::uint32_t>(points_.size());
@@ -31,9 +35,12 @@ class PointHash {
       keys_[s] = k;
       heads_[s] = kNone;
       ++used_;
+      const std::uint32_t b = bit_of(cell_of(p));
+      occupied_[b >> 6] |= std::uint64_t{1} << (b & 63);
     }
     next_.push_back(heads_[s]);
     heads_[s] = id;
+    last_hit_ = id;  // the next query is most likely near the newest point
   }
 
   /// True when a stored point lies within the radius of `p` (distance <= radius).
@@ -42,13 +49,16 @@ class PointHash {
     if (last_hit_ < points_.size() && (points_[last_hit_] - p).squaredNorm() <= r2) return true;
     const Eigen::Vector3i c = cell_of(p);
     // The cell itself first: the likeliest to hold a point within reach.
-    if (scan_cell(key(c), p, r2)) return true;
+    if (maybe_occupied(bit_of(c)) && scan_cell(key(c), p, r2)) return true;
     for (int dz = -1; dz <= 1; ++dz)
-      for (int dy = -1; dy <= 1; ++dy)
+      for (int dy = -1; dy <= 1; ++dy) {
+        const std::uint32_t b = bit_of(c + Eigen::Vector3i(-1, dy, dz));
         for (int dx = -1; dx <= 1; ++dx) {
           if (dx == 0 && dy == 0 && dz == 0) continue;
+          if (!maybe_occupied((b + static_cast<std::uint32_t>(dx + 1)) & kBitMask)) continue;
           if (scan_cell(key(c + Eigen::Vector3i(dx, dy, dz)), p, r2)) return true;
         }
+      }
     return false;
   }
 
@@ -57,6 +67,19 @@ class PointHash {
  private:
   static constexpr std::uint64_t kFree = ~std::uint64_t{0};  // keys use 63 bits
   static constexpr std::uint32_t kNone = ~std::uint32_t{0};
+  static constexpr std::uint32_t kBits = 1U << 20;  // 128 KiB of bits
+  static constexpr std::uint32_t kBitMask = kBits - 1;
+  static constexpr std::size_t kBitWords = kBits / 64;
+
+  // Bit of a cell: x + y·A + z·B modulo 2^20, with odd multipliers that spread
+  // neighbouring rows and layers far apart.
+  static std::uint32_t bit_of(const Eigen::Vector3i& c) {
+    return (static_cast<std::uint32_t>(c.x()) + static_cast<std::uint32_t>(c.y()) * 0x9E3779B1U +
+            static_cast<std::uint32_t>(c.z()) * 0x85EBCA77U) & kBitMask;
+  }
+  [[nodiscard]] bool maybe_occupied(std::uint32_t b) const {
+    return ((occupied_[b >> 6] >> (b & 63)) & 1U) != 0;
+  }
 
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
     return {static_cast<int>(std::floor(p.x() * inv_cell_)), static_cast<int>(std::floor(p.y() * inv_cell_)),
@@ -108,6 +131,7 @@ class PointHash {
   std::vector<std::uint32_t> next_;  // per point: the previous point of its cell
   std::vector<std::uint64_t> keys_;  // per slot: cell key or kFree
   std::vector<std::uint32_t> heads_; // per slot: newest point of the cell
+  std::vector<std::uint64_t> occupied_;  // kBits bits, set for the cells that hold points
   std::size_t mask_ = 0;
   int shift_ = 64;
   std::size_t used_ = 0;
