@@ -379,11 +379,23 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   }
 #endif
   const float* const f0 = depth.data() + ps + 1;
-  for (int y = 0; y < s; ++y)
-    for (int x = 0; x < s; ++x) {
+  for (int y = 0; y < s; ++y) {
+    int x = 0;
+#if defined(__SSE2__)
+    // max(q, -1) and min(., 1) pick as std::clamp does for every finite q.
+    for (; x + 4 <= s; x += 4) {
+      const __m128 v = _mm_loadu_ps(f0 + y * ps + x);
+      const __m128 q = _mm_min_ps(_mm_max_ps(_mm_div_ps(v, _mm_set1_ps(rad)), _mm_set1_ps(-1.0F)), _mm_set1_ps(1.0F));
+      const __m128 is_empty = _mm_cmpeq_ps(v, _mm_set1_ps(kEmpty));
+      _mm_storeu_ps(out + y * s + x,
+                    _mm_or_ps(_mm_and_ps(is_empty, _mm_set1_ps(-1.0F)), _mm_andnot_ps(is_empty, q)));
+    }
+#endif
+    for (; x < s; ++x) {
       const float v = f0[y * ps + x];
       out[y * s + x] = v == kEmpty ? -1.0F : std::clamp(v / rad, -1.0F, 1.0F);
     }
+  }
 }
 
 }  // namespace
