@@ -318,16 +318,24 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   thread_local std::vector<float> next;
   next.assign(depth.size(), kEmpty);
   const __m128 empty = _mm_set1_ps(kEmpty), one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
+  // Lanes past the last column are border cells and stay empty.
+  const __m128 last_lanes =
+      _mm_castsi128_ps(_mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(s - 4 * ((s - 1) / 4))));
   for (int pass = 0; pass < 2; ++pass) {
     const float* const c0 = depth.data() + ps + 1;
-    bool any_hole = false;
-    for (int y = 0; y < s && !any_hole; ++y)
-      for (int x = 0; x < s; ++x) any_hole |= c0[y * ps + x] == kEmpty;
-    if (!any_hole) break;
     float* const n0 = next.data() + ps + 1;
+    int holes = 0, left = 0;
     for (int y = 0; y < s; ++y)
       for (int x = 0; x < s; x += 4) {
         const float* const c = c0 + y * ps + x;
+        const __m128 cv = _mm_loadu_ps(c);
+        __m128 hole = _mm_cmpeq_ps(cv, empty);
+        if (s - x < 4) hole = _mm_and_ps(hole, last_lanes);
+        if (_mm_movemask_ps(hole) == 0) {  // nothing to fill in these four cells
+          _mm_storeu_ps(n0 + y * ps + x, cv);
+          continue;
+        }
+        holes = 1;
         __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {
@@ -336,15 +344,14 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
             sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
             n = _mm_add_ps(n, _mm_and_ps(ok, one));
           }
-        const __m128 cv = _mm_loadu_ps(c);
-        __m128 fill = _mm_and_ps(_mm_cmpeq_ps(cv, empty), _mm_cmpge_ps(n, two));
-        // Lanes past the last column are border cells and stay empty.
-        if (s - x < 4)
-          fill = _mm_and_ps(fill, _mm_castsi128_ps(_mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(s - x))));
+        const __m128 fill = _mm_and_ps(hole, _mm_cmpge_ps(n, two));
+        left |= _mm_movemask_ps(_mm_andnot_ps(fill, hole));
         _mm_storeu_ps(n0 + y * ps + x,
                       _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
       }
+    if (holes == 0) break;  // `next` is a copy of `depth`
     depth.swap(next);
+    if (left == 0) break;   // no hole left for a second pass
   }
 #else
   thread_local std::vector<int> holes;
