@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
@@ -421,7 +422,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
       (T_cloud_sensor.linear().transpose() * params.up.cast<float>()).normalized();
 
   const std::size_t n = static_cast<std::size_t>(img.width) * static_cast<std::size_t>(img.height);
-  std::vector<Pixel> pix(n);
+  const std::unique_ptr<Pixel[]> pix(new Pixel[n]);  // every pixel is written below
   for (std::size_t k = 0; k < n; ++k) {
     if (img.state[k] == PixelState::kValid) {
       const Eigen::Vector3f& q = img.point[k];
@@ -445,7 +446,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
     const Keypoint& kp = keypoints[i];
     Window win;
     const WindowCentre centre = window_centre(img, kp);
-    const Frame f = feature_frame(img, pix.data(), kp, centre, params, up_sensor, win);
+    const Frame f = feature_frame(img, pix.get(), kp, centre, params, up_sensor, win);
     Eigen::Isometry3f T_sensor_feature = Eigen::Isometry3f::Identity();
     T_sensor_feature.linear() = f.R;
     T_sensor_feature.translation() = kp.point_sensor;
@@ -453,7 +454,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
     feat.keypoint = kp;
     feat.normal_support = f.support;
     feat.T_cloud_feature = img.T_cloud_sensor * T_sensor_feature.cast<double>();
-    patch_descriptor(img, pix.data(), kp, centre, f.R, params, win,
+    patch_descriptor(img, pix.get(), kp, centre, f.R, params, win,
                      out.descriptors.data() + i * static_cast<std::size_t>(out.descriptor_dim));
   });
   return out;
