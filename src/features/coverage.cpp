@@ -22,8 +22,7 @@ std::vector<Keypoint> coverage_points(const Cloud& cloud, const RangeImage& img,
   detail::PointHash hash(static_cast<float>(params.distance));
   for (const auto& kp : existing) hash.insert(kp.point_sensor);
 
-  auto consider = [&](const Eigen::Vector3f& p, float x, float y) {
-    if (hash.any_within(p)) return;
+  auto add = [&](const Eigen::Vector3f& p, float x, float y) {
     hash.insert(p);
     Keypoint kp;
     kp.point_sensor = p;
@@ -38,8 +37,8 @@ std::vector<Keypoint> coverage_points(const Cloud& cloud, const RangeImage& img,
   for (int y = 0; y < img.height; ++y)
     for (int x = 0; x < img.width; ++x) {
       const std::size_t k = img.index(x, y);
-      if (img.state[k] == PixelState::kValid)
-        consider(img.point[k], static_cast<float>(x) + 0.5F, static_cast<float>(y) + 0.5F);
+      if (img.state[k] == PixelState::kValid && !hash.any_within(img.point[k]))
+        add(img.point[k], static_cast<float>(x) + 0.5F, static_cast<float>(y) + 0.5F);
     }
   // Then the returns hidden behind a closer one in the same pixel, so the guarantee
   // holds for every point of the scan (points under min_range excepted).
@@ -50,9 +49,13 @@ std::vector<Keypoint> coverage_points(const Cloud& cloud, const RangeImage& img,
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     if (in_image[i]) continue;
     const Eigen::Vector3f q = T_sensor_cloud * cloud.points[i];
+    // What RangeImage::project and the min_range test decide from the range alone,
+    // before the angles, which only a point that adds a keypoint needs.
+    const float range = q.norm();
+    if (!(range > 0.0F) || static_cast<double>(range) < img.min_range) continue;
+    if (hash.any_within(q)) continue;
     float x = 0.0F, y = 0.0F, r = 0.0F;
-    if (!img.project(q, x, y, r) || static_cast<double>(r) < img.min_range) continue;
-    consider(q, x, y);
+    if (img.project(q, x, y, r)) add(q, x, y);
   }
   return added;
 }

@@ -14,9 +14,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/features/features.hpp"
@@ -68,39 +73,99 @@ std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f
 
 namespace {
 
-// Visits the valid pixels of a window around `kp` that may hold points within
-// `radius` of it, sampling at most about (2*max_half+1)^2 of them.
-template <typename Fn>
-void for_window(const RangeImage& img, const Keypoint& kp, double radius, int max_half, Fn&& fn) {
-  const double r = static_cast<double>(kp.point_sensor.norm());
-  const double extent = r > radius ? std::asin(radius / r) : M_PI;
+const float kNaNf = std::numeric_limits<float>::quiet_NaN();
+
+// The image's points packed 16 bytes a pixel, NaN where there is no return: a window
+// is read with one aligned load a pixel, and NaN fails every distance test, so no
+// separate state look-up is needed.
+struct alignas(16) Pixel {
+  float x, y, z, pad;
+};
+
+// The pixels of a window around a keypoint that may hold points within a radius of
+// it, sampling at most about (2*max_half+1)^2 of them: rows (image rows in range) and
+// columns (wrapped; off a partial image dropped), visited row by row.
+struct Window {
+  // Each side of a window has fewer than 2 * max_half samples, and max_half <= 64.
+  int rows[256];
+  int cols[256];
+  int nrows = 0;
+  int ncols = 0;
+};
+
+// Where a keypoint sits, computed once for both of its windows.
+struct WindowCentre {
+  double range;   // |point|
+  double cos_el;  // cosine of the elevation of its row, at least 0.05
+  int cx, cy;     // pixel
+};
+
+WindowCentre window_centre(const RangeImage& img, const Keypoint& kp) {
+  WindowCentre c;
+  c.range = static_cast<double>(kp.point_sensor.norm());
   const double el = img.elevation_at(static_cast<double>(kp.y));
-  const double cos_el = std::max(std::cos(el), 0.05);
-  const int half_x = static_cast<int>(std::min<double>(img.width / 2, std::ceil(extent / (img.azimuth_resolution_rad * cos_el))));
+  c.cos_el = std::max(std::cos(el), 0.05);
+  c.cx = static_cast<int>(std::floor(kp.x));
+  c.cy = static_cast<int>(std::floor(kp.y));
+  return c;
+}
+
+void make_window(const RangeImage& img, const WindowCentre& c, double radius, int max_half, Window& w) {
+  const double extent = c.range > radius ? std::asin(radius / c.range) : M_PI;
+  const int half_x = static_cast<int>(
+      std::min<double>(img.width / 2, std::ceil(extent / (img.azimuth_resolution_rad * c.cos_el))));
   const int half_y = static_cast<int>(std::min<double>(img.height, std::ceil(extent / img.elevation_resolution_rad)));
   const int stride_x = std::max(1, half_x / std::max(1, max_half));
   const int stride_y = std::max(1, half_y / std::max(1, max_half));
-  const int cx = static_cast<int>(std::floor(kp.x));
-  const int cy = static_cast<int>(std::floor(kp.y));
+  w.nrows = 0;
   for (int dy = -(half_y / stride_y) * stride_y; dy <= half_y; dy += stride_y) {
-    const int y = cy + dy;
-    if (y < 0 || y >= img.height) continue;
-    for (int dx = -(half_x / stride_x) * stride_x; dx <= half_x; dx += stride_x) {
-      const int x = img.wrap_x(cx + dx);
-      if (x < 0) continue;
-      const std::size_t k = img.index(x, y);
-      if (img.state[k] == PixelState::kValid) fn(img.point[k]);
-    }
+    const int y = c.cy + dy;
+    if (y >= 0 && y < img.height) w.rows[w.nrows++] = y;
+  }
+  w.ncols = 0;
+  for (int dx = -(half_x / stride_x) * stride_x; dx <= half_x; dx += stride_x) {
+    const int x = img.wrap_x(c.cx + dx);
+    if (x >= 0) w.cols[w.ncols++] = x;
   }
 }
+
+// Calls the kernel for the window's points in order: row by row, columns left to
+// right. With SSE2, four pixels at a time as x, y and z lanes (block(x, y, z)), the
+// rest of a row one by one (one(pixel)); otherwise all one by one.
+#if defined(__SSE2__)
+template <typename Block, typename One>
+inline void for_window(const Pixel* pix, int width, const Window& w, Block&& block, One&& one) {
+  for (int r = 0; r < w.nrows; ++r) {
+    const Pixel* row = pix + static_cast<std::ptrdiff_t>(w.rows[r]) * width;
+    int j = 0;
+    for (; j + 4 <= w.ncols; j += 4) {
+      __m128 x = _mm_load_ps(&row[w.cols[j]].x);
+      __m128 y = _mm_load_ps(&row[w.cols[j + 1]].x);
+      __m128 z = _mm_load_ps(&row[w.cols[j + 2]].x);
+      __m128 t = _mm_load_ps(&row[w.cols[j + 3]].x);
+      _MM_TRANSPOSE4_PS(x, y, z, t);
+      block(x, y, z);
+    }
+    for (; j < w.ncols; ++j) one(row[w.cols[j]]);
+  }
+}
+#else
+template <typename One>
+inline void for_window(const Pixel* pix, int width, const Window& w, One&& one) {
+  for (int r = 0; r < w.nrows; ++r) {
+    const Pixel* row = pix + static_cast<std::ptrdiff_t>(w.rows[r]) * width;
+    for (int j = 0; j < w.ncols; ++j) one(row[w.cols[j]]);
+  }
+}
+#endif
 
 struct Frame {
   Eigen::Matrix3f R;  // columns: x, y, z of the feature frame in the sensor frame
   std::uint16_t support;
 };
 
-Frame feature_frame(const RangeImage& img, const Keypoint& kp, const DescriptorParams& params,
-                    const Eigen::Vector3f& up_sensor) {
+Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp, const WindowCentre& centre,
+                    const DescriptorParams& params, const Eigen::Vector3f& up_sensor, Window& win) {
   const Eigen::Vector3f p = kp.point_sensor;
   const float range = p.norm();
   const Eigen::Vector3f view = range > 0.0F ? Eigen::Vector3f(p / range) : Eigen::Vector3f::UnitX();
@@ -108,18 +173,54 @@ Frame feature_frame(const RangeImage& img, const Keypoint& kp, const DescriptorP
   const double spacing = std::max(img.azimuth_resolution_rad, img.elevation_resolution_rad) * range;
   const double radius = std::min(params.support_radius, std::max(params.normal_radius, 2.5 * spacing));
   const float r2 = static_cast<float>(radius * radius);
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d sum_sq = Eigen::Matrix3d::Zero();
+  make_window(img, centre, radius, 7, win);
+  // Sums of the offsets and of their products (xx, xy, xz, yy, yz, zz), in visiting order.
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+  double sxx = 0.0, sxy = 0.0, sxz = 0.0, syy = 0.0, syz = 0.0, szz = 0.0;
   int count = 0;
-  for_window(img, kp, radius, 7, [&](const Eigen::Vector3f& q) {
-    if ((q - p).squaredNorm() > r2) return;
-    const Eigen::Vector3d d = (q - p).cast<double>();
-    sum += d;
-    sum_sq += d * d.transpose();
+  const float px = p.x(), py = p.y(), pz = p.z();
+  auto add = [&](float dx, float dy, float dz) {
+    const double ex = dx, ey = dy, ez = dz;
+    s0 += ex;
+    s1 += ey;
+    s2 += ez;
+    sxx += ex * ex;
+    sxy += ex * ey;
+    sxz += ex * ez;
+    syy += ey * ey;
+    syz += ey * ez;
+    szz += ez * ez;
     ++count;
-  });
+  };
+  // Same association as Eigen's squaredNorm of a 3-vector; NaN (no return) fails.
+  for_window(pix, img.width, win,
+#if defined(__SSE2__)
+             [&, vpx = _mm_set1_ps(px), vpy = _mm_set1_ps(py), vpz = _mm_set1_ps(pz),
+              vr2 = _mm_set1_ps(r2)](__m128 x, __m128 y, __m128 z) {
+               const __m128 dx = _mm_sub_ps(x, vpx), dy = _mm_sub_ps(y, vpy), dz = _mm_sub_ps(z, vpz);
+               const __m128 sq =
+                   _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
+               int m = _mm_movemask_ps(_mm_cmple_ps(sq, vr2));
+               if (m == 0) return;
+               alignas(16) float ax[4], ay[4], az[4];
+               _mm_store_ps(ax, dx);
+               _mm_store_ps(ay, dy);
+               _mm_store_ps(az, dz);
+               for (; m != 0; m &= m - 1) {
+                 const int l = __builtin_ctz(static_cast<unsigned>(m));
+                 add(ax[l], ay[l], az[l]);
+               }
+             },
+#endif
+             [&](const Pixel& q) {
+               const float dx = q.x - px, dy = q.y - py, dz = q.z - pz;
+               if (dx * dx + (dy * dy + dz * dz) <= r2) add(dx, dy, dz);
+             });
   Eigen::Vector3f normal = -view;
   if (count >= 3) {
+    const Eigen::Vector3d sum(s0, s1, s2);
+    Eigen::Matrix3d sum_sq;
+    sum_sq << sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz;
     const Eigen::Vector3d mean = sum / count;
     const Eigen::Matrix3d cov = sum_sq / count - mean * mean.transpose();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
@@ -151,49 +252,157 @@ Frame feature_frame(const RangeImage& img, const Keypoint& kp, const DescriptorP
   return f;
 }
 
-void patch_descriptor(const RangeImage& img, const Keypoint& kp, const Eigen::Matrix3f& R,
-                      const DescriptorParams& params, float* out) {
+void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& kp, const WindowCentre& centre,
+                      const Eigen::Matrix3f& R, const DescriptorParams& params, Window& win, float* out) {
   const int s = params.patch_size;
   const float rad = static_cast<float>(params.support_radius);
   const float inv_cell = static_cast<float>(s) / (2.0F * rad);
   const float kEmpty = -std::numeric_limits<float>::infinity();
-  thread_local std::vector<float> depth, next;
-  depth.assign(static_cast<std::size_t>(s * s), kEmpty);
-  const Eigen::Matrix3f Rt = R.transpose();
-  const Eigen::Vector3f p = kp.point_sensor;
-  for_window(img, kp, params.support_radius * std::sqrt(3.0), s, [&](const Eigen::Vector3f& q) {
-    const Eigen::Vector3f l = Rt * (q - p);
-    if (std::abs(l.x()) >= rad || std::abs(l.y()) >= rad || std::abs(l.z()) >= rad) return;
-    const int ix = std::min(s - 1, static_cast<int>((l.x() + rad) * inv_cell));
-    const int iy = std::min(s - 1, static_cast<int>((rad - l.y()) * inv_cell));
-    float& d = depth[static_cast<std::size_t>(iy * s + ix)];
-    d = std::max(d, l.z());  // z-buffer: the viewpoint sits on +z
-  });
+  // The patch with a border of empty cells, so that hole filling needs no bounds
+  // checks; rows padded to a multiple of four cells plus four, for 4-wide blocks.
+  const int ps = 4 * ((s + 5) / 4) + 4;
+  thread_local std::vector<float> depth;
+  depth.assign(static_cast<std::size_t>((s + 2) * ps), kEmpty);
+  float* const d0 = depth.data() + ps + 1;  // cell (0, 0)
+  // Rows of R^T; each coordinate sums its products as Eigen's 3x3 product does.
+  const float a00 = R(0, 0), a01 = R(1, 0), a02 = R(2, 0);
+  const float a10 = R(0, 1), a11 = R(1, 1), a12 = R(2, 1);
+  const float a20 = R(0, 2), a21 = R(1, 2), a22 = R(2, 2);
+  const float px = kp.point_sensor.x(), py = kp.point_sensor.y(), pz = kp.point_sensor.z();
+  make_window(img, centre, params.support_radius * std::sqrt(3.0), s, win);
+  auto put = [&](float lx, float ly, float lz) {
+    const int ix = std::min(s - 1, static_cast<int>((lx + rad) * inv_cell));
+    const int iy = std::min(s - 1, static_cast<int>((rad - ly) * inv_cell));
+    float& d = d0[iy * ps + ix];
+    d = std::max(d, lz);  // z-buffer: the viewpoint sits on +z
+  };
+  // Points inside the cube of half side rad (NaN, no return, fails).
+  for_window(pix, img.width, win,
+#if defined(__SSE2__)
+             [&, vpx = _mm_set1_ps(px), vpy = _mm_set1_ps(py), vpz = _mm_set1_ps(pz), vrad = _mm_set1_ps(rad),
+              abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF))](__m128 x, __m128 y, __m128 z) {
+               const __m128 dx = _mm_sub_ps(x, vpx), dy = _mm_sub_ps(y, vpy), dz = _mm_sub_ps(z, vpz);
+               const __m128 lx = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a00), dx),
+                                            _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a01), dy), _mm_mul_ps(_mm_set1_ps(a02), dz)));
+               const __m128 ly = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a10), dx),
+                                            _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a11), dy), _mm_mul_ps(_mm_set1_ps(a12), dz)));
+               const __m128 lz = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a20), dx),
+                                            _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a21), dy), _mm_mul_ps(_mm_set1_ps(a22), dz)));
+               const __m128 in = _mm_and_ps(_mm_and_ps(_mm_cmplt_ps(_mm_and_ps(lx, abs_mask), vrad),
+                                                       _mm_cmplt_ps(_mm_and_ps(ly, abs_mask), vrad)),
+                                            _mm_cmplt_ps(_mm_and_ps(lz, abs_mask), vrad));
+               int m = _mm_movemask_ps(in);
+               if (m == 0) return;
+               alignas(16) float ax[4], ay[4], az[4];
+               _mm_store_ps(ax, lx);
+               _mm_store_ps(ay, ly);
+               _mm_store_ps(az, lz);
+               for (; m != 0; m &= m - 1) {
+                 const int l = __builtin_ctz(static_cast<unsigned>(m));
+                 put(ax[l], ay[l], az[l]);
+               }
+             },
+#endif
+             [&](const Pixel& q) {
+               const float dx = q.x - px, dy = q.y - py, dz = q.z - pz;
+               const float lx = a00 * dx + (a01 * dy + a02 * dz);
+               const float ly = a10 * dx + (a11 * dy + a12 * dz);
+               const float lz = a20 * dx + (a21 * dy + a22 * dz);
+               if (std::abs(lx) < rad && std::abs(ly) < rad && std::abs(lz) < rad) put(lx, ly, lz);
+             });
   // Interpolate small holes from filled neighbours (two passes); what stays empty
-  // is "nothing seen within the support" and gets the far value -radius.
+  // is "nothing seen within the support" and gets the far value -radius. A hole takes
+  // the mean of its filled 3x3 neighbours as they were before the pass, summed in
+  // row-major order. Empty neighbours add +0, which changes nothing (a sum started at
+  // +0 never becomes -0), so the sums need no branches.
+#if defined(__SSE2__)
+  thread_local std::vector<float> next;
+  next.assign(depth.size(), kEmpty);
+  const __m128 empty = _mm_set1_ps(kEmpty), one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
+  // Lanes past the last column are border cells and stay empty.
+  const __m128 last_lanes =
+      _mm_castsi128_ps(_mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(s - 4 * ((s - 1) / 4))));
   for (int pass = 0; pass < 2; ++pass) {
-    next = depth;
+    const float* const c0 = depth.data() + ps + 1;
+    float* const n0 = next.data() + ps + 1;
+    int holes = 0, left = 0;
     for (int y = 0; y < s; ++y)
-      for (int x = 0; x < s; ++x) {
-        if (depth[static_cast<std::size_t>(y * s + x)] != kEmpty) continue;
-        float sum = 0.0F;
-        int n = 0;
+      for (int x = 0; x < s; x += 4) {
+        const float* const c = c0 + y * ps + x;
+        const __m128 cv = _mm_loadu_ps(c);
+        __m128 hole = _mm_cmpeq_ps(cv, empty);
+        if (s - x < 4) hole = _mm_and_ps(hole, last_lanes);
+        if (_mm_movemask_ps(hole) == 0) {  // nothing to fill in these four cells
+          _mm_storeu_ps(n0 + y * ps + x, cv);
+          continue;
+        }
+        holes = 1;
+        __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= s || yy >= s) continue;
-            const float v = depth[static_cast<std::size_t>(yy * s + xx)];
-            if (v == kEmpty) continue;
-            sum += v;
-            ++n;
+            const __m128 v = _mm_loadu_ps(c + dy * ps + dx);
+            const __m128 ok = _mm_cmpneq_ps(v, empty);
+            sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
+            n = _mm_add_ps(n, _mm_and_ps(ok, one));
           }
-        if (n >= 2) next[static_cast<std::size_t>(y * s + x)] = sum / static_cast<float>(n);
+        const __m128 fill = _mm_and_ps(hole, _mm_cmpge_ps(n, two));
+        left |= _mm_movemask_ps(_mm_andnot_ps(fill, hole));
+        _mm_storeu_ps(n0 + y * ps + x,
+                      _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
       }
+    if (holes == 0) break;  // `next` is a copy of `depth`
     depth.swap(next);
+    if (left == 0) break;   // no hole left for a second pass
   }
-  for (int i = 0; i < s * s; ++i) {
-    const float v = depth[static_cast<std::size_t>(i)];
-    out[i] = v == kEmpty ? -1.0F : std::clamp(v / rad, -1.0F, 1.0F);
+#else
+  thread_local std::vector<int> holes;
+  thread_local std::vector<float> filled;
+  holes.clear();
+  for (int y = 0; y < s; ++y)
+    for (int x = 0; x < s; ++x)
+      if (d0[y * ps + x] == kEmpty) holes.push_back((y + 1) * ps + x + 1);
+  filled.resize(holes.size());
+  float* const dp = depth.data();
+  for (int pass = 0; pass < 2 && !holes.empty(); ++pass) {
+    const std::size_t nh = holes.size();
+    for (std::size_t i = 0; i < nh; ++i) {
+      const float* const c = dp + holes[i];
+      float sum = 0.0F;
+      int n = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const float v = c[dy * ps + dx];
+          const bool ok = v != kEmpty;
+          sum += ok ? v : 0.0F;
+          n += ok ? 1 : 0;
+        }
+      filled[i] = n >= 2 ? sum / static_cast<float>(n) : kEmpty;
+    }
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < nh; ++i) {
+      dp[holes[i]] = filled[i];
+      if (filled[i] == kEmpty) holes[kept++] = holes[i];
+    }
+    holes.resize(kept);
+  }
+#endif
+  const float* const f0 = depth.data() + ps + 1;
+  for (int y = 0; y < s; ++y) {
+    int x = 0;
+#if defined(__SSE2__)
+    // max(q, -1) and min(., 1) pick as std::clamp does for every finite q.
+    for (; x + 4 <= s; x += 4) {
+      const __m128 v = _mm_loadu_ps(f0 + y * ps + x);
+      const __m128 q = _mm_min_ps(_mm_max_ps(_mm_div_ps(v, _mm_set1_ps(rad)), _mm_set1_ps(-1.0F)), _mm_set1_ps(1.0F));
+      const __m128 is_empty = _mm_cmpeq_ps(v, _mm_set1_ps(kEmpty));
+      _mm_storeu_ps(out + y * s + x,
+                    _mm_or_ps(_mm_and_ps(is_empty, _mm_set1_ps(-1.0F)), _mm_andnot_ps(is_empty, q)));
+    }
+#endif
+    for (; x < s; ++x) {
+      const float v = f0[y * ps + x];
+      out[y * s + x] = v == kEmpty ? -1.0F : std::clamp(v / rad, -1.0F, 1.0F);
+    }
   }
 }
 
@@ -211,9 +420,33 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
   const Eigen::Isometry3f T_cloud_sensor = img.T_cloud_sensor.cast<float>();
   const Eigen::Vector3f up_sensor =
       (T_cloud_sensor.linear().transpose() * params.up.cast<float>()).normalized();
-  parallel_for(keypoints.size(), threads, [&](std::size_t i) {
+
+  const std::size_t n = static_cast<std::size_t>(img.width) * static_cast<std::size_t>(img.height);
+  const std::unique_ptr<Pixel[]> pix(new Pixel[n]);  // every pixel is written below
+  for (std::size_t k = 0; k < n; ++k) {
+    if (img.state[k] == PixelState::kValid) {
+      const Eigen::Vector3f& q = img.point[k];
+      pix[k] = {q.x(), q.y(), q.z(), 0.0F};
+    } else {
+      pix[k] = {kNaNf, kNaNf, kNaNf, kNaNf};
+    }
+  }
+  // Features are independent: describe them in image order, so that consecutive
+  // windows overlap in the cache, and store each at its own index.
+  const std::size_t m = keypoints.size();
+  std::vector<std::pair<std::int64_t, std::uint32_t>> order(m);
+  for (std::size_t i = 0; i < m; ++i) {
+    const std::int64_t row = static_cast<std::int64_t>(std::floor(keypoints[i].y));
+    const std::int64_t col = static_cast<std::int64_t>(std::floor(keypoints[i].x));
+    order[i] = {row * (static_cast<std::int64_t>(img.width) + 1) + col, static_cast<std::uint32_t>(i)};
+  }
+  std::sort(order.begin(), order.end());
+  parallel_for(m, threads, [&](std::size_t o) {
+    const std::size_t i = order[o].second;
     const Keypoint& kp = keypoints[i];
-    const Frame f = feature_frame(img, kp, params, up_sensor);
+    Window win;
+    const WindowCentre centre = window_centre(img, kp);
+    const Frame f = feature_frame(img, pix.get(), kp, centre, params, up_sensor, win);
     Eigen::Isometry3f T_sensor_feature = Eigen::Isometry3f::Identity();
     T_sensor_feature.linear() = f.R;
     T_sensor_feature.translation() = kp.point_sensor;
@@ -221,7 +454,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
     feat.keypoint = kp;
     feat.normal_support = f.support;
     feat.T_cloud_feature = img.T_cloud_sensor * T_sensor_feature.cast<double>();
-    patch_descriptor(img, kp, f.R, params,
+    patch_descriptor(img, pix.get(), kp, centre, f.R, params, win,
                      out.descriptors.data() + i * static_cast<std::size_t>(out.descriptor_dim));
   });
   return out;

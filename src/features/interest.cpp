@@ -91,55 +91,69 @@ inline float normalised_gradient(float r, Neighbour before, Neighbour after, flo
 // smoothing removes noise without blurring occlusion borders away.
 constexpr float kSameSurface = 0.05F;
 
-void smooth(std::vector<float>& v, const RangeImage& img, double sigma) {
+// Both gradient images at once: they are known at the same pixels (every return), so
+// the weights of a pixel's neighbours are the same for both.
+void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& img, double sigma) {
   const int w = img.width;
   const int h = img.height;
   const bool wrap = img.full_circle;
-  const std::vector<float>& range = img.range;
+  const float* const range = img.range.data();
   if (sigma <= 0.0) return;
   const int radius = std::max(1, static_cast<int>(std::ceil(2.0 * sigma)));
   std::vector<float> kernel(static_cast<std::size_t>(2 * radius + 1));
   for (int i = -radius; i <= radius; ++i)
     kernel[static_cast<std::size_t>(i + radius)] = static_cast<float>(std::exp(-0.5 * i * i / (sigma * sigma)));
-  std::vector<float> tmp(v.size(), kNaN);
+  const float* const kc = kernel.data() + radius;  // kc[i], i in [-radius, radius]
+  std::vector<float> tx(gx.size(), kNaN), ty(gy.size(), kNaN);
   // Horizontal pass.
   for (int y = 0; y < h; ++y) {
     const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    const float* const vx = gx.data() + row;
+    const float* const vy = gy.data() + row;
+    const float* const rr = range + row;
     for (int x = 0; x < w; ++x) {
-      if (std::isnan(v[row + static_cast<std::size_t>(x)])) continue;
-      const float tol = kSameSurface * range[row + static_cast<std::size_t>(x)];
-      float s = 0.0F, ws = 0.0F;
+      if (std::isnan(vx[x])) continue;
+      const float rc = rr[x];
+      const float tol = kSameSurface * rc;
+      float sx = 0.0F, sy = 0.0F, ws = 0.0F;
       for (int i = -radius; i <= radius; ++i) {
         int xx = x + i;
-        if (wrap) xx = (xx % w + w) % w;
-        else if (xx < 0 || xx >= w) continue;
-        const float val = v[row + static_cast<std::size_t>(xx)];
-        if (std::isnan(val) || !(std::abs(range[row + static_cast<std::size_t>(xx)] - range[row + static_cast<std::size_t>(x)]) <= tol)) continue;
-        const float k = kernel[static_cast<std::size_t>(i + radius)];
-        s += k * val;
+        if (wrap) {
+          if (xx < 0 || xx >= w) xx = (xx % w + w) % w;
+        } else if (xx < 0 || xx >= w) {
+          continue;
+        }
+        if (std::isnan(vx[xx]) || !(std::abs(rr[xx] - rc) <= tol)) continue;
+        const float k = kc[i];
+        sx += k * vx[xx];
+        sy += k * vy[xx];
         ws += k;
       }
-      tmp[row + static_cast<std::size_t>(x)] = s / ws;
+      tx[row + static_cast<std::size_t>(x)] = sx / ws;
+      ty[row + static_cast<std::size_t>(x)] = sy / ws;
     }
   }
   // Vertical pass.
+  const std::ptrdiff_t stride = w;
   for (int y = 0; y < h; ++y) {
+    const int i0 = std::max(-radius, -y);
+    const int i1 = std::min(radius, h - 1 - y);
     for (int x = 0; x < w; ++x) {
       const std::size_t k0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-      if (std::isnan(tmp[k0])) continue;
-      const float tol = kSameSurface * range[k0];
-      float s = 0.0F, ws = 0.0F;
-      for (int i = -radius; i <= radius; ++i) {
-        const int yy = y + i;
-        if (yy < 0 || yy >= h) continue;
-        const std::size_t kq = static_cast<std::size_t>(yy) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-        const float val = tmp[kq];
-        if (std::isnan(val) || !(std::abs(range[kq] - range[k0]) <= tol)) continue;
-        const float k = kernel[static_cast<std::size_t>(i + radius)];
-        s += k * val;
+      if (std::isnan(tx[k0])) continue;
+      const float rc = range[k0];
+      const float tol = kSameSurface * rc;
+      float sx = 0.0F, sy = 0.0F, ws = 0.0F;
+      for (int i = i0; i <= i1; ++i) {
+        const std::size_t kq = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k0) + i * stride);
+        if (std::isnan(tx[kq]) || !(std::abs(range[kq] - rc) <= tol)) continue;
+        const float k = kc[i];
+        sx += k * tx[kq];
+        sy += k * ty[kq];
         ws += k;
       }
-      v[k0] = s / ws;
+      gx[k0] = sx / ws;
+      gy[k0] = sy / ws;
     }
   }
 }
@@ -199,12 +213,17 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
       if (std::isnan(gx[k])) gx[k] = 0.0F;
       if (std::isnan(gy[k])) gy[k] = 0.0F;
     }
-  smooth(gx, img, params.smoothing_sigma_px);
-  smooth(gy, img, params.smoothing_sigma_px);
+  smooth(gx, gy, img, params.smoothing_sigma_px);
 
   // Eq. 3-5 and the occlusion filter.
   out.value.assign(n, 0.0F);
-  std::vector<float> angle(n, 0.0F);
+  // Direction of change (atan2 of the second derivatives) of a return; only the
+  // straight-line filter needs it, at a few pixels, so it is computed there.
+  auto angle = [&](std::size_t k) {
+    const int x = static_cast<int>(k % static_cast<std::size_t>(w));
+    const int y = static_cast<int>(k / static_cast<std::size_t>(w));
+    return std::atan2(second_derivative(gy, img, x, y, false), second_derivative(gx, img, x, y, true));
+  };
   // atan(step / (tan α · r · px)) · 2/π > occ  <=>  step > tan(occ · π/2) · tan α · r · px
   const float occ_ratio = params.occlusion_gradient >= 1.0
                               ? std::numeric_limits<float>::infinity()
@@ -219,7 +238,6 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
       // |G'| <= 1 bounds each second derivative by 2, so dividing by 2·sqrt(2) maps
       // eq. 5 onto [0, 1] without clipping the strongest corners into a tie.
       float interest = std::sqrt(gx2 * gx2 + gy2 * gy2) * kInvMaxInterest;
-      angle[k] = std::atan2(gy2, gx2);
       if (interest >= thr) {
         // Shadow side of a jump: a nearer neighbour (1 or 2 px away) with a normalised
         // range step close to 1. Such borders depend on the viewpoint.
@@ -266,7 +284,7 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
       if (!is_max) continue;
       ++out.maxima;
       // The edge through this pixel runs perpendicular to the direction of change.
-      const float th = angle[k];
+      const float th = angle(k);
       const int sx = static_cast<int>(std::lround(-2.0 * std::sin(th)));
       const int sy = static_cast<int>(std::lround(2.0 * std::cos(th)));
       int continuing = 0;
@@ -276,7 +294,7 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
         if (yy < 0 || yy >= h || xx < 0) continue;
         const std::size_t q = img.index(xx, yy);
         if (img.state[q] != PixelState::kValid || out.value[q] < 0.5F * thr) continue;
-        if (angle_diff_mod_pi(angle[q], th) < line_angle) ++continuing;
+        if (angle_diff_mod_pi(angle(q), th) < line_angle) ++continuing;
       }
       if (continuing == 2) {
         ++out.line_rejected;

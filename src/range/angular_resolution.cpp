@@ -7,6 +7,10 @@
 #include "lex3d/range/range_image.hpp"
 #include "range/spacing.hpp"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace lex3d {
 
 void AngularResolutionParams::validate() const {
@@ -34,7 +38,20 @@ double median_of(std::vector<double>& v) {
 // (vertical spacing up to ~30x the horizontal one) still find their vertical neighbour
 // in the 3x3 cells around a sample.
 namespace detail {
-std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& dirs, std::size_t max_samples) {
+namespace {
+// The directions as a read-only array.
+struct Directions {
+  const Direction* data;
+  std::size_t count;
+  [[nodiscard]] std::size_t size() const noexcept { return count; }
+  const Direction& operator[](std::size_t i) const noexcept { return data[i]; }
+  [[nodiscard]] const Direction* begin() const noexcept { return data; }
+  [[nodiscard]] const Direction* end() const noexcept { return data + count; }
+};
+}  // namespace
+
+std::optional<AngularResolution> estimate_spacing(const Direction* dir_data, std::size_t count, std::size_t max_samples) {
+  const Directions dirs{dir_data, count};
   if (dirs.size() < 16) return std::nullopt;
 
   // Robust elevation extent (1st..99th percentile) for the mean-spacing estimate.
@@ -44,7 +61,8 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
   std::nth_element(els.begin(), lo_it, els.end());
   const double el_lo = *lo_it;
   const auto hi_it = els.begin() + static_cast<std::ptrdiff_t>(els.size() - 1 - els.size() / 100);
-  std::nth_element(els.begin(), hi_it, els.end());
+  // Past lo_it, which the first selection left in place with nothing smaller after it.
+  std::nth_element(lo_it + 1, hi_it, els.end());
   const double el_hi = *hi_it;
   const double solid_angle =
       2.0 * M_PI * std::max(1e-4, std::sin(std::max(el_lo, el_hi)) - std::sin(std::min(el_lo, el_hi)));
@@ -80,10 +98,11 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
     ++start[cell_of[i] + 1];
   }
   std::partial_sum(start.begin(), start.end(), start.begin());
-  std::vector<std::uint32_t> order(dirs.size());
+  // The directions in cell order, so that a cell's are read contiguously.
+  std::vector<Direction> by_cell(dirs.size());
   {
     std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (std::size_t i = 0; i < dirs.size(); ++i) order[fill[cell_of[i]]++] = static_cast<std::uint32_t>(i);
+    for (std::size_t i = 0; i < dirs.size(); ++i) by_cell[fill[cell_of[i]]++] = dirs[i];
   }
 
   const std::size_t samples = std::min(max_samples, dirs.size());
@@ -99,6 +118,14 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
     double best_h = std::numeric_limits<double>::infinity();
     double best_v = std::numeric_limits<double>::infinity();
     const int row = row_of(d.el);
+#if defined(__SSE2__)
+    const __m128d v_daz = _mm_set1_pd(static_cast<double>(d.az)), v_del = _mm_set1_pd(static_cast<double>(d.el));
+    const __m128d v_pi = _mm_set1_pd(M_PI), v_minus_pi = _mm_set1_pd(-M_PI), v_two_pi = _mm_set1_pd(2 * M_PI);
+    const __m128d v_abs = _mm_castsi128_pd(_mm_set1_epi64x(0x7FFFFFFFFFFFFFFFLL));
+    const __m128d v_cos_el = _mm_set1_pd(cos_el), v_same = _mm_set1_pd(kSame), v_half = _mm_set1_pd(0.5);
+    const __m128d v_inf = _mm_set1_pd(std::numeric_limits<double>::infinity());
+    __m128d bh = v_inf, bv = v_inf;
+#endif
     for (int dr = -1; dr <= 1; ++dr) {
       const int rr = row + dr;
       if (rr < 0 || rr >= rows) continue;
@@ -108,8 +135,30 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
         if (n < 3 && dc != 0) continue;
         const int cc = ((c0 + dc) % n + n) % n;
         const std::size_t cell_index = row_offset[static_cast<std::size_t>(rr)] + static_cast<std::size_t>(cc);
-        for (std::uint32_t k = start[cell_index]; k < start[cell_index + 1]; ++k) {
-          const Direction& e = dirs[order[k]];
+        std::uint32_t k = start[cell_index];
+        const std::uint32_t k_end = start[cell_index + 1];
+#if defined(__SSE2__)
+        // Two candidates at a time, with the same double arithmetic; a rejected one
+        // offers +inf to the minimum.
+        for (; k + 2 <= k_end; k += 2) {
+          const __m128 pair = _mm_loadu_ps(&by_cell[k].az);  // az0 el0 az1 el1
+          const __m128d az = _mm_cvtps_pd(_mm_shuffle_ps(pair, pair, _MM_SHUFFLE(2, 0, 2, 0)));
+          const __m128d el = _mm_cvtps_pd(_mm_shuffle_ps(pair, pair, _MM_SHUFFLE(3, 1, 3, 1)));
+          __m128d daz = _mm_sub_pd(az, v_daz);
+          daz = _mm_sub_pd(daz, _mm_and_pd(_mm_cmpgt_pd(daz, v_pi), v_two_pi));
+          daz = _mm_add_pd(daz, _mm_and_pd(_mm_cmplt_pd(daz, v_minus_pi), v_two_pi));
+          const __m128d h = _mm_mul_pd(_mm_and_pd(daz, v_abs), v_cos_el);
+          const __m128d v = _mm_and_pd(_mm_sub_pd(el, v_del), v_abs);
+          const __m128d same = _mm_and_pd(_mm_cmplt_pd(h, v_same), _mm_cmplt_pd(v, v_same));
+          const __m128d is_h = _mm_cmplt_pd(v, _mm_mul_pd(v_half, h));
+          const __m128d take_h = _mm_andnot_pd(same, is_h);
+          const __m128d take_v = _mm_andnot_pd(same, _mm_andnot_pd(is_h, _mm_cmplt_pd(h, _mm_mul_pd(v_half, v))));
+          bh = _mm_min_pd(bh, _mm_or_pd(_mm_and_pd(take_h, h), _mm_andnot_pd(take_h, v_inf)));
+          bv = _mm_min_pd(bv, _mm_or_pd(_mm_and_pd(take_v, v), _mm_andnot_pd(take_v, v_inf)));
+        }
+#endif
+        for (; k < k_end; ++k) {
+          const Direction& e = by_cell[k];
           double daz = static_cast<double>(e.az) - d.az;
           if (daz > M_PI) daz -= 2 * M_PI;
           if (daz < -M_PI) daz += 2 * M_PI;
@@ -121,6 +170,15 @@ std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& 
         }
       }
     }
+#if defined(__SSE2__)
+    {
+      alignas(16) double lanes_h[2], lanes_v[2];
+      _mm_store_pd(lanes_h, bh);
+      _mm_store_pd(lanes_v, bv);
+      best_h = std::min(best_h, std::min(lanes_h[0], lanes_h[1]));
+      best_v = std::min(best_v, std::min(lanes_v[0], lanes_v[1]));
+    }
+#endif
     if (std::isfinite(best_h)) horizontal.push_back(best_h);
     if (std::isfinite(best_v)) vertical.push_back(best_v);
   }
@@ -145,7 +203,7 @@ std::optional<AngularResolution> estimate_angular_resolution(const Cloud& cloud,
     if (!(r > static_cast<float>(params.min_range))) continue;
     dirs.push_back({std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z() / r, -1.0F, 1.0F))});
   }
-  return detail::estimate_spacing(dirs, params.max_samples);
+  return detail::estimate_spacing(dirs.data(), dirs.size(), params.max_samples);
 }
 
 }  // namespace lex3d

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -20,6 +21,30 @@ void check_resolution(double v, const char* name) {
     throw std::invalid_argument(std::string("RangeImageParams::") + name +
                                 " must be 0 (estimate) or in [1e-5, 0.2] rad, got " + std::to_string(v));
 }
+}  // namespace
+
+namespace {
+
+// std::clamp(static_cast<int>(img.row_at(el)), 0, height - 1), with the row found from
+// the nominal row height and checked against the row table instead of searched for.
+int row_index(const RangeImage& img, double el) {
+  const std::vector<double>& e = img.row_edges;
+  if (e.size() < 2) return 0;
+  const int h = img.height;
+  if (el >= e.front()) return 0;  // row_at <= 0
+  if (!(el > e.back())) return h - 1;  // row_at >= height (row_at's search would run off at e.back())
+  // The row y with e[y] >= el > e[y+1] (upper_bound's answer): a guess, then a check.
+  const double nominal = img.elevation_resolution_rad > 0 ? img.elevation_resolution_rad : 1.0;
+  double g = std::floor((e.front() - el) / nominal);
+  if (!(g >= 0.0)) g = 0.0;
+  if (g > h - 1) g = h - 1;
+  auto y = static_cast<std::size_t>(g);
+  while (y > 0 && !(e[y] >= el)) --y;
+  while (!(el > e[y + 1])) ++y;
+  const double at = static_cast<double>(y) + (e[y] - el) / (e[y] - e[y + 1]);
+  return std::clamp(static_cast<int>(at), 0, h - 1);
+}
+
 }  // namespace
 
 void RangeImageParams::validate() const {
@@ -88,15 +113,14 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
   // 1e-7 rad is far below any beam spacing).
   const Eigen::Isometry3f T_sensor_cloud = cloud.T_cloud_sensor.inverse().cast<float>();
   const Eigen::Matrix3f R_sensor_cloud = T_sensor_cloud.linear();
-  struct Ray {
-    Eigen::Vector3f p;
-    float r;
-    std::int32_t idx;  // -1 for a no-return direction
-  };
-  std::vector<Ray> rays;
-  std::vector<detail::Direction> dirs;
-  rays.reserve(cloud.size() + cloud.no_return_directions.size());
-  dirs.reserve(rays.capacity());
+  // Per accepted direction: its range and cloud index (-1 for a no-return direction);
+  // a point's sensor-frame position is computed again, by the same expression, only
+  // when it claims a pixel. Left uninitialised: every used element is written first.
+  const std::size_t max_rays = cloud.size() + cloud.no_return_directions.size();
+  const std::unique_ptr<float[]> ray_range(new float[max_rays]);
+  const std::unique_ptr<std::int32_t[]> ray_index(new std::int32_t[max_rays]);
+  const std::unique_ptr<detail::Direction[]> dirs(new detail::Direction[max_rays]);
+  std::size_t used = 0;
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     if (!cloud.points[i].allFinite()) {
       ++img.points_non_finite;
@@ -108,23 +132,26 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
       ++img.points_too_close;
       continue;
     }
-    rays.push_back({q, r, static_cast<std::int32_t>(i)});
-    dirs.push_back({std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z() / r, -1.0F, 1.0F))});
+    ray_range[used] = r;
+    ray_index[used] = static_cast<std::int32_t>(i);
+    dirs[used] = {std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z() / r, -1.0F, 1.0F))};
+    ++used;
   }
-  const std::size_t returns = rays.size();
+  const std::size_t returns = used;
   for (const auto& d : cloud.no_return_directions) {
     const Eigen::Vector3f q = (R_sensor_cloud * d).normalized();
     if (!q.allFinite()) continue;
-    rays.push_back({q, std::numeric_limits<float>::infinity(), -1});
-    dirs.push_back({std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z(), -1.0F, 1.0F))});
+    ray_range[used] = std::numeric_limits<float>::infinity();
+    ray_index[used] = -1;
+    dirs[used] = {std::atan2(q.y(), q.x()), std::asin(std::clamp(q.z(), -1.0F, 1.0F))};
+    ++used;
   }
-  if (rays.empty()) return img;
+  if (used == 0) return img;
 
   double res_az = params.azimuth_resolution_rad;
   double res_el = params.elevation_resolution_rad;
   if (res_az == 0.0 || res_el == 0.0) {
-    const std::vector<detail::Direction> returned(dirs.begin(), dirs.begin() + static_cast<std::ptrdiff_t>(returns));
-    const auto est = detail::estimate_spacing(returned, AngularResolutionParams{}.max_samples);
+    const auto est = detail::estimate_spacing(dirs.get(), returns, AngularResolutionParams{}.max_samples);
     // Without enough points to measure, fall back to 0.2°, a common lidar spacing.
     const double fallback = 0.2 * M_PI / 180.0;
     const double scale = params.pixel_scale;
@@ -135,10 +162,11 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
   img.elevation_resolution_rad = res_el;
 
   // Elevation extent from the data; azimuth: full circle unless the scan leaves a gap.
-  double el_min = dirs.front().el;
+  double el_min = dirs[0].el;
   double el_max = el_min;
   std::array<bool, 360> az_bin{};
-  for (const auto& d : dirs) {
+  for (std::size_t i = 0; i < used; ++i) {
+    const detail::Direction& d = dirs[i];
     el_min = std::min(el_min, static_cast<double>(d.el));
     el_max = std::max(el_max, static_cast<double>(d.el));
     az_bin[static_cast<std::size_t>(std::clamp(static_cast<int>((d.az + M_PI) / kTwoPi * 360.0), 0, 359))] = true;
@@ -182,32 +210,35 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
   img.source.assign(n, -1);
 
   const float max_range = static_cast<float>(std::min(params.max_range, 1e30));
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    const Ray& ray = rays[i];
+  for (std::size_t i = 0; i < used; ++i) {
+    const float ray_r = ray_range[i];
+    const std::int32_t ray_idx = ray_index[i];
     const detail::Direction& dir = dirs[i];
     double daz = img.azimuth_max_rad - dir.az;
-    daz = std::fmod(daz, kTwoPi);
-    if (daz < 0) daz += kTwoPi;
+    if (!(daz >= 0.0 && daz < kTwoPi)) {  // fmod returns an angle already in [0, 2π) unchanged
+      daz = std::fmod(daz, kTwoPi);
+      if (daz < 0) daz += kTwoPi;
+    }
     int x = static_cast<int>(daz / img.azimuth_resolution_rad);
     if (img.full_circle) x %= img.width;
     if (x < 0 || x >= img.width) continue;
-    const int y = std::clamp(static_cast<int>(img.row_at(dir.el)), 0, img.height - 1);
+    const int y = row_index(img, dir.el);
     const std::size_t k = img.index(x, y);
-    if (ray.idx < 0 || ray.r >= max_range) {
+    if (ray_idx < 0 || ray_r >= max_range) {
       // A beam with no return: only fills a pixel no return has claimed.
       if (img.state[k] == PixelState::kUnobserved) img.state[k] = PixelState::kMaxRange;
       continue;
     }
     if (img.state[k] == PixelState::kValid) {
       ++img.points_hidden;
-      if (ray.r >= img.range[k]) continue;
+      if (ray_r >= img.range[k]) continue;
     } else {
       ++img.valid_count;
     }
     img.state[k] = PixelState::kValid;
-    img.range[k] = ray.r;
-    img.point[k] = ray.p;
-    img.source[k] = ray.idx;
+    img.range[k] = ray_r;
+    img.point[k] = T_sensor_cloud * cloud.points[static_cast<std::size_t>(ray_idx)];
+    img.source[k] = ray_idx;
   }
   return img;
 }

@@ -14,6 +14,7 @@ struct Direction {
   float el;  // radians, [-pi/2, pi/2]
 };
 
-std::optional<AngularResolution> estimate_spacing(const std::vector<Direction>& dirs, std::size_t max_samples);
+/// Spacing of the first `count` directions of `dirs`.
+std::optional<AngularResolution> estimate_spacing(const Direction* dirs, std::size_t count, std::size_t max_samples);
 
 }  // namespace lex3d::detail
