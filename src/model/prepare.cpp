@@ -66,7 +66,8 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
   FeatureResult fr = extract_features(cloud, fp);
   s.features = std::move(fr.features);
   s.timings = fr.timings;
-  const auto res = estimate_angular_resolution(cloud);
+  // The range image measured the beam spacing already (unless its pixel sizes were given).
+  const auto res = fr.image.beam_spacing ? fr.image.beam_spacing : estimate_angular_resolution(cloud);
   s.beam_spacing = res ? std::max(res->azimuth_rad, res->elevation_rad) : 0.2 * M_PI / 180.0;
 
   // σ of eq. 13 for every point.

@@ -152,6 +152,7 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
   double res_el = params.elevation_resolution_rad;
   if (res_az == 0.0 || res_el == 0.0) {
     const auto est = detail::estimate_spacing(dirs.get(), returns, AngularResolutionParams{}.max_samples);
+    img.beam_spacing = est;
     // Without enough points to measure, fall back to 0.2°, a common lidar spacing.
     const double fallback = 0.2 * M_PI / 180.0;
     const double scale = params.pixel_scale;

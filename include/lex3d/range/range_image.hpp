@@ -69,6 +69,9 @@ struct RangeImage {
   int height = 0;
   double azimuth_resolution_rad = 0.0;
   double elevation_resolution_rad = 0.0;  ///< nominal (median) row height
+  /// The scan's beam spacing as estimated for the pixel sizes (estimate_angular_resolution
+  /// of the returns); nullopt when both pixel sizes were given or too few returns.
+  std::optional<AngularResolution> beam_spacing;
   double azimuth_max_rad = 0.0;    ///< left edge of column 0
   /// Elevation of the row borders, height+1 values, decreasing: row y spans
   /// [row_edges[y+1], row_edges[y]).
