@@ -16,6 +16,7 @@ WORK="$(mktemp -d)"
 trap 'rm -rf "$WORK"' EXIT
 
 for seq in "${SEQS[@]}"; do
+  rm -f "$WORK"/*.json  # a sequence's figures only (scan names repeat across sequences)
   scans=("$DATA/$seq"/[0-9]*.bin)
   poses=()
   [ "$seq" = balm ] && poses=(--poses "$DATA/balm/poses.txt")
