@@ -6,14 +6,7 @@
 # ../shared/data. Usage: bench/codec.sh [BUILD_DIR] [DATA_DIR] [SEQUENCE...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-BUILD_DIR="${1:-build}"
-DATA="${2:-../shared/data}"
-shift $(( $# > 2 ? 2 : $# )) || true
-SEQS=("$@")
-[ ${#SEQS[@]} -gt 0 ] || SEQS=(kitti00 balm)
-LEX3D="$BUILD_DIR/lex3d"
-WORK="$(mktemp -d)"
-trap 'rm -rf "$WORK"' EXIT
+source bench/sequence_args.sh
 
 for seq in "${SEQS[@]}"; do
   rm -f "$WORK"/*.json  # a sequence's figures only (scan names repeat across sequences)

@@ -8,14 +8,7 @@
 #   (defaults: build, ../shared/data, kitti00 balm). Needs a Release build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-BUILD_DIR="${1:-build}"
-DATA="${2:-../shared/data}"
-shift $(( $# > 2 ? 2 : $# )) || true
-SEQS=("$@")
-[ ${#SEQS[@]} -gt 0 ] || SEQS=(kitti00 balm)
-LEX3D="$BUILD_DIR/lex3d"
-WORK="$(mktemp -d)"
-trap 'rm -rf "$WORK"' EXIT
+source bench/sequence_args.sh
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores"
 for seq in "${SEQS[@]}"; do
   scans=("$DATA/$seq"/[0-9]*.bin)

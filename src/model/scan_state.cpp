@@ -83,6 +83,14 @@ inline V8f splat8(float x) { return __builtin_shuffle(V8f{x}, V8i{0, 0, 0, 0, 0,
 inline V8i splat8i(std::int32_t x) { return __builtin_shuffle(V8i{x}, V8i{0, 0, 0, 0, 0, 0, 0, 0}); }
 #endif
 inline V8f mask8(V8f v, V8i m) { return reinterpret_cast<V8f>(reinterpret_cast<V8i>(v) & m); }
+// Squared distances of eight points to the box [lo, hi] (0 inside).
+inline V8f box_gap2_8(V8f qx, V8f qy, V8f qz, const float* lo, const float* hi) {
+  const V8f zero = splat8(0.0F);
+  const V8f ox = max8(max8(splat8(lo[0]) - qx, qx - splat8(hi[0])), zero);
+  const V8f oy = max8(max8(splat8(lo[1]) - qy, qy - splat8(hi[1])), zero);
+  const V8f oz = max8(max8(splat8(lo[2]) - qz, qz - splat8(hi[2])), zero);
+  return ox * ox + oy * oy + oz * oz;
+}
 typedef long long V4ll __attribute__((vector_size(32)));
 inline bool any8(V8i m) {
   const auto q = reinterpret_cast<V4ll>(m);
@@ -144,13 +152,9 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   // The entries within 3σ of the word's bounding box (the others get nothing).
   std::size_t nl = 0;
   std::size_t k0 = 0;
-  const V8f zero = splat8(0.0F);
   for (; k0 + 8 <= n; k0 += 8) {
     const V8f qx = load8(lx + k0), qy = load8(ly + k0), qz = load8(lz + k0);
-    const V8f ox = max8(max8(splat8(lo[0]) - qx, qx - splat8(hi[0])), zero);
-    const V8f oy = max8(max8(splat8(lo[1]) - qy, qy - splat8(hi[1])), zero);
-    const V8f oz = max8(max8(splat8(lo[2]) - qz, qz - splat8(hi[2])), zero);
-    const V8i far = ox * ox + oy * oy + oz * oz > load8(reach2 + k0);
+    const V8i far = box_gap2_8(qx, qy, qz, lo, hi) > load8(reach2 + k0);
     for (std::size_t l = 0; l < 8; ++l) {
       live[nl] = static_cast<std::uint32_t>(k0 + l);
       nl += static_cast<std::size_t>(far[l] + 1);
@@ -193,10 +197,7 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     std::size_t nc = 0;
     for (std::size_t u = 0; u < nl8; u += 8) {
       const V8f qx = load8(cx.data() + u), qy = load8(cy.data() + u), qz = load8(cz.data() + u);
-      const V8f ox = max8(max8(splat8(blo[0]) - qx, qx - splat8(bhi[0])), zero);
-      const V8f oy = max8(max8(splat8(blo[1]) - qy, qy - splat8(bhi[1])), zero);
-      const V8f oz = max8(max8(splat8(blo[2]) - qz, qz - splat8(bhi[2])), zero);
-      const V8i near = ox * ox + oy * oy + oz * oz <= load8(cr.data() + u);
+      const V8i near = box_gap2_8(qx, qy, qz, blo, bhi) <= load8(cr.data() + u);
       for (std::size_t l = 0; l < 8; ++l) {
         cand[nc] = static_cast<std::uint32_t>(u + l);
         nc -= static_cast<std::size_t>(near[l]);
@@ -293,14 +294,10 @@ LEX3D_CLONES std::size_t select_targets(const float* lx, const float* ly, const 
                                         const float* shi, float reach2, float* fx, float* fy, float* fz) {
   std::size_t nf = 0;
   std::size_t k = 0;
-  const V8f zero = splat8(0.0F);
   for (; k + 8 <= n; k += 8) {
     const V8f qx = load8(lx + k), qy = load8(ly + k), qz = load8(lz + k);
-    const V8f ox = max8(max8(splat8(slo[0]) - qx, qx - splat8(shi[0])), zero);
-    const V8f oy = max8(max8(splat8(slo[1]) - qy, qy - splat8(shi[1])), zero);
-    const V8f oz = max8(max8(splat8(slo[2]) - qz, qz - splat8(shi[2])), zero);
     const V8f mv = splat8(margin);
-    const V8i keep = (ox * ox + oy * oy + oz * oz < splat8(reach2)) & (splat8(wlo[0]) - qx <= mv) &
+    const V8i keep = (box_gap2_8(qx, qy, qz, slo, shi) < splat8(reach2)) & (splat8(wlo[0]) - qx <= mv) &
                      (qx - splat8(whi[0]) <= mv) & (splat8(wlo[1]) - qy <= mv) & (qy - splat8(whi[1]) <= mv) &
                      (splat8(wlo[2]) - qz <= mv) & (qz - splat8(whi[2]) <= mv);
     if (!any8(keep)) continue;
