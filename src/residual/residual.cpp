@@ -372,31 +372,21 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     ok = quantise(t.r - pr.r, q, kr);
     Spherical s{};
     Eigen::Vector3d decoded;
-    if (ok && sweep) {
+    if (ok) {
       const double r_hat = pr.r + static_cast<double>(kr) * q;
       const double rho = std::max(r_hat, q);
-      ok = quantise(wrap_angle(t.azimuth - pr.azimuth - pr.azimuth_step), sweep_azimuth_step(pr, q, rho), ka);
-      if (ok) {
+      if (sweep) {  // azimuth first: the elevation follows the slope for its change
+        ok = quantise(wrap_angle(t.azimuth - pr.azimuth - pr.azimuth_step), sweep_azimuth_step(pr, q, rho), ka);
         const double da = pr.azimuth_step + static_cast<double>(ka) * sweep_azimuth_step(pr, q, rho);
-        ok = quantise(t.elevation - (pr.elevation + pr.slope * da), q / rho, ke);
-      }
-      if (ok) {
-        decoded = sweep_point(pr, q, kr, ke, ka, s);
-        const Eigen::Vector3f back_f = to_cloud_frame(T_cloud_sensor, decoded);
-        ok = r_hat > 0.0 && (back_f.cast<double>() - truth_cloud).squaredNorm() <= e2;
-        if (ok) remember(back_f);
-      }
-    } else if (ok) {
-      const double r_hat = pr.r + static_cast<double>(kr) * q;
-      const double rho = std::max(r_hat, q);
-      ok = quantise(t.elevation - pr.elevation, q / rho, ke);
-      if (ok) {
+        ok = ok && quantise(t.elevation - (pr.elevation + pr.slope * da), q / rho, ke);
+      } else {
+        ok = quantise(t.elevation - pr.elevation, q / rho, ke);
         const double e_hat = pr.elevation + static_cast<double>(ke) * (q / rho);
         const double c = std::max(std::abs(std::cos(e_hat)), kMinCosElevation);
-        ok = quantise(wrap_angle(t.azimuth - pr.azimuth - pr.azimuth_step), q / (rho * c), ka);
+        ok = ok && quantise(wrap_angle(t.azimuth - pr.azimuth - pr.azimuth_step), q / (rho * c), ka);
       }
       if (ok) {
-        decoded = spherical_point(pr, q, kr, ke, ka, s);
+        decoded = sweep ? sweep_point(pr, q, kr, ke, ka, s) : spherical_point(pr, q, kr, ke, ka, s);
         const Eigen::Vector3f back_f = to_cloud_frame(T_cloud_sensor, decoded);
         ok = r_hat > 0.0 && (back_f.cast<double>() - truth_cloud).squaredNorm() <= e2;
         if (ok) remember(back_f);
