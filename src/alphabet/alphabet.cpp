@@ -57,12 +57,12 @@ std::vector<WordIndex::Match> WordIndex::nearest(const float* descriptors, std::
   // Exact search: with 100-dimensional descriptors and alphabets of hundreds of words a
   // vectorised linear scan beats tree search and keeps ties deterministic (lowest id).
   parallel_for(count, threads, [&](std::size_t i) {
-    const float* q = descriptors + i * static_cast<std::size_t>(dim);
+    thread_local std::vector<float> dist;
+    dist.resize(words);
+    descriptor_distances_sq(descriptors + i * static_cast<std::size_t>(dim), packed_.data(), words, dim, dist.data());
     Match best{0, std::numeric_limits<float>::infinity()};
-    for (std::size_t w = 0; w < words; ++w) {
-      const float d = descriptor_distance_sq(q, packed_.data() + w * static_cast<std::size_t>(dim), dim);
-      if (d < best.distance_sq) best = {static_cast<std::uint32_t>(w), d};
-    }
+    for (std::size_t w = 0; w < words; ++w)
+      if (dist[w] < best.distance_sq) best = {static_cast<std::uint32_t>(w), dist[w]};
     out[i] = best;
   }, 64);
   return out;

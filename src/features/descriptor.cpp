@@ -44,19 +44,28 @@ void DescriptorParams::validate() const {
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
 __attribute__((target_clones("avx2", "default")))
 #endif
-float descriptor_distance_sq(const float* a, const float* b, int dim) noexcept {
-  float acc[8] = {0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F};
+void descriptor_distances_sq(const float* q, const float* rows, std::size_t count, int dim, float* out) noexcept {
   const int blocks = dim / 8;
-  for (int k = 0; k < blocks; ++k)
-    for (int l = 0; l < 8; ++l) {
-      const float d = a[8 * k + l] - b[8 * k + l];
-      acc[l] += d * d;
+  for (std::size_t w = 0; w < count; ++w) {
+    const float* b = rows + w * static_cast<std::size_t>(dim);
+    float acc[8] = {0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F};
+    for (int k = 0; k < blocks; ++k)
+      for (int l = 0; l < 8; ++l) {
+        const float d = q[8 * k + l] - b[8 * k + l];
+        acc[l] += d * d;
+      }
+    for (int i = 8 * blocks; i < dim; ++i) {
+      const float d = q[i] - b[i];
+      acc[i - 8 * blocks] += d * d;
     }
-  for (int i = 8 * blocks; i < dim; ++i) {
-    const float d = a[i] - b[i];
-    acc[i - 8 * blocks] += d * d;
+    out[w] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
   }
-  return ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+}
+
+float descriptor_distance_sq(const float* a, const float* b, int dim) noexcept {
+  float d = 0.0F;
+  descriptor_distances_sq(a, b, 1, dim, &d);
+  return d;
 }
 
 std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f& point_sensor) {
@@ -149,6 +158,20 @@ inline void for_window(const Pixel* pix, int width, const Window& w, Block&& blo
     for (; j < w.ncols; ++j) one(row[w.cols[j]]);
   }
 }
+
+// fn(x[l], y[l], z[l]) for each lane l whose bit is set in `lanes`, lowest first.
+template <typename Fn>
+inline void for_lanes(int lanes, __m128 x, __m128 y, __m128 z, Fn&& fn) {
+  if (lanes == 0) return;
+  alignas(16) float ax[4], ay[4], az[4];
+  _mm_store_ps(ax, x);
+  _mm_store_ps(ay, y);
+  _mm_store_ps(az, z);
+  for (; lanes != 0; lanes &= lanes - 1) {
+    const int l = __builtin_ctz(static_cast<unsigned>(lanes));
+    fn(ax[l], ay[l], az[l]);
+  }
+}
 #else
 template <typename One>
 inline void for_window(const Pixel* pix, int width, const Window& w, One&& one) {
@@ -200,16 +223,7 @@ Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp,
                const __m128 dx = _mm_sub_ps(x, vpx), dy = _mm_sub_ps(y, vpy), dz = _mm_sub_ps(z, vpz);
                const __m128 sq =
                    _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
-               int m = _mm_movemask_ps(_mm_cmple_ps(sq, vr2));
-               if (m == 0) return;
-               alignas(16) float ax[4], ay[4], az[4];
-               _mm_store_ps(ax, dx);
-               _mm_store_ps(ay, dy);
-               _mm_store_ps(az, dz);
-               for (; m != 0; m &= m - 1) {
-                 const int l = __builtin_ctz(static_cast<unsigned>(m));
-                 add(ax[l], ay[l], az[l]);
-               }
+               for_lanes(_mm_movemask_ps(_mm_cmple_ps(sq, vr2)), dx, dy, dz, add);
              },
 #endif
              [&](const Pixel& q) {
@@ -291,16 +305,7 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
                const __m128 in = _mm_and_ps(_mm_and_ps(_mm_cmplt_ps(_mm_and_ps(lx, abs_mask), vrad),
                                                        _mm_cmplt_ps(_mm_and_ps(ly, abs_mask), vrad)),
                                             _mm_cmplt_ps(_mm_and_ps(lz, abs_mask), vrad));
-               int m = _mm_movemask_ps(in);
-               if (m == 0) return;
-               alignas(16) float ax[4], ay[4], az[4];
-               _mm_store_ps(ax, lx);
-               _mm_store_ps(ay, ly);
-               _mm_store_ps(az, lz);
-               for (; m != 0; m &= m - 1) {
-                 const int l = __builtin_ctz(static_cast<unsigned>(m));
-                 put(ax[l], ay[l], az[l]);
-               }
+               for_lanes(_mm_movemask_ps(in), lx, ly, lz, put);
              },
 #endif
              [&](const Pixel& q) {

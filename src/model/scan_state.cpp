@@ -347,27 +347,6 @@ LEX3D_CLONES std::size_t fit_counts(const float* lx, const float* ly, const floa
   return explained;
 }
 
-// Squared descriptor distances from q to each of `count` descriptors stored one after
-// another: the arithmetic of descriptor_distance_sq (eight running sums, element i in
-// sum i % 8, added pairwise), so the same bits, with one dispatch for all words.
-LEX3D_CLONES void descriptor_distances(const float* q, const float* words, std::size_t count, int dim, float* out) {
-  const int blocks = dim / 8;
-  for (std::size_t w = 0; w < count; ++w) {
-    const float* b = words + w * static_cast<std::size_t>(dim);
-    float acc[8] = {0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F, 0.0F};
-    for (int k = 0; k < blocks; ++k)
-      for (int l = 0; l < 8; ++l) {
-        const float d = q[8 * k + l] - b[8 * k + l];
-        acc[l] += d * d;
-      }
-    for (int i = 8 * blocks; i < dim; ++i) {
-      const float d = q[i] - b[i];
-      acc[i - 8 * blocks] += d * d;
-    }
-    out[w] = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
-  }
-}
-
 // v where m is all ones, +0 where it is zero (a select on bits: loops using it vectorise).
 inline float mask(float v, std::uint32_t m) {
   std::uint32_t b;
@@ -1160,7 +1139,7 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     // The kk nearest words by descriptor (ties: lower id), in order: words come by
     // increasing id, so one enters the list when strictly nearer than its last.
     dist.resize(nw);
-    descriptor_distances(scan_.features.descriptor(f), descriptors.data(), nw, dim, dist.data());
+    descriptor_distances_sq(scan_.features.descriptor(f), descriptors.data(), nw, dim, dist.data());
     near.clear();
     for (std::size_t w = 0; w < nw; ++w) {
       const float d = dist[w];

@@ -145,6 +145,9 @@ struct Features {
 
 /// Squared Euclidean distance between two descriptors of length `dim`.
 [[nodiscard]] float descriptor_distance_sq(const float* a, const float* b, int dim) noexcept;
+/// The same from `q` to each of `count` descriptors stored one after another in `rows`,
+/// into out[0..count): the same bits as descriptor_distance_sq, one call for all rows.
+void descriptor_distances_sq(const float* q, const float* rows, std::size_t count, int dim, float* out) noexcept;
 
 /// Everything `extract_features` produced, with diagnostics.
 struct FeatureResult {
