@@ -27,6 +27,7 @@ struct CompressOptions {
   double target_bpp = 0.0;
   std::string words;  ///< on, off or auto; empty: off with a residual layer, on without
   bool keep_all_points = false;
+  std::string layer_coding = "auto";  ///< auto, spherical or voxel
   bool one_file = false;
   /// Instance steps; 0 (the default) scales them to the alphabet's word radius
   /// (codec::quantization_for_word_radius).
@@ -172,6 +173,8 @@ void run_compress(const CompressOptions& o) {
   codec::SequenceData sequence;
   residual::LayerOptions layer_options;
   layer_options.thin = !o.keep_all_points;
+  layer_options.spherical = o.layer_coding != "voxel";
+  layer_options.voxel = o.layer_coding != "spherical";
   layer_options.threads = mp.threads;
   for (std::size_t i = 0; i < clouds.size(); ++i) {
     Stopwatch code_sw;
@@ -227,6 +230,7 @@ void run_compress(const CompressOptions& o) {
             .value("explained_points", coded.layer.explained_points)
             .value("coded_points", coded.layer.residual_points)
             .value("escaped_points", coded.layer.escaped_points)
+            .value("coding", coded.layer.voxel ? "voxel" : coded.layer.sweep ? "sweep" : "previous-point")
             .value("bytes", coded.layer.bytes)
             .end_object();
       }
@@ -314,6 +318,12 @@ void register_compress(CLI::App& app) {
   sub->add_flag("--keep-all-points", o->keep_all_points,
                 "Residual layer: give every input point its own decoded point (by default a point within the "
                 "error of one decoded before it is not coded again)");
+  sub->add_option("--layer-coding", o->layer_coding,
+                  "Residual layer: try the sensor-centred spherical codings and the voxel (octree) coding and keep "
+                  "the smallest (auto), or use only one kind; voxel needs no sensor pose and suits maps merged "
+                  "from many viewpoints (formats/model.md §2.5-2.7)")
+      ->check(CLI::IsMember({"auto", "spherical", "voxel"}))
+      ->capture_default_str();
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);
   o->model.add_to(*sub);

@@ -19,6 +19,10 @@ namespace lex3d::cli {
 
 namespace {
 
+const char* layer_coding_name(std::uint32_t coding) {
+  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : "previous-point";
+}
+
 struct InfoOptions {
   std::string path;
   std::string alphabet;  // the alphabet file a model references
@@ -108,7 +112,7 @@ bool info_lex3d_file(const InfoOptions& o) {
   std::uint64_t layer_bytes = 0;
   if (fi.kind == "model")
     for (const auto& c : fi.chunks)
-      if ((c.type == "RESD" || c.type == "RESW") && c.crc_ok) {
+      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV") && c.crc_ok) {
         auto h = residual::read_layer_header(b.data() + c.offset + 12, static_cast<std::size_t>(c.length));
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
@@ -157,7 +161,7 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.begin_object("residual")
           .value("max_error_m", layer->max_error)
           .value("step_m", layer->step)
-          .value("coding", layer->coding == 1 ? "sweep" : "previous point")
+          .value("coding", layer_coding_name(layer->coding))
           .value("word_points", layer->word_points)
           .value("coded_points", layer->coded_points)
           .value("bytes", layer_bytes)
@@ -182,8 +186,9 @@ bool info_lex3d_file(const InfoOptions& o) {
         std::printf("input points   %llu (%.3f bits per point)\n", static_cast<unsigned long long>(input_points), bpp);
       }
       if (layer)
-        std::printf("residual layer max error %.4g m (step %.4g m, %s coding), %llu coded points, a keep mask over %llu word points, %llu bytes\n",
-                    layer->max_error, layer->step, layer->coding == 1 ? "sweep" : "previous-point", static_cast<unsigned long long>(layer->coded_points),
+        std::printf("residual layer max error %.4g m (%s %.4g m, %s coding), %llu coded %s, a keep mask over %llu word points, %llu bytes\n",
+                    layer->max_error, layer->coding == 2 ? "cell" : "step", layer->step, layer_coding_name(layer->coding),
+                    static_cast<unsigned long long>(layer->coded_points), layer->coding == 2 ? "voxels" : "points",
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
     }
     if (translation_step)

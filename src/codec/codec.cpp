@@ -32,8 +32,16 @@ constexpr char kSequenceMagic[8] = {'L', 'E', 'X', '3', 'D', 'S', 'E', 'Q'};
 constexpr std::uint64_t kQhdrBytes = 8;
 constexpr std::uint16_t kMajor = 1;
 constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
-constexpr std::uint16_t kMinorResidual = 1;  // the first minor version with the RESD chunk
-constexpr std::uint16_t kMinorSweep = 2;     // the first minor version with the RESW chunk
+/// The chunk of a residual layer by its coding (layer_coding), with the first minor
+/// version that has it: RESD 1.1, RESW 1.2, RESV 1.3.
+struct LayerChunk {
+  const char* type;
+  std::uint16_t minor;
+  const char* coding;
+};
+constexpr LayerChunk kLayerChunks[] = {
+    {"RESD", 1, "previous-point"}, {"RESW", 2, "sweep"}, {"RESV", 3, "voxel"}};
+constexpr std::uint32_t kLayerCodings = 3;
 constexpr std::size_t kHeaderBytes = 20;      // magic 8, major 2, minor 2, flags 4, header_crc 4
 constexpr std::size_t kChunkHeadBytes = 12;   // type 4, length 8
 constexpr std::size_t kChunkCrcBytes = 4;
@@ -683,11 +691,15 @@ void Quantization::validate() const {
   check(word_point_m, "word_point_m");
 }
 
-bool is_sweep_layer(const std::vector<std::uint8_t>& payload) {
+std::uint32_t layer_coding(const std::vector<std::uint8_t>& payload) {
   // coding u32, then the marker 0xFFFFFFFF, which as the high half of a RESD payload's
   // first field (max_error f64) would make it a NaN.
-  return payload.size() >= 8 && payload[4] == 0xFF && payload[5] == 0xFF && payload[6] == 0xFF && payload[7] == 0xFF;
+  const bool marked =
+      payload.size() >= 8 && payload[4] == 0xFF && payload[5] == 0xFF && payload[6] == 0xFF && payload[7] == 0xFF;
+  return marked ? ld_u32(payload.data()) : 0U;
 }
+
+bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_coding(payload) == 1; }
 
 Quantization quantization_for_word_radius(double word_radius) {
   Quantization q;
@@ -766,12 +778,15 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual && data.residual->empty())
     throw std::invalid_argument("lex3d::codec::encode_model: an empty residual layer (use nullopt for none)");
 
-  // A layer of the sweep coding is an RESW chunk (format 1.2); any other one a RESD chunk,
-  // in a file of format 1.1 that older readers still take.
-  const bool resw = data.residual && is_sweep_layer(*data.residual);
+  // A layer's chunk and the file's minor version follow its coding: a RESD layer makes a
+  // file of format 1.1 that older readers still take.
+  const std::uint32_t coding = data.residual ? layer_coding(*data.residual) : 0U;
+  if (coding >= kLayerCodings)
+    throw std::invalid_argument("lex3d::codec::encode_model: residual layer of unknown coding " + std::to_string(coding));
+  const LayerChunk& layer_chunk = kLayerChunks[coding];
   std::vector<std::uint8_t> out;
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced,
-             resw ? kMinorSweep : data.residual ? kMinorResidual : kMinor);
+             data.residual ? layer_chunk.minor : kMinor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
@@ -790,7 +805,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
     put_chunk(out, "AREF", aref);
   }
   put_chunk(out, "INST", inst_payload(data.model, q));
-  if (data.residual) put_chunk(out, resw ? "RESW" : "RESD", *data.residual);
+  if (data.residual) put_chunk(out, layer_chunk.type, *data.residual);
   put_chunk(out, "IEND", {});
   return out;
 }
@@ -814,20 +829,25 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
 
   ModelData out;
   MhdrFields mhdr;
-  // A file without a residual layer has neither RESD nor RESW; one with RESD is version
-  // 1.1 or later, one with RESW 1.2 or later; a file has at most one of them.
-  const bool has_resd = has_chunk(d, bytes.size(), "RESD");
-  const bool has_resw = has_chunk(d, bytes.size(), "RESW");
-  if (has_resd && has_resw) return ctx.error("a model file holds at most one of the chunks 'RESD' and 'RESW'", 20);
-  const bool has_residual = has_resd || has_resw;
-  const char* const residual_chunk = has_resw ? "RESW" : "RESD";
-  if (has_resd && h.minor < kMinorResidual)
-    return ctx.error("chunk 'RESD' needs format version 1.1, the header says 1." + std::to_string(h.minor), 10);
-  if (has_resw && h.minor < kMinorSweep)
-    return ctx.error("chunk 'RESW' needs format version 1.2, the header says 1." + std::to_string(h.minor), 10);
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "IEND"};
+  // A file without a residual layer has none of the layer chunks, one with a layer exactly
+  // one, in a file of at least the minor version that introduced it.
+  const LayerChunk* layer_chunk = nullptr;
+  for (const LayerChunk& lc : kLayerChunks) {
+    if (!has_chunk(d, bytes.size(), lc.type)) continue;
+    if (layer_chunk != nullptr)
+      return ctx.error(std::string("a model file holds at most one of the chunks 'RESD', 'RESW' and 'RESV' ('") +
+                           layer_chunk->type + "' and '" + lc.type + "' found)",
+                       20);
+    layer_chunk = &lc;
+  }
+  const bool has_residual = layer_chunk != nullptr;
+  if (has_residual && h.minor < layer_chunk->minor)
+    return ctx.error(std::string("chunk '") + layer_chunk->type + "' needs format version 1." +
+                         std::to_string(layer_chunk->minor) + ", the header says 1." + std::to_string(h.minor),
+                     10);
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "IEND"};
   std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
-  if (has_residual) sequence.insert(sequence.begin() + 3, residual_chunk);
+  if (has_residual) sequence.insert(sequence.begin() + 3, layer_chunk->type);
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
     switch (index) {
       case 0: return read_mhdr(c, ctx, mhdr);
@@ -860,11 +880,18 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
       case 2: return read_inst(c, ctx, mhdr, out.alphabet->size(), out.model);
       case 3:
         if (has_residual) {
-          if (c.length == 0) return ctx.error(std::string("chunk '") + residual_chunk + "' is empty", c.offset + 4);
+          if (c.length == 0) return ctx.error(std::string("chunk '") + layer_chunk->type + "' is empty", c.offset + 4);
           out.residual.emplace(c.payload, c.payload + c.length);
-          if (is_sweep_layer(*out.residual) != has_resw)
-            return ctx.error(has_resw ? "chunk 'RESW' does not hold a sweep-coded layer (formats/model.md §2.6)"
-                                      : "chunk 'RESD' holds a sweep-coded layer, which belongs in an 'RESW' chunk",
+          const std::uint32_t coding = layer_coding(*out.residual);
+          if (coding >= kLayerCodings)
+            return ctx.error(std::string("chunk '") + layer_chunk->type + "' holds a layer of unknown coding " +
+                                 std::to_string(coding),
+                             c.payload_offset);
+          if (&kLayerChunks[coding] != layer_chunk)
+            return ctx.error(std::string("chunk '") + layer_chunk->type + "' (the " + layer_chunk->coding +
+                                 " coding) holds a layer of the " +
+                                 kLayerChunks[coding].coding + " coding, which belongs in an '" +
+                                 kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.7)",
                              c.payload_offset);
         }
         return {};

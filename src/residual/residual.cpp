@@ -29,6 +29,7 @@
 #include "lex3d/range/range_image.hpp"
 #include "codec/bytes.hpp"
 #include "residual/range_coder.hpp"
+#include "residual/voxel.hpp"
 
 namespace lex3d::residual {
 namespace {
@@ -37,6 +38,7 @@ using detail::BitModel;
 using detail::IntModel;
 using detail::RangeDecoder;
 using detail::RangeEncoder;
+using detail::kMaxVoxelDepth;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::uint64_t kHeadBytes = 32;  // max_error f64, step f64, word_points u64, coded_points u64
@@ -46,6 +48,14 @@ constexpr std::uint32_t kSweepMarker = 0xFFFFFFFFU;
 constexpr std::uint32_t kCodingSweep = 1;
 constexpr std::uint64_t kSweepPrefixBytes = 8;  // coding u32, marker u32
 constexpr std::uint64_t kSweepExtraBytes = 8;   // cell f64, after the RESD header fields
+constexpr std::uint32_t kCodingVoxel = 2;
+constexpr std::uint64_t kVoxelExtraBytes = 28;  // origin 3 f64, depth u32, after the RESD header fields
+/// A voxel layer's origin lies within this many metres of the model frame's origin.
+constexpr double kMaxVoxelOrigin = 1e9;
+/// A decoder accepts at most this many voxels per payload byte: a node's occupancy costs
+/// at least seven binary decisions of >= 0.011 bits (so about 100 nodes a byte), and a
+/// node holds at most eight voxels.
+constexpr std::uint64_t kMaxVoxelsPerByte = 1000;
 /// Sweep coding: the elevation follows the slope over this many decoded points back.
 constexpr unsigned kSlopeSpan = 7;
 /// Largest |elevation / azimuth| slope the sweep coding extrapolates.
@@ -430,6 +440,88 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
   return enc.finish();
 }
 
+// ---------------------------------------------------------------------------------------
+// Voxel coding (formats/model.md §2.7)
+// ---------------------------------------------------------------------------------------
+
+/// A voxel layer: the grid and the coded stream.
+struct VoxelLayer {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+  double cell = 0.0;
+  int depth = 0;
+  std::size_t voxels = 0;
+  std::vector<std::uint8_t> stream;
+};
+
+/// The decoded point of voxel (x, y, z): its centre, as every decoder computes it.
+Eigen::Vector3f voxel_centre(const Eigen::Vector3d& origin, double cell, std::uint32_t x, std::uint32_t y,
+                             std::uint32_t z) {
+  return {static_cast<float>(origin.x() + (static_cast<double>(x) + 0.5) * cell),
+          static_cast<float>(origin.y() + (static_cast<double>(y) + 0.5) * cell),
+          static_cast<float>(origin.z() + (static_cast<double>(z) + 0.5) * cell)};
+}
+
+/// The cells of the input points `coded` in a grid of `cell` from `origin` (the corner of
+/// their bounding box) as Morton codes, one a point, with the octree depth they need. With
+/// `bound` > 0, every point is checked to lie within it of its cell's centre as a decoder
+/// computes it (float32 coordinates). False when a check fails or the octree would need
+/// more than kMaxVoxelDepth levels.
+bool voxel_codes(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
+                 const Eigen::Vector3d& origin, double cell, double bound, std::vector<std::uint64_t>& codes,
+                 int& depth) {
+  const double inv = 1.0 / cell;
+  double top = 0.0;
+  for (const std::uint32_t i : coded) top = std::max(top, ((input[i].cast<double>() - origin) * inv).maxCoeff());
+  if (!(top < static_cast<double>(1U << kMaxVoxelDepth) - 1.0)) return false;
+  depth = 1;
+  while (depth < kMaxVoxelDepth && std::ldexp(1.0, depth) <= top) ++depth;
+  codes.resize(coded.size());
+  const double b2 = bound * bound;
+  for (std::size_t k = 0; k < coded.size(); ++k) {
+    const Eigen::Vector3d p = input[coded[k]].cast<double>();
+    std::uint32_t c[3];
+    for (int a = 0; a < 3; ++a) c[a] = static_cast<std::uint32_t>(std::floor((p[a] - origin[a]) * inv));
+    if (bound > 0.0 && !((voxel_centre(origin, cell, c[0], c[1], c[2]).cast<double>() - p).squaredNorm() <= b2))
+      return false;
+    codes[k] = detail::morton(c[0], c[1], c[2]);
+  }
+  return true;
+}
+
+Eigen::Vector3d corner_of(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded) {
+  Eigen::Vector3d lo = input[coded[0]].cast<double>();
+  for (const std::uint32_t i : coded) lo = lo.cwiseMin(input[i].cast<double>());
+  return lo;
+}
+
+/// The widest cell whose centre is within `bound` of every point of the cell.
+double voxel_cell(double bound) { return 2.0 * bound / std::sqrt(3.0) * (1.0 - 1e-6); }
+
+/// Codes the input points `coded` as the voxels that hold them, after the keep mask that
+/// `enc` holds already. The cells are voxel_cell(bound) wide, and narrowed when a point is
+/// not within `bound` of its cell's centre as a decoder computes it. nullopt when there is
+/// nothing to code or the octree would need more than kMaxVoxelDepth levels.
+std::optional<VoxelLayer> voxel_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
+                                      const std::vector<std::uint32_t>& coded, double bound) {
+  if (coded.empty()) return std::nullopt;
+  VoxelLayer v;
+  v.origin = corner_of(input, coded);
+  v.cell = voxel_cell(bound);
+  std::vector<std::uint64_t> leaves;
+  for (int attempt = 0;; ++attempt) {
+    if (attempt == 8) return std::nullopt;  // float32 cannot hold centres this close (not seen)
+    if (voxel_codes(input, coded, v.origin, v.cell, bound, leaves, v.depth)) break;
+    if (leaves.size() != coded.size()) return std::nullopt;  // too deep
+    v.cell *= 1.0 - 1e-3;
+  }
+  std::sort(leaves.begin(), leaves.end());
+  leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
+  v.voxels = leaves.size();
+  detail::encode_occupancy(enc, leaves, v.depth);
+  v.stream = enc.finish();
+  return v;
+}
+
 using codec::bytes::ld_f64;
 using codec::bytes::ld_u64;
 using codec::bytes::put_f64;
@@ -462,20 +554,24 @@ std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, 
 
 }  // namespace
 
-bool is_sweep_payload(const std::uint8_t* payload, std::size_t size) {
-  return size >= kSweepPrefixBytes && codec::bytes::ld_u32(payload + 4) == kSweepMarker;  // codec::is_sweep_layer
+bool has_coding_field(const std::uint8_t* payload, std::size_t size) {
+  // codec::layer_coding: coding u32 and the marker
+  return size >= kSweepPrefixBytes && codec::bytes::ld_u32(payload + 4) == kSweepMarker;
 }
 
 StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size) {
   LayerHeader h;
   std::size_t at = 0;
-  if (is_sweep_payload(payload, size)) {
+  if (has_coding_field(payload, size)) {
     h.coding = codec::bytes::ld_u32(payload);
-    if (h.coding != kCodingSweep)
-      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1 expected)", 0);
+    if (h.coding != kCodingSweep && h.coding != kCodingVoxel)
+      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1 or 2 expected)", 0);
     at = kSweepPrefixBytes;
-    if (size < at + kHeadBytes + kSweepExtraBytes)
-      return bad_data("residual layer is " + std::to_string(size) + " bytes, at least 48 expected", 0);
+    const std::uint64_t need = at + kHeadBytes + (h.coding == kCodingSweep ? kSweepExtraBytes : kVoxelExtraBytes);
+    if (size < need)
+      return bad_data("residual layer is " + std::to_string(size) + " bytes, at least " + std::to_string(need) +
+                          " expected",
+                      0);
   } else if (size < kHeadBytes) {
     return bad_data("residual layer is " + std::to_string(size) + " bytes, at least 32 expected", 0);
   }
@@ -488,6 +584,10 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
   if (h.coding == kCodingSweep) {
     h.cell = ld_f64(payload + at + kHeadBytes);
     h.stream_offset += kSweepExtraBytes;
+  } else if (h.coding == kCodingVoxel) {
+    for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
+    h.depth = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
+    h.stream_offset += kVoxelExtraBytes;
   }
   return h;
 }
@@ -583,28 +683,69 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::vector<std::vector<std::uint8_t>> streams(ways.size());
   std::vector<std::size_t> escaped(ways.size(), 0), counts(ways.size(), 0);
   std::size_t best = 0;
-  if (coded.size() > 4 * kOrderTrialPoints) {
-    const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
-    const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
-                                            coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
-    const std::vector<std::uint32_t> window_rows = row_order(input.points, window, T_sensor_cloud, row_height);
-    std::vector<std::size_t> trial(ways.size(), 0);
-    parallel_for(ways.size(), threads, [&](std::size_t w) {
-      std::size_t e = 0, n = 0;
-      trial[w] = code(ways[w].by_rows ? window_rows : window, ways[w].sweep, e, n).size();
-    }, 1);
-    for (std::size_t w = 1; w < ways.size(); ++w)
-      if (trial[w] < trial[best]) best = w;
-    streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
-  } else {
-    parallel_for(ways.size(), threads, [&](std::size_t w) {
-      streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w]);
-    }, 1);
-    for (std::size_t w = 1; w < ways.size(); ++w)
-      if (streams[w].size() < streams[best].size()) best = w;
+  // The voxel coding competes too, coded in full alongside the spherical ones (a trial on
+  // part of the points misjudges it: its cost depends on the density of the whole).
+  std::optional<VoxelLayer> voxel;
+  if (!options.spherical && options.voxel) voxel = voxel_layer(head, input.points, coded, check_error);
+  if (!voxel) {
+    const bool try_voxel = options.voxel && options.spherical;
+    if (coded.size() > 4 * kOrderTrialPoints) {
+      // On a large layer, a window of consecutive input points is coded the spherical ways
+      // and only the winner is coded in full.
+      const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
+      const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
+                                              coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
+      const std::vector<std::uint32_t> window_rows = row_order(input.points, window, T_sensor_cloud, row_height);
+      std::vector<std::size_t> trial(ways.size(), 0);
+      parallel_for(ways.size(), threads, [&](std::size_t w) {
+        std::size_t e = 0, n = 0;
+        trial[w] = code(ways[w].by_rows ? window_rows : window, ways[w].sweep, e, n).size();
+      }, 1);
+      for (std::size_t w = 1; w < ways.size(); ++w)
+        if (trial[w] < trial[best]) best = w;
+      parallel_for(try_voxel ? 2 : 1, threads, [&](std::size_t job) {
+        if (job == 1) voxel = voxel_layer(head, input.points, coded, check_error);
+        else streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
+      }, 1);
+    } else {
+      parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
+        if (w == ways.size()) voxel = voxel_layer(head, input.points, coded, check_error);
+        else streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w]);
+      }, 1);
+      for (std::size_t w = 1; w < ways.size(); ++w)
+        if (streams[w].size() < streams[best].size()) best = w;
+    }
+  }
+  const bool sweep = ways[best].sweep;
+  // (no spherical stream when the trial chose the voxel coding)
+  const std::size_t spherical_bytes =
+      streams[best].empty() ? std::numeric_limits<std::size_t>::max()
+                            : (sweep ? kSweepPrefixBytes + kHeadBytes + kSweepExtraBytes : kHeadBytes) + streams[best].size();
+  if (voxel && kSweepPrefixBytes + kHeadBytes + kVoxelExtraBytes + voxel->stream.size() < spherical_bytes) {
+    std::vector<std::uint8_t> out;
+    out.reserve(kSweepPrefixBytes + kHeadBytes + kVoxelExtraBytes + voxel->stream.size());
+    codec::bytes::put_u32(out, kCodingVoxel);
+    codec::bytes::put_u32(out, kSweepMarker);
+    put_f64(out, max_error);
+    put_f64(out, voxel->cell);
+    put_u64(out, n_w);
+    put_u64(out, voxel->voxels);
+    for (int a = 0; a < 3; ++a) put_f64(out, voxel->origin[a]);
+    codec::bytes::put_u32(out, static_cast<std::uint32_t>(voxel->depth));
+    out.insert(out.end(), voxel->stream.begin(), voxel->stream.end());
+    if (stats) {
+      *stats = LayerStats{};
+      stats->max_error = max_error;
+      stats->word_points = n_w;
+      stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
+      stats->explained_points = n_in - coded.size();
+      stats->residual_points = voxel->voxels;
+      stats->voxel = true;
+      stats->bytes = out.size();
+    }
+    return out;
   }
   const std::vector<std::uint8_t>& stream = streams[best];
-  const bool sweep = ways[best].sweep;
 
   std::vector<std::uint8_t> out;
   out.reserve(kSweepPrefixBytes + kHeadBytes + kSweepExtraBytes + stream.size());
@@ -626,6 +767,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     stats->residual_points = counts[best];
     stats->escaped_points = escaped[best];
     stats->sweep = sweep;
+    stats->voxel = false;
     stats->bytes = out.size();
   }
   return out;
@@ -650,7 +792,8 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
                         std::to_string(words.size()),
                     at + 16);
   const std::uint64_t stream_bytes = payload.size() - h.stream_offset;
-  if (n_c > max_points || n_c > kMaxPointsPerByte * stream_bytes + 64)
+  const bool voxel = h.coding == kCodingVoxel;
+  if (n_c > max_points || n_c > (voxel ? kMaxVoxelsPerByte : kMaxPointsPerByte) * stream_bytes + 64)
     return bad_data("residual layer coded_points " + std::to_string(n_c) + " exceeds what the model (" +
                         std::to_string(max_points) + " input points) or the stored bytes can hold",
                     at + 24);
@@ -671,6 +814,31 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
     }
   }
   out.points.reserve(out.points.size() + static_cast<std::size_t>(n_c));
+  if (voxel) {
+    const Eigen::Vector3d origin(h.origin[0], h.origin[1], h.origin[2]);
+    if (!(q >= 1e-7))
+      return bad_data("residual layer voxel cell " + std::to_string(q) + " m is below 1e-7 m", at + 8);
+    if (!origin.allFinite() || !(origin.cwiseAbs().maxCoeff() <= kMaxVoxelOrigin))
+      return bad_data("residual layer voxel origin is not finite or lies beyond 1e9 m", at + kHeadBytes);
+    if (h.depth < 1 || h.depth > static_cast<std::uint32_t>(kMaxVoxelDepth))
+      return bad_data("residual layer octree depth " + std::to_string(h.depth) + " is not in [1, 21]",
+                      at + kHeadBytes + 24);
+    if (n_c == 0) return bad_data("residual layer voxel coding holds no voxel", at + 24);
+    std::vector<std::uint64_t> leaves;
+    if (!detail::decode_occupancy(dec, static_cast<int>(h.depth), n_c, leaves) || leaves.size() != n_c)
+      return bad_data("residual layer octree does not hold the " + std::to_string(n_c) + " voxels its header states",
+                      h.stream_offset);
+    if (dec.overrun() > 8)
+      return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());
+    for (const std::uint64_t code : leaves) {
+      std::uint32_t x = 0, y = 0, z = 0;
+      detail::unmorton(code, x, y, z);
+      const Eigen::Vector3f c = voxel_centre(origin, q, x, y, z);
+      if (!c.allFinite()) return bad_data("residual layer voxel decodes to a non-finite position", h.stream_offset);
+      out.points.push_back(c);
+    }
+    return out;
+  }
   PointModels m;
   Predictor pr;
   AngularMemory memory(sweep ? h.cell : 0.0);

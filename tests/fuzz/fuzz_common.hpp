@@ -10,7 +10,7 @@
 //   points, and it encodes and decodes again to the same word ids;
 // - inspect's chunk table lies inside the input;
 // - a sequence file's scans are checked as model files with its alphabet;
-// - a model with a residual layer (model.md §2.5) decodes to finite points, no more than
+// - a model with a residual layer (model.md §2.5-2.7) decodes to finite points, no more than
 //   the reconstruction and the input point count allow, or fails like the codec does.
 
 #include <algorithm>

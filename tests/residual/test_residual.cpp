@@ -1,9 +1,12 @@
 // The residual layer: its range coder, its error guarantee on synthetic and real
-// scans, the model file with a RESD chunk, and decoding of corrupt layers.
+// scans, the model file with a RESD, RESW or RESV chunk, and decoding of corrupt layers.
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <limits>
 #include <cstring>
 #include <fstream>
 #include <string>
@@ -15,9 +18,11 @@
 
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/eval/metrics.hpp"
+#include "lex3d/io/io.hpp"
 #include "lex3d/model/model.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "residual/range_coder.hpp"
+#include "residual/voxel.hpp"
 #include "support/test_support.hpp"
 #include "test_config.hpp"
 
@@ -231,7 +236,8 @@ TEST(ResidualLayer, RealScanThroughTheModelFile) {
     EXPECT_LE(st.explained_points + st.residual_points, cloud.size());
     if (e >= 0.2) EXPECT_GT(st.explained_points, cloud.size() / 4) << "words explain part of the scan at E = " << e;
     const Bytes file = codec::encode_model(d);
-    EXPECT_EQ(file[10], 1) << "a model with a residual layer is format 1.1";
+    EXPECT_EQ(file[10], st.voxel ? 3 : st.sweep ? 2 : 1)
+        << "a model with a residual layer is format 1.1, 1.2 with the sweep coding, 1.3 with the voxel coding";
     const auto decoded = codec::decode_model(file);
     ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
     ASSERT_TRUE(decoded.value().residual.has_value());
@@ -400,7 +406,7 @@ TEST(ResidualSweep, CorruptPayloadsAreRejectedOrDecodeBounded) {
     return b;
   };
   Bytes unknown = good;
-  unknown[0] = 2;  // coding 2 does not exist
+  unknown[0] = 3;  // coding 3 does not exist
   EXPECT_FALSE(residual::decode_layer(unknown, Cloud{}, Pose::Identity(), scan.size()).ok());
   for (const double cell : {0.0, -0.01, 4.0, std::nan("")})
     EXPECT_FALSE(residual::decode_layer(poke_f64(good, 40, cell), Cloud{}, Pose::Identity(), scan.size()).ok()) << cell;
@@ -421,8 +427,10 @@ TEST(ResidualSweep, RealTiltingScan) {
   ASSERT_GT(scan.size(), 10000U);
   const double e = 0.014;
   residual::LayerStats st, plain_st;
-  const Bytes sweep = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, e, &st);
-  residual::LayerOptions no_sweep;
+  residual::LayerOptions spherical;  // the voxel coding is smaller still here (ResidualVoxel.RealTiltingScan)
+  spherical.voxel = false;
+  const Bytes sweep = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, e, &st, spherical);
+  residual::LayerOptions no_sweep = spherical;
   no_sweep.sweep = false;
   const Bytes plain = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, e, &plain_st, no_sweep);
   EXPECT_TRUE(st.sweep);
@@ -431,6 +439,266 @@ TEST(ResidualSweep, RealTiltingScan) {
   ASSERT_TRUE(d.ok()) << d.status().to_string();
   EXPECT_LE(hausdorff(scan, d.value()), e);
   EXPECT_LE(hausdorff(d.value(), scan), e);
+}
+
+// ---------------------------------------------------------------------------------------
+// The voxel coding (RESV chunk, format 1.3)
+// ---------------------------------------------------------------------------------------
+
+/// A map merged from spinning-lidar scans taken at several places in one room (floor at
+/// z = -1.7, walls at |x| = 8 and |y| = 12), in the room's frame: no one viewpoint.
+Cloud merged_views(int views = 6, std::uint32_t seed = 3) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, 0.005);
+  const Eigen::Vector3d at[] = {{0.0, 0.0, 0.0}, {1.5, 0.5, 0.1}, {-1.0, 2.0, 0.0}, {2.0, -2.0, -0.1}, {-2.5, -1.0, 0.0}, {0.5, 3.0, 0.1}};
+  Cloud c;
+  for (int v = 0; v < views; ++v) {
+    const Eigen::Vector3d o = at[v % 6];
+    for (int ring = 0; ring < 32; ++ring) {
+      const double elevation = (-25.0 + 1.0 * ring) * M_PI / 180.0;
+      for (int k = 0; k < 720; ++k) {
+        const double azimuth = -M_PI + (k + 0.3 * v) * (2.0 * M_PI / 720.0);
+        const Eigen::Vector3d dir(std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth),
+                                  std::sin(elevation));
+        double t = 1e9;
+        if (dir.z() < 0) t = std::min(t, (-1.7 - o.z()) / dir.z());
+        if (dir.x() > 1e-9) t = std::min(t, (8.0 - o.x()) / dir.x());
+        if (dir.x() < -1e-9) t = std::min(t, (-8.0 - o.x()) / dir.x());
+        if (dir.y() > 1e-9) t = std::min(t, (12.0 - o.y()) / dir.y());
+        if (dir.y() < -1e-9) t = std::min(t, (-12.0 - o.y()) / dir.y());
+        if (t > 100.0) continue;
+        c.points.push_back((o + dir * (t + noise(rng))).cast<float>());
+      }
+    }
+  }
+  return c;
+}
+
+TEST(ResidualVoxel, MortonCodesRoundTrip) {
+  std::mt19937 rng(1);
+  std::uniform_int_distribution<std::uint32_t> coord(0, (1U << 21) - 1);
+  for (int i = 0; i < 1000; ++i) {
+    const std::uint32_t x = coord(rng), y = coord(rng), z = coord(rng);
+    std::uint32_t a = 0, b = 0, c = 0;
+    residual::detail::unmorton(residual::detail::morton(x, y, z), a, b, c);
+    EXPECT_EQ(a, x);
+    EXPECT_EQ(b, y);
+    EXPECT_EQ(c, z);
+  }
+  EXPECT_EQ(residual::detail::morton(1, 0, 0), 1U);
+  EXPECT_EQ(residual::detail::morton(0, 1, 0), 2U);
+  EXPECT_EQ(residual::detail::morton(0, 0, 1), 4U);
+  EXPECT_EQ(residual::detail::morton(2, 0, 0), 8U);
+}
+
+TEST(ResidualVoxel, OccupancyRoundTripsAndBoundsItsWork) {
+  // Random leaves of octrees of several depths, decoded exactly; a decoder allowed fewer
+  // leaves than coded stops.
+  std::mt19937 rng(2);
+  for (const int depth : {1, 3, 8, 21}) {
+    std::vector<std::uint64_t> leaves;
+    const std::uint32_t side = depth >= 21 ? (1U << 21) : (1U << depth);
+    std::uniform_int_distribution<std::uint32_t> coord(0, side - 1);
+    for (int i = 0; i < 3000; ++i) leaves.push_back(residual::detail::morton(coord(rng), coord(rng), coord(rng) / 4));
+    std::sort(leaves.begin(), leaves.end());
+    leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
+    RangeEncoder enc;
+    residual::detail::encode_occupancy(enc, leaves, depth);
+    const Bytes bytes = enc.finish();
+    std::vector<std::uint64_t> back;
+    RangeDecoder dec(bytes.data(), bytes.size());
+    ASSERT_TRUE(residual::detail::decode_occupancy(dec, depth, leaves.size(), back)) << depth;
+    EXPECT_EQ(back, leaves) << depth;
+    RangeDecoder short_dec(bytes.data(), bytes.size());
+    EXPECT_FALSE(residual::detail::decode_occupancy(short_dec, depth, leaves.size() - 1, back)) << depth;
+  }
+}
+
+TEST(ResidualVoxel, MergedViewsKeepTheBound) {
+  const Cloud map = merged_views();
+  residual::LayerOptions voxel_only;
+  voxel_only.spherical = false;
+  for (const double e : {0.01, 0.03}) {
+    residual::LayerStats st;
+    const Bytes voxel = residual::encode_layer(map, Cloud{}, Pose::Identity(), e, &st, voxel_only);
+    EXPECT_TRUE(st.voxel) << "E = " << e;
+    EXPECT_EQ(codec::layer_coding(voxel), 2U);
+    EXPECT_FALSE(codec::is_sweep_layer(voxel));
+    const auto header = residual::read_layer_header(voxel.data(), voxel.size());
+    ASSERT_TRUE(header.ok()) << header.status().to_string();
+    EXPECT_EQ(header.value().coding, 2U);
+    EXPECT_DOUBLE_EQ(header.value().max_error, e);
+    EXPECT_GT(header.value().step, 0.0);
+    EXPECT_LE(header.value().step, 2.0 * e / std::sqrt(3.0));
+    EXPECT_GE(header.value().depth, 1U);
+    EXPECT_LE(header.value().depth, 21U);
+    EXPECT_EQ(header.value().coded_points, st.residual_points);
+    EXPECT_LT(st.residual_points, map.size()) << "points sharing a voxel are coded once";
+    const auto d = residual::decode_layer(voxel, Cloud{}, Pose::Identity(), map.size());
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    EXPECT_EQ(d.value().size(), st.residual_points);
+    EXPECT_LE(hausdorff(map, d.value()), e) << "input to decoded, E = " << e;
+    EXPECT_LE(hausdorff(d.value(), map), e) << "decoded to input, E = " << e;
+    EXPECT_EQ(voxel, residual::encode_layer(map, Cloud{}, Pose::Identity(), e, nullptr, voxel_only)) << "deterministic";
+    residual::LayerOptions one_thread = voxel_only;
+    one_thread.threads = 1;
+    EXPECT_EQ(voxel, residual::encode_layer(map, Cloud{}, Pose::Identity(), e, nullptr, one_thread)) << "threads";
+    // Chosen by size: never larger than the spherical codings alone.
+    residual::LayerOptions spherical;
+    spherical.voxel = false;
+    EXPECT_LE(residual::encode_layer(map, Cloud{}, Pose::Identity(), e).size(),
+              residual::encode_layer(map, Cloud{}, Pose::Identity(), e, nullptr, spherical).size());
+  }
+  // One spinning lidar's scan keeps a spherical coding; forced, the voxel one still meets the bound.
+  residual::LayerStats ring_st, forced_st;
+  const Cloud scan = synthetic_scan();
+  (void)residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.01, &ring_st);
+  EXPECT_FALSE(ring_st.voxel);
+  const Bytes forced = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.01, &forced_st, voxel_only);
+  EXPECT_TRUE(forced_st.voxel);
+  const auto d = residual::decode_layer(forced, Cloud{}, Pose::Identity(), scan.size());
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_LE(hausdorff(scan, d.value()), 0.01);
+  EXPECT_LE(hausdorff(d.value(), scan), 0.01);
+}
+
+TEST(ResidualVoxel, ModelFileVersionRules) {
+  const Cloud map = merged_views(3);
+  codec::ModelData d;
+  d.input_points = map.size();
+  d.alphabet = Alphabet{};
+  residual::LayerOptions voxel_only;
+  voxel_only.spherical = false;
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, map, 0.02, voxel_only);
+  ASSERT_TRUE(st.voxel);
+  const Bytes file = codec::encode_model(d);
+  EXPECT_EQ(file[10], 3);
+  ASSERT_TRUE(codec::decode_model(file).ok());
+  // RESV in a file that claims 1.2; a voxel payload in a RESW chunk; a RESW payload in a RESV chunk.
+  const auto older = codec::decode_model(retype_chunk(file, "RESV", "RESV", 2));
+  ASSERT_FALSE(older.ok());
+  EXPECT_NE(older.status().message().find("1.3"), std::string::npos) << older.status().to_string();
+  const auto in_resw = codec::decode_model(retype_chunk(file, "RESV", "RESW", 3));
+  ASSERT_FALSE(in_resw.ok());
+  EXPECT_NE(in_resw.status().message().find("RESV"), std::string::npos) << in_resw.status().to_string();
+  codec::ModelData sweep = d;
+  residual::LayerOptions no_voxel;
+  no_voxel.voxel = false;
+  residual::add_layer(sweep, Alphabet{}, tilting_scan(), 0.01, no_voxel);
+  sweep.input_points = tilting_scan().size();
+  const Bytes sweep_file = codec::encode_model(sweep);
+  ASSERT_EQ(sweep_file[10], 2);
+  const auto in_resv = codec::decode_model(retype_chunk(sweep_file, "RESW", "RESV", 3));
+  ASSERT_FALSE(in_resv.ok());
+  EXPECT_NE(in_resv.status().message().find("voxel"), std::string::npos) << in_resv.status().to_string();
+  // Two layer chunks in one file.
+  Bytes two = file;
+  const std::size_t iend = two.size() - 16;  // IEND: type 4, length 8, CRC 4
+  Bytes resd_chunk;
+  {
+    codec::ModelData plain = d;
+    residual::LayerOptions spherical = no_voxel;
+    spherical.sweep = false;
+    residual::add_layer(plain, Alphabet{}, map, 0.02, spherical);
+    const Bytes plain_file = codec::encode_model(plain);
+    const std::size_t at = plain_file.size() - 16 - (12 + plain.residual->size() + 4);
+    resd_chunk.assign(plain_file.begin() + static_cast<std::ptrdiff_t>(at), plain_file.end() - 16);
+  }
+  two.insert(two.begin() + static_cast<std::ptrdiff_t>(iend), resd_chunk.begin(), resd_chunk.end());
+  const auto both = codec::decode_model(two);
+  ASSERT_FALSE(both.ok());
+  EXPECT_NE(both.status().message().find("at most one"), std::string::npos) << both.status().to_string();
+}
+
+TEST(ResidualVoxel, CorruptPayloadsAreRejectedOrDecodeBounded) {
+  Cloud map = merged_views(2);
+  map.points.resize(map.size() / 4);
+  residual::LayerOptions voxel_only;
+  voxel_only.spherical = false;
+  const Bytes good = residual::encode_layer(map, Cloud{}, Pose::Identity(), 0.02, nullptr, voxel_only);
+  ASSERT_EQ(codec::layer_coding(good), 2U);
+  const std::uint64_t n = residual::read_layer_header(good.data(), good.size()).value().coded_points;
+  for (std::size_t k = 0; k < good.size(); k += (k < 96 ? 1 : 97)) {
+    const Bytes cut(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(k));
+    const auto d = residual::decode_layer(cut, Cloud{}, Pose::Identity(), map.size());
+    if (k < 68) EXPECT_FALSE(d.ok()) << k;
+    if (d.ok()) EXPECT_EQ(d.value().size(), n) << k;
+  }
+  auto poke_f64 = [](Bytes b, std::size_t at, double v) {
+    std::uint64_t u = 0;
+    std::memcpy(&u, &v, 8);
+    for (int i = 0; i < 8; ++i) b[at + i] = static_cast<std::uint8_t>(u >> (8 * i));
+    return b;
+  };
+  auto poke_u32 = [](Bytes b, std::size_t at, std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
+    return b;
+  };
+  const auto fails = [&](const Bytes& b) { return !residual::decode_layer(b, Cloud{}, Pose::Identity(), map.size()).ok(); };
+  for (const double cell : {0.0, -0.01, 0.1, std::nan("")}) EXPECT_TRUE(fails(poke_f64(good, 16, cell))) << cell;
+  for (const double o : {std::nan(""), 1e10, -std::numeric_limits<double>::infinity()}) {
+    EXPECT_TRUE(fails(poke_f64(good, 40, o))) << o;
+    EXPECT_TRUE(fails(poke_f64(good, 56, o))) << o;
+  }
+  for (const std::uint32_t depth : {0U, 22U, 0xFFFFFFFFU}) EXPECT_TRUE(fails(poke_u32(good, 64, depth))) << depth;
+  Bytes zero = good, many = good;
+  for (int i = 0; i < 8; ++i) zero[32 + i] = 0;
+  EXPECT_TRUE(fails(zero));
+  for (int i = 0; i < 8; ++i) many[32 + i] = 0xFF;
+  EXPECT_TRUE(fails(many));
+  for (std::size_t at = 68; at < good.size(); at += 101) {
+    Bytes b = good;
+    b[at] ^= 0x5A;
+    const auto d = residual::decode_layer(b, Cloud{}, Pose::Identity(), map.size());
+    if (d.ok()) EXPECT_EQ(d.value().size(), n);
+  }
+}
+
+/// A map: `scans` balm scans three apart, moved into the world frame by their poses.
+Cloud balm_map(int scans) {
+  const auto poses = io::read_pose_list(test::shared_data("balm/poses.txt"));
+  EXPECT_TRUE(poses.ok());
+  Cloud map;
+  if (!poses.ok()) return map;
+  for (int k = 0; k < scans; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "balm/%06d.bin", 20 + 6 * k);  // frame 10 + 3k, 3 s apart
+    const Cloud scan = test::load_or_fail(test::shared_data(name));
+    const Eigen::Isometry3f T = poses.value()[static_cast<std::size_t>(10 + 3 * k)].cast<float>();
+    for (const auto& p : scan.points) map.points.push_back(T * p);
+  }
+  return map;
+}
+
+/// Real clouds: a map of balm scans (overlapping views, where present), the tilting-SICK
+/// scan (its lines cross, so a voxel is cheaper than a point predicted along the line,
+/// where present) and the room scan of samples/ at a coarse bound.
+TEST(ResidualVoxel, RealCloudsWhereVoxelsWin) {
+  struct Case {
+    std::string name;
+    Cloud cloud;
+    double e;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"room_scan1", test::load_or_fail(test::sample("room_scan1.pcd")), 0.04});
+  if (test::has_shared_data("indoor/scan001.3d"))
+    cases.push_back({"scan001", test::load_or_fail(test::shared_data("indoor/scan001.3d")), 0.014});
+  if (test::has_shared_data("balm/poses.txt")) cases.push_back({"balm map", balm_map(4), 0.014});
+  for (const Case& c : cases) {
+    const Cloud& scan = c.cloud;
+    ASSERT_GT(scan.size(), 10000U);
+    residual::LayerStats st, sph_st;
+    const Bytes best = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, c.e, &st);
+    residual::LayerOptions spherical;
+    spherical.voxel = false;
+    const Bytes sph = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, c.e, &sph_st, spherical);
+    EXPECT_TRUE(st.voxel) << c.name;
+    EXPECT_LT(static_cast<double>(best.size()), 0.9 * static_cast<double>(sph.size())) << c.name;
+    const auto d = residual::decode_layer(best, Cloud{}, scan.T_cloud_sensor, scan.size());
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    EXPECT_LE(hausdorff(scan, d.value()), c.e) << c.name;
+    EXPECT_LE(hausdorff(d.value(), scan), c.e) << c.name;
+  }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -476,6 +744,7 @@ codec::ModelData golden_residual_model(Cloud& input) {
   return d;
 }
 constexpr double kGoldenMaxError = 0.01;
+constexpr std::size_t kVoxelGoldenPoints = 2880;  // the input points of tiny_residual_voxel_1.3
 
 void write_xyz(const std::string& path, const Cloud& c) {
   std::ofstream out(path);
@@ -562,12 +831,56 @@ TEST(ResidualGolden, DISABLED_WriteSweepGoldenFile) {
   write_golden("tiny_residual_sweep_1.2", d, input);
 }
 
+TEST(ResidualGolden, DISABLED_WriteVoxelGoldenFile) {
+  // Format 1.3: a layer of the voxel coding (RESV) over a small map of two views.
+  Cloud input = merged_views(2, 13);
+  input.points.resize(input.size() / 16);  // the first view's lowest rings
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.T_cloud_sensor = Pose::Identity();
+  d.alphabet = Alphabet{};
+  residual::LayerOptions voxel_only;
+  voxel_only.spherical = false;
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError, voxel_only);
+  ASSERT_TRUE(st.voxel);
+  write_golden("tiny_residual_voxel_1.3", d, input);
+}
+
 TEST(ResidualGolden, Format1_1FileDecodesToTheRecordedCloud) {
   check_golden("tiny_residual_1.1", 48, 1, "MHDR ALPH INST RESD IEND ");
 }
 
 TEST(ResidualGolden, Format1_2SweepFileDecodesToTheRecordedCloud) {
   check_golden("tiny_residual_sweep_1.2", 20 * 91, 2, "MHDR ALPH INST RESW IEND ");
+}
+
+TEST(ResidualGolden, Format1_3VoxelFileDecodesToTheRecordedCloud) {
+  check_golden("tiny_residual_voxel_1.3", kVoxelGoldenPoints, 3, "MHDR ALPH INST RESV IEND ");
+}
+
+TEST(ResidualVoxel, WordsAndAFarFrameKeepTheBound) {
+  // The keep mask before the octree, and a cloud far from the frame's origin (float32
+  // centres): the bound holds through the model file.
+  Cloud input;
+  codec::ModelData d = golden_residual_model(input);
+  for (auto& p : input.points) p += Eigen::Vector3f(5000.0F, -3000.0F, 20.0F);
+  for (auto& inst : d.model.instances) inst.T_cloud_word.translation() += Eigen::Vector3d(5000.0, -3000.0, 20.0);
+  d.T_cloud_sensor.translation() += Eigen::Vector3d(5000.0, -3000.0, 20.0);
+  const auto alphabet = codec::decode_alphabet(codec::encode_alphabet(*d.alphabet));
+  ASSERT_TRUE(alphabet.ok());
+  residual::LayerOptions voxel_only;
+  voxel_only.spherical = false;
+  const residual::LayerStats st = residual::add_layer(d, alphabet.value(), input, 0.01, voxel_only);
+  ASSERT_TRUE(st.voxel);
+  EXPECT_GT(st.kept_word_points, 0U);
+  const Bytes file = codec::encode_model(d);
+  EXPECT_EQ(file[10], 3) << "a voxel-coded layer makes the file format 1.3";
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+  const auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
+  EXPECT_LE(hausdorff(input, cloud.value()), 0.01);
+  EXPECT_LE(hausdorff(cloud.value(), input), 0.01);
 }
 
 }  // namespace

@@ -37,8 +37,13 @@ struct Quantization {
 [[nodiscard]] Quantization quantization_for_word_radius(double word_radius);
 
 /// Whether a residual payload is of the sweep coding, stored as an RESW chunk
-/// (formats/model.md §2.6): its bytes 4..7 are 0xFF.
+/// (formats/model.md §2.6): its bytes 4..7 are 0xFF and its coding u32 is 1.
 [[nodiscard]] bool is_sweep_layer(const std::vector<std::uint8_t>& payload);
+/// The coding of a residual payload, which names its chunk: 0 the previous-point coding
+/// (RESD, §2.5), else the coding u32 that a payload starting with it holds (its bytes
+/// 4..7 are 0xFF): 1 the sweep coding (RESW, §2.6), 2 the voxel coding (RESV, §2.7), any
+/// other value unknown.
+[[nodiscard]] std::uint32_t layer_coding(const std::vector<std::uint8_t>& payload);
 
 /// Everything a model file holds.
 struct ModelData {
@@ -51,8 +56,8 @@ struct ModelData {
   std::optional<std::uint64_t> alphabet_hash;
   /// The residual layer's payload (formats/model.md §2.5-2.6; lex3d/residual/residual.hpp
   /// codes and decodes it), or nullopt for a words-only model. A model with one is
-  /// written as format 1.1 (a RESD chunk) or, when the payload is of the sweep coding
-  /// (is_sweep_layer), 1.2 (an RESW chunk); one without as 1.0.
+  /// written as format 1.1 (a RESD chunk) or, by its layer_coding, 1.2 (the sweep coding,
+  /// an RESW chunk) or 1.3 (the voxel coding, an RESV chunk); one without as 1.0.
   std::optional<std::vector<std::uint8_t>> residual;
 };
 

@@ -11,8 +11,11 @@
 /// D is the reconstructed word points that have an input point within E (a keep mask
 /// over the reconstruction) plus the input points no kept word point explains (thinned:
 /// a point within E of one decoded before it is skipped), quantised in sensor-centred
-/// spherical coordinates and range coded.
+/// spherical coordinates and range coded; or, in the voxel coding, the centres of the
+/// cubic cells (2E/sqrt(3) wide, less a margin) that hold the input points no kept word
+/// point explains, coded as an octree.
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -38,6 +41,12 @@ struct LayerOptions {
   /// Also try the sweep coding (formats/model.md §2.6: a file of format 1.2) and keep it
   /// when it codes smaller; off: the layer is always a RESD one (format 1.1).
   bool sweep = true;
+  /// Also try the voxel coding (formats/model.md §2.7: a file of format 1.3), which needs
+  /// no sensor (maps merged from many viewpoints), and keep it when it codes smaller.
+  bool voxel = true;
+  /// Try the spherical codings (RESD, and RESW with `sweep`); off with `voxel` on: the
+  /// voxel coding alone (the spherical ones still code a layer the voxel one cannot).
+  bool spherical = true;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
 };
@@ -52,6 +61,7 @@ struct LayerStats {
   std::size_t escaped_points = 0;      ///< of those, coded in Cartesian form (near the sensor or a pole)
   std::size_t bytes = 0;               ///< payload bytes of the layer
   bool sweep = false;                  ///< coded with the sweep coding (an RESW chunk)
+  bool voxel = false;                  ///< coded with the voxel coding (an RESV chunk)
 };
 
 /// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5,
@@ -61,13 +71,16 @@ struct LayerHeader {
   double step = 0.0;               ///< q, metres
   std::uint64_t word_points = 0;   ///< reconstruction points the keep mask covers
   std::uint64_t coded_points = 0;  ///< points coded by the layer
-  std::uint32_t coding = 0;        ///< 0: previous-point coding (RESD); 1: sweep coding (RESW)
+  std::uint32_t coding = 0;        ///< 0: previous-point coding (RESD); 1: sweep (RESW); 2: voxel (RESV)
   double cell = 0.0;               ///< sweep coding: direction cell, radians
+  std::array<double, 3> origin{};  ///< voxel coding: the grid's corner, model frame, metres
+  std::uint32_t depth = 0;         ///< voxel coding: octree levels
   std::uint64_t fields_offset = 0; ///< where max_error starts (8 in an RESW payload)
   std::uint64_t stream_offset = 0; ///< where the range-coded stream starts
 };
-/// Whether a payload is an RESW one (the chunk type a model file stores it under).
-[[nodiscard]] bool is_sweep_payload(const std::uint8_t* payload, std::size_t size);
+/// Whether a payload starts with a coding u32 and the marker 0xFFFFFFFF (the sweep and the
+/// voxel codings; codec::layer_coding names its chunk).
+[[nodiscard]] bool has_coding_field(const std::uint8_t* payload, std::size_t size);
 /// Reads the header of a residual payload (no checks beyond its length and coding).
 [[nodiscard]] StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size);
 

@@ -1,0 +1,194 @@
+// Octree occupancy coding of the voxel residual layer (src/residual/voxel.hpp,
+// formats/model.md §2.7).
+
+#include "residual/voxel.hpp"
+
+#include <array>
+#include <memory>
+
+namespace lex3d::residual::detail {
+namespace {
+
+// The bits of x, y and z in a Morton code.
+constexpr std::uint64_t kAxisBits[3] = {0x1249249249249249ULL, 0x2492492492492492ULL, 0x4924924924924924ULL};
+
+std::uint64_t spread(std::uint32_t v) {
+  std::uint64_t x = v & 0x1FFFFFU;
+  x = (x | x << 32) & 0x1F00000000FFFFULL;
+  x = (x | x << 16) & 0x1F0000FF0000FFULL;
+  x = (x | x << 8) & 0x100F00F00F00F00FULL;
+  x = (x | x << 4) & 0x10C30C30C30C30C3ULL;
+  x = (x | x << 2) & 0x1249249249249249ULL;
+  return x;
+}
+
+std::uint32_t compact(std::uint64_t x) {
+  x &= 0x1249249249249249ULL;
+  x = (x ^ (x >> 2)) & 0x10C30C30C30C30C3ULL;
+  x = (x ^ (x >> 4)) & 0x100F00F00F00F00FULL;
+  x = (x ^ (x >> 8)) & 0x1F0000FF0000FFULL;
+  x = (x ^ (x >> 16)) & 0x1F00000000FFFFULL;
+  x = (x ^ (x >> 32)) & 0x1FFFFFULL;
+  return static_cast<std::uint32_t>(x);
+}
+
+/// The occupied nodes of one level, for "which face neighbours of this node are
+/// occupied?". Nodes are grouped in blocks of 4x4x4 (a Morton code's low six bits are the
+/// place in its block), each held as a 64-bit mask; a block's six face-neighbour blocks
+/// are looked up once (open addressing), so a node's neighbours cost a few bit operations
+/// rather than six scattered table probes.
+class LevelOccupancy {
+ public:
+  /// `nodes`: the level's occupied nodes, sorted.
+  void assign(const std::vector<std::uint64_t>& nodes) {
+    keys_.clear();
+    masks_.clear();
+    for (const std::uint64_t n : nodes) {
+      if (keys_.empty() || keys_.back() != (n >> 6)) {
+        keys_.push_back(n >> 6);
+        masks_.push_back(0);
+      }
+      masks_.back() |= 1ULL << (n & 63U);
+    }
+    std::size_t cap = 16;
+    while (cap < 2 * keys_.size()) cap <<= 1;
+    slots_.assign(cap, kNone);
+    mask_ = cap - 1;
+    for (std::uint32_t b = 0; b < keys_.size(); ++b) {
+      std::size_t i = hash(keys_[b]) & mask_;
+      while (slots_[i] != kNone) i = (i + 1) & mask_;
+      slots_[i] = b;
+    }
+    around_.assign(6 * keys_.size(), 0);
+    for (std::size_t b = 0; b < keys_.size(); ++b)
+      for (int a = 0; a < 3; ++a) {
+        const std::uint64_t axis = kAxisBits[a] >> 6;  // the axis' bits of a block key
+        const std::uint64_t own = keys_[b] & axis, rest = keys_[b] & ~axis;
+        if (own != 0) around_[6 * b + 2 * a] = mask_of((((own - 1) & axis) | rest));
+        around_[6 * b + 2 * a + 1] = mask_of((((own | ~axis) + 1) & axis) | rest);
+      }
+  }
+  [[nodiscard]] std::size_t blocks() const noexcept { return keys_.size(); }
+  [[nodiscard]] std::uint64_t key(std::size_t b) const noexcept { return keys_[b]; }
+
+  /// Which of the six face neighbours of `node` (in block b) are occupied: bit 2a for the
+  /// one below along axis a, bit 2a+1 above. (Nodes beyond the level's extent are never
+  /// occupied, so no bounds are needed.)
+  [[nodiscard]] unsigned neighbours(std::size_t b, std::uint64_t node) const noexcept {
+    const unsigned local = static_cast<unsigned>(node & 63U);
+    unsigned ctx = 0;
+    for (int a = 0; a < 3; ++a) {
+      const unsigned axis = 9U << a;  // bits a and a + 3: the axis' coordinate in the block
+      const unsigned own = local & axis, rest = local & ~axis;
+      // Below: inside the block unless the coordinate is 0, then the far side of the block below.
+      const std::uint64_t below = own != 0 ? masks_[b] >> (((own - 1) & axis) | rest)
+                                           : around_[6 * b + 2 * a] >> (axis | rest);
+      const std::uint64_t above = own != axis ? masks_[b] >> ((((own | ~axis) + 1) & axis) | rest)
+                                              : around_[6 * b + 2 * a + 1] >> rest;
+      ctx |= static_cast<unsigned>(below & 1U) << (2 * a);
+      ctx |= static_cast<unsigned>(above & 1U) << (2 * a + 1);
+    }
+    return ctx;
+  }
+
+ private:
+  static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
+  static std::size_t hash(std::uint64_t k) { return static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ULL) >> 20); }
+  [[nodiscard]] std::uint64_t mask_of(std::uint64_t key) const {
+    for (std::size_t i = hash(key) & mask_;; i = (i + 1) & mask_) {
+      if (slots_[i] == kNone) return 0;
+      if (keys_[slots_[i]] == key) return masks_[slots_[i]];
+    }
+  }
+  std::vector<std::uint64_t> keys_, masks_, around_;
+  std::vector<std::uint32_t> slots_;
+  std::size_t mask_ = 0;
+};
+
+/// The models of the occupancy bits: 64 neighbour contexts x the 255 states of the bits
+/// before (a binary tree over the byte, rooted at 1).
+class OccupancyModels {
+ public:
+  BitModel& at(unsigned ctx, unsigned prefix) { return models_[ctx * 256 + prefix]; }
+
+ private:
+  std::array<BitModel, 64 * 256> models_{};
+};
+
+/// The nodes of every level of the octree over `leaves`: [0] the root, [depth] the leaves.
+std::vector<std::vector<std::uint64_t>> levels_of(const std::vector<std::uint64_t>& leaves, int depth) {
+  std::vector<std::vector<std::uint64_t>> levels(static_cast<std::size_t>(depth) + 1);
+  levels[static_cast<std::size_t>(depth)] = leaves;
+  for (int l = depth - 1; l >= 0; --l) {
+    const auto& below = levels[static_cast<std::size_t>(l) + 1];
+    auto& here = levels[static_cast<std::size_t>(l)];
+    here.reserve(below.size() / 2 + 1);
+    for (const std::uint64_t n : below)
+      if (here.empty() || here.back() != (n >> 3)) here.push_back(n >> 3);
+  }
+  return levels;
+}
+
+}  // namespace
+
+std::uint64_t morton(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+  return spread(x) | (spread(y) << 1) | (spread(z) << 2);
+}
+
+void unmorton(std::uint64_t code, std::uint32_t& x, std::uint32_t& y, std::uint32_t& z) {
+  x = compact(code);
+  y = compact(code >> 1);
+  z = compact(code >> 2);
+}
+
+void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth) {
+  const auto levels = levels_of(leaves, depth);
+  auto models = std::make_unique<OccupancyModels>();
+  LevelOccupancy occupied;
+  for (int l = 0; l < depth; ++l) {
+    const auto& nodes = levels[static_cast<std::size_t>(l)];
+    const auto& children = levels[static_cast<std::size_t>(l) + 1];
+    occupied.assign(nodes);
+    std::size_t j = 0, b = 0;
+    for (const std::uint64_t n : nodes) {
+      unsigned byte = 0;
+      for (; j < children.size() && (children[j] >> 3) == n; ++j) byte |= 1U << (children[j] & 7U);
+      while (occupied.key(b) != (n >> 6)) ++b;
+      const unsigned ctx = occupied.neighbours(b, n);
+      unsigned prefix = 1;
+      for (unsigned i = 0; i < 8; ++i) {
+        const unsigned bit = (byte >> i) & 1U;
+        // An occupied node has a child: after seven empty ones, the eighth is not coded.
+        if (!(i == 7 && prefix == 1)) enc.put(models->at(ctx, prefix), bit != 0);
+        prefix = 2 * prefix + bit;
+      }
+    }
+  }
+}
+
+bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, std::vector<std::uint64_t>& leaves) {
+  auto models = std::make_unique<OccupancyModels>();
+  LevelOccupancy occupied;
+  std::vector<std::uint64_t> nodes = {0}, children;
+  for (int l = 0; l < depth; ++l) {
+    occupied.assign(nodes);
+    children.clear();
+    std::size_t b = 0;
+    for (const std::uint64_t n : nodes) {
+      while (occupied.key(b) != (n >> 6)) ++b;
+      const unsigned ctx = occupied.neighbours(b, n);
+      unsigned prefix = 1;
+      for (unsigned i = 0; i < 8; ++i) {
+        const bool bit = (i == 7 && prefix == 1) || dec.get(models->at(ctx, prefix));
+        prefix = 2 * prefix + (bit ? 1U : 0U);
+        if (bit) children.push_back(n * 8 + i);
+      }
+      if (children.size() > max_leaves) return false;
+    }
+    nodes.swap(children);
+  }
+  leaves = std::move(nodes);
+  return true;
+}
+
+}  // namespace lex3d::residual::detail
