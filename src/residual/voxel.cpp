@@ -43,10 +43,13 @@ class LevelOccupancy {
   void assign(const std::vector<std::uint64_t>& nodes) {
     keys_.clear();
     masks_.clear();
-    for (const std::uint64_t n : nodes) {
+    first_.clear();
+    for (std::uint32_t k = 0; k < nodes.size(); ++k) {
+      const std::uint64_t n = nodes[k];
       if (keys_.empty() || keys_.back() != (n >> 6)) {
         keys_.push_back(n >> 6);
         masks_.push_back(0);
+        first_.push_back(k);
       }
       masks_.back() |= 1ULL << (n & 63U);
     }
@@ -59,13 +62,13 @@ class LevelOccupancy {
       while (slots_[i] != kNone) i = (i + 1) & mask_;
       slots_[i] = b;
     }
-    around_.assign(6 * keys_.size(), 0);
+    around_.assign(6 * keys_.size(), kNone);
     for (std::size_t b = 0; b < keys_.size(); ++b)
       for (int a = 0; a < 3; ++a) {
         const std::uint64_t axis = kAxisBits[a] >> 6;  // the axis' bits of a block key
         const std::uint64_t own = keys_[b] & axis, rest = keys_[b] & ~axis;
-        if (own != 0) around_[6 * b + 2 * a] = mask_of((((own - 1) & axis) | rest));
-        around_[6 * b + 2 * a + 1] = mask_of((((own | ~axis) + 1) & axis) | rest);
+        if (own != 0) around_[6 * b + 2 * a] = block_of((((own - 1) & axis) | rest));
+        around_[6 * b + 2 * a + 1] = block_of((((own | ~axis) + 1) & axis) | rest);
       }
   }
   [[nodiscard]] std::size_t blocks() const noexcept { return keys_.size(); }
@@ -82,38 +85,66 @@ class LevelOccupancy {
       const unsigned own = local & axis, rest = local & ~axis;
       // Below: inside the block unless the coordinate is 0, then the far side of the block below.
       const std::uint64_t below = own != 0 ? masks_[b] >> (((own - 1) & axis) | rest)
-                                           : around_[6 * b + 2 * a] >> (axis | rest);
+                                           : mask(around_[6 * b + 2 * a]) >> (axis | rest);
       const std::uint64_t above = own != axis ? masks_[b] >> ((((own | ~axis) + 1) & axis) | rest)
-                                              : around_[6 * b + 2 * a + 1] >> rest;
+                                              : mask(around_[6 * b + 2 * a + 1]) >> rest;
       ctx |= static_cast<unsigned>(below & 1U) << (2 * a);
       ctx |= static_cast<unsigned>(above & 1U) << (2 * a + 1);
     }
     return ctx;
   }
 
+  /// Where in the level's node order the node one step lower than `node` (in block b)
+  /// along axis a stands; -1 when that node is not occupied.
+  [[nodiscard]] std::int64_t lower(std::size_t b, std::uint64_t node, int a) const noexcept {
+    const unsigned local = static_cast<unsigned>(node & 63U);
+    const unsigned axis = 9U << a;
+    const unsigned own = local & axis, rest = local & ~axis;
+    const std::uint32_t block = own != 0 ? static_cast<std::uint32_t>(b) : around_[6 * b + 2 * a];
+    const unsigned at = own != 0 ? (((own - 1) & axis) | rest) : (axis | rest);
+    if (block == kNone || ((masks_[block] >> at) & 1U) == 0) return -1;
+    const std::uint64_t before = masks_[block] & ((1ULL << at) - 1);
+    return static_cast<std::int64_t>(first_[block]) + __builtin_popcountll(before);
+  }
+
  private:
   static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
   static std::size_t hash(std::uint64_t k) { return static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ULL) >> 20); }
-  [[nodiscard]] std::uint64_t mask_of(std::uint64_t key) const {
+  [[nodiscard]] std::uint32_t block_of(std::uint64_t key) const {
     for (std::size_t i = hash(key) & mask_;; i = (i + 1) & mask_) {
-      if (slots_[i] == kNone) return 0;
-      if (keys_[slots_[i]] == key) return masks_[slots_[i]];
+      if (slots_[i] == kNone || keys_[slots_[i]] == key) return slots_[i];
     }
   }
-  std::vector<std::uint64_t> keys_, masks_, around_;
+  [[nodiscard]] std::uint64_t mask(std::uint32_t block) const noexcept { return block == kNone ? 0 : masks_[block]; }
+  std::vector<std::uint64_t> keys_, masks_;
+  std::vector<std::uint32_t> first_;   // the index of each block's first node
+  std::vector<std::uint32_t> around_;  // each block's six face-neighbour blocks (kNone: empty)
   std::vector<std::uint32_t> slots_;
   std::size_t mask_ = 0;
 };
 
-/// The models of the occupancy bits: 64 neighbour contexts x the 255 states of the bits
-/// before (a binary tree over the byte, rooted at 1).
+/// The models of the occupancy bits: 8 child-level contexts x 64 neighbour contexts x
+/// the 255 states of the bits before (a binary tree over the byte, rooted at 1).
 class OccupancyModels {
  public:
-  BitModel& at(unsigned ctx, unsigned prefix) { return models_[ctx * 256 + prefix]; }
+  BitModel& at(unsigned lower, unsigned ctx, unsigned prefix) { return models_[((lower << 6 | ctx) << 8) | prefix]; }
 
  private:
-  std::array<BitModel, 64 * 256> models_{};
+  std::vector<BitModel> models_ = std::vector<BitModel>(8 * 64 * 256);
 };
+
+/// Which of child i's three lower neighbours on the child level are occupied (bit a: along
+/// axis a), all known to the decoder: a sibling coded before it (in `so_far`, bit j for
+/// child j) or a child of the node's lower neighbour along a (whose occupancy byte is
+/// `low[a]`, 0 when there is none), which comes earlier in Morton order.
+unsigned lower_children(unsigned i, unsigned so_far, const unsigned low[3]) {
+  unsigned out = 0;
+  for (unsigned a = 0; a < 3; ++a) {
+    const unsigned along = 1U << a;
+    out |= (((i & along) != 0 ? so_far >> (i ^ along) : low[a] >> (i | along)) & 1U) << a;
+  }
+  return out;
+}
 
 /// The nodes of every level of the octree over `leaves`: [0] the root, [depth] the leaves.
 std::vector<std::vector<std::uint64_t>> levels_of(const std::vector<std::uint64_t>& leaves, int depth) {
@@ -143,23 +174,35 @@ void unmorton(std::uint64_t code, std::uint32_t& x, std::uint32_t& y, std::uint3
 
 void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth) {
   const auto levels = levels_of(leaves, depth);
-  auto models = std::make_unique<OccupancyModels>();
+  OccupancyModels models;
   LevelOccupancy occupied;
+  std::vector<std::uint8_t> bytes;
   for (int l = 0; l < depth; ++l) {
     const auto& nodes = levels[static_cast<std::size_t>(l)];
     const auto& children = levels[static_cast<std::size_t>(l) + 1];
     occupied.assign(nodes);
-    std::size_t j = 0, b = 0;
-    for (const std::uint64_t n : nodes) {
-      unsigned byte = 0;
-      for (; j < children.size() && (children[j] >> 3) == n; ++j) byte |= 1U << (children[j] & 7U);
+    bytes.assign(nodes.size(), 0);
+    // (children and nodes are both in Morton order: one walk)
+    std::size_t j = 0;
+    for (std::size_t k = 0; k < nodes.size(); ++k)
+      for (; j < children.size() && (children[j] >> 3) == nodes[k]; ++j) bytes[k] |= static_cast<std::uint8_t>(1U << (children[j] & 7U));
+    std::size_t b = 0;
+    for (std::size_t k = 0; k < nodes.size(); ++k) {
+      const std::uint64_t n = nodes[k];
+      const unsigned byte = bytes[k];
       while (occupied.key(b) != (n >> 6)) ++b;
       const unsigned ctx = occupied.neighbours(b, n);
+      unsigned low[3];
+      for (int a = 0; a < 3; ++a) {
+        const std::int64_t at = occupied.lower(b, n, a);
+        low[a] = at >= 0 ? bytes[static_cast<std::size_t>(at)] : 0U;
+      }
       unsigned prefix = 1;
       for (unsigned i = 0; i < 8; ++i) {
         const unsigned bit = (byte >> i) & 1U;
         // An occupied node has a child: after seven empty ones, the eighth is not coded.
-        if (!(i == 7 && prefix == 1)) enc.put(models->at(ctx, prefix), bit != 0);
+        if (!(i == 7 && prefix == 1))
+          enc.put(models.at(lower_children(i, byte & ((1U << i) - 1), low), ctx, prefix), bit != 0);
         prefix = 2 * prefix + bit;
       }
     }
@@ -167,22 +210,33 @@ void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leave
 }
 
 bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, std::vector<std::uint64_t>& leaves) {
-  auto models = std::make_unique<OccupancyModels>();
+  OccupancyModels models;
   LevelOccupancy occupied;
   std::vector<std::uint64_t> nodes = {0}, children;
+  std::vector<std::uint8_t> bytes;
   for (int l = 0; l < depth; ++l) {
     occupied.assign(nodes);
     children.clear();
+    bytes.clear();
     std::size_t b = 0;
     for (const std::uint64_t n : nodes) {
       while (occupied.key(b) != (n >> 6)) ++b;
       const unsigned ctx = occupied.neighbours(b, n);
-      unsigned prefix = 1;
-      for (unsigned i = 0; i < 8; ++i) {
-        const bool bit = (i == 7 && prefix == 1) || dec.get(models->at(ctx, prefix));
-        prefix = 2 * prefix + (bit ? 1U : 0U);
-        if (bit) children.push_back(n * 8 + i);
+      unsigned low[3];
+      for (int a = 0; a < 3; ++a) {
+        const std::int64_t at = occupied.lower(b, n, a);  // earlier in the level: decoded
+        low[a] = at >= 0 ? bytes[static_cast<std::size_t>(at)] : 0U;
       }
+      unsigned prefix = 1, byte = 0;
+      for (unsigned i = 0; i < 8; ++i) {
+        const bool bit = (i == 7 && prefix == 1) || dec.get(models.at(lower_children(i, byte, low), ctx, prefix));
+        prefix = 2 * prefix + (bit ? 1U : 0U);
+        if (bit) {
+          byte |= 1U << i;
+          children.push_back(n * 8 + i);
+        }
+      }
+      bytes.push_back(static_cast<std::uint8_t>(byte));
       if (children.size() > max_leaves) return false;
     }
     nodes.swap(children);
