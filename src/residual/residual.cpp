@@ -56,6 +56,13 @@ constexpr double kMaxVoxelOrigin = 1e9;
 /// at least seven binary decisions of >= 0.011 bits (so about 100 nodes a byte), and a
 /// node holds at most eight voxels.
 constexpr std::uint64_t kMaxVoxelsPerByte = 1000;
+/// The voxel coding's trial window, in spherical trial windows (encoder only).
+constexpr std::size_t kVoxelTrialSpan = 4;
+/// The voxel coding is not coded in full when its trial costs this many times the
+/// spherical winner's (encoder only). Measured, voxel / spherical on the trial windows
+/// and in full: single spinning-lidar scans (kitti00, balm) 1.32-1.84 and 1.36-1.95;
+/// where voxels win (a balm map, scan001, room_scan1 at 4 cm) at most 0.88 and 0.81.
+constexpr double kVoxelSkipRatio = 1.25;
 /// Sweep coding: the elevation follows the slope over this many decoded points back.
 constexpr unsigned kSlopeSpan = 7;
 /// Largest |elevation / azimuth| slope the sweep coding extrapolates.
@@ -691,19 +698,37 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     const bool try_voxel = options.voxel && options.spherical;
     if (coded.size() > 4 * kOrderTrialPoints) {
       // On a large layer, a window of consecutive input points is coded the spherical ways
-      // and only the winner is coded in full.
+      // and only the winner is coded in full. The voxel coding, on a window four times as
+      // large (its contexts need more points to learn), is coded in full too unless it
+      // costs kVoxelSkipRatio times the spherical winner's bits there: a single scan of a
+      // spinning lidar, whose full costs differ about as much, skips it.
       const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
       const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
                                               coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
       const std::vector<std::uint32_t> window_rows = row_order(input.points, window, T_sensor_cloud, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
-      parallel_for(ways.size(), threads, [&](std::size_t w) {
+      double voxel_window_bits = 0.0;
+      parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
+        if (w == ways.size()) {
+          const std::size_t span = std::min(coded.size(), kVoxelTrialSpan * kOrderTrialPoints);
+          const std::size_t at = coded.size() / 2 - span / 2;
+          const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
+                                                coded.begin() + static_cast<std::ptrdiff_t>(at + span));
+          const auto v = voxel_layer(RangeEncoder{}, input.points, wide, check_error);
+          voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(span)
+                                : std::numeric_limits<double>::infinity();
+          return;
+        }
         std::size_t e = 0, n = 0;
         trial[w] = code(ways[w].by_rows ? window_rows : window, ways[w].sweep, e, n).size();
       }, 1);
       for (std::size_t w = 1; w < ways.size(); ++w)
         if (trial[w] < trial[best]) best = w;
-      parallel_for(try_voxel ? 2 : 1, threads, [&](std::size_t job) {
+      const std::size_t head_bytes = RangeEncoder(head).finish().size();
+      const double spherical_window_bits =
+          8.0 * static_cast<double>(trial[best] - std::min(trial[best], head_bytes)) / static_cast<double>(kOrderTrialPoints);
+      const bool full_voxel = try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits;
+      parallel_for(full_voxel ? 2 : 1, threads, [&](std::size_t job) {
         if (job == 1) voxel = voxel_layer(head, input.points, coded, check_error);
         else streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
       }, 1);
