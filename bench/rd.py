@@ -54,6 +54,9 @@ OCTOMAP_RES = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2]
 LEX3D_E = [0.005, 0.008, 0.012, 0.02, 0.035, 0.1]
 LEX3D_SEQ_E = [0.02, 0.1]
 LEARN_SCANS = 4
+MAP_SCANS = 10   # balm_map: scans merged into one map,
+MAP_STEP = 3     # this many scans apart (3 s),
+MAP_COUNT = 3    # maps, spread over the walk
 
 
 def env_list(name, default, kind=float):
@@ -76,7 +79,33 @@ def datasets(data, all_scans):
     indoor = sorted(glob.glob(os.path.join(data, "indoor", "room_scan*.pcd")))
     indoor += sorted(glob.glob(os.path.join(data, "indoor", "scan*.3d")))
     out["indoor"] = ([(s, None, None) for s in indoor], None)
+    # Maps: MAP_SCANS balm scans MAP_STEP apart, merged in the world frame by their poses
+    # (made by merge_balm when the dataset runs): clouds with no one viewpoint.
+    poses = os.path.join(data, "balm", "poses.txt")
+    span = MAP_STEP * (MAP_SCANS - 1) + 1
+    if os.path.exists(poses) and len(balm) >= span:
+        starts = range(0, len(balm) - span + 1, max(1, (len(balm) - span) // (MAP_COUNT - 1)))
+        out["balm_map"] = ([(("map", [s + MAP_STEP * k for k in range(MAP_SCANS)]), None, None)
+                            for s in list(starts)[:MAP_COUNT]], None)
     return out
+
+
+def merge_balm(data, lines, path):
+    """Writes the balm scans of pose lines `lines` (frames.txt order), moved into the world
+    frame by their poses, as one binary PLY of x y z."""
+    import numpy as np
+    frames = [f.strip() for f in open(os.path.join(data, "balm", "frames.txt")) if f.strip()]
+    poses = np.loadtxt(os.path.join(data, "balm", "poses.txt")).reshape(-1, 3, 4)
+    parts = []
+    for i in lines:
+        xyz = np.fromfile(os.path.join(data, "balm", frames[i]), dtype="<f4").reshape(-1, 4)[:, :3].astype(np.float64)
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+        parts.append(xyz @ poses[i][:, :3].T + poses[i][:, 3])
+    m = np.vstack(parts).astype("<f4")
+    with open(path, "wb") as f:
+        f.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(m)}\n"
+                 "property float x\nproperty float y\nproperty float z\nend_header\n").encode())
+        f.write(m.tobytes())
 
 
 class Runner:
@@ -111,6 +140,7 @@ def last_json(text):
 class Bench:
     def __init__(self, args):
         self.args = args
+        self.data = args.data
         b = args.build
         self.lex3d = args.lex3d or os.path.join(b, "lex3d")
         self.eval = os.path.join(b, "bench", "lex3d_eval_clouds")
@@ -300,6 +330,14 @@ class Bench:
         w = os.path.join(self.tmp, name)
         os.makedirs(w, exist_ok=True)
         print(f"[{name}] {len(scans)} scans", flush=True)
+        made = []
+        for scan, fmt, li in scans:
+            if isinstance(scan, tuple):  # a map to merge first
+                lines = scan[1]
+                scan = os.path.join(w, f"map_{lines[0]:03d}.ply")
+                merge_balm(self.data, lines, scan)
+            made.append((scan, fmt, li))
+        scans = made
         alphabet = self.learn(name, scans, poses, w)
         pose_lines = open(poses).read().split("\n") if poses else None
         for n, (scan, fmt, li) in enumerate(scans, 1):
@@ -336,7 +374,7 @@ def main():
     ap.add_argument("--all-scans", action="store_true", help="every balm scan (default: every 10th)")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory")
     ap.add_argument("--lex3d", help="the lex3d binary (default BUILD/lex3d)")
-    ap.add_argument("datasets", nargs="*", default=["balm", "kitti00", "newer_college", "indoor"])
+    ap.add_argument("datasets", nargs="*", default=["balm", "kitti00", "newer_college", "indoor", "balm_map"])
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     all_sets = datasets(args.data, args.all_scans)

@@ -10,7 +10,8 @@
 # Usage: bench/rd.sh [--all-scans] [--out DIR] [--keep] [--lex3d BIN] [BUILD_DIR] [DATA_DIR] [dataset...]
 #   BUILD_DIR  a build with LEX3D_BUILD_BENCH=ON (default build)
 #   DATA_DIR   the real scans (default ../shared/data)
-#   dataset    balm kitti00 newer_college indoor (default: all four)
+#   dataset    balm kitti00 newer_college indoor balm_map (default: all five; balm_map: three
+#              maps of 10 balm scans 3 s apart merged in the world frame, made from the poses)
 #   --all-scans  every balm scan (default: every 10th, 9 scans)
 #   --out DIR    results (default out/rd/<datasets joined by ->)
 #   --keep       keep the temporary files (reference PLYs, last decoded clouds)
@@ -29,7 +30,7 @@ while [ $# -gt 0 ]; do
     --all-scans|--keep) flags+=("$1") ;;
     --out) [ $# -ge 2 ] || { echo "rd.sh: --out needs a directory" >&2; exit 1; }; OUT="$2"; shift ;;
     --lex3d) [ $# -ge 2 ] || { echo "rd.sh: --lex3d needs a binary" >&2; exit 1; }; LEX3D="$2"; shift ;;
-    -h|--help) sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     -*) echo "rd.sh: unknown option $1" >&2; exit 1 ;;
     *) pos+=("$1") ;;
   esac
@@ -38,7 +39,7 @@ done
 BUILD_DIR="${pos[0]:-build}"
 DATA="${pos[1]:-../shared/data}"
 DATASETS=("${pos[@]:2}")
-[ ${#DATASETS[@]} -gt 0 ] || DATASETS=(balm kitti00 newer_college indoor)
+[ ${#DATASETS[@]} -gt 0 ] || DATASETS=(balm kitti00 newer_college indoor balm_map)
 [ -n "$OUT" ] || OUT="out/rd/$(IFS=-; echo "${DATASETS[*]}")"
 [ -n "$LEX3D" ] || LEX3D="$BUILD_DIR/lex3d"
 
