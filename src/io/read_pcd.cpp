@@ -3,6 +3,7 @@
 // bytes left before anything is allocated.
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <initializer_list>
 #include <limits>
@@ -79,6 +80,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   bool have_width = false, have_height = false, have_points = false, have_data = false;
   std::string encoding;
   std::size_t data_start = 0;
+  Pose viewpoint = Pose::Identity();
 
   std::string_view line;
   while (lines.next(line)) {
@@ -108,8 +110,25 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       }
       return {};
     };
-    // VIEWPOINT is ignored: readers leave T_cloud_sensor at identity (see cloud.hpp)
-    if (key == "version" || key == "viewpoint") continue;
+    if (key == "version") continue;
+    if (key == "viewpoint") {
+      // The sensor's pose in the points' frame: tx ty tz qw qx qy qz (as PCL writes its
+      // sensor_origin_ and sensor_orientation_); the last one counts.
+      double v[7];
+      bool ok = tok.size() == 8;
+      for (std::size_t k = 0; ok && k < 7; ++k)
+        ok = parse_number(tok[k + 1].data(), tok[k + 1].data() + tok[k + 1].size(), v[k]) && std::isfinite(v[k]);
+      const double qn = ok ? std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]) : 0.0;
+      if (!ok || !(std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}) <= 1e9) || !(qn > 0.5 && qn < 2.0)) {
+        return bad_data(msg(path, where + "VIEWPOINT needs tx ty tz qw qx qy qz (finite, a unit quaternion), got " +
+                                      quoted(trim(t.substr(tok[0].size())))),
+                        lines.line_offset());
+      }
+      viewpoint = Pose::Identity();
+      viewpoint.linear() = Eigen::Quaterniond(v[3], v[4], v[5], v[6]).normalized().toRotationMatrix();
+      viewpoint.translation() = Eigen::Vector3d(v[0], v[1], v[2]);
+      continue;
+    }
     if (key == "data") {
       if (tok.size() != 2) {
         return bad_data(msg(path, where + "DATA needs one of ascii, binary, binary_compressed"),
@@ -233,6 +252,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   if (fc != nullptr && fc->size != 4) fc = nullptr;  // only packed 32-bit colours
 
   r.encoding = encoding;
+  r.cloud.T_cloud_sensor = viewpoint;
   const std::uint64_t avail = size - data_start;
   Builder out(r, fi != nullptr, fc != nullptr);
 

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cerrno>
 #include <charconv>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <new>
@@ -28,6 +29,21 @@ using detail::kHostBigEndian;
 using detail::msg;
 
 namespace {
+
+/// A PCD VIEWPOINT: the sensor pose as tx ty tz qw qx qy qz (qw >= 0), to round-trip
+/// precision ("0 0 0 1 0 0 0" for the identity).
+std::string viewpoint_of(const Pose& T) {
+  Eigen::Quaterniond q(T.linear());
+  if (q.w() < 0.0) q.coeffs() = -q.coeffs();
+  const double v[7] = {T.translation().x(), T.translation().y(), T.translation().z(), q.w(), q.x(), q.y(), q.z()};
+  std::string out;
+  char buf[32];
+  for (int k = 0; k < 7; ++k) {
+    std::snprintf(buf, sizeof buf, "%.17g", v[k] == 0.0 ? 0.0 : v[k]);  // no "-0"
+    out += (k > 0 ? " " : "") + std::string(buf);
+  }
+  return out;
+}
 
 Status invalid(const std::string& path, const std::string& what) {
   return {ErrorCode::kInvalidArgument, msg(path, what)};
@@ -107,7 +123,8 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
                                                              : "binary_compressed";
   b.str("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS " + fields + "\nSIZE " +
         sizes + "\nTYPE " + types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(n) +
-        "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " + std::to_string(n) + "\nDATA " + enc + "\n");
+        "\nHEIGHT 1\nVIEWPOINT " + viewpoint_of(cloud.T_cloud_sensor) + "\nPOINTS " + std::to_string(n) +
+        "\nDATA " + enc + "\n");
   switch (o.pcd_encoding) {
     case PcdEncoding::kAscii:
       for (std::size_t i = 0; i < n; ++i) {

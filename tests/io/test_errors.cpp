@@ -168,6 +168,16 @@ TEST(ReadErrors, PcdHeaderMissingFields) {
              "unknown DATA encoding 'zip'");
 }
 
+TEST(ReadErrors, PcdBadViewpoint) {
+  const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nHEIGHT 1\n";
+  const std::string tail = "\nPOINTS 1\nDATA ascii\n1 2 3\n";
+  for (const char* v : {"0 0 0 1 0 0", "0 0 0 1 0 0 0 0", "0 0 nan 1 0 0 0", "0 0 0 0 0 0 0", "1e12 0 0 1 0 0 0",
+                        "0 0 0 1 0 x 0", "0 0 0 3 0 0 0"}) {
+    SCOPED_TRACE(v);
+    expect_bad("pcd_viewpoint", "cloud.pcd", head + "VIEWPOINT " + v + tail, "VIEWPOINT needs tx ty tz qw qx qy qz");
+  }
+}
+
 TEST(ReadErrors, PcdBadPoints) {
   expect_bad("pcd_points_text", "cloud.pcd", pcd_header("x y z", "4 4 4", "F F F", "1", "many", "ascii"),
              "POINTS needs one non-negative integer");

@@ -247,6 +247,28 @@ TEST(ReadFixture, PcdWithExtraFields) {
   EXPECT_EQ(r.cloud.intensity[2], 7.0F);
 }
 
+TEST(ReadFixture, PcdViewpointIsTheSensorPose) {
+  // PCL's VIEWPOINT (tx ty tz qw qx qy qz): the sensor pose in the points' frame.
+  const auto dir = temp_dir("pcd_viewpoint");
+  const std::string path = (dir / "world.pcd").string();
+  write_bytes(path,
+              "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nHEIGHT 1\n"
+              "VIEWPOINT 10 -5 2.5 0.70710678118654757 0 0 0.70710678118654757\nPOINTS 1\nDATA ascii\n1 2 3\n");
+  const ReadResult r = read_ok(path);
+  ASSERT_EQ(r.cloud.size(), 1U);
+  EXPECT_TRUE(r.cloud.T_cloud_sensor.translation().isApprox(Eigen::Vector3d(10.0, -5.0, 2.5)));
+  // A quarter turn about z: the sensor's x axis is the cloud's y axis.
+  EXPECT_TRUE((r.cloud.T_cloud_sensor.linear() * Eigen::Vector3d::UnitX()).isApprox(Eigen::Vector3d::UnitY(), 1e-12));
+  // Written back, read again: the same pose.
+  const std::string out = (dir / "again.pcd").string();
+  ASSERT_TRUE(write_cloud(out, r.cloud).ok());
+  const ReadResult back = read_ok(out);
+  EXPECT_TRUE(back.cloud.T_cloud_sensor.isApprox(r.cloud.T_cloud_sensor, 1e-15));
+  // The identity stays as PCL writes it, and is what a file without VIEWPOINT gets.
+  const ReadResult plain = read_ok(fixture("extra_fields.pcd"));
+  EXPECT_TRUE(plain.cloud.T_cloud_sensor.isApprox(Pose::Identity()));
+}
+
 TEST(ReadFixture, OrganizedPcdWithNaNsAndMixedTypes) {
   const ReadResult r = read_ok(fixture("organized_nan.pcd"));
   EXPECT_EQ(r.encoding, "binary");

@@ -25,8 +25,9 @@ struct Cloud {
   /// Directions (unit vectors, cloud frame) of beams that returned no echo,
   /// when the source format records them (e.g. the 3DTK `.3d` no-return value).
   std::vector<Eigen::Vector3f> no_return_directions;
-  /// Pose of the sensor in the frame the points are expressed in. Readers
-  /// leave it at identity: scans are stored in the sensor frame.
+  /// Pose of the sensor in the frame the points are expressed in: a PCD file's
+  /// VIEWPOINT; identity for the other formats, whose scans are stored in the
+  /// sensor frame. Written back as the VIEWPOINT of a PCD file.
   Pose T_cloud_sensor = Pose::Identity();
   /// Pose of the cloud frame in a world frame, when the data provides one
   /// (a `.pose` file, a poses.txt line); identity otherwise.
