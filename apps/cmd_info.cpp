@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <iostream>
 #include <optional>
 
@@ -117,27 +116,12 @@ bool info_lex3d_file(const InfoOptions& o) {
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
       }
-  // Quantisation steps and the word geometry, read from the (CRC-checked) header chunks:
-  // MHDR bytes 104..119 (formats/model.md §2.1), AHDR bytes 0..15 and 24..31 (alphabet.md).
-  const auto f64_at = [&](const codec::ChunkInfo& c, std::size_t at) {
-    std::uint64_t u = 0;
-    for (int k = 7; k >= 0; --k) u = (u << 8) | b[static_cast<std::size_t>(c.offset) + 12 + at + static_cast<std::size_t>(k)];
-    double v = 0.0;
-    std::memcpy(&v, &u, sizeof v);
-    return v;
-  };
-  std::optional<double> translation_step, rotation_step, word_radius, point_spacing, word_point_step;
-  for (const auto& c : fi.chunks) {
-    if (!c.crc_ok) continue;
-    if (c.type == "MHDR" && c.length == 120) {
-      translation_step = f64_at(c, 104);
-      rotation_step = f64_at(c, 112);
-    } else if (c.type == "AHDR" && c.length >= 32) {
-      word_radius = f64_at(c, 0);
-      point_spacing = f64_at(c, 8);
-      word_point_step = f64_at(c, 24);
-    }
-  }
+  const auto& translation_step = fi.translation_step_m;
+  const auto& rotation_step = fi.rotation_step_rad;
+  const auto& word_radius = fi.word_radius_m;
+  const auto& point_spacing = fi.point_spacing_m;
+  const auto& word_point_step = fi.word_point_step_m;
+
   const double bpp = input_points ? 8.0 * static_cast<double>(b.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {
     Json j;

@@ -1019,7 +1019,17 @@ StatusOr<FileInfo> inspect(const std::vector<std::uint8_t>& bytes) {
     std::string type(4, '?');  // four characters; anything not printable shows as '?'
     for (std::size_t k = 0; k < 4; ++k)
       if (c.type[k] >= 0x20 && c.type[k] < 0x7F) type[k] = static_cast<char>(c.type[k]);
-    info.chunks.push_back({type, c.offset, c.length, c.stored_crc == c.computed_crc});
+    const bool crc_ok = c.stored_crc == c.computed_crc;
+    info.chunks.push_back({type, c.offset, c.length, crc_ok});
+    // The header chunks' figures (model.md §2.1, alphabet.md AHDR), from intact chunks.
+    if (crc_ok && type == "MHDR" && c.length == 120) {
+      info.translation_step_m = ld_f64(c.payload + 104);
+      info.rotation_step_rad = ld_f64(c.payload + 112);
+    } else if (crc_ok && type == "AHDR" && c.length >= 32) {
+      info.word_radius_m = ld_f64(c.payload);
+      info.point_spacing_m = ld_f64(c.payload + 8);
+      info.word_point_step_m = ld_f64(c.payload + 24);
+    }
     pos = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
   }
   return info;

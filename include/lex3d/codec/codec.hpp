@@ -115,6 +115,11 @@ struct FileInfo {
   bool header_crc_ok = false;  ///< the header's own CRC (bytes 0..15)
   std::vector<ChunkInfo> chunks;
   std::uint64_t file_bytes = 0;
+  /// A model's instance steps (its MHDR chunk), when that chunk is intact.
+  std::optional<double> translation_step_m, rotation_step_rad;
+  /// An alphabet's word radius, word-point spacing and word-point step (its AHDR
+  /// chunk), when that chunk is intact.
+  std::optional<double> word_radius_m, point_spacing_m, word_point_step_m;
 };
 /// Reads the header and chunk table without decoding payloads; fails only when the
 /// header or the chunk framing is unreadable (a CRC mismatch is reported, not fatal).
