@@ -109,6 +109,8 @@ void run_compress(const CompressOptions& o) {
   const bool layered = max_error || o.target_bpp > 0.0;
   if (!layered && o.words == "off")
     throw CliError(1, "--words off needs a residual layer: give --max-error E or --target-bpp B");
+  if (o.layer_coding == "voxel" && o.keep_all_points)
+    throw CliError(1, "--layer-coding voxel codes one point a cell, --keep-all-points one a point: give one of them");
   // With a layer, words cost more than they save at every bound measured (README), so the
   // layer alone is the default; --words on/auto brings them back.
   const std::string words_mode = !o.words.empty() ? o.words : layered ? "off" : "on";

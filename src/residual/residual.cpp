@@ -693,9 +693,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // The voxel coding competes too, coded in full alongside the spherical ones (a trial on
   // part of the points misjudges it: its cost depends on the density of the whole).
   std::optional<VoxelLayer> voxel;
-  if (!options.spherical && options.voxel) voxel = voxel_layer(head, input.points, coded, check_error);
+  // (a voxel stands for every point in it: not with `thin` off, which gives each its own)
+  const bool voxel_allowed = options.voxel && options.thin;
+  if (!options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (!voxel) {
-    const bool try_voxel = options.voxel && options.spherical;
+    const bool try_voxel = voxel_allowed && options.spherical;
     if (coded.size() > 4 * kOrderTrialPoints) {
       // On a large layer, a window of consecutive input points is coded the spherical ways
       // and only the winner is coded in full. The voxel coding, on a window four times as

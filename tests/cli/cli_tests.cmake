@@ -196,6 +196,7 @@ expect_match(decompress.voxel "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.0
 run(0 compress.spherical compress "${NC}" -o "${WORK}/nc_s.lex3dm" --max-error 0.02 --layer-coding spherical --json)
 expect_match(compress.spherical "${LAST_OUT}" "\"coding\":\"(previous-point|sweep)\"")
 run(1 compress.bad_coding compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0.02 --layer-coding octree)
+run(1 compress.voxel_keep_all compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0.02 --layer-coding voxel --keep-all-points)
 run(1 compress.bad_error compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0)
 run(1 compress.bad_error_text compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error lots)
 run(1 compress.both compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0.01 --target-bpp 4)

@@ -556,6 +556,13 @@ TEST(ResidualVoxel, MergedViewsKeepTheBound) {
   EXPECT_FALSE(ring_st.voxel);
   const Bytes forced = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.01, &forced_st, voxel_only);
   EXPECT_TRUE(forced_st.voxel);
+  // Without thinning every input point gets its own decoded point: never the voxel coding.
+  residual::LayerOptions every_point;
+  every_point.thin = false;
+  residual::LayerStats every_st;
+  (void)residual::encode_layer(map, Cloud{}, Pose::Identity(), 0.03, &every_st, every_point);
+  EXPECT_FALSE(every_st.voxel);
+  EXPECT_EQ(every_st.residual_points, map.size());
   const auto d = residual::decode_layer(forced, Cloud{}, Pose::Identity(), scan.size());
   ASSERT_TRUE(d.ok()) << d.status().to_string();
   EXPECT_LE(hausdorff(scan, d.value()), 0.01);

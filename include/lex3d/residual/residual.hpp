@@ -43,6 +43,7 @@ struct LayerOptions {
   bool sweep = true;
   /// Also try the voxel coding (formats/model.md §2.7: a file of format 1.3), which needs
   /// no sensor (maps merged from many viewpoints), and keep it when it codes smaller.
+  /// Only with `thin`: a voxel stands for all the points in it.
   bool voxel = true;
   /// Try the spherical codings (RESD, and RESW with `sweep`); off with `voxel` on: the
   /// voxel coding alone (the spherical ones still code a layer the voxel one cannot).
