@@ -67,6 +67,9 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
   s.timings = fr.timings;
   // The range image measured the beam spacing already (unless its pixel sizes were given).
   const auto res = fr.image.beam_spacing ? fr.image.beam_spacing : estimate_angular_resolution(cloud);
+  // The image is not needed any more: its memory, freed now, serves the neighbourhoods
+  // below instead of fresh pages (each first touch of which costs a page fault).
+  fr.image = RangeImage{};
   s.beam_spacing = res ? std::max(res->azimuth_rad, res->elevation_rad) : 0.2 * M_PI / 180.0;
 
   // σ of eq. 13 for every point.
