@@ -14,7 +14,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <memory>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
@@ -82,14 +81,11 @@ std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f
 
 namespace {
 
-const float kNaNf = std::numeric_limits<float>::quiet_NaN();
 
-// The image's points packed 16 bytes a pixel, NaN where there is no return: a window
-// is read with one aligned load a pixel, and NaN fails every distance test, so no
-// separate state look-up is needed.
-struct alignas(16) Pixel {
-  float x, y, z, pad;
-};
+// The image's points (RangeImage::point), NaN where there is no return: NaN fails
+// every distance test, so no state look-up is needed. Read in place rather than
+// copied to 16-byte pixels, whose fresh pages cost more than the unaligned loads.
+using Pixel = Eigen::Vector3f;
 
 // The pixels of a window around a keypoint that may hold points within a radius of
 // it, sampling at most about (2*max_half+1)^2 of them: rows (image rows in range) and
@@ -136,26 +132,37 @@ void make_window(const RangeImage& img, const WindowCentre& c, double radius, in
     const int x = img.wrap_x(c.cx + dx);
     if (x >= 0) w.cols[w.ncols++] = x;
   }
+  // Room for a whole last block of four: the last column again (its lanes masked off).
+  for (int j = w.ncols; j < ((w.ncols + 3) & ~3); ++j) w.cols[j] = w.cols[w.ncols - 1];
 }
 
 // Calls the kernel for the window's points in order: row by row, columns left to
-// right. With SSE2, four pixels at a time as x, y and z lanes (block(x, y, z)), the
-// rest of a row one by one (one(pixel)); otherwise all one by one.
+// right. With SSE2, four pixels at a time as x, y and z lanes, with a mask of the lanes
+// that are pixels of the window (block(x, y, z, lanes): the last block of a row may be
+// short); otherwise one by one (one(pixel)).
 #if defined(__SSE2__)
+// A 12-byte pixel as x, y, z lanes: one 16-byte load, which reads 4 bytes of the next
+// pixel, except in the image's last row, whose last pixel has no next.
+inline __m128 load_pixel(const float* p, bool last_row) {
+  if (!last_row) return _mm_loadu_ps(p);
+  return _mm_movelh_ps(_mm_loadl_pi(_mm_setzero_ps(), reinterpret_cast<const __m64*>(p)), _mm_load_ss(p + 2));
+}
+
 template <typename Block, typename One>
-inline void for_window(const Pixel* pix, int width, const Window& w, Block&& block, One&& one) {
+inline void for_window(const Pixel* pix, int width, int height, const Window& w, Block&& block,
+                       One&& /*one: without SSE2*/) {
   for (int r = 0; r < w.nrows; ++r) {
-    const Pixel* row = pix + static_cast<std::ptrdiff_t>(w.rows[r]) * width;
-    int j = 0;
-    for (; j + 4 <= w.ncols; j += 4) {
-      __m128 x = _mm_load_ps(&row[w.cols[j]].x);
-      __m128 y = _mm_load_ps(&row[w.cols[j + 1]].x);
-      __m128 z = _mm_load_ps(&row[w.cols[j + 2]].x);
-      __m128 t = _mm_load_ps(&row[w.cols[j + 3]].x);
+    const float* row = pix[static_cast<std::ptrdiff_t>(w.rows[r]) * width].data();
+    const bool last_row = w.rows[r] + 1 == height;
+    for (int j = 0; j < w.ncols; j += 4) {
+      const int lanes = w.ncols - j >= 4 ? 0xF : (1 << (w.ncols - j)) - 1;
+      __m128 x = load_pixel(row + 3 * w.cols[j], last_row);
+      __m128 y = load_pixel(row + 3 * w.cols[j + 1], last_row);
+      __m128 z = load_pixel(row + 3 * w.cols[j + 2], last_row);
+      __m128 t = load_pixel(row + 3 * w.cols[j + 3], last_row);
       _MM_TRANSPOSE4_PS(x, y, z, t);
-      block(x, y, z);
+      block(x, y, z, lanes);
     }
-    for (; j < w.ncols; ++j) one(row[w.cols[j]]);
   }
 }
 
@@ -174,7 +181,7 @@ inline void for_lanes(int lanes, __m128 x, __m128 y, __m128 z, Fn&& fn) {
 }
 #else
 template <typename One>
-inline void for_window(const Pixel* pix, int width, const Window& w, One&& one) {
+inline void for_window(const Pixel* pix, int width, int /*height*/, const Window& w, One&& one) {
   for (int r = 0; r < w.nrows; ++r) {
     const Pixel* row = pix + static_cast<std::ptrdiff_t>(w.rows[r]) * width;
     for (int j = 0; j < w.ncols; ++j) one(row[w.cols[j]]);
@@ -216,18 +223,18 @@ Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp,
     ++count;
   };
   // Same association as Eigen's squaredNorm of a 3-vector; NaN (no return) fails.
-  for_window(pix, img.width, win,
+  for_window(pix, img.width, img.height, win,
 #if defined(__SSE2__)
              [&, vpx = _mm_set1_ps(px), vpy = _mm_set1_ps(py), vpz = _mm_set1_ps(pz),
-              vr2 = _mm_set1_ps(r2)](__m128 x, __m128 y, __m128 z) {
+              vr2 = _mm_set1_ps(r2)](__m128 x, __m128 y, __m128 z, int lanes) {
                const __m128 dx = _mm_sub_ps(x, vpx), dy = _mm_sub_ps(y, vpy), dz = _mm_sub_ps(z, vpz);
                const __m128 sq =
                    _mm_add_ps(_mm_mul_ps(dx, dx), _mm_add_ps(_mm_mul_ps(dy, dy), _mm_mul_ps(dz, dz)));
-               for_lanes(_mm_movemask_ps(_mm_cmple_ps(sq, vr2)), dx, dy, dz, add);
+               for_lanes(_mm_movemask_ps(_mm_cmple_ps(sq, vr2)) & lanes, dx, dy, dz, add);
              },
 #endif
              [&](const Pixel& q) {
-               const float dx = q.x - px, dy = q.y - py, dz = q.z - pz;
+               const float dx = q.x() - px, dy = q.y() - py, dz = q.z() - pz;
                if (dx * dx + (dy * dy + dz * dz) <= r2) add(dx, dy, dz);
              });
   Eigen::Vector3f normal = -view;
@@ -291,10 +298,10 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
     d = std::max(d, lz);  // z-buffer: the viewpoint sits on +z
   };
   // Points inside the cube of half side rad (NaN, no return, fails).
-  for_window(pix, img.width, win,
+  for_window(pix, img.width, img.height, win,
 #if defined(__SSE2__)
              [&, vpx = _mm_set1_ps(px), vpy = _mm_set1_ps(py), vpz = _mm_set1_ps(pz), vrad = _mm_set1_ps(rad),
-              abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF))](__m128 x, __m128 y, __m128 z) {
+              abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF))](__m128 x, __m128 y, __m128 z, int lanes) {
                const __m128 dx = _mm_sub_ps(x, vpx), dy = _mm_sub_ps(y, vpy), dz = _mm_sub_ps(z, vpz);
                const __m128 lx = _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a00), dx),
                                             _mm_add_ps(_mm_mul_ps(_mm_set1_ps(a01), dy), _mm_mul_ps(_mm_set1_ps(a02), dz)));
@@ -305,11 +312,11 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
                const __m128 in = _mm_and_ps(_mm_and_ps(_mm_cmplt_ps(_mm_and_ps(lx, abs_mask), vrad),
                                                        _mm_cmplt_ps(_mm_and_ps(ly, abs_mask), vrad)),
                                             _mm_cmplt_ps(_mm_and_ps(lz, abs_mask), vrad));
-               for_lanes(_mm_movemask_ps(in), lx, ly, lz, put);
+               for_lanes(_mm_movemask_ps(in) & lanes, lx, ly, lz, put);
              },
 #endif
              [&](const Pixel& q) {
-               const float dx = q.x - px, dy = q.y - py, dz = q.z - pz;
+               const float dx = q.x() - px, dy = q.y() - py, dz = q.z() - pz;
                const float lx = a00 * dx + (a01 * dy + a02 * dz);
                const float ly = a10 * dx + (a11 * dy + a12 * dz);
                const float lz = a20 * dx + (a21 * dy + a22 * dz);
@@ -426,16 +433,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
   const Eigen::Vector3f up_sensor =
       (T_cloud_sensor.linear().transpose() * params.up.cast<float>()).normalized();
 
-  const std::size_t n = static_cast<std::size_t>(img.width) * static_cast<std::size_t>(img.height);
-  const std::unique_ptr<Pixel[]> pix(new Pixel[n]);  // every pixel is written below
-  for (std::size_t k = 0; k < n; ++k) {
-    if (img.state[k] == PixelState::kValid) {
-      const Eigen::Vector3f& q = img.point[k];
-      pix[k] = {q.x(), q.y(), q.z(), 0.0F};
-    } else {
-      pix[k] = {kNaNf, kNaNf, kNaNf, kNaNf};
-    }
-  }
+  const Pixel* const pix = img.point.data();  // NaN unless kValid (make_range_image)
   // Features are independent: describe them in image order, so that consecutive
   // windows overlap in the cache, and store each at its own index.
   const std::size_t m = keypoints.size();
@@ -451,7 +449,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
     const Keypoint& kp = keypoints[i];
     Window win;
     const WindowCentre centre = window_centre(img, kp);
-    const Frame f = feature_frame(img, pix.get(), kp, centre, params, up_sensor, win);
+    const Frame f = feature_frame(img, pix, kp, centre, params, up_sensor, win);
     Eigen::Isometry3f T_sensor_feature = Eigen::Isometry3f::Identity();
     T_sensor_feature.linear() = f.R;
     T_sensor_feature.translation() = kp.point_sensor;
@@ -459,7 +457,7 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
     feat.keypoint = kp;
     feat.normal_support = f.support;
     feat.T_cloud_feature = img.T_cloud_sensor * T_sensor_feature.cast<double>();
-    patch_descriptor(img, pix.get(), kp, centre, f.R, params, win,
+    patch_descriptor(img, pix, kp, centre, f.R, params, win,
                      out.descriptors.data() + i * static_cast<std::size_t>(out.descriptor_dim));
   });
   return out;

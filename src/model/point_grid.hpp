@@ -1,13 +1,19 @@
 #pragma once
-// A static voxel grid over a point set for radius queries. Points are bucketed by cell
-// in two linear passes (a counting sort, points of a cell in index order) and stored
-// with their coordinates in cell order (x, y and z apart, each cell padded to a multiple
-// of 8 with far points), so a query reads each cell it visits contiguously and tests its
-// points eight at a time. The cells live in a compact open-addressing table (key and
-// range in one 16-byte slot, sized by the number of cells, not of points). A query
-// visits only the cells its ball touches and merges the cells' hits (each run in index
-// order) into one sorted list. For the neighbourhoods of thousands of features this
-// beats a kd-tree, because radii are a few cells at most.
+// The points of a scan within each of many balls (the neighbourhoods of the features),
+// found point by point instead of ball by ball. Balls are registered in the cells of a
+// voxel grid they may reach; then every point, in index order, tests the balls of its
+// own cell, four at a time. A point's hits go to the end of each hit ball's list, so
+// every list comes out in index order with no sorting or merging. (Ball by ball, each
+// query looked up ~27 cells and merged their runs of hits, which cost more than the
+// distance tests themselves.)
+//
+// Cells are grouped in blocks of 4x4x4 kept in a hash table: a ball's cells mostly lie
+// in one or two blocks, and consecutive points mostly in one, so few hash look-ups.
+//
+// The result is exactly that of testing, for every ball, the points of every cell of
+// its bounding box that is not farther from the centre than the radius (plus a margin
+// for rounding): the cells, their keys (21 bits an axis) and the test, (dx² + dy²) + dz²
+// <= r² in float, are those of a query ball by ball.
 
 #include <algorithm>
 #include <cmath>
@@ -16,113 +22,206 @@
 
 #include <Eigen/Core>
 
-namespace lex3d::detail {
-
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
-#define LEX3D_GRID_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define LEX3D_GRID_CLONES
+#if defined(__SSE2__)
+#include <emmintrin.h>
 #endif
 
-// Writes to `out` the indices of the points of [0, n) (n a multiple of 8) within r2 of
-// c, in order; returns how many. The test is that of a scalar loop, (dx² + dy²) + dz²
-// <= r², done eight points at a time (no fused multiply-adds: the same bits).
-LEX3D_GRID_CLONES static inline std::size_t grid_block_hits(const float* xs, const float* ys, const float* zs,
-                                                              const std::uint32_t* idx, std::size_t n, float cx,
-                                                              float cy, float cz, float r2, std::uint32_t* out) {
-  std::size_t m = 0;
-  for (std::size_t k = 0; k < n; k += 8) {
-    std::int32_t in[8];
-    for (std::size_t l = 0; l < 8; ++l) {
-      const float dx = xs[k + l] - cx, dy = ys[k + l] - cy, dz = zs[k + l] - cz;
-      in[l] = (dx * dx + dy * dy + dz * dz <= r2) ? 1 : 0;
-    }
-    for (std::size_t l = 0; l < 8; ++l) {  // branch-free: write every index, keep the hits
-      out[m] = idx[k + l];
-      m += static_cast<std::size_t>(in[l]);
-    }
-  }
-  return m;
-}
+#include "lex3d/core/parallel.hpp"
 
-class PointGrid {
+namespace lex3d::detail {
+
+class BallGrid {
  public:
-  PointGrid(const std::vector<Eigen::Vector3f>& points, float cell) : cell_(cell), inv_(1.0F / cell) {
+  explicit BallGrid(float cell) : cell_(cell), inv_(1.0F / cell) {}
+
+  /// For each ball b (centre[b], radius[b]), the indices of the points within it, in
+  /// ascending order: index[offset[b], offset[b + 1]).
+  void points_in_balls(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& centre,
+                       const std::vector<float>& radius, int threads, std::vector<std::size_t>& offset,
+                       std::vector<std::uint32_t>& index) {
     const std::size_t n = points.size();
-    // Pass 1: the cell of every point and the size of every cell, in a table sized for
-    // the worst case (one cell per point); the query table below is sized by the cells.
-    std::size_t cap = 16;
-    while (cap < 2 * n) cap <<= 1;
-    std::vector<Slot> build(cap, Slot{kEmpty, 0, 0});
-    const std::size_t build_mask = cap - 1;
-    std::vector<std::uint32_t> slot_of(n);
-    std::vector<std::uint32_t> first;  // build slots in the order their cells were first met
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::uint64_t k = key(cell_of(points[i]));
-      std::size_t s = hash(k) & build_mask;
-      while (build[s].key != k && build[s].key != kEmpty) s = (s + 1) & build_mask;
-      if (build[s].key == kEmpty) {
-        build[s].key = k;
-        first.push_back(static_cast<std::uint32_t>(s));
+    const std::size_t nb = centre.size();
+    offset.assign(nb + 1, 0);
+    index.clear();
+    if (n == 0 || nb == 0) return;
+    // The cell of every point (blocks numbered in the order they are first met).
+    std::vector<std::uint32_t> cell_of_point(n);
+    {
+      std::uint64_t last = kEmpty;
+      std::uint32_t last_block = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const Eigen::Vector3i c = cell_of(points[i]);
+        const std::uint64_t b = block_key(c.x(), c.y(), c.z());
+        if (b != last) {  // points in scan order mostly stay in a block
+          last = b;
+          last_block = insert(b);
+        }
+        cell_of_point[i] = 64 * last_block + local(c.x(), c.y(), c.z());
       }
-      slot_of[i] = static_cast<std::uint32_t>(s);
-      ++build[s].end;
     }
-    // Cells in the order they were first met; each gets a contiguous range (begin, and
-    // end as the fill cursor).
-    // (Ranges padded to a multiple of 8 with far points, for tests eight at a time.)
-    std::uint32_t at = 0;
-    for (const std::uint32_t s : first) {
-      const std::uint32_t count = build[s].end;
-      build[s].begin = at;
-      build[s].end = at;
-      at += (count + 7U) & ~7U;
+    const std::size_t cells = 64 * count_;
+    std::vector<std::uint8_t> occupied(cells, 0);
+    for (const std::uint32_t c : cell_of_point) occupied[c] = 1;
+    // The cells holding points each ball may reach, as (cell, ball) pairs, then the
+    // balls of each cell gathered by a counting sort: centre, r² and id apart, each
+    // cell padded to a multiple of 4 with far balls of r² = -1.
+    std::vector<std::uint32_t> cell_balls(cells + 1, 0);
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> reg;
+    reg.reserve(16 * nb);
+    for (std::size_t b = 0; b < nb; ++b)
+      for_cells(centre[b], radius[b], [&](std::uint32_t c) {
+        if (occupied[c] == 0) return;
+        reg.emplace_back(c, static_cast<std::uint32_t>(b));
+        ++cell_balls[c + 1];
+      });
+    for (std::size_t c = 0; c < cells; ++c) cell_balls[c + 1] = cell_balls[c] + ((cell_balls[c + 1] + 3U) & ~3U);
+    const std::size_t slots = cell_balls[cells];
+    std::vector<float> bx(slots, kFar), by(slots, kFar), bz(slots, kFar), br2(slots, -1.0F);
+    std::vector<std::uint32_t> bid(slots, 0);
+    {
+      std::vector<std::uint32_t> fill(cell_balls.begin(), cell_balls.end() - 1);
+      for (const auto& [c, b] : reg) {
+        const std::uint32_t k = fill[c]++;
+        bx[k] = centre[b].x();
+        by[k] = centre[b].y();
+        bz[k] = centre[b].z();
+        br2[k] = radius[b] * radius[b];
+        bid[k] = b;
+      }
     }
-    // Pass 2: scatter, in index order within each cell; the padding stays far away.
-    xs_.assign(at, kFar);
-    ys_.assign(at, kFar);
-    zs_.assign(at, kFar);
-    idx_.assign(at, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::uint32_t k = build[slot_of[i]].end++;
-      xs_[k] = points[i].x();
-      ys_[k] = points[i].y();
-      zs_[k] = points[i].z();
-      idx_[k] = static_cast<std::uint32_t>(i);
+    // Every point tests the balls of its cell once, keeping which of them hold it as a
+    // bit mask over the cell's slots (cells of up to 64; a point of a larger cell is
+    // tested again instead); each ball's points are counted, then placed, in index
+    // order, at the ball's cursor. With several threads, each block of points has its
+    // own counts and cursors, blocks in index order.
+    const std::size_t blocks = threads > 1 ? 4 * static_cast<std::size_t>(threads) : 1;
+    const std::size_t per_block = (n + blocks - 1) / blocks;
+    std::vector<std::size_t> at(blocks * nb, 0);
+    std::vector<std::uint64_t> mask(n);
+    const auto test = [&](std::size_t i, auto&& fn) {
+      const std::uint32_t c = cell_of_point[i];
+      const std::uint32_t s0 = cell_balls[c], s1 = cell_balls[c + 1];
+      ball_hits(bx.data() + s0, by.data() + s0, bz.data() + s0, br2.data() + s0, bid.data() + s0, s1 - s0,
+                points[i], fn);
+    };
+    // fn(ball) for each ball holding point i, from its mask when it has one.
+    const auto each_hit = [&](std::size_t i, auto&& fn) {
+      const std::uint32_t c = cell_of_point[i];
+      const std::uint32_t s0 = cell_balls[c], s1 = cell_balls[c + 1];
+      if (s1 - s0 > 64) return test(i, fn);
+      for (std::uint64_t m = mask[i]; m != 0; m &= m - 1) fn(bid[s0 + static_cast<std::uint32_t>(__builtin_ctzll(m))]);
+    };
+    parallel_for(blocks, threads, [&](std::size_t blk) {
+      std::size_t* const count = at.data() + blk * nb;
+      const std::size_t i0 = std::min(n, blk * per_block), i1 = std::min(n, i0 + per_block);
+      for (std::size_t i = i0; i < i1; ++i) {
+        const std::uint32_t c = cell_of_point[i];
+        const std::uint32_t s0 = cell_balls[c], s1 = cell_balls[c + 1];
+        if (s1 - s0 <= 64)
+          mask[i] = ball_mask(bx.data() + s0, by.data() + s0, bz.data() + s0, br2.data() + s0, s1 - s0, points[i]);
+        each_hit(i, [&](std::uint32_t b) { ++count[b]; });
+      }
+    }, 1);
+    std::size_t total = 0;
+    for (std::size_t b = 0; b < nb; ++b) {
+      offset[b] = total;
+      for (std::size_t blk = 0; blk < blocks; ++blk) {
+        const std::size_t c = at[blk * nb + b];
+        at[blk * nb + b] = total;
+        total += c;
+      }
     }
-    for (const std::uint32_t s : first) build[s].end = (build[s].end + 7U) & ~7U;
-    // The query table: at most a quarter full.
-    std::size_t qcap = 16;
-    while (qcap < 4 * first.size()) qcap <<= 1;
-    slots_.assign(qcap, Slot{kEmpty, 0, 0});
-    mask_ = qcap - 1;
-    for (const std::uint32_t s : first) {
-      std::size_t i = hash(build[s].key) & mask_;
-      while (slots_[i].key != kEmpty) i = (i + 1) & mask_;
-      slots_[i] = build[s];
+    offset[nb] = total;
+    index.resize(total);
+    std::uint32_t* const out = index.data();
+    parallel_for(blocks, threads, [&](std::size_t blk) {
+      std::size_t* const cursor = at.data() + blk * nb;
+      const std::size_t i0 = std::min(n, blk * per_block), i1 = std::min(n, i0 + per_block);
+      for (std::size_t i = i0; i < i1; ++i)
+        each_hit(i, [&](std::uint32_t b) { out[cursor[b]++] = static_cast<std::uint32_t>(i); });
+    }, 1);
+  }
+
+ private:
+  // Bit k set when ball k of [0, n) (n a multiple of 4, at most 64) holds p; the test
+  // is that of ball_hits.
+  static std::uint64_t ball_mask(const float* cx, const float* cy, const float* cz, const float* r2, std::size_t n,
+                                 const Eigen::Vector3f& p) {
+    std::uint64_t m = 0;
+#if defined(__SSE2__)
+    const __m128 px = _mm_set1_ps(p.x()), py = _mm_set1_ps(p.y()), pz = _mm_set1_ps(p.z());
+    for (std::size_t k = 0; k < n; k += 4) {
+      const __m128 dx = _mm_sub_ps(px, _mm_loadu_ps(cx + k));
+      const __m128 dy = _mm_sub_ps(py, _mm_loadu_ps(cy + k));
+      const __m128 dz = _mm_sub_ps(pz, _mm_loadu_ps(cz + k));
+      const __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+      m |= static_cast<std::uint64_t>(_mm_movemask_ps(_mm_cmple_ps(d2, _mm_loadu_ps(r2 + k)))) << k;
+    }
+#else
+    for (std::size_t k = 0; k < n; ++k) {
+      const float dx = p.x() - cx[k], dy = p.y() - cy[k], dz = p.z() - cz[k];
+      m |= static_cast<std::uint64_t>(dx * dx + dy * dy + dz * dz <= r2[k] ? 1 : 0) << k;
+    }
+#endif
+    return m;
+  }
+
+  // Calls hit(id) for each ball of [0, n) (n a multiple of 4) that holds p, in order.
+  // The test is that of a scalar loop, (dx² + dy²) + dz² <= r², done four balls at a
+  // time (the same bits). The hits of up to 64 balls are gathered without branches
+  // first: a branch on each test would be mispredicted about as often as it is taken.
+  template <typename Hit>
+  static void ball_hits(const float* cx, const float* cy, const float* cz, const float* r2, const std::uint32_t* id,
+                        std::size_t n, const Eigen::Vector3f& p, Hit&& hit) {
+    std::uint32_t buf[64];
+#if defined(__SSE2__)
+    const __m128 px = _mm_set1_ps(p.x()), py = _mm_set1_ps(p.y()), pz = _mm_set1_ps(p.z());
+#endif
+    for (std::size_t k = 0; k < n;) {
+      const std::size_t k1 = std::min(n, k + 64);
+      std::size_t m = 0;
+#if defined(__SSE2__)
+      for (; k < k1; k += 4) {
+        const __m128 dx = _mm_sub_ps(px, _mm_loadu_ps(cx + k));
+        const __m128 dy = _mm_sub_ps(py, _mm_loadu_ps(cy + k));
+        const __m128 dz = _mm_sub_ps(pz, _mm_loadu_ps(cz + k));
+        const __m128 d2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+        const int in = _mm_movemask_ps(_mm_cmple_ps(d2, _mm_loadu_ps(r2 + k)));
+        for (std::size_t l = 0; l < 4; ++l) {  // write every id, keep the hits
+          buf[m] = id[k + l];
+          m += static_cast<std::size_t>((in >> l) & 1);
+        }
+      }
+#else
+      for (; k < k1; ++k) {
+        const float dx = p.x() - cx[k], dy = p.y() - cy[k], dz = p.z() - cz[k];
+        buf[m] = id[k];
+        m += (dx * dx + dy * dy + dz * dz <= r2[k]) ? 1 : 0;
+      }
+#endif
+      for (std::size_t j = 0; j < m; ++j) hit(buf[j]);
     }
   }
 
-  /// Appends to `out` the indices of the points within `radius` of `c`, sorted ascending.
-  void radius(const Eigen::Vector3f& c, float radius, std::vector<std::uint32_t>& out) const {
-    const std::size_t base = out.size();
+  // Calls fn(cell) for each cell a ball may reach, in a block that holds points: those
+  // of its bounding box not farther from c than the radius.
+  template <typename Fn>
+  void for_cells(const Eigen::Vector3f& c, float radius, Fn&& fn) const {
     const Eigen::Vector3i lo = cell_of(c - Eigen::Vector3f::Constant(radius));
     const Eigen::Vector3i hi = cell_of(c + Eigen::Vector3f::Constant(radius));
-    const float r2 = radius * radius;
     // Cells are skipped against a slightly larger ball: a point's cell comes from
     // rounded products, so it may sit a hair outside the cell's exact bounds.
     const float rc = radius + 1e-4F * cell_;
     const float rc2 = rc * rc;
     const float cx = c.x(), cy = c.y(), cz = c.z();
-    // Each cell's hits come in index order: the query ends by merging these runs.
-    thread_local std::vector<std::size_t> runs;
-    runs.assign(1, base);
     // Distance along one axis from c to cell v's slab (0 inside).
     const auto gap = [&](int v, float cv) {
       const float a = static_cast<float>(v) * cell_;
       const float b = a + cell_;
       return cv < a ? a - cv : (cv > b ? cv - b : 0.0F);
     };
+    std::uint64_t last = kEmpty;
+    std::uint32_t last_block = kNone;
     for (int z = lo.z(); z <= hi.z(); ++z) {
       const float gz = gap(z, cz);
       const float gz2 = gz * gz;
@@ -134,96 +233,80 @@ class PointGrid {
         for (int x = lo.x(); x <= hi.x(); ++x) {
           const float gx = gap(x, cx);
           if (gyz2 + gx * gx > rc2) continue;  // the cell lies outside the ball
-          const Slot* s = find(key({x, y, z}));
-          if (s == nullptr) continue;
-          // Room for the whole cell, then keep the hits.
-          std::size_t n = out.size();
-          out.resize(n + (s->end - s->begin));
-          n += grid_block_hits(xs_.data() + s->begin, ys_.data() + s->begin, zs_.data() + s->begin,
-                               idx_.data() + s->begin, s->end - s->begin, cx, cy, cz, r2, out.data() + n);
-          out.resize(n);
-          if (n > runs.back()) runs.push_back(n);
+          const std::uint64_t b = block_key(x, y, z);
+          if (b != last) {
+            last = b;
+            last_block = find(b);
+          }
+          if (last_block != kNone) fn(64 * last_block + local(x, y, z));
         }
       }
     }
-    merge_runs(out, runs);
   }
 
- private:
-  // Sorts out[runs.front(), runs.back()), made of the sorted runs [runs[i], runs[i + 1]),
-  // by merging pairs of runs (branch-free) until one is left. Indices are distinct.
-  static void merge_runs(std::vector<std::uint32_t>& out, std::vector<std::size_t>& runs) {
-    if (runs.size() <= 2) return;
-    const std::size_t base = runs.front();
-    const std::size_t n = runs.back() - base;
-    thread_local std::vector<std::uint32_t> scratch;
-    scratch.resize(n);
-    std::uint32_t* src = out.data() + base;
-    std::uint32_t* dst = scratch.data();
-    for (std::size_t& r : runs) r -= base;
-    while (runs.size() > 2) {
-      std::size_t w = 0;  // runs written so far (their ends overwrite runs[1..])
-      std::size_t i = 0;
-      for (; i + 2 < runs.size(); i += 2) {
-        const std::uint32_t* a = src + runs[i];
-        const std::uint32_t* a_end = src + runs[i + 1];
-        const std::uint32_t* b = a_end;
-        const std::uint32_t* b_end = src + runs[i + 2];
-        std::uint32_t* d = dst + runs[i];
-        while (a < a_end && b < b_end) {
-          const bool take_b = *b < *a;
-          *d++ = take_b ? *b : *a;
-          b += take_b ? 1 : 0;
-          a += take_b ? 0 : 1;
-        }
-        d = std::copy(a, a_end, d);
-        std::copy(b, b_end, d);
-        runs[++w] = runs[i + 2];
-      }
-      if (i + 1 < runs.size()) {  // an odd run left: copied as it is
-        std::copy(src + runs[i], src + runs[i + 1], dst + runs[i]);
-        runs[++w] = runs[i + 1];
-      }
-      runs.resize(w + 1);
-      std::swap(src, dst);
-    }
-    if (src != out.data() + base) std::copy(src, src + n, out.data() + base);
-  }
-
-  struct Slot {
-    std::uint64_t key;
-    std::uint32_t begin, end;  // the cell's range in xs_/ys_/zs_/idx_ (padding included)
-  };
   static constexpr std::uint64_t kEmpty = ~0ULL;
+  static constexpr std::uint32_t kNone = ~0U;
   static constexpr float kFar = 1e18F;  // padding: (1e18)² is finite and beyond any radius
 
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
     return {static_cast<int>(std::floor(p.x() * inv_)), static_cast<int>(std::floor(p.y() * inv_)),
             static_cast<int>(std::floor(p.z() * inv_))};
   }
-  static std::uint64_t key(const Eigen::Vector3i& c) {
-    const auto u = [](int v) { return static_cast<std::uint64_t>(static_cast<std::int64_t>(v) + (1 << 20)) & 0x1FFFFFULL; };
-    return u(c.x()) | (u(c.y()) << 21) | (u(c.z()) << 42);
+  // A cell's key is its coordinates, 21 bits each (wrapping): the upper 19 name its
+  // block, the lower 2 its place in the block.
+  static std::uint32_t wrap(int v) {
+    return static_cast<std::uint32_t>((static_cast<std::int64_t>(v) + (1 << 20)) & 0x1FFFFF);
   }
+  static std::uint64_t block_key(int x, int y, int z) {
+    return static_cast<std::uint64_t>(wrap(x) >> 2) | (static_cast<std::uint64_t>(wrap(y) >> 2) << 19) |
+           (static_cast<std::uint64_t>(wrap(z) >> 2) << 38);
+  }
+  static std::uint32_t local(int x, int y, int z) { return (wrap(x) & 3) | (wrap(y) & 3) << 2 | (wrap(z) & 3) << 4; }
   static std::size_t hash(std::uint64_t k) {
     k ^= k >> 33;
     k *= 0xff51afd7ed558ccdULL;
     k ^= k >> 33;
     return static_cast<std::size_t>(k);
   }
-  [[nodiscard]] const Slot* find(std::uint64_t k) const {
+  // Block numbers by key, open addressing, at most half full (grown by doubling).
+  std::uint32_t insert(std::uint64_t k) {
+    if (2 * (count_ + 1) > keys_.size()) grow();
+    std::size_t i = hash(k) & mask_;
+    for (; keys_[i] != kEmpty; i = (i + 1) & mask_)
+      if (keys_[i] == k) return ids_[i];
+    keys_[i] = k;
+    ids_[i] = static_cast<std::uint32_t>(count_);
+    return static_cast<std::uint32_t>(count_++);
+  }
+  [[nodiscard]] std::uint32_t find(std::uint64_t k) const {
     for (std::size_t i = hash(k) & mask_;; i = (i + 1) & mask_) {
-      if (slots_[i].key == k) return &slots_[i];
-      if (slots_[i].key == kEmpty) return nullptr;
+      if (keys_[i] == k) return ids_[i];
+      if (keys_[i] == kEmpty) return kNone;
     }
+  }
+  void grow() {
+    const std::size_t cap = keys_.empty() ? 1024 : 2 * keys_.size();
+    std::vector<std::uint64_t> keys(cap, kEmpty);
+    std::vector<std::uint32_t> ids(cap);
+    const std::size_t mask = cap - 1;
+    for (std::size_t j = 0; j < keys_.size(); ++j) {
+      if (keys_[j] == kEmpty) continue;
+      std::size_t i = hash(keys_[j]) & mask;
+      while (keys[i] != kEmpty) i = (i + 1) & mask;
+      keys[i] = keys_[j];
+      ids[i] = ids_[j];
+    }
+    keys_.swap(keys);
+    ids_.swap(ids);
+    mask_ = cap - 1;
   }
 
   float cell_;
   float inv_;
+  std::vector<std::uint64_t> keys_;
+  std::vector<std::uint32_t> ids_;
   std::size_t mask_ = 0;
-  std::vector<Slot> slots_;
-  std::vector<float> xs_, ys_, zs_;  // points in cell order (each cell padded to a multiple of 8)
-  std::vector<std::uint32_t> idx_;   // their indices
+  std::size_t count_ = 0;
 };
 
 }  // namespace lex3d::detail

@@ -3,7 +3,6 @@
 #include <stdexcept>
 #include <string>
 
-#include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/model/model.hpp"
 #include "model/point_grid.hpp"
@@ -68,6 +67,9 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
   s.timings = fr.timings;
   // The range image measured the beam spacing already (unless its pixel sizes were given).
   const auto res = fr.image.beam_spacing ? fr.image.beam_spacing : estimate_angular_resolution(cloud);
+  // The image is not needed any more: its memory, freed now, serves the neighbourhoods
+  // below instead of fresh pages (each first touch of which costs a page fault).
+  fr.image = RangeImage{};
   s.beam_spacing = res ? std::max(res->azimuth_rad, res->elevation_rad) : 0.2 * M_PI / 180.0;
 
   // σ of eq. 13 for every point.
@@ -81,55 +83,21 @@ PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double 
   const std::size_t nf = s.features.size();
   s.nearby_offset.assign(nf + 1, 0);
   if (!cloud.empty() && nf > 0) {
+    std::vector<Eigen::Vector3f> centre(nf);
     std::vector<float> reach(nf);
     for (std::size_t f = 0; f < nf; ++f) {
       const Eigen::Vector3d t = s.features.features[f].T_cloud_feature.translation();
       const double range = (t - cloud.T_cloud_sensor.translation()).norm();
+      centre[f] = t.cast<float>();
       reach[f] = static_cast<float>(s.word_radius + 3.0 * factor * (range + s.word_radius) + 1e-3);
     }
-    // Cells about as large as the typical ball: smaller ones cost more cell look-ups
+    // Cells about as large as the typical ball: smaller ones cost more registrations
     // than they save in point tests (reaches grow with range, to several δ).
     std::vector<float> sorted = reach;
     const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
     std::nth_element(sorted.begin(), mid, sorted.end());
-    const detail::PointGrid grid(cloud.points, std::max(static_cast<float>(s.word_radius), *mid));
-    const auto centre = [&](std::size_t f) { return s.features.features[f].T_cloud_feature.translation().cast<float>(); };
-    // Blocks of features, each appending to its own list (one list, in order, with one
-    // thread), then joined in feature order.
-    constexpr std::size_t kBlock = 256;
-    const std::size_t blocks = (nf + kBlock - 1) / kBlock;
-    if (params.threads <= 1 || blocks <= 1) {
-      auto& index = s.nearby_index;
-      index.reserve(80 * nf);
-      for (std::size_t f = 0; f < nf; ++f) {
-        // Nearly full: room for the rest at the mean so far, plus 15 %.
-        if (index.size() + 4096 > index.capacity())
-          index.reserve(index.size() + index.size() / std::max<std::size_t>(f, 1) * (nf - f) * 115 / 100 + 8192);
-        grid.radius(centre(f), reach[f], index);
-        s.nearby_offset[f + 1] = index.size();
-      }
-    } else {
-      std::vector<std::vector<std::uint32_t>> part(blocks);
-      parallel_for(blocks, params.threads, [&](std::size_t b) {
-        const std::size_t f0 = b * kBlock, f1 = std::min(nf, f0 + kBlock);
-        part[b].reserve(80 * (f1 - f0));
-        for (std::size_t f = f0; f < f1; ++f) {
-          grid.radius(centre(f), reach[f], part[b]);
-          s.nearby_offset[f + 1] = part[b].size();  // within the block, for now
-        }
-      }, 1);
-      std::size_t total = 0;
-      for (std::size_t b = 0; b < blocks; ++b) {
-        const std::size_t f0 = b * kBlock, f1 = std::min(nf, f0 + kBlock);
-        for (std::size_t f = f0; f < f1; ++f) s.nearby_offset[f + 1] += total;
-        total += part[b].size();
-      }
-      s.nearby_index.resize(total);
-      parallel_for(blocks, params.threads, [&](std::size_t b) {
-        std::copy(part[b].begin(), part[b].end(),
-                  s.nearby_index.begin() + static_cast<std::ptrdiff_t>(s.nearby_offset[b * kBlock]));
-      }, 1);
-    }
+    detail::BallGrid grid(std::max(static_cast<float>(s.word_radius), *mid));
+    grid.points_in_balls(cloud.points, centre, reach, params.threads, s.nearby_offset, s.nearby_index);
   }
   s.prepare_ms = sw.elapsed_ms();
   return s;
