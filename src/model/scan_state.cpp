@@ -115,7 +115,8 @@ inline V8f exp_neg8(V8f x) {
 }
 
 // Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), times
-// norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature.
+// norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature
+// (a and norm are per scan point, read through idx).
 // Word arrays hold np points padded to npad, a multiple of 8, with far points; the sum
 // keeps eight lanes (point p in lane p % 8), each adding its blocks of eight points in
 // order, the lanes then added pairwise, so the SSE and AVX2 builds give the same bits.
@@ -177,7 +178,7 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     cy[u] = ly[k];
     cz[u] = lz[k];
     cr[u] = u < nl ? reach2[k] : -1.0F;
-    cna[u] = -a[k];
+    cna[u] = -a[idx[k]];
   }
   std::uint32_t items = 0;
   for (std::size_t b = 0; b < nb; ++b) {
@@ -388,9 +389,13 @@ struct Slabs {
   int count = 0;
   std::size_t size = 0;  // entries kept
 
-  void build(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n, const float* blo,
+  // r2: (3σ)² of each entry (σ² is taken as (3σ)² / 9).
+  void build(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n, const float* blo,
              const float* bhi) {
     constexpr int kMaxSlabs = 64;
+    s2_.resize(n);
+    for (std::size_t k = 0; k < n; ++k) s2_[k] = r2[k] / 9.0F;
+    const float* const s2 = s2_.data();
     keep_.resize(n);
     box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
     kept_.resize(n);
@@ -464,6 +469,7 @@ struct Slabs {
  private:
   std::vector<std::uint32_t> kept_, slab_, cursor_;
   std::vector<std::int32_t> keep_;
+  std::vector<float> s2_;
 };
 
 // Word choice by fit with slabs: the counts of fit_counts (entries with a word point
@@ -530,8 +536,6 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   ly_.resize(entries);
   lz_.resize(entries);
   reach2_e_.resize(entries);
-  a_e_.resize(entries);
-  sig2_e_.resize(entries);
   cache_.assign(entries, 0.0F);
   const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
@@ -545,8 +549,6 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
       ly_[k] = q.y();
       lz_[k] = q.z();
       reach2_e_[k] = reach2[j];
-      a_e_[k] = inv_two_sigma2_[j];
-      sig2_e_[k] = reach2[j] / 9.0F;
     }
   }, 64);
   recompute();
@@ -586,7 +588,7 @@ void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* 
   }
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
-  gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, a_e_.data() + b, e - b,
+  gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, inv_two_sigma2_.data(), e - b,
                 word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_.data() + b,
                 norm_.data(), out);
 }
@@ -754,9 +756,12 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       const std::size_t b = begin_of(f), e = end_of(f);
       const PackedWord& w = packed[static_cast<std::size_t>(word_[f])];
       thread_local std::vector<std::int32_t> hits, sup;
+      thread_local std::vector<float> sig2;
       hits.resize(e - b);
       sup.resize(w.size());
-      fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, w.x.data(), w.y.data(),
+      sig2.resize(e - b);
+      for (std::size_t k = b; k < e; ++k) sig2[k - b] = reach2_e_[k] / 9.0F;
+      fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2.data(), e - b, w.x.data(), w.y.data(),
                  w.z.data(), w.size(), hits.data(), sup.data());
       for (std::size_t k = b; k < e; ++k) covers[k] = hits[k - b] != 0 ? 1 : 0;
     }, 16);
@@ -1165,7 +1170,7 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
         hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
       }
     }
-    slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, lo, hi);
+    slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, e - b, lo, hi);
     hits.resize(slabs.x.size());
     double best = -1e300;
     for (std::size_t c = 0; c < kk; ++c) {

@@ -140,9 +140,7 @@ class ScanState {
   std::vector<std::size_t> off_;
   std::vector<std::uint32_t> idx_;      // the scan point of each entry
   std::vector<float> lx_, ly_, lz_;     // the entry's point in its feature's instance frame
-  std::vector<float> reach2_e_;         // (3σ)² of the entry's point
-  std::vector<float> a_e_;              // 1 / (2σ²) of the entry's point
-  std::vector<float> sig2_e_;           // σ² of the entry's point (as (3σ)² / 9)
+  std::vector<float> reach2_e_;         // (3σ)² of the entry's point (σ² taken as (3σ)² / 9)
   std::vector<float> cache_;            // current contribution of each feature's instance
   std::vector<float> inv_two_sigma2_;   // 1 / (2σ²), per point
   std::vector<double> norm_;            // (2πσ²)^(-3/2), per point
