@@ -529,9 +529,9 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
   pose_.resize(nf);
-  off_.assign(scan.nearby_offset.begin(), scan.nearby_offset.end());
+  off_ = scan.nearby_offset.data();
+  idx_ = scan.nearby_index.data();
   const std::size_t entries = off_[nf];
-  idx_.resize(entries);
   lx_.resize(entries);
   ly_.resize(entries);
   lz_.resize(entries);
@@ -544,7 +544,6 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
     for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
       const std::uint32_t j = near[k];
       const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
-      idx_[k] = j;
       lx_[k] = q.x();
       ly_[k] = q.y();
       lz_[k] = q.z();
@@ -589,7 +588,7 @@ void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* 
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
   gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, inv_two_sigma2_.data(), e - b,
-                word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_.data() + b,
+                word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_ + b,
                 norm_.data(), out);
 }
 

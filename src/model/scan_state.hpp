@@ -136,9 +136,10 @@ class ScanState {
 
   const PreparedScan& scan_;
   std::vector<Eigen::Isometry3f> pose_;  // instance pose of each feature (cloud frame)
-  // The nearby points of all features, flat: feature f owns entries [off_[f], off_[f+1]).
-  std::vector<std::size_t> off_;
-  std::vector<std::uint32_t> idx_;      // the scan point of each entry
+  // The nearby points of all features, flat (the scan's own arrays): feature f owns
+  // entries [off_[f], off_[f+1]).
+  const std::size_t* off_ = nullptr;
+  const std::uint32_t* idx_ = nullptr;  // the scan point of each entry
   std::vector<float> lx_, ly_, lz_;     // the entry's point in its feature's instance frame
   std::vector<float> reach2_e_;         // (3σ)² of the entry's point (σ² taken as (3σ)² / 9)
   std::vector<float> cache_;            // current contribution of each feature's instance
