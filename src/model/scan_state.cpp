@@ -357,23 +357,43 @@ inline float mask(float v, std::uint32_t m) {
   return v;
 }
 
-// keep[k] = 1 when entry k may be within its σ of the box [blo, bhi], else 0. The margin
-// (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the box's centre and half sizes, so
-// no entry that could pass the fit test is dropped.
+// 1 when an entry at (x, y, z) with σ² s2 may be within its σ of the box with centre c and
+// half sizes h, else 0. The margin (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the
+// box's centre and half sizes, so no entry that could pass the fit test with a point in
+// the box gets 0.
+inline std::int32_t near_box(float x, float y, float z, float s2, const float* c, const float* h) {
+  float ox = std::fabs(x - c[0]) - h[0];
+  float oy = std::fabs(y - c[1]) - h[1];
+  float oz = std::fabs(z - c[2]) - h[2];
+  // max(o, 0) as bits, so that the loops using this vectorise.
+  ox = mask(ox, static_cast<std::uint32_t>(-static_cast<std::int32_t>(ox > 0.0F)));
+  oy = mask(oy, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oy > 0.0F)));
+  oz = mask(oz, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oz > 0.0F)));
+  return (ox * ox + oy * oy + oz * oz <= s2 * 1.002F + 1e-8F) ? 1 : 0;
+}
+inline void box_centre(const float* blo, const float* bhi, float* c, float* h) {
+  for (int a = 0; a < 3; ++a) {
+    c[a] = 0.5F * (blo[a] + bhi[a]);
+    h[a] = 0.5F * (bhi[a] - blo[a]);
+  }
+}
+
+// keep[k] = near_box of entry k and the box [blo, bhi].
 LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
                            const float* blo, const float* bhi, std::int32_t* keep) {
-  const float cx = 0.5F * (blo[0] + bhi[0]), cy = 0.5F * (blo[1] + bhi[1]), cz = 0.5F * (blo[2] + bhi[2]);
-  const float hx = 0.5F * (bhi[0] - blo[0]), hy = 0.5F * (bhi[1] - blo[1]), hz = 0.5F * (bhi[2] - blo[2]);
-  for (std::size_t k = 0; k < n; ++k) {
-    float ox = std::fabs(lx[k] - cx) - hx;
-    float oy = std::fabs(ly[k] - cy) - hy;
-    float oz = std::fabs(lz[k] - cz) - hz;
-    // max(o, 0) as bits, so that the loop vectorises.
-    ox = mask(ox, static_cast<std::uint32_t>(-static_cast<std::int32_t>(ox > 0.0F)));
-    oy = mask(oy, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oy > 0.0F)));
-    oz = mask(oz, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oz > 0.0F)));
-    keep[k] = (ox * ox + oy * oy + oz * oz <= s2[k] * 1.002F + 1e-8F) ? 1 : 0;
-  }
+  float c[3], h[3];
+  box_centre(blo, bhi, c, h);
+  for (std::size_t k = 0; k < n; ++k) keep[k] = near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+}
+
+// How many of the n entries near_box finds near the box [blo, bhi].
+LEX3D_CLONES std::size_t box_count(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
+                                   const float* blo, const float* bhi) {
+  float c[3], h[3];
+  box_centre(blo, bhi, c, h);
+  std::int32_t count = 0;
+  for (std::size_t k = 0; k < n; ++k) count += near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+  return static_cast<std::size_t>(count);
 }
 
 // The entries of one feature that can be within their σ of a box (the union of the
@@ -476,8 +496,11 @@ struct Slabs {
 // within their σ, and the word points with no entry within σ), testing each word point
 // against its three slabs only, widened to whole blocks of 8 entries. Every pair tested
 // is compared as in fit_counts; the pairs skipped are farther than σ apart along x.
-LEX3D_CLONES void fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
-                                   std::int32_t* hit, std::size_t& explained, std::size_t& unsupported) {
+// Gives up (returns false, the counts unset) once `max_lonely` word points have no entry
+// within σ.
+LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
+                                   std::size_t max_lonely, std::int32_t* hit, std::size_t& explained,
+                                   std::size_t& unsupported) {
   const std::size_t npad = s.x.size();
   const float* lx = s.x.data();
   const float* ly = s.y.data();
@@ -489,21 +512,25 @@ LEX3D_CLONES void fit_counts_slabs(const Slabs& s, const float* wx, const float*
     const float px = wx[p], py = wy[p], pz = wz[p];
     std::uint32_t lo = 0, hi = 0;
     s.window(px, lo, hi);
-    std::int32_t any[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (std::size_t k = lo & ~7U; k < hi; k += 8)
-      for (std::size_t l = 0; l < 8; ++l) {
-        const float dx = px - lx[k + l], dy = py - ly[k + l], dz = pz - lz[k + l];
-        const std::int32_t m = (dx * dx + dy * dy + dz * dz <= sig2[k + l]) ? 1 : 0;
-        hit[k + l] |= m;
-        any[l] |= m;
-      }
-    const std::int32_t a = (any[0] | any[1] | any[2] | any[3]) | (any[4] | any[5] | any[6] | any[7]);
-    lonely += a ? 0 : 1;
+    const V8f x = splat8(px), y = splat8(py), z = splat8(pz);
+    V8i any = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (std::size_t k = lo & ~7U; k < hi; k += 8) {
+      const V8f dx = x - load8(lx + k), dy = y - load8(ly + k), dz = z - load8(lz + k);
+      const V8i m = (dx * dx + dy * dy + dz * dz <= load8(sig2 + k)) & 1;
+      V8i h;
+      std::memcpy(&h, hit + k, sizeof h);
+      h |= m;
+      std::memcpy(hit + k, &h, sizeof h);
+      any |= m;
+    }
+    lonely += any8(any) ? 0 : 1;
+    if (lonely >= max_lonely) return false;
   }
   std::size_t e = 0;
   for (std::size_t k = 0; k < s.size; ++k) e += static_cast<std::size_t>(hit[k]);
   explained = e;
   unsupported = lonely;
+  return true;
 }
 
 }  // namespace
@@ -1175,7 +1202,22 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     for (std::size_t c = 0; c < kk; ++c) {
       const PackedWord& w = packed[near[c].second];
       std::size_t explained = 0, unsupported = w.size();
-      if (slabs.size > 0) fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), hits.data(), explained, unsupported);
+      if (slabs.size > 0) {
+        // A word wins only with a score above the best so far; it explains at most the
+        // entries near its bounding box, so it is passed over (or given up) once that
+        // many less its word points known to be unsupported cannot beat the best.
+        const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
+        const std::size_t most = box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(),
+                                           slabs.x.size(), wlo, whi);
+        std::size_t max_lonely = std::numeric_limits<std::size_t>::max();
+        if (best > -1e300) {
+          if (static_cast<double>(most) <= best) continue;
+          max_lonely = static_cast<std::size_t>(static_cast<double>(most) - best);
+        }
+        if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
+                              unsupported))
+          continue;
+      }
       const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
       if (score > best) {
         best = score;
