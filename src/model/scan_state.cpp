@@ -1198,32 +1198,48 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     }
     slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, e - b, lo, hi);
     hits.resize(slabs.x.size());
-    double best = -1e300;
+    if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
+      for (std::size_t c = 0; c < kk; ++c)
+        if (c == 0 || packed[near[c].second].size() < packed[static_cast<std::size_t>(choice[i])].size())
+          choice[i] = static_cast<std::int32_t>(near[c].second);
+      return;
+    }
+    // The word with the highest score (explained - unsupported), the first in the list
+    // on ties. A word explains at most the entries near its bounding box (`most`), so
+    // the words are tried by decreasing `most`, and one is passed over, or given up
+    // once enough of its points are found unsupported, when it can no longer win.
+    thread_local std::vector<std::pair<std::int64_t, std::uint32_t>> order;  // (-most, position)
+    order.clear();
     for (std::size_t c = 0; c < kk; ++c) {
       const PackedWord& w = packed[near[c].second];
-      std::size_t explained = 0, unsupported = w.size();
-      if (slabs.size > 0) {
-        // A word wins only with a score above the best so far; it explains at most the
-        // entries near its bounding box, so it is passed over (or given up) once that
-        // many less its word points known to be unsupported cannot beat the best.
-        const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
-        const std::size_t most = box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(),
-                                           slabs.x.size(), wlo, whi);
-        std::size_t max_lonely = std::numeric_limits<std::size_t>::max();
-        if (best > -1e300) {
-          if (static_cast<double>(most) <= best) continue;
-          max_lonely = static_cast<std::size_t>(static_cast<double>(most) - best);
-        }
-        if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
-                              unsupported))
-          continue;
+      const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
+      const std::size_t most =
+          box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.x.size(), wlo, whi);
+      order.emplace_back(-static_cast<std::int64_t>(most), static_cast<std::uint32_t>(c));
+    }
+    std::sort(order.begin(), order.end());
+    std::int64_t best = 0;
+    std::size_t best_c = kk;  // none yet
+    for (const auto& [minus_most, c] : order) {
+      const PackedWord& w = packed[near[c].second];
+      // It must reach best, or best + 1 when it comes after the best word in the list.
+      std::size_t max_lonely = std::numeric_limits<std::size_t>::max();
+      if (best_c < kk) {
+        const std::int64_t slack = -minus_most - best - (c > best_c ? 1 : 0);
+        if (slack < 0) continue;
+        max_lonely = static_cast<std::size_t>(slack) + 1;
       }
-      const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
-      if (score > best) {
+      std::size_t explained = 0, unsupported = 0;
+      if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
+                            unsupported))
+        continue;
+      const std::int64_t score = static_cast<std::int64_t>(explained) - static_cast<std::int64_t>(unsupported);
+      if (best_c == kk || score > best || (score == best && c < best_c)) {
         best = score;
-        choice[i] = static_cast<std::int32_t>(near[c].second);
+        best_c = c;
       }
     }
+    choice[i] = static_cast<std::int32_t>(near[best_c].second);
   }, 8);
   std::size_t changed = 0;
   for (std::size_t i = 0; i < active.size(); ++i) {
