@@ -541,7 +541,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   inv_two_sigma2_.resize(n);
   norm_.resize(n);
   log_floor_.resize(n);
-  std::vector<float> reach2(n);
+  LargeVector<float> reach2(n);
   const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
   for (std::size_t j = 0; j < n; ++j) {
     const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
@@ -800,11 +800,11 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
   // staged_delta instead (the points of one neighbourhood are distinct in practice).
   const std::size_t nf = word_.size();
   std::vector<std::size_t> nz_off(nf + 1, 0);
-  std::vector<std::uint32_t> nz_j(cache_.size());
-  std::vector<float> nz_c(cache_.size());
+  LargeVector<std::uint32_t> nz_j(cache_.size());
+  LargeVector<float> nz_c(cache_.size());
   bool repeats = false;
   {
-    std::vector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
+    LargeVector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
     std::size_t n = 0;
     for (std::size_t f = 0; f < nf; ++f) {
       nz_off[f] = n;
@@ -869,7 +869,7 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
   struct PointTerms {
     double s, ln_s, floor;
   };
-  std::vector<PointTerms> pt(S_.size());
+  LargeVector<PointTerms> pt(S_.size());
   for (std::size_t j = 0; j < S_.size(); ++j) pt[j] = {S_[j], log_s_[j], log_floor_[j]};
   const auto term = [](const PointTerms& q, double ln_s, double lm) {
     const double v = ln_s - lm;
