@@ -239,12 +239,72 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
 }
 
-// For each of the npad word points (mx, my, mz), the first target strictly nearest
-// within reach (match -1 when none). Eight word points at a time, held in registers
-// while all targets pass, with selects done on bits.
-LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, std::size_t nt, const float* mx,
-                                  const float* my, const float* mz, std::size_t npad, float reach2, float* best,
-                                  std::int32_t* match) {
+// For each of the npad word points (mx, my, mz), np of them real (the rest padding that
+// matches nothing), the first of the nt targets strictly nearest within reach (match -1
+// when none). The target arrays are padded to a multiple of 8 with far points.
+// Eight word points at a time, held in registers while the targets pass, with selects
+// done on bits. The targets go by in runs of eight (in order); a run whose bounding box
+// is at least reach from that of the word points in hand is left out: no squared
+// distance between one of its targets and one of those points is below that of the boxes
+// (the rounded differences keep their order), so none of its targets could be taken.
+// The bounding boxes of the nt targets (tx, ty, tz) in runs of eight, as six arrays of
+// nr8 values (lo x, y, z, hi x, y, z; nr8: the runs rounded up to a multiple of 8, the
+// extra ones empty boxes far away); returns nr8.
+std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::size_t nt, std::vector<float>& box) {
+  const std::size_t nr = (nt + 7) / 8;
+  const std::size_t nr8 = (nr + 7) / 8 * 8;
+  box.assign(6 * nr8, 1e9F);
+  float* const lo[3] = {box.data(), box.data() + nr8, box.data() + 2 * nr8};
+  float* const hi[3] = {box.data() + 3 * nr8, box.data() + 4 * nr8, box.data() + 5 * nr8};
+  const float* const t[3] = {tx, ty, tz};
+  for (std::size_t r = 0; r < nr; ++r) {
+    const std::size_t t0 = 8 * r, t1 = std::min(t0 + 8, nt);  // the real targets of the run
+    for (int a = 0; a < 3; ++a) {
+      float l = t[a][t0], h = t[a][t0];
+      for (std::size_t u = t0 + 1; u < t1; ++u) {
+        l = std::min(l, t[a][u]);
+        h = std::max(h, t[a][u]);
+      }
+      lo[a][r] = l;
+      hi[a][r] = h;
+    }
+  }
+  return nr8;
+}
+
+LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, const float* rbox, std::size_t nr8,
+                                  const float* mx, const float* my, const float* mz, std::size_t np, std::size_t npad,
+                                  float reach2, float* best, std::int32_t* match) {
+  thread_local std::vector<std::uint32_t> runs;
+  if (runs.size() < nr8) runs.resize(nr8);
+  // The runs that may hold a target within reach of the real word points [p, p + len);
+  // returns how many (in runs).
+  const auto near_runs = [&](std::size_t p, std::size_t len) {
+    const std::size_t e = std::min(p + len, np);
+    if (e <= p) return std::size_t{0};  // padding only
+    float lo[3] = {mx[p], my[p], mz[p]}, hi[3] = {mx[p], my[p], mz[p]};
+    for (std::size_t q = p + 1; q < e; ++q) {
+      lo[0] = std::min(lo[0], mx[q]);
+      lo[1] = std::min(lo[1], my[q]);
+      lo[2] = std::min(lo[2], mz[q]);
+      hi[0] = std::max(hi[0], mx[q]);
+      hi[1] = std::max(hi[1], my[q]);
+      hi[2] = std::max(hi[2], mz[q]);
+    }
+    std::size_t count = 0;
+    const V8f zero = splat8(0.0F);
+    for (std::size_t r = 0; r < nr8; r += 8) {
+      const V8f gx = max8(max8(load8(rbox + r) - splat8(hi[0]), splat8(lo[0]) - load8(rbox + 3 * nr8 + r)), zero);
+      const V8f gy = max8(max8(load8(rbox + nr8 + r) - splat8(hi[1]), splat8(lo[1]) - load8(rbox + 4 * nr8 + r)), zero);
+      const V8f gz = max8(max8(load8(rbox + 2 * nr8 + r) - splat8(hi[2]), splat8(lo[2]) - load8(rbox + 5 * nr8 + r)), zero);
+      const V8i near = gx * gx + gy * gy + gz * gz < splat8(reach2);
+      for (std::size_t l = 0; l < 8; ++l) {
+        runs[count] = static_cast<std::uint32_t>(r + l);
+        count -= static_cast<std::size_t>(static_cast<std::ptrdiff_t>(near[l]));
+      }
+    }
+    return count;
+  };
   const V8i zero8 = {0, 0, 0, 0, 0, 0, 0, 0};
   std::size_t p = 0;
   // Two blocks at a time: two independent chains of compare and select.
@@ -253,7 +313,9 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     const V8f bx = load8(mx + p + 8), by = load8(my + p + 8), bz = load8(mz + p + 8);
     V8f abst = splat8(reach2), bbst = abst;
     V8i amt = zero8 - 1, bmt = amt;
-    for (std::size_t t = 0; t < nt; ++t) {
+    const std::size_t nrun = near_runs(p, 16);
+    for (std::size_t i = 0; i < nrun; ++i)
+    for (std::size_t t = 8 * std::size_t{runs[i]}; t < 8 * std::size_t{runs[i]} + 8; ++t) {
       const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
       const V8i ti = splat8i(static_cast<std::int32_t>(t));
       const V8f adx = x - ax, ady = y - ay, adz = z - az;
@@ -275,7 +337,9 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     const V8f px = load8(mx + p), py = load8(my + p), pz = load8(mz + p);
     V8f bst = splat8(reach2);
     V8i mt = zero8 - 1;
-    for (std::size_t t = 0; t < nt; ++t) {
+    const std::size_t nrun = near_runs(p, 8);
+    for (std::size_t i = 0; i < nrun; ++i)
+    for (std::size_t t = 8 * std::size_t{runs[i]}; t < 8 * std::size_t{runs[i]} + 8; ++t) {
       const V8f dx = splat8(tx[t]) - px, dy = splat8(ty[t]) - py, dz = splat8(tz[t]) - pz;
       const V8f d2 = dx * dx + dy * dy + dz * dz;
       const V8i m = d2 < bst;
@@ -1089,12 +1153,13 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // one to a box holding it). The box is the moved word's bounding box grown by
     // `slack`, kept while it still holds the moved word.
     const float slack = 0.1F * static_cast<float>(max_distance);
-    thread_local std::vector<float> fx, fy, fz, mx, my, mz, best;
+    thread_local std::vector<float> fx, fy, fz, mx, my, mz, best, rbox;
+    std::size_t nr8 = 0;
     thread_local std::vector<std::int32_t> match;
     const std::size_t b = begin_of(f), e = end_of(f);
-    fx.resize(e - b);
-    fy.resize(e - b);
-    fz.resize(e - b);
+    fx.resize(e - b + 8);
+    fy.resize(e - b + 8);
+    fz.resize(e - b + 8);
     std::size_t nf = 0;
     float slo[3] = {0.0F, 0.0F, 0.0F}, shi[3] = {-1.0F, -1.0F, -1.0F};  // empty: filled in the first round
     const std::size_t npad = pw.xp.size();
@@ -1118,8 +1183,11 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
         const float whi[3] = {pw.hi.x(), pw.hi.y(), pw.hi.z()};
         nf = select_targets(lx_.data() + b, ly_.data() + b, lz_.data() + b, e - b, wlo, whi, margin, slo, shi, reach2,
                             fx.data(), fy.data(), fz.data());
+        // Padding to a multiple of 8: far points nothing takes.
+        for (std::size_t t = nf; t < (nf + 7) / 8 * 8; ++t) fx[t] = fy[t] = fz[t] = 1e9F;
+        nr8 = run_boxes(fx.data(), fy.data(), fz.data(), nf, rbox);
       }
-      nearest_targets(fx.data(), fy.data(), fz.data(), nf, mx.data(), my.data(), mz.data(), npad, reach2, best.data(),
+      nearest_targets(fx.data(), fy.data(), fz.data(), rbox.data(), nr8, mx.data(), my.data(), mz.data(), np, npad, reach2, best.data(),
                       match.data());
       const Eigen::Isometry3f D =
           fit_pairs(mx.data(), my.data(), mz.data(), np, fx.data(), fy.data(), fz.data(), match.data());
