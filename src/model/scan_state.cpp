@@ -949,13 +949,27 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       double d = 0.0;
       std::size_t touched_above = 0;
       staged_log_.resize(ne - nb);
+      // A removal is kept out as soon as it is certain to lower ln L: no term still to
+      // come adds more than gain = ln M - ln M' (S_j only falls; the background stays), nor
+      // does any point above the background not yet seen, so d plus that many gains bounds
+      // the final d (the margin covers rounding). Saves the log() of the remaining points.
+      const double gain = lm_old - lm_new;
+      bool lowers = false;
       for (std::size_t i = nb; i < ne; ++i) {
         const PointTerms& q = pt[nz_j[i]];
         const double ln_new = log_or_minus_inf(std::max(0.0, q.s + -static_cast<double>(nz_c[i])));
         staged_log_[i - nb] = ln_new;
         d += term(q, ln_new, lm_new) - term(q, q.ln_s, lm_old);
         touched_above += q.ln_s - lm_old > q.floor ? 1 : 0;
+        if (((i - nb) & 7) == 7) {
+          const double most = d + static_cast<double>(above_ - touched_above + (ne - 1 - i)) * gain;
+          if (most < -1e-6 * (1.0 + std::fabs(d))) {
+            lowers = true;
+            break;
+          }
+        }
       }
+      if (lowers) continue;
       d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
       if (d < 0.0 || sole_cover(f)) continue;
       log_l_ += d;
