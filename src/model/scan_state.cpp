@@ -1150,7 +1150,23 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (word_[f] >= 0) active.push_back(f);
   std::vector<Eigen::Isometry3f> correction(active.size(), Eigen::Isometry3f::Identity());
-  parallel_for(active.size(), threads, [&](std::size_t i) {
+  // The new pose of instance i, and its entries moved into that frame (while they are in
+  // cache from the fit).
+  const auto finish = [&](std::size_t i) {
+    const std::size_t f = active[i];
+    pose_[f] = pose_[f] * correction[i];
+    // Keep the rotation exactly orthonormal: float products drift.
+    pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
+    const Eigen::Isometry3f inv = correction[i].inverse();
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
+      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
+      lx_[k] = q.x();
+      ly_[k] = q.y();
+      lz_[k] = q.z();
+    }
+  };
+  // The ICP fit of instance i (correction[i]).
+  const auto fit = [&](std::size_t i) {
     const std::size_t f = active[i];
     // ICP in the instance's frame: D moves the word onto the nearby scan points;
     // the new pose is pose · D.
@@ -1210,20 +1226,11 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
       // Converged: under 0.1 mm and 0.1 mrad.
       if (D.translation().norm() < 1e-4F && Eigen::AngleAxisf(D.linear()).angle() < 1e-4F) break;
     }
-  }, 8);
+  };
   parallel_for(active.size(), threads, [&](std::size_t i) {
-    const std::size_t f = active[i];
-    pose_[f] = pose_[f] * correction[i];
-    // Keep the rotation exactly orthonormal: float products drift.
-    pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
-    const Eigen::Isometry3f inv = correction[i].inverse();
-    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
-      lx_[k] = q.x();
-      ly_[k] = q.y();
-      lz_[k] = q.z();
-    }
-  }, 64);
+    fit(i);
+    finish(i);
+  }, 8);
   stale_ = true;
 }
 
