@@ -1033,7 +1033,7 @@ Eigen::Matrix3d kabsch_rotation(const Eigen::Matrix3d& H) {
 // targets, in the instance's frame; identity when fewer than 3 pairs fall within reach.
 // `match[i]` is the target (tx, ty, tz)[match[i]] of word point i or -1. The pairs are
 // gathered first (no branch on the match); the sums run in double, in word point order.
-Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
+LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
                             const float* ty, const float* tz, const std::int32_t* match) {
   thread_local std::vector<double> pairs_buf;
   pairs_buf.resize(6 * np);
