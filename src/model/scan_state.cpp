@@ -1234,6 +1234,73 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
   stale_ = true;
 }
 
+namespace {
+
+// Word choice by fit for one feature: among the kk words `near` (nearest descriptor
+// first), the one that best fits the feature's n entries (lx, ly, lz; r2: (3σ)² of each),
+// as ScanState::choose_by_fit describes. Compiled for AVX2 too, with the slab loops.
+LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near, std::size_t kk,
+                                    const std::vector<PackedWord>& packed, const float* lx, const float* ly,
+                                    const float* lz, const float* r2, std::size_t n) {
+  thread_local std::vector<std::int32_t> hits;
+  thread_local Slabs slabs;
+  float lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = packed[near[0].second].lo[a];
+    hi[a] = packed[near[0].second].hi[a];
+    for (std::size_t c = 1; c < kk; ++c) {
+      lo[a] = std::min(lo[a], packed[near[c].second].lo[a]);
+      hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
+    }
+  }
+  slabs.build(lx, ly, lz, r2, n, lo, hi);
+  hits.resize(slabs.x.size());
+  if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
+    std::size_t pick = 0;
+    for (std::size_t c = 1; c < kk; ++c)
+      if (packed[near[c].second].size() < packed[near[pick].second].size()) pick = c;
+    return near[pick].second;
+  }
+  // The word with the highest score (explained - unsupported), the first in the list
+  // on ties. A word explains at most the entries near its bounding box (`most`), so
+  // the words are tried by decreasing `most`, and one is passed over, or given up
+  // once enough of its points are found unsupported, when it can no longer win.
+  thread_local std::vector<std::pair<std::int64_t, std::uint32_t>> order;  // (-most, position)
+  order.clear();
+  for (std::size_t c = 0; c < kk; ++c) {
+    const PackedWord& w = packed[near[c].second];
+    const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
+    const std::size_t most =
+        box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.x.size(), wlo, whi);
+    order.emplace_back(-static_cast<std::int64_t>(most), static_cast<std::uint32_t>(c));
+  }
+  std::sort(order.begin(), order.end());
+  std::int64_t best = 0;
+  std::size_t best_c = kk;  // none yet
+  for (const auto& [minus_most, c] : order) {
+    const PackedWord& w = packed[near[c].second];
+    // It must reach best, or best + 1 when it comes after the best word in the list.
+    std::size_t max_lonely = std::numeric_limits<std::size_t>::max();
+    if (best_c < kk) {
+      const std::int64_t slack = -minus_most - best - (c > best_c ? 1 : 0);
+      if (slack < 0) continue;
+      max_lonely = static_cast<std::size_t>(slack) + 1;
+    }
+    std::size_t explained = 0, unsupported = 0;
+    if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
+                          unsupported))
+      continue;
+    const std::int64_t score = static_cast<std::int64_t>(explained) - static_cast<std::int64_t>(unsupported);
+    if (best_c == kk || score > best || (score == best && c < best_c)) {
+      best = score;
+      best_c = c;
+    }
+  }
+  return near[best_c].second;
+}
+
+}  // namespace
+
 std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int threads, bool all_features) {
   if (alphabet.size() == 0) return 0;
   if (!all_features && (k <= 1 || alphabet.size() < 2)) return 0;
@@ -1254,8 +1321,6 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     const std::size_t f = active[i];
     thread_local std::vector<float> dist;
     thread_local std::vector<std::pair<float, std::uint32_t>> near;
-    thread_local std::vector<std::int32_t> hits;
-    thread_local Slabs slabs;
     // The kk nearest words by descriptor (ties: lower id), in order: words come by
     // increasing id, so one enters the list when strictly nearer than its last.
     dist.resize(nw);
@@ -1276,59 +1341,8 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
       return;
     }
     const std::size_t b = begin_of(f), e = end_of(f);
-    float lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = packed[near[0].second].lo[a];
-      hi[a] = packed[near[0].second].hi[a];
-      for (std::size_t c = 1; c < kk; ++c) {
-        lo[a] = std::min(lo[a], packed[near[c].second].lo[a]);
-        hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
-      }
-    }
-    slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, e - b, lo, hi);
-    hits.resize(slabs.x.size());
-    if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
-      for (std::size_t c = 0; c < kk; ++c)
-        if (c == 0 || packed[near[c].second].size() < packed[static_cast<std::size_t>(choice[i])].size())
-          choice[i] = static_cast<std::int32_t>(near[c].second);
-      return;
-    }
-    // The word with the highest score (explained - unsupported), the first in the list
-    // on ties. A word explains at most the entries near its bounding box (`most`), so
-    // the words are tried by decreasing `most`, and one is passed over, or given up
-    // once enough of its points are found unsupported, when it can no longer win.
-    thread_local std::vector<std::pair<std::int64_t, std::uint32_t>> order;  // (-most, position)
-    order.clear();
-    for (std::size_t c = 0; c < kk; ++c) {
-      const PackedWord& w = packed[near[c].second];
-      const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
-      const std::size_t most =
-          box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.x.size(), wlo, whi);
-      order.emplace_back(-static_cast<std::int64_t>(most), static_cast<std::uint32_t>(c));
-    }
-    std::sort(order.begin(), order.end());
-    std::int64_t best = 0;
-    std::size_t best_c = kk;  // none yet
-    for (const auto& [minus_most, c] : order) {
-      const PackedWord& w = packed[near[c].second];
-      // It must reach best, or best + 1 when it comes after the best word in the list.
-      std::size_t max_lonely = std::numeric_limits<std::size_t>::max();
-      if (best_c < kk) {
-        const std::int64_t slack = -minus_most - best - (c > best_c ? 1 : 0);
-        if (slack < 0) continue;
-        max_lonely = static_cast<std::size_t>(slack) + 1;
-      }
-      std::size_t explained = 0, unsupported = 0;
-      if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
-                            unsupported))
-        continue;
-      const std::int64_t score = static_cast<std::int64_t>(explained) - static_cast<std::int64_t>(unsupported);
-      if (best_c == kk || score > best || (score == best && c < best_c)) {
-        best = score;
-        best_c = c;
-      }
-    }
-    choice[i] = static_cast<std::int32_t>(near[best_c].second);
+    choice[i] = static_cast<std::int32_t>(best_fit(near.data(), kk, packed, lx_.data() + b, ly_.data() + b,
+                                                   lz_.data() + b, reach2_e_.data() + b, e - b));
   }, 8);
   std::size_t changed = 0;
   for (std::size_t i = 0; i < active.size(); ++i) {
