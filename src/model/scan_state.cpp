@@ -240,8 +240,9 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
 }
 
 // For each of the npad word points (mx, my, mz), np of them real (the rest padding that
-// matches nothing), the first of the nt targets strictly nearest within reach (match -1
-// when none). The target arrays are padded to a multiple of 8 with far points.
+// matches nothing), the first target strictly nearest within reach (match -1 when none).
+// The targets are padded to a multiple of 8 with far points (on the other side from the
+// word's padding), their runs' boxes made by run_boxes.
 // Eight word points at a time, held in registers while the targets pass, with selects
 // done on bits. The targets go by in runs of eight (in order); a run whose bounding box
 // is at least reach from that of the word points in hand is left out: no squared
@@ -314,19 +315,21 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     V8f abst = splat8(reach2), bbst = abst;
     V8i amt = zero8 - 1, bmt = amt;
     const std::size_t nrun = near_runs(p, 16);
-    for (std::size_t i = 0; i < nrun; ++i)
-    for (std::size_t t = 8 * std::size_t{runs[i]}; t < 8 * std::size_t{runs[i]} + 8; ++t) {
-      const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
-      const V8i ti = splat8i(static_cast<std::int32_t>(t));
-      const V8f adx = x - ax, ady = y - ay, adz = z - az;
-      const V8f bdx = x - bx, bdy = y - by, bdz = z - bz;
-      const V8f ad2 = adx * adx + ady * ady + adz * adz;
-      const V8f bd2 = bdx * bdx + bdy * bdy + bdz * bdz;
-      const V8i am = ad2 < abst, bm = bd2 < bbst;
-      abst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(abst) & ~am) | (reinterpret_cast<V8i>(ad2) & am));
-      bbst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bbst) & ~bm) | (reinterpret_cast<V8i>(bd2) & bm));
-      amt = (amt & ~am) | (ti & am);
-      bmt = (bmt & ~bm) | (ti & bm);
+    for (std::size_t i = 0; i < nrun; ++i) {
+      const std::size_t t0 = 8 * std::size_t{runs[i]};
+      for (std::size_t t = t0; t < t0 + 8; ++t) {
+        const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
+        const V8i ti = splat8i(static_cast<std::int32_t>(t));
+        const V8f adx = x - ax, ady = y - ay, adz = z - az;
+        const V8f bdx = x - bx, bdy = y - by, bdz = z - bz;
+        const V8f ad2 = adx * adx + ady * ady + adz * adz;
+        const V8f bd2 = bdx * bdx + bdy * bdy + bdz * bdz;
+        const V8i am = ad2 < abst, bm = bd2 < bbst;
+        abst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(abst) & ~am) | (reinterpret_cast<V8i>(ad2) & am));
+        bbst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bbst) & ~bm) | (reinterpret_cast<V8i>(bd2) & bm));
+        amt = (amt & ~am) | (ti & am);
+        bmt = (bmt & ~bm) | (ti & bm);
+      }
     }
     std::memcpy(best + p, &abst, sizeof abst);
     std::memcpy(match + p, &amt, sizeof amt);
@@ -338,13 +341,15 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     V8f bst = splat8(reach2);
     V8i mt = zero8 - 1;
     const std::size_t nrun = near_runs(p, 8);
-    for (std::size_t i = 0; i < nrun; ++i)
-    for (std::size_t t = 8 * std::size_t{runs[i]}; t < 8 * std::size_t{runs[i]} + 8; ++t) {
-      const V8f dx = splat8(tx[t]) - px, dy = splat8(ty[t]) - py, dz = splat8(tz[t]) - pz;
-      const V8f d2 = dx * dx + dy * dy + dz * dz;
-      const V8i m = d2 < bst;
-      bst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bst) & ~m) | (reinterpret_cast<V8i>(d2) & m));
-      mt = (mt & ~m) | (splat8i(static_cast<std::int32_t>(t)) & m);
+    for (std::size_t i = 0; i < nrun; ++i) {
+      const std::size_t t0 = 8 * std::size_t{runs[i]};
+      for (std::size_t t = t0; t < t0 + 8; ++t) {
+        const V8f dx = splat8(tx[t]) - px, dy = splat8(ty[t]) - py, dz = splat8(tz[t]) - pz;
+        const V8f d2 = dx * dx + dy * dy + dz * dz;
+        const V8i m = d2 < bst;
+        bst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bst) & ~m) | (reinterpret_cast<V8i>(d2) & m));
+        mt = (mt & ~m) | (splat8i(static_cast<std::int32_t>(t)) & m);
+      }
     }
     std::memcpy(best + p, &bst, sizeof bst);
     std::memcpy(match + p, &mt, sizeof mt);
@@ -1213,8 +1218,8 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
         const float whi[3] = {pw.hi.x(), pw.hi.y(), pw.hi.z()};
         nf = select_targets(lx_.data() + b, ly_.data() + b, lz_.data() + b, e - b, wlo, whi, margin, slo, shi, reach2,
                             fx.data(), fy.data(), fz.data());
-        // Padding to a multiple of 8: far points nothing takes.
-        for (std::size_t t = nf; t < (nf + 7) / 8 * 8; ++t) fx[t] = fy[t] = fz[t] = 1e9F;
+        // Padding to a multiple of 8: far points nothing takes (the word's padding sits at +1e9).
+        for (std::size_t t = nf; t < (nf + 7) / 8 * 8; ++t) fx[t] = fy[t] = fz[t] = -1e9F;
         nr8 = run_boxes(fx.data(), fy.data(), fz.data(), nf, rbox);
       }
       nearest_targets(fx.data(), fy.data(), fz.data(), rbox.data(), nr8, mx.data(), my.data(), mz.data(), np, npad, reach2, best.data(),
