@@ -239,15 +239,6 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
 }
 
-// For each of the npad word points (mx, my, mz), np of them real (the rest padding that
-// matches nothing), the first target strictly nearest within reach (match -1 when none).
-// The targets are padded to a multiple of 8 with far points (on the other side from the
-// word's padding), their runs' boxes made by run_boxes.
-// Eight word points at a time, held in registers while the targets pass, with selects
-// done on bits. The targets go by in runs of eight (in order); a run whose bounding box
-// is at least reach from that of the word points in hand is left out: no squared
-// distance between one of its targets and one of those points is below that of the boxes
-// (the rounded differences keep their order), so none of its targets could be taken.
 // The bounding boxes of the nt targets (tx, ty, tz) in runs of eight, as six arrays of
 // nr8 values (lo x, y, z, hi x, y, z; nr8: the runs rounded up to a multiple of 8, the
 // extra ones empty boxes far away); returns nr8.
@@ -273,6 +264,15 @@ std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::si
   return nr8;
 }
 
+// For each of the npad word points (mx, my, mz), np of them real (the rest padding that
+// matches nothing), the first target strictly nearest within reach (match -1 when none).
+// The targets are padded to a multiple of 8 with far points (on the other side from the
+// word's padding), their runs' boxes made by run_boxes. Eight word points at a time, held
+// in registers while the targets pass, with selects done on bits. The targets go by in
+// runs of eight (in order); a run whose bounding box is at least reach from that of the
+// word points in hand is left out: no squared distance between one of its targets and one
+// of those points is below that of the boxes (the rounded differences keep their order),
+// so none of its targets could be taken.
 LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, const float* rbox, std::size_t nr8,
                                   const float* mx, const float* my, const float* mz, std::size_t np, std::size_t npad,
                                   float reach2, float* best, std::int32_t* match) {
