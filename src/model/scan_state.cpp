@@ -115,7 +115,8 @@ inline V8f exp_neg8(V8f x) {
 }
 
 // Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), times
-// norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature.
+// norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature
+// (a and norm are per scan point, read through idx).
 // Word arrays hold np points padded to npad, a multiple of 8, with far points; the sum
 // keeps eight lanes (point p in lane p % 8), each adding its blocks of eight points in
 // order, the lanes then added pairwise, so the SSE and AVX2 builds give the same bits.
@@ -177,7 +178,7 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     cy[u] = ly[k];
     cz[u] = lz[k];
     cr[u] = u < nl ? reach2[k] : -1.0F;
-    cna[u] = -a[k];
+    cna[u] = -a[idx[k]];
   }
   std::uint32_t items = 0;
   for (std::size_t b = 0; b < nb; ++b) {
@@ -238,12 +239,73 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
 }
 
-// For each of the npad word points (mx, my, mz), the first target strictly nearest
-// within reach (match -1 when none). Eight word points at a time, held in registers
-// while all targets pass, with selects done on bits.
-LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, std::size_t nt, const float* mx,
-                                  const float* my, const float* mz, std::size_t npad, float reach2, float* best,
-                                  std::int32_t* match) {
+// The bounding boxes of the nt targets (tx, ty, tz) in runs of eight, as six arrays of
+// nr8 values (lo x, y, z, hi x, y, z; nr8: the runs rounded up to a multiple of 8, the
+// extra ones empty boxes far away); returns nr8.
+std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::size_t nt, std::vector<float>& box) {
+  const std::size_t nr = (nt + 7) / 8;
+  const std::size_t nr8 = (nr + 7) / 8 * 8;
+  box.assign(6 * nr8, 1e9F);
+  float* const lo[3] = {box.data(), box.data() + nr8, box.data() + 2 * nr8};
+  float* const hi[3] = {box.data() + 3 * nr8, box.data() + 4 * nr8, box.data() + 5 * nr8};
+  const float* const t[3] = {tx, ty, tz};
+  for (std::size_t r = 0; r < nr; ++r) {
+    const std::size_t t0 = 8 * r, t1 = std::min(t0 + 8, nt);  // the real targets of the run
+    for (int a = 0; a < 3; ++a) {
+      float l = t[a][t0], h = t[a][t0];
+      for (std::size_t u = t0 + 1; u < t1; ++u) {
+        l = std::min(l, t[a][u]);
+        h = std::max(h, t[a][u]);
+      }
+      lo[a][r] = l;
+      hi[a][r] = h;
+    }
+  }
+  return nr8;
+}
+
+// For each of the npad word points (mx, my, mz), np of them real (the rest padding that
+// matches nothing), the first target strictly nearest within reach (match -1 when none).
+// The targets are padded to a multiple of 8 with far points (on the other side from the
+// word's padding), their runs' boxes made by run_boxes. Eight word points at a time, held
+// in registers while the targets pass, with selects done on bits. The targets go by in
+// runs of eight (in order); a run whose bounding box is at least reach from that of the
+// word points in hand is left out: no squared distance between one of its targets and one
+// of those points is below that of the boxes (the rounded differences keep their order),
+// so none of its targets could be taken.
+LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float* tz, const float* rbox, std::size_t nr8,
+                                  const float* mx, const float* my, const float* mz, std::size_t np, std::size_t npad,
+                                  float reach2, float* best, std::int32_t* match) {
+  thread_local std::vector<std::uint32_t> runs;
+  if (runs.size() < nr8) runs.resize(nr8);
+  // The runs that may hold a target within reach of the real word points [p, p + len);
+  // returns how many (in runs).
+  const auto near_runs = [&](std::size_t p, std::size_t len) {
+    const std::size_t e = std::min(p + len, np);
+    if (e <= p) return std::size_t{0};  // padding only
+    float lo[3] = {mx[p], my[p], mz[p]}, hi[3] = {mx[p], my[p], mz[p]};
+    for (std::size_t q = p + 1; q < e; ++q) {
+      lo[0] = std::min(lo[0], mx[q]);
+      lo[1] = std::min(lo[1], my[q]);
+      lo[2] = std::min(lo[2], mz[q]);
+      hi[0] = std::max(hi[0], mx[q]);
+      hi[1] = std::max(hi[1], my[q]);
+      hi[2] = std::max(hi[2], mz[q]);
+    }
+    std::size_t count = 0;
+    const V8f zero = splat8(0.0F);
+    for (std::size_t r = 0; r < nr8; r += 8) {
+      const V8f gx = max8(max8(load8(rbox + r) - splat8(hi[0]), splat8(lo[0]) - load8(rbox + 3 * nr8 + r)), zero);
+      const V8f gy = max8(max8(load8(rbox + nr8 + r) - splat8(hi[1]), splat8(lo[1]) - load8(rbox + 4 * nr8 + r)), zero);
+      const V8f gz = max8(max8(load8(rbox + 2 * nr8 + r) - splat8(hi[2]), splat8(lo[2]) - load8(rbox + 5 * nr8 + r)), zero);
+      const V8i near = gx * gx + gy * gy + gz * gz < splat8(reach2);
+      for (std::size_t l = 0; l < 8; ++l) {
+        runs[count] = static_cast<std::uint32_t>(r + l);
+        count -= static_cast<std::size_t>(static_cast<std::ptrdiff_t>(near[l]));
+      }
+    }
+    return count;
+  };
   const V8i zero8 = {0, 0, 0, 0, 0, 0, 0, 0};
   std::size_t p = 0;
   // Two blocks at a time: two independent chains of compare and select.
@@ -252,18 +314,22 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     const V8f bx = load8(mx + p + 8), by = load8(my + p + 8), bz = load8(mz + p + 8);
     V8f abst = splat8(reach2), bbst = abst;
     V8i amt = zero8 - 1, bmt = amt;
-    for (std::size_t t = 0; t < nt; ++t) {
-      const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
-      const V8i ti = splat8i(static_cast<std::int32_t>(t));
-      const V8f adx = x - ax, ady = y - ay, adz = z - az;
-      const V8f bdx = x - bx, bdy = y - by, bdz = z - bz;
-      const V8f ad2 = adx * adx + ady * ady + adz * adz;
-      const V8f bd2 = bdx * bdx + bdy * bdy + bdz * bdz;
-      const V8i am = ad2 < abst, bm = bd2 < bbst;
-      abst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(abst) & ~am) | (reinterpret_cast<V8i>(ad2) & am));
-      bbst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bbst) & ~bm) | (reinterpret_cast<V8i>(bd2) & bm));
-      amt = (amt & ~am) | (ti & am);
-      bmt = (bmt & ~bm) | (ti & bm);
+    const std::size_t nrun = near_runs(p, 16);
+    for (std::size_t i = 0; i < nrun; ++i) {
+      const std::size_t t0 = 8 * std::size_t{runs[i]};
+      for (std::size_t t = t0; t < t0 + 8; ++t) {
+        const V8f x = splat8(tx[t]), y = splat8(ty[t]), z = splat8(tz[t]);
+        const V8i ti = splat8i(static_cast<std::int32_t>(t));
+        const V8f adx = x - ax, ady = y - ay, adz = z - az;
+        const V8f bdx = x - bx, bdy = y - by, bdz = z - bz;
+        const V8f ad2 = adx * adx + ady * ady + adz * adz;
+        const V8f bd2 = bdx * bdx + bdy * bdy + bdz * bdz;
+        const V8i am = ad2 < abst, bm = bd2 < bbst;
+        abst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(abst) & ~am) | (reinterpret_cast<V8i>(ad2) & am));
+        bbst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bbst) & ~bm) | (reinterpret_cast<V8i>(bd2) & bm));
+        amt = (amt & ~am) | (ti & am);
+        bmt = (bmt & ~bm) | (ti & bm);
+      }
     }
     std::memcpy(best + p, &abst, sizeof abst);
     std::memcpy(match + p, &amt, sizeof amt);
@@ -274,12 +340,16 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
     const V8f px = load8(mx + p), py = load8(my + p), pz = load8(mz + p);
     V8f bst = splat8(reach2);
     V8i mt = zero8 - 1;
-    for (std::size_t t = 0; t < nt; ++t) {
-      const V8f dx = splat8(tx[t]) - px, dy = splat8(ty[t]) - py, dz = splat8(tz[t]) - pz;
-      const V8f d2 = dx * dx + dy * dy + dz * dz;
-      const V8i m = d2 < bst;
-      bst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bst) & ~m) | (reinterpret_cast<V8i>(d2) & m));
-      mt = (mt & ~m) | (splat8i(static_cast<std::int32_t>(t)) & m);
+    const std::size_t nrun = near_runs(p, 8);
+    for (std::size_t i = 0; i < nrun; ++i) {
+      const std::size_t t0 = 8 * std::size_t{runs[i]};
+      for (std::size_t t = t0; t < t0 + 8; ++t) {
+        const V8f dx = splat8(tx[t]) - px, dy = splat8(ty[t]) - py, dz = splat8(tz[t]) - pz;
+        const V8f d2 = dx * dx + dy * dy + dz * dz;
+        const V8i m = d2 < bst;
+        bst = reinterpret_cast<V8f>((reinterpret_cast<V8i>(bst) & ~m) | (reinterpret_cast<V8i>(d2) & m));
+        mt = (mt & ~m) | (splat8i(static_cast<std::int32_t>(t)) & m);
+      }
     }
     std::memcpy(best + p, &bst, sizeof bst);
     std::memcpy(match + p, &mt, sizeof mt);
@@ -356,23 +426,43 @@ inline float mask(float v, std::uint32_t m) {
   return v;
 }
 
-// keep[k] = 1 when entry k may be within its σ of the box [blo, bhi], else 0. The margin
-// (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the box's centre and half sizes, so
-// no entry that could pass the fit test is dropped.
+// 1 when an entry at (x, y, z) with σ² s2 may be within its σ of the box with centre c and
+// half sizes h, else 0. The margin (0.2 % of σ² and 1e-8 m²) exceeds the rounding of the
+// box's centre and half sizes, so no entry that could pass the fit test with a point in
+// the box gets 0.
+inline std::int32_t near_box(float x, float y, float z, float s2, const float* c, const float* h) {
+  float ox = std::fabs(x - c[0]) - h[0];
+  float oy = std::fabs(y - c[1]) - h[1];
+  float oz = std::fabs(z - c[2]) - h[2];
+  // max(o, 0) as bits, so that the loops using this vectorise.
+  ox = mask(ox, static_cast<std::uint32_t>(-static_cast<std::int32_t>(ox > 0.0F)));
+  oy = mask(oy, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oy > 0.0F)));
+  oz = mask(oz, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oz > 0.0F)));
+  return (ox * ox + oy * oy + oz * oz <= s2 * 1.002F + 1e-8F) ? 1 : 0;
+}
+inline void box_centre(const float* blo, const float* bhi, float* c, float* h) {
+  for (int a = 0; a < 3; ++a) {
+    c[a] = 0.5F * (blo[a] + bhi[a]);
+    h[a] = 0.5F * (bhi[a] - blo[a]);
+  }
+}
+
+// keep[k] = near_box of entry k and the box [blo, bhi].
 LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
                            const float* blo, const float* bhi, std::int32_t* keep) {
-  const float cx = 0.5F * (blo[0] + bhi[0]), cy = 0.5F * (blo[1] + bhi[1]), cz = 0.5F * (blo[2] + bhi[2]);
-  const float hx = 0.5F * (bhi[0] - blo[0]), hy = 0.5F * (bhi[1] - blo[1]), hz = 0.5F * (bhi[2] - blo[2]);
-  for (std::size_t k = 0; k < n; ++k) {
-    float ox = std::fabs(lx[k] - cx) - hx;
-    float oy = std::fabs(ly[k] - cy) - hy;
-    float oz = std::fabs(lz[k] - cz) - hz;
-    // max(o, 0) as bits, so that the loop vectorises.
-    ox = mask(ox, static_cast<std::uint32_t>(-static_cast<std::int32_t>(ox > 0.0F)));
-    oy = mask(oy, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oy > 0.0F)));
-    oz = mask(oz, static_cast<std::uint32_t>(-static_cast<std::int32_t>(oz > 0.0F)));
-    keep[k] = (ox * ox + oy * oy + oz * oz <= s2[k] * 1.002F + 1e-8F) ? 1 : 0;
-  }
+  float c[3], h[3];
+  box_centre(blo, bhi, c, h);
+  for (std::size_t k = 0; k < n; ++k) keep[k] = near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+}
+
+// How many of the n entries near_box finds near the box [blo, bhi].
+LEX3D_CLONES std::size_t box_count(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
+                                   const float* blo, const float* bhi) {
+  float c[3], h[3];
+  box_centre(blo, bhi, c, h);
+  std::int32_t count = 0;
+  for (std::size_t k = 0; k < n; ++k) count += near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+  return static_cast<std::size_t>(count);
 }
 
 // The entries of one feature that can be within their σ of a box (the union of the
@@ -388,9 +478,13 @@ struct Slabs {
   int count = 0;
   std::size_t size = 0;  // entries kept
 
-  void build(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n, const float* blo,
+  // r2: (3σ)² of each entry (σ² is taken as (3σ)² / 9).
+  void build(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n, const float* blo,
              const float* bhi) {
     constexpr int kMaxSlabs = 64;
+    s2_.resize(n);
+    for (std::size_t k = 0; k < n; ++k) s2_[k] = r2[k] / 9.0F;
+    const float* const s2 = s2_.data();
     keep_.resize(n);
     box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
     kept_.resize(n);
@@ -464,14 +558,18 @@ struct Slabs {
  private:
   std::vector<std::uint32_t> kept_, slab_, cursor_;
   std::vector<std::int32_t> keep_;
+  std::vector<float> s2_;
 };
 
 // Word choice by fit with slabs: the counts of fit_counts (entries with a word point
 // within their σ, and the word points with no entry within σ), testing each word point
 // against its three slabs only, widened to whole blocks of 8 entries. Every pair tested
 // is compared as in fit_counts; the pairs skipped are farther than σ apart along x.
-LEX3D_CLONES void fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
-                                   std::int32_t* hit, std::size_t& explained, std::size_t& unsupported) {
+// Gives up (returns false, the counts unset) once `max_lonely` word points have no entry
+// within σ.
+LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
+                                   std::size_t max_lonely, std::int32_t* hit, std::size_t& explained,
+                                   std::size_t& unsupported) {
   const std::size_t npad = s.x.size();
   const float* lx = s.x.data();
   const float* ly = s.y.data();
@@ -483,21 +581,25 @@ LEX3D_CLONES void fit_counts_slabs(const Slabs& s, const float* wx, const float*
     const float px = wx[p], py = wy[p], pz = wz[p];
     std::uint32_t lo = 0, hi = 0;
     s.window(px, lo, hi);
-    std::int32_t any[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (std::size_t k = lo & ~7U; k < hi; k += 8)
-      for (std::size_t l = 0; l < 8; ++l) {
-        const float dx = px - lx[k + l], dy = py - ly[k + l], dz = pz - lz[k + l];
-        const std::int32_t m = (dx * dx + dy * dy + dz * dz <= sig2[k + l]) ? 1 : 0;
-        hit[k + l] |= m;
-        any[l] |= m;
-      }
-    const std::int32_t a = (any[0] | any[1] | any[2] | any[3]) | (any[4] | any[5] | any[6] | any[7]);
-    lonely += a ? 0 : 1;
+    const V8f x = splat8(px), y = splat8(py), z = splat8(pz);
+    V8i any = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (std::size_t k = lo & ~7U; k < hi; k += 8) {
+      const V8f dx = x - load8(lx + k), dy = y - load8(ly + k), dz = z - load8(lz + k);
+      const V8i m = (dx * dx + dy * dy + dz * dz <= load8(sig2 + k)) & 1;
+      V8i h;
+      std::memcpy(&h, hit + k, sizeof h);
+      h |= m;
+      std::memcpy(hit + k, &h, sizeof h);
+      any |= m;
+    }
+    lonely += any8(any) ? 0 : 1;
+    if (lonely >= max_lonely) return false;
   }
   std::size_t e = 0;
   for (std::size_t k = 0; k < s.size; ++k) e += static_cast<std::size_t>(hit[k]);
   explained = e;
   unsupported = lonely;
+  return true;
 }
 
 }  // namespace
@@ -508,7 +610,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   inv_two_sigma2_.resize(n);
   norm_.resize(n);
   log_floor_.resize(n);
-  std::vector<float> reach2(n);
+  LargeVector<float> reach2(n);
   const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
   for (std::size_t j = 0; j < n; ++j) {
     const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
@@ -523,15 +625,13 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
   pose_.resize(nf);
-  off_.assign(scan.nearby_offset.begin(), scan.nearby_offset.end());
+  off_ = scan.nearby_offset.data();
+  idx_ = scan.nearby_index.data();
   const std::size_t entries = off_[nf];
-  idx_.resize(entries);
   lx_.resize(entries);
   ly_.resize(entries);
   lz_.resize(entries);
   reach2_e_.resize(entries);
-  a_e_.resize(entries);
-  sig2_e_.resize(entries);
   cache_.assign(entries, 0.0F);
   const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
@@ -540,13 +640,10 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
     for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
       const std::uint32_t j = near[k];
       const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
-      idx_[k] = j;
       lx_[k] = q.x();
       ly_[k] = q.y();
       lz_[k] = q.z();
       reach2_e_[k] = reach2[j];
-      a_e_[k] = inv_two_sigma2_[j];
-      sig2_e_[k] = reach2[j] / 9.0F;
     }
   }, 64);
   recompute();
@@ -586,8 +683,8 @@ void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* 
   }
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
-  gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, a_e_.data() + b, e - b,
-                word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_.data() + b,
+  gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, inv_two_sigma2_.data(), e - b,
+                word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_ + b,
                 norm_.data(), out);
 }
 
@@ -754,9 +851,12 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       const std::size_t b = begin_of(f), e = end_of(f);
       const PackedWord& w = packed[static_cast<std::size_t>(word_[f])];
       thread_local std::vector<std::int32_t> hits, sup;
+      thread_local std::vector<float> sig2;
       hits.resize(e - b);
       sup.resize(w.size());
-      fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, w.x.data(), w.y.data(),
+      sig2.resize(e - b);
+      for (std::size_t k = b; k < e; ++k) sig2[k - b] = reach2_e_[k] / 9.0F;
+      fit_counts(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2.data(), e - b, w.x.data(), w.y.data(),
                  w.z.data(), w.size(), hits.data(), sup.data());
       for (std::size_t k = b; k < e; ++k) covers[k] = hits[k - b] != 0 ? 1 : 0;
     }, 16);
@@ -769,11 +869,11 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
   // staged_delta instead (the points of one neighbourhood are distinct in practice).
   const std::size_t nf = word_.size();
   std::vector<std::size_t> nz_off(nf + 1, 0);
-  std::vector<std::uint32_t> nz_j(cache_.size());
-  std::vector<float> nz_c(cache_.size());
+  LargeVector<std::uint32_t> nz_j(cache_.size());
+  LargeVector<float> nz_c(cache_.size());
   bool repeats = false;
   {
-    std::vector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
+    LargeVector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
     std::size_t n = 0;
     for (std::size_t f = 0; f < nf; ++f) {
       nz_off[f] = n;
@@ -838,7 +938,7 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
   struct PointTerms {
     double s, ln_s, floor;
   };
-  std::vector<PointTerms> pt(S_.size());
+  LargeVector<PointTerms> pt(S_.size());
   for (std::size_t j = 0; j < S_.size(); ++j) pt[j] = {S_[j], log_s_[j], log_floor_[j]};
   const auto term = [](const PointTerms& q, double ln_s, double lm) {
     const double v = ln_s - lm;
@@ -854,13 +954,27 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       double d = 0.0;
       std::size_t touched_above = 0;
       staged_log_.resize(ne - nb);
+      // A removal is kept out as soon as it is certain to lower ln L: no term still to
+      // come adds more than gain = ln M - ln M' (S_j only falls; the background stays), nor
+      // does any point above the background not yet seen, so d plus that many gains bounds
+      // the final d (the margin covers rounding). Saves the log() of the remaining points.
+      const double gain = lm_old - lm_new;
+      bool lowers = false;
       for (std::size_t i = nb; i < ne; ++i) {
         const PointTerms& q = pt[nz_j[i]];
         const double ln_new = log_or_minus_inf(std::max(0.0, q.s + -static_cast<double>(nz_c[i])));
         staged_log_[i - nb] = ln_new;
         d += term(q, ln_new, lm_new) - term(q, q.ln_s, lm_old);
         touched_above += q.ln_s - lm_old > q.floor ? 1 : 0;
+        if (((i - nb) & 7) == 7) {
+          const double most = d + static_cast<double>(above_ - touched_above + (ne - 1 - i)) * gain;
+          if (most < -1e-6 * (1.0 + std::fabs(d))) {
+            lowers = true;
+            break;
+          }
+        }
       }
+      if (lowers) continue;
       d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
       if (d < 0.0 || sole_cover(f)) continue;
       log_l_ += d;
@@ -924,7 +1038,7 @@ Eigen::Matrix3d kabsch_rotation(const Eigen::Matrix3d& H) {
 // targets, in the instance's frame; identity when fewer than 3 pairs fall within reach.
 // `match[i]` is the target (tx, ty, tz)[match[i]] of word point i or -1. The pairs are
 // gathered first (no branch on the match); the sums run in double, in word point order.
-Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
+LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
                             const float* ty, const float* tz, const std::int32_t* match) {
   thread_local std::vector<double> pairs_buf;
   pairs_buf.resize(6 * np);
@@ -1041,7 +1155,23 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (word_[f] >= 0) active.push_back(f);
   std::vector<Eigen::Isometry3f> correction(active.size(), Eigen::Isometry3f::Identity());
-  parallel_for(active.size(), threads, [&](std::size_t i) {
+  // The new pose of instance i, and its entries moved into that frame (while they are in
+  // cache from the fit).
+  const auto finish = [&](std::size_t i) {
+    const std::size_t f = active[i];
+    pose_[f] = pose_[f] * correction[i];
+    // Keep the rotation exactly orthonormal: float products drift.
+    pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
+    const Eigen::Isometry3f inv = correction[i].inverse();
+    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
+      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
+      lx_[k] = q.x();
+      ly_[k] = q.y();
+      lz_[k] = q.z();
+    }
+  };
+  // The ICP fit of instance i (correction[i]).
+  const auto fit = [&](std::size_t i) {
     const std::size_t f = active[i];
     // ICP in the instance's frame: D moves the word onto the nearby scan points;
     // the new pose is pose · D.
@@ -1058,12 +1188,13 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     // one to a box holding it). The box is the moved word's bounding box grown by
     // `slack`, kept while it still holds the moved word.
     const float slack = 0.1F * static_cast<float>(max_distance);
-    thread_local std::vector<float> fx, fy, fz, mx, my, mz, best;
+    thread_local std::vector<float> fx, fy, fz, mx, my, mz, best, rbox;
+    std::size_t nr8 = 0;
     thread_local std::vector<std::int32_t> match;
     const std::size_t b = begin_of(f), e = end_of(f);
-    fx.resize(e - b);
-    fy.resize(e - b);
-    fz.resize(e - b);
+    fx.resize(e - b + 8);
+    fy.resize(e - b + 8);
+    fz.resize(e - b + 8);
     std::size_t nf = 0;
     float slo[3] = {0.0F, 0.0F, 0.0F}, shi[3] = {-1.0F, -1.0F, -1.0F};  // empty: filled in the first round
     const std::size_t npad = pw.xp.size();
@@ -1087,8 +1218,11 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
         const float whi[3] = {pw.hi.x(), pw.hi.y(), pw.hi.z()};
         nf = select_targets(lx_.data() + b, ly_.data() + b, lz_.data() + b, e - b, wlo, whi, margin, slo, shi, reach2,
                             fx.data(), fy.data(), fz.data());
+        // Padding to a multiple of 8: far points nothing takes (the word's padding sits at +1e9).
+        for (std::size_t t = nf; t < (nf + 7) / 8 * 8; ++t) fx[t] = fy[t] = fz[t] = -1e9F;
+        nr8 = run_boxes(fx.data(), fy.data(), fz.data(), nf, rbox);
       }
-      nearest_targets(fx.data(), fy.data(), fz.data(), nf, mx.data(), my.data(), mz.data(), npad, reach2, best.data(),
+      nearest_targets(fx.data(), fy.data(), fz.data(), rbox.data(), nr8, mx.data(), my.data(), mz.data(), np, npad, reach2, best.data(),
                       match.data());
       const Eigen::Isometry3f D =
           fit_pairs(mx.data(), my.data(), mz.data(), np, fx.data(), fy.data(), fz.data(), match.data());
@@ -1097,22 +1231,80 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
       // Converged: under 0.1 mm and 0.1 mrad.
       if (D.translation().norm() < 1e-4F && Eigen::AngleAxisf(D.linear()).angle() < 1e-4F) break;
     }
-  }, 8);
+  };
   parallel_for(active.size(), threads, [&](std::size_t i) {
-    const std::size_t f = active[i];
-    pose_[f] = pose_[f] * correction[i];
-    // Keep the rotation exactly orthonormal: float products drift.
-    pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
-    const Eigen::Isometry3f inv = correction[i].inverse();
-    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
-      lx_[k] = q.x();
-      ly_[k] = q.y();
-      lz_[k] = q.z();
-    }
-  }, 64);
+    fit(i);
+    finish(i);
+  }, 8);
   stale_ = true;
 }
+
+namespace {
+
+// Word choice by fit for one feature: among the kk words `near` (nearest descriptor
+// first), the one that best fits the feature's n entries (lx, ly, lz; r2: (3σ)² of each),
+// as ScanState::choose_by_fit describes. Compiled for AVX2 too, with the slab loops.
+LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near, std::size_t kk,
+                                    const std::vector<PackedWord>& packed, const float* lx, const float* ly,
+                                    const float* lz, const float* r2, std::size_t n) {
+  thread_local std::vector<std::int32_t> hits;
+  thread_local Slabs slabs;
+  float lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = packed[near[0].second].lo[a];
+    hi[a] = packed[near[0].second].hi[a];
+    for (std::size_t c = 1; c < kk; ++c) {
+      lo[a] = std::min(lo[a], packed[near[c].second].lo[a]);
+      hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
+    }
+  }
+  slabs.build(lx, ly, lz, r2, n, lo, hi);
+  hits.resize(slabs.x.size());
+  if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
+    std::size_t pick = 0;
+    for (std::size_t c = 1; c < kk; ++c)
+      if (packed[near[c].second].size() < packed[near[pick].second].size()) pick = c;
+    return near[pick].second;
+  }
+  // The word with the highest score (explained - unsupported), the first in the list
+  // on ties. A word explains at most the entries near its bounding box (`most`), so
+  // the words are tried by decreasing `most`, and one is passed over, or given up
+  // once enough of its points are found unsupported, when it can no longer win.
+  thread_local std::vector<std::pair<std::int64_t, std::uint32_t>> order;  // (-most, position)
+  order.clear();
+  for (std::size_t c = 0; c < kk; ++c) {
+    const PackedWord& w = packed[near[c].second];
+    const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
+    const std::size_t most =
+        box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.x.size(), wlo, whi);
+    order.emplace_back(-static_cast<std::int64_t>(most), static_cast<std::uint32_t>(c));
+  }
+  std::sort(order.begin(), order.end());
+  std::int64_t best = 0;
+  std::size_t best_c = kk;  // none yet
+  for (const auto& [minus_most, c] : order) {
+    const PackedWord& w = packed[near[c].second];
+    // It must reach best, or best + 1 when it comes after the best word in the list.
+    std::size_t max_lonely = std::numeric_limits<std::size_t>::max();
+    if (best_c < kk) {
+      const std::int64_t slack = -minus_most - best - (c > best_c ? 1 : 0);
+      if (slack < 0) continue;
+      max_lonely = static_cast<std::size_t>(slack) + 1;
+    }
+    std::size_t explained = 0, unsupported = 0;
+    if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
+                          unsupported))
+      continue;
+    const std::int64_t score = static_cast<std::int64_t>(explained) - static_cast<std::int64_t>(unsupported);
+    if (best_c == kk || score > best || (score == best && c < best_c)) {
+      best = score;
+      best_c = c;
+    }
+  }
+  return near[best_c].second;
+}
+
+}  // namespace
 
 std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int threads, bool all_features) {
   if (alphabet.size() == 0) return 0;
@@ -1134,8 +1326,6 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     const std::size_t f = active[i];
     thread_local std::vector<float> dist;
     thread_local std::vector<std::pair<float, std::uint32_t>> near;
-    thread_local std::vector<std::int32_t> hits;
-    thread_local Slabs slabs;
     // The kk nearest words by descriptor (ties: lower id), in order: words come by
     // increasing id, so one enters the list when strictly nearer than its last.
     dist.resize(nw);
@@ -1156,28 +1346,8 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
       return;
     }
     const std::size_t b = begin_of(f), e = end_of(f);
-    float lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = packed[near[0].second].lo[a];
-      hi[a] = packed[near[0].second].hi[a];
-      for (std::size_t c = 1; c < kk; ++c) {
-        lo[a] = std::min(lo[a], packed[near[c].second].lo[a]);
-        hi[a] = std::max(hi[a], packed[near[c].second].hi[a]);
-      }
-    }
-    slabs.build(lx_.data() + b, ly_.data() + b, lz_.data() + b, sig2_e_.data() + b, e - b, lo, hi);
-    hits.resize(slabs.x.size());
-    double best = -1e300;
-    for (std::size_t c = 0; c < kk; ++c) {
-      const PackedWord& w = packed[near[c].second];
-      std::size_t explained = 0, unsupported = w.size();
-      if (slabs.size > 0) fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), hits.data(), explained, unsupported);
-      const double score = static_cast<double>(explained) - static_cast<double>(unsupported);
-      if (score > best) {
-        best = score;
-        choice[i] = static_cast<std::int32_t>(near[c].second);
-      }
-    }
+    choice[i] = static_cast<std::int32_t>(best_fit(near.data(), kk, packed, lx_.data() + b, ly_.data() + b,
+                                                   lz_.data() + b, reach2_e_.data() + b, e - b));
   }, 8);
   std::size_t changed = 0;
   for (std::size_t i = 0; i < active.size(); ++i) {
