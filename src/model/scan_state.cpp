@@ -114,6 +114,22 @@ inline V8f exp_neg8(V8f x) {
   return y * reinterpret_cast<V8f>(bits);
 }
 
+// The bounding box (lo, hi) of points [p, e) of (x, y, z), e > p.
+inline void box_of(const float* x, const float* y, const float* z, std::size_t p, std::size_t e, float lo[3],
+                   float hi[3]) {
+  lo[0] = hi[0] = x[p];
+  lo[1] = hi[1] = y[p];
+  lo[2] = hi[2] = z[p];
+  for (std::size_t q = p + 1; q < e; ++q) {
+    lo[0] = std::min(lo[0], x[q]);
+    lo[1] = std::min(lo[1], y[q]);
+    lo[2] = std::min(lo[2], z[q]);
+    hi[0] = std::max(hi[0], x[q]);
+    hi[1] = std::max(hi[1], y[q]);
+    hi[2] = std::max(hi[2], z[q]);
+  }
+}
+
 // Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), times
 // norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature
 // (a and norm are per scan point, read through idx).
@@ -184,15 +200,8 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   for (std::size_t b = 0; b < nb; ++b) {
     const std::size_t p = 8 * b;
     if (p >= np) break;  // only far padding from here on
-    float blo[3] = {wx[p], wy[p], wz[p]}, bhi[3] = {wx[p], wy[p], wz[p]};
-    for (std::size_t q = p + 1; q < std::min(p + 8, np); ++q) {
-      blo[0] = std::min(blo[0], wx[q]);
-      blo[1] = std::min(blo[1], wy[q]);
-      blo[2] = std::min(blo[2], wz[q]);
-      bhi[0] = std::max(bhi[0], wx[q]);
-      bhi[1] = std::max(bhi[1], wy[q]);
-      bhi[2] = std::max(bhi[2], wz[q]);
-    }
+    float blo[3], bhi[3];
+    box_of(wx, wy, wz, p, std::min(p + 8, np), blo, bhi);
     // Live entries within reach of the block's bounding box (no squared distance to a
     // point of the block is below the one to its box).
     std::size_t nc = 0;
@@ -283,15 +292,8 @@ LEX3D_CLONES void nearest_targets(const float* tx, const float* ty, const float*
   const auto near_runs = [&](std::size_t p, std::size_t len) {
     const std::size_t e = std::min(p + len, np);
     if (e <= p) return std::size_t{0};  // padding only
-    float lo[3] = {mx[p], my[p], mz[p]}, hi[3] = {mx[p], my[p], mz[p]};
-    for (std::size_t q = p + 1; q < e; ++q) {
-      lo[0] = std::min(lo[0], mx[q]);
-      lo[1] = std::min(lo[1], my[q]);
-      lo[2] = std::min(lo[2], mz[q]);
-      hi[0] = std::max(hi[0], mx[q]);
-      hi[1] = std::max(hi[1], my[q]);
-      hi[2] = std::max(hi[2], mz[q]);
-    }
+    float lo[3], hi[3];
+    box_of(mx, my, mz, p, e, lo, hi);
     std::size_t count = 0;
     const V8f zero = splat8(0.0F);
     for (std::size_t r = 0; r < nr8; r += 8) {

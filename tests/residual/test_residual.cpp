@@ -356,6 +356,13 @@ Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t mi
   return file;
 }
 
+/// Decoding model file `file` fails, and the message names `needle`.
+void expect_rejected(const Bytes& file, const std::string& needle) {
+  const auto d = codec::decode_model(file);
+  ASSERT_FALSE(d.ok()) << "expected a failure naming " << needle;
+  EXPECT_NE(d.status().message().find(needle), std::string::npos) << d.status().to_string();
+}
+
 TEST(ResidualSweep, ModelFileVersionRules) {
   const Cloud scan = tilting_scan();
   codec::ModelData d;
@@ -372,21 +379,15 @@ TEST(ResidualSweep, ModelFileVersionRules) {
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
   // RESW in a file that claims 1.1; a sweep payload in a RESD chunk; a RESD payload in a RESW chunk.
-  const auto older = codec::decode_model(retype_chunk(file, "RESW", "RESW", 1));
-  ASSERT_FALSE(older.ok());
-  EXPECT_NE(older.status().message().find("1.2"), std::string::npos) << older.status().to_string();
-  const auto in_resd = codec::decode_model(retype_chunk(file, "RESW", "RESD", 2));
-  ASSERT_FALSE(in_resd.ok());
-  EXPECT_NE(in_resd.status().message().find("RESW"), std::string::npos) << in_resd.status().to_string();
+  expect_rejected(retype_chunk(file, "RESW", "RESW", 1), "1.2");
+  expect_rejected(retype_chunk(file, "RESW", "RESD", 2), "RESW");
   codec::ModelData plain = d;
   residual::LayerOptions no_sweep;
   no_sweep.sweep = false;
   residual::add_layer(plain, Alphabet{}, scan, 0.01, no_sweep);
   const Bytes plain_file = codec::encode_model(plain);
   EXPECT_EQ(plain_file[10], 1);
-  const auto in_resw = codec::decode_model(retype_chunk(plain_file, "RESD", "RESW", 2));
-  ASSERT_FALSE(in_resw.ok());
-  EXPECT_NE(in_resw.status().message().find("sweep"), std::string::npos) << in_resw.status().to_string();
+  expect_rejected(retype_chunk(plain_file, "RESD", "RESW", 2), "sweep");
 }
 
 TEST(ResidualSweep, CorruptPayloadsAreRejectedOrDecodeBounded) {
@@ -582,12 +583,8 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
   EXPECT_EQ(file[10], 3);
   ASSERT_TRUE(codec::decode_model(file).ok());
   // RESV in a file that claims 1.2; a voxel payload in a RESW chunk; a RESW payload in a RESV chunk.
-  const auto older = codec::decode_model(retype_chunk(file, "RESV", "RESV", 2));
-  ASSERT_FALSE(older.ok());
-  EXPECT_NE(older.status().message().find("1.3"), std::string::npos) << older.status().to_string();
-  const auto in_resw = codec::decode_model(retype_chunk(file, "RESV", "RESW", 3));
-  ASSERT_FALSE(in_resw.ok());
-  EXPECT_NE(in_resw.status().message().find("RESV"), std::string::npos) << in_resw.status().to_string();
+  expect_rejected(retype_chunk(file, "RESV", "RESV", 2), "1.3");
+  expect_rejected(retype_chunk(file, "RESV", "RESW", 3), "RESV");
   codec::ModelData sweep = d;
   residual::LayerOptions no_voxel;
   no_voxel.voxel = false;
@@ -595,9 +592,7 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
   sweep.input_points = tilting_scan().size();
   const Bytes sweep_file = codec::encode_model(sweep);
   ASSERT_EQ(sweep_file[10], 2);
-  const auto in_resv = codec::decode_model(retype_chunk(sweep_file, "RESW", "RESV", 3));
-  ASSERT_FALSE(in_resv.ok());
-  EXPECT_NE(in_resv.status().message().find("voxel"), std::string::npos) << in_resv.status().to_string();
+  expect_rejected(retype_chunk(sweep_file, "RESW", "RESV", 3), "voxel");
   // Two layer chunks in one file.
   Bytes two = file;
   const std::size_t iend = two.size() - 16;  // IEND: type 4, length 8, CRC 4
@@ -612,9 +607,7 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
     resd_chunk.assign(plain_file.begin() + static_cast<std::ptrdiff_t>(at), plain_file.end() - 16);
   }
   two.insert(two.begin() + static_cast<std::ptrdiff_t>(iend), resd_chunk.begin(), resd_chunk.end());
-  const auto both = codec::decode_model(two);
-  ASSERT_FALSE(both.ok());
-  EXPECT_NE(both.status().message().find("at most one"), std::string::npos) << both.status().to_string();
+  expect_rejected(two, "at most one");
 }
 
 TEST(ResidualVoxel, CorruptPayloadsAreRejectedOrDecodeBounded) {
