@@ -50,6 +50,12 @@ constexpr std::uint64_t kSweepPrefixBytes = 8;  // coding u32, marker u32
 constexpr std::uint64_t kSweepExtraBytes = 8;   // cell f64, after the RESD header fields
 constexpr std::uint32_t kCodingVoxel = 2;
 constexpr std::uint64_t kVoxelExtraBytes = 28;  // origin 3 f64, depth u32, after the RESD header fields
+/// What a payload of a coding adds to its stream besides the fields every coding has.
+constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
+  return coding == kCodingSweep ? kSweepPrefixBytes + kSweepExtraBytes
+         : coding == kCodingVoxel ? kSweepPrefixBytes + kVoxelExtraBytes
+                                  : 0;
+}
 /// A voxel layer's origin lies within this many metres of the model frame's origin.
 constexpr double kMaxVoxelOrigin = 1e9;
 /// A decoder accepts at most this many voxels per payload byte: a node's occupancy costs
@@ -479,17 +485,17 @@ Eigen::Vector3f voxel_centre(const Eigen::Vector3d& origin, double cell, std::ui
 }
 
 /// The cells of the input points `coded` in a grid of `cell` from `origin` (the corner of
-/// their bounding box) as Morton codes, one a point, with the octree depth they need. With
-/// `bound` > 0, every point is checked to lie within it of its cell's centre as a decoder
-/// computes it (float32 coordinates). False when a check fails or the octree would need
-/// more than kMaxVoxelDepth levels.
-bool voxel_codes(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
+/// their bounding box) as Morton codes, one a point, with the octree depth they need; every
+/// point is checked to lie within `bound` of its cell's centre as a decoder computes it
+/// (float32 coordinates).
+enum class VoxelFit { kOk, kMiss /* a point is not within bound */, kTooDeep /* > kMaxVoxelDepth levels */ };
+VoxelFit voxel_codes(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
                  const Eigen::Vector3d& origin, double cell, double bound, std::vector<std::uint64_t>& codes,
                  int& depth) {
   const double inv = 1.0 / cell;
   double top = 0.0;
   for (const std::uint32_t i : coded) top = std::max(top, ((input[i].cast<double>() - origin) * inv).maxCoeff());
-  if (!(top < static_cast<double>(1U << kMaxVoxelDepth) - 1.0)) return false;
+  if (!(top < static_cast<double>(1U << kMaxVoxelDepth) - 1.0)) return VoxelFit::kTooDeep;
   depth = 1;
   while (depth < kMaxVoxelDepth && std::ldexp(1.0, depth) <= top) ++depth;
   codes.resize(coded.size());
@@ -498,11 +504,10 @@ bool voxel_codes(const std::vector<Eigen::Vector3f>& input, const std::vector<st
     const Eigen::Vector3d p = input[coded[k]].cast<double>();
     std::uint32_t c[3];
     for (int a = 0; a < 3; ++a) c[a] = static_cast<std::uint32_t>(std::floor((p[a] - origin[a]) * inv));
-    if (bound > 0.0 && !((voxel_centre(origin, cell, c[0], c[1], c[2]).cast<double>() - p).squaredNorm() <= b2))
-      return false;
     codes[k] = detail::morton(c[0], c[1], c[2]);
+    if (!((voxel_centre(origin, cell, c[0], c[1], c[2]).cast<double>() - p).squaredNorm() <= b2)) return VoxelFit::kMiss;
   }
-  return true;
+  return VoxelFit::kOk;
 }
 
 Eigen::Vector3d corner_of(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded) {
@@ -527,8 +532,9 @@ std::optional<VoxelLayer> voxel_layer(RangeEncoder enc, const std::vector<Eigen:
   std::vector<std::uint64_t> leaves;
   for (int attempt = 0;; ++attempt) {
     if (attempt == 8) return std::nullopt;  // float32 cannot hold centres this close (not seen)
-    if (voxel_codes(input, coded, v.origin, v.cell, bound, leaves, v.depth)) break;
-    if (leaves.size() != coded.size()) return std::nullopt;  // too deep
+    const VoxelFit fit = voxel_codes(input, coded, v.origin, v.cell, bound, leaves, v.depth);
+    if (fit == VoxelFit::kOk) break;
+    if (fit == VoxelFit::kTooDeep) return std::nullopt;
     v.cell *= 1.0 - 1e-3;
   }
   std::sort(leaves.begin(), leaves.end());
@@ -700,8 +706,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::vector<std::vector<std::uint8_t>> streams(ways.size());
   std::vector<std::size_t> escaped(ways.size(), 0), counts(ways.size(), 0);
   std::size_t best = 0;
-  // The voxel coding competes too, coded in full alongside the spherical ones (a trial on
-  // part of the points misjudges it: its cost depends on the density of the whole).
+  // The voxel coding (§2.7) competes too: alone with `spherical` off; else coded in full
+  // alongside the spherical winner unless its trial below rules it out.
   std::optional<VoxelLayer> voxel;
   // (a voxel stands for every point in it: not with `thin` off, which gives each its own)
   const bool voxel_allowed = options.voxel && options.thin;
@@ -753,58 +759,41 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         if (streams[w].size() < streams[best].size()) best = w;
     }
   }
-  const bool sweep = ways[best].sweep;
-  // (no spherical stream when the trial chose the voxel coding)
-  const std::size_t spherical_bytes =
-      streams[best].empty() ? std::numeric_limits<std::size_t>::max()
-                            : (sweep ? kSweepPrefixBytes + kHeadBytes + kSweepExtraBytes : kHeadBytes) + streams[best].size();
-  if (voxel && kSweepPrefixBytes + kHeadBytes + kVoxelExtraBytes + voxel->stream.size() < spherical_bytes) {
-    std::vector<std::uint8_t> out;
-    out.reserve(kSweepPrefixBytes + kHeadBytes + kVoxelExtraBytes + voxel->stream.size());
-    codec::bytes::put_u32(out, kCodingVoxel);
-    codec::bytes::put_u32(out, kSweepMarker);
-    put_f64(out, max_error);
-    put_f64(out, voxel->cell);
-    put_u64(out, n_w);
-    put_u64(out, voxel->voxels);
-    for (int a = 0; a < 3; ++a) put_f64(out, voxel->origin[a]);
-    codec::bytes::put_u32(out, static_cast<std::uint32_t>(voxel->depth));
-    out.insert(out.end(), voxel->stream.begin(), voxel->stream.end());
-    if (stats) {
-      *stats = LayerStats{};
-      stats->max_error = max_error;
-      stats->word_points = n_w;
-      stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
-      stats->explained_points = n_in - coded.size();
-      stats->residual_points = voxel->voxels;
-      stats->voxel = true;
-      stats->bytes = out.size();
-    }
-    return out;
-  }
-  const std::vector<std::uint8_t>& stream = streams[best];
+  const bool use_voxel =
+      voxel && (streams[best].empty() ||  // (no spherical stream with `spherical` off)
+                extra_bytes(kCodingVoxel) + voxel->stream.size() <
+                    extra_bytes(ways[best].sweep ? kCodingSweep : 0) + streams[best].size());
+  const bool sweep = !use_voxel && ways[best].sweep;
+  const std::vector<std::uint8_t>& stream = use_voxel ? voxel->stream : streams[best];
 
+  // The payload: the coding and marker (RESW, RESV), the fields every coding has, the
+  // coding's own fields, the stream.
   std::vector<std::uint8_t> out;
-  out.reserve(kSweepPrefixBytes + kHeadBytes + kSweepExtraBytes + stream.size());
-  if (sweep) {
-    codec::bytes::put_u32(out, kCodingSweep);
+  out.reserve(kHeadBytes + extra_bytes(kCodingVoxel) + stream.size());
+  if (use_voxel || sweep) {
+    codec::bytes::put_u32(out, use_voxel ? kCodingVoxel : kCodingSweep);
     codec::bytes::put_u32(out, kSweepMarker);
   }
   put_f64(out, max_error);
-  put_f64(out, q);
+  put_f64(out, use_voxel ? voxel->cell : q);
   put_u64(out, n_w);
-  put_u64(out, counts[best]);
+  put_u64(out, use_voxel ? voxel->voxels : counts[best]);
   if (sweep) put_f64(out, sweep_cell);
+  if (use_voxel) {
+    for (int a = 0; a < 3; ++a) put_f64(out, voxel->origin[a]);
+    codec::bytes::put_u32(out, static_cast<std::uint32_t>(voxel->depth));
+  }
   out.insert(out.end(), stream.begin(), stream.end());
   if (stats) {
+    *stats = LayerStats{};
     stats->max_error = max_error;
     stats->word_points = n_w;
     stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
     stats->explained_points = n_in - coded.size();
-    stats->residual_points = counts[best];
-    stats->escaped_points = escaped[best];
+    stats->residual_points = use_voxel ? voxel->voxels : counts[best];
+    stats->escaped_points = use_voxel ? 0 : escaped[best];
     stats->sweep = sweep;
-    stats->voxel = false;
+    stats->voxel = use_voxel;
     stats->bytes = out.size();
   }
   return out;
