@@ -376,11 +376,12 @@ struct PointModels {
 };
 
 /// Codes `points` (indices into `input`) in the given order; returns the stream and the
-/// number of escaped points.
+/// number of escaped points. `spherical[i]`: input point i in sensor-centred spherical
+/// coordinates (to_spherical), for every point in `order`.
 std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
-                                      const std::vector<std::uint32_t>& order, const Pose& T_cloud_sensor,
-                                      const Pose& T_sensor_cloud, double q, double bound, std::size_t& escaped,
-                                      std::size_t& coded_count, bool thin, double sweep_cell) {
+                                      const std::vector<Spherical>& spherical, const std::vector<std::uint32_t>& order,
+                                      const Pose& T_cloud_sensor, const Pose& T_sensor_cloud, double q, double bound,
+                                      std::size_t& escaped, std::size_t& coded_count, bool thin, double sweep_cell) {
   const bool sweep = sweep_cell > 0.0;
   AngularMemory memory(sweep_cell);
   PointModels m;
@@ -398,7 +399,7 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     if (thin && seen.any_within(truth_cloud)) continue;
     ++coded_count;
     const Eigen::Vector3d p = T_sensor_cloud * truth_cloud;
-    const Spherical t = to_spherical(p);
+    const Spherical& t = spherical[idx];
     // Spherical attempt: range first (the angle steps depend on it), then elevation, azimuth.
     bool ok = true;
     std::int64_t kr = 0, ke = 0, ka = 0;
@@ -551,8 +552,8 @@ using codec::bytes::put_f64;
 using codec::bytes::put_u64;
 
 /// Orders the coded points along rows of elevation by azimuth.
-std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
-                                     const Pose& T_sensor_cloud, double row_height) {
+std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, const std::vector<std::uint32_t>& coded,
+                                     double row_height) {
   struct Key {
     std::int64_t row;
     double azimuth;
@@ -561,7 +562,7 @@ std::vector<std::uint32_t> row_order(const std::vector<Eigen::Vector3f>& input, 
   std::vector<Key> keys;
   keys.reserve(coded.size());
   for (std::uint32_t i : coded) {
-    const Spherical s = to_spherical(T_sensor_cloud * input[i].cast<double>());
+    const Spherical& s = spherical[i];
     keys.push_back({static_cast<std::int64_t>(std::floor(s.elevation / row_height)), s.azimuth, i});
   }
   std::sort(keys.begin(), keys.end(), [](const Key& a, const Key& b) {
@@ -665,6 +666,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
 
   const double q = kStepShare * 2.0 * max_error / std::sqrt(3.0);
   const Pose T_sensor_cloud = T_cloud_sensor.inverse();
+  // The coded points in sensor-centred spherical coordinates, once for the row order and
+  // every way of coding them (indexed by input point; the others are not read).
+  std::vector<Spherical> spherical(n_in);
+  parallel_for(coded.size(), threads, [&](std::size_t k) {
+    spherical[coded[k]] = to_spherical(T_sensor_cloud * input.points[coded[k]].cast<double>());
+  }, 4096);
 
   // The keep mask, then the points: in row order and in input order, the smaller wins.
   RangeEncoder head;
@@ -689,7 +696,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const bool thin = options.thin;
   // Sweep coding's direction cells: half the angular spacing of the coded points.
   const double sweep_cell = res ? 0.5 * std::max(res->azimuth_rad, res->elevation_rad) : 0.0;
-  const std::vector<std::uint32_t> rows = row_order(input.points, coded, T_sensor_cloud, row_height);
+  const std::vector<std::uint32_t> rows = row_order(spherical, coded, row_height);
   struct Way {
     bool by_rows;
     bool sweep;
@@ -700,7 +707,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     ways.push_back({false, true});
   }
   auto code = [&](const std::vector<std::uint32_t>& order, bool sweep, std::size_t& escaped, std::size_t& count) {
-    return code_points(head, input.points, order, T_cloud_sensor, T_sensor_cloud, q, check_error, escaped, count, thin,
+    return code_points(head, input.points, spherical, order, T_cloud_sensor, T_sensor_cloud, q, check_error, escaped, count, thin,
                        sweep ? sweep_cell : 0.0);
   };
   std::vector<std::vector<std::uint8_t>> streams(ways.size());
@@ -723,7 +730,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
       const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
                                               coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
-      const std::vector<std::uint32_t> window_rows = row_order(input.points, window, T_sensor_cloud, row_height);
+      const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
