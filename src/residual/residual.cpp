@@ -69,6 +69,11 @@ constexpr std::size_t kVoxelTrialSpan = 4;
 /// and in full: single spinning-lidar scans (kitti00, balm) 1.32-1.84 and 1.36-1.95;
 /// where voxels win (a balm map, scan001, room_scan1 at 4 cm) at most 0.88 and 0.81.
 constexpr double kVoxelSkipRatio = 1.25;
+/// The spherical winner is not coded in full when the voxel trial costs less than this
+/// share of its bits (encoder only). Measured where voxels win: trial 0.60-0.88, in full
+/// 0.56-0.81 (the balm map, scan001, room_scan1 at 4 cm); where they lose, the trial never
+/// went below 1.04.
+constexpr double kSphericalSkipRatio = 0.9;
 /// Sweep coding: the elevation follows the slope over this many decoded points back.
 constexpr unsigned kSlopeSpan = 7;
 /// Largest |elevation / azimuth| slope the sweep coding extrapolates.
@@ -733,8 +738,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
-      parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
-        if (w == ways.size()) {
+      // (the voxel trial, the longest job, first: the other thread meanwhile takes the
+      // spherical ones)
+      const std::size_t first_way = try_voxel ? 1 : 0;
+      parallel_for(ways.size() + first_way, threads, [&](std::size_t job) {
+        if (job < first_way) {
           const std::size_t span = std::min(coded.size(), kVoxelTrialSpan * kOrderTrialPoints);
           const std::size_t at = coded.size() / 2 - span / 2;
           const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
@@ -744,6 +752,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                 : std::numeric_limits<double>::infinity();
           return;
         }
+        const std::size_t w = job - first_way;
         std::size_t e = 0, n = 0;
         trial[w] = code(ways[w].by_rows ? window_rows : window, ways[w].sweep, e, n).size();
       }, 1);
@@ -753,10 +762,17 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const double spherical_window_bits =
           8.0 * static_cast<double>(trial[best] - std::min(trial[best], head_bytes)) / static_cast<double>(kOrderTrialPoints);
       const bool full_voxel = try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits;
-      parallel_for(full_voxel ? 2 : 1, threads, [&](std::size_t job) {
-        if (job == 1) voxel = voxel_layer(head, input.points, coded, check_error);
-        else streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
+      // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
+      const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
+      parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
+        if (job == 0 && full_spherical)
+          streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
+        else
+          voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
+      // (should the voxel coding fail after all, which its trial makes unlikely)
+      if (!voxel && !full_spherical)
+        streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
     } else {
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
         if (w == ways.size()) voxel = voxel_layer(head, input.points, coded, check_error);
@@ -767,7 +783,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     }
   }
   const bool use_voxel =
-      voxel && (streams[best].empty() ||  // (no spherical stream with `spherical` off)
+      voxel && (streams[best].empty() ||  // (no spherical stream: `spherical` off, or skipped)
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
                     extra_bytes(ways[best].sweep ? kCodingSweep : 0) + streams[best].size());
   const bool sweep = !use_voxel && ways[best].sweep;
