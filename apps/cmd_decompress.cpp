@@ -23,6 +23,7 @@ struct DecompressOptions {
   std::string alphabet;
   std::string octomap;
   double resolution = 0.1;
+  std::string free_space = "cast";  ///< cast (rays from the sensor) or none (occupied voxels only)
   std::string reference;
   std::string reference_format = "auto";
   double sigma_lambda = ModelParams{}.sigma_lambda;
@@ -106,7 +107,10 @@ void run_decompress(const DecompressOptions& o) {
   if (!o.output.empty()) throw_if_error(io::write_cloud(o.output, cloud));
   io::OctomapStats oct;
   if (!o.octomap.empty()) {
-    auto r = io::write_octomap(o.octomap, cloud, d.T_cloud_sensor.translation(), o.resolution);
+    auto r = io::write_octomap(o.octomap, cloud,
+                               o.free_space == "cast" ? std::optional<Eigen::Vector3d>(d.T_cloud_sensor.translation())
+                                                      : std::nullopt,
+                               o.resolution);
     throw_if_error(r.status());
     oct = r.value();
   }
@@ -184,6 +188,11 @@ void register_decompress(CLI::App& app) {
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references");
   sub->add_option("--octomap", o->octomap, "Also write an OctoMap occupancy tree (.bt)");
   sub->add_option("--resolution", o->resolution, "OctoMap resolution, m")->check(CLI::Range(1e-3, 100.0));
+  sub->add_option("--free-space", o->free_space,
+                  "OctoMap free space: cast along the rays from the stored sensor origin (cast), or none, only "
+                  "the occupied voxels (for a map merged from many viewpoints, which has no one origin)")
+      ->check(CLI::IsMember({"cast", "none"}))
+      ->capture_default_str();
   sub->add_option("--reference", o->reference, "Compare the reconstruction with this scan (D1 PSNR, inliers)");
   sub->add_option("--reference-format", o->reference_format, "Format of --reference");
   sub->add_option("--sigma-lambda", o->sigma_lambda, "λ of σ = λ tan(α/2) range for inliers/outliers");

@@ -7,19 +7,23 @@
 
 namespace lex3d::io {
 
-StatusOr<OctomapStats> write_octomap(const std::string& path, const Cloud& cloud, const Eigen::Vector3d& sensor_origin,
-                                     double resolution) {
+StatusOr<OctomapStats> write_octomap(const std::string& path, const Cloud& cloud,
+                                     const std::optional<Eigen::Vector3d>& sensor_origin, double resolution) {
   if (!(resolution > 0.0 && resolution <= 100.0))
     return Status(ErrorCode::kInvalidArgument, "octomap resolution must be in (0, 100] m, got " + std::to_string(resolution));
   octomap::OcTree tree(resolution);
-  octomap::Pointcloud pc;
-  pc.reserve(cloud.size());
-  for (const auto& p : cloud.points) pc.push_back(p.x(), p.y(), p.z());
-  const octomap::point3d origin(static_cast<float>(sensor_origin.x()), static_cast<float>(sensor_origin.y()),
-                                static_cast<float>(sensor_origin.z()));
-  // Discretised insertion casts one ray a voxel end point instead of one a point: the
-  // same map for dense scans, several times faster.
-  tree.insertPointCloud(pc, origin, -1.0, false, true);
+  if (sensor_origin) {
+    octomap::Pointcloud pc;
+    pc.reserve(cloud.size());
+    for (const auto& p : cloud.points) pc.push_back(p.x(), p.y(), p.z());
+    const octomap::point3d origin(static_cast<float>(sensor_origin->x()), static_cast<float>(sensor_origin->y()),
+                                  static_cast<float>(sensor_origin->z()));
+    // Discretised insertion casts one ray a voxel end point instead of one a point: the
+    // same map for dense scans, several times faster.
+    tree.insertPointCloud(pc, origin, -1.0, false, true);
+  } else {
+    for (const auto& p : cloud.points) tree.updateNode(octomap::point3d(p.x(), p.y(), p.z()), true, true);
+  }
   tree.updateInnerOccupancy();
   tree.prune();
   OctomapStats stats;

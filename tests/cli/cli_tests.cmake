@@ -126,6 +126,10 @@ run(0 decompress.octomap decompress "${WORK}/nc.lex3dm" --octomap "${WORK}/nc.bt
 if(NOT EXISTS "${WORK}/nc.bt")
   message(SEND_ERROR "[decompress.octomap] no OctoMap written")
 endif()
+# A map has no one viewpoint: only the occupied voxels.
+run(0 decompress.octomap_map decompress "${WORK}/nc.lex3dm" --octomap "${WORK}/nc_map.bt" --resolution 0.25 --free-space none)
+expect_match(decompress.octomap_map "${LAST_OUT}" " 0 free leaves")
+run(1 decompress.octomap_bad_free decompress "${WORK}/nc.lex3dm" --octomap "${WORK}/nc_bad.bt" --free-space some)
 # Alphabet reuse: a learned alphabet file, models that reference it.
 run(0 compress.save compress "${NC}" -o "${WORK}/nc_ref.lex3dm" --save-alphabet "${WORK}/nc.lex3da" --iterations 30)
 run(0 info.alphabet info --json "${WORK}/nc.lex3da")

@@ -30,6 +30,24 @@ TEST(Octomap, WritesOccupiedAndFreeSpaceFromTheSensor) {
   EXPECT_NEAR(tree.getResolution(), 0.1, 1e-12);
 }
 
+TEST(Octomap, WithoutAnOriginOnlyThePointsAreOccupied) {
+  Cloud wall;
+  for (int i = -20; i <= 20; ++i)
+    for (int k = -10; k <= 10; ++k) wall.points.emplace_back(5.0F, 0.05F * static_cast<float>(i), 0.05F * static_cast<float>(k));
+  const auto dir = test::temp_dir("octomap_map");
+  const std::string path = (dir / "map.bt").string();
+  const auto r = io::write_octomap(path, wall, std::nullopt, 0.1);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_GT(r.value().occupied_leaves, 20U);
+  EXPECT_EQ(r.value().free_leaves, 0U);
+  octomap::OcTree tree(0.1);
+  ASSERT_TRUE(tree.readBinary(path));
+  const octomap::OcTreeNode* at_wall = tree.search(5.0, 0.0, 0.0);
+  ASSERT_NE(at_wall, nullptr);
+  EXPECT_TRUE(tree.isNodeOccupied(at_wall));
+  EXPECT_EQ(tree.search(2.5, 0.0, 0.0), nullptr) << "no free space between the origin and the wall";
+}
+
 TEST(Octomap, EmptyCloudAndBadResolution) {
   const auto dir = test::temp_dir("octomap_empty");
   const auto r = io::write_octomap((dir / "empty.bt").string(), Cloud{}, Eigen::Vector3d::Zero(), 0.2);

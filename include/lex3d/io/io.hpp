@@ -120,9 +120,12 @@ struct OctomapStats {
 };
 
 /// Builds an OctoMap occupancy tree of `cloud` at `resolution` metres, casting free
-/// space along the rays from `sensor_origin` (the cloud's frame) to every point, and
-/// writes it as a binary `.bt` file atomically. An empty cloud gives an empty tree.
+/// space along the rays from `sensor_origin` (the cloud's frame) to every point, or, with
+/// no origin (a map merged from many viewpoints), marking the points' voxels occupied and
+/// nothing free; writes it as a binary `.bt` file atomically. An empty cloud gives an
+/// empty tree.
 [[nodiscard]] StatusOr<OctomapStats> write_octomap(const std::string& path, const Cloud& cloud,
-                                                   const Eigen::Vector3d& sensor_origin, double resolution);
+                                                   const std::optional<Eigen::Vector3d>& sensor_origin,
+                                                   double resolution);
 
 }  // namespace lex3d::io
