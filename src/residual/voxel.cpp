@@ -94,6 +94,18 @@ class LevelOccupancy {
     return ctx;
   }
 
+  /// low[a]: the occupancy byte of the node one step lower than `node` (in block b) along
+  /// axis a, 0 when it is not occupied. `bytes`: the bytes of the level's nodes in order,
+  /// at least up to `node` (the lower neighbours come earlier in Morton order).
+  void lower_bytes(std::size_t b, std::uint64_t node, const std::vector<std::uint8_t>& bytes,
+                   unsigned low[3]) const noexcept {
+    for (int a = 0; a < 3; ++a) {
+      const std::int64_t at = lower(b, node, a);
+      low[a] = at >= 0 ? bytes[static_cast<std::size_t>(at)] : 0U;
+    }
+  }
+
+ private:
   /// Where in the level's node order the node one step lower than `node` (in block b)
   /// along axis a stands; -1 when that node is not occupied.
   [[nodiscard]] std::int64_t lower(std::size_t b, std::uint64_t node, int a) const noexcept {
@@ -107,7 +119,6 @@ class LevelOccupancy {
     return static_cast<std::int64_t>(first_[block]) + __builtin_popcountll(before);
   }
 
- private:
   static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
   static std::size_t hash(std::uint64_t k) { return static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ULL) >> 20); }
   [[nodiscard]] std::uint32_t block_of(std::uint64_t key) const {
@@ -193,10 +204,7 @@ void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leave
       while (occupied.key(b) != (n >> 6)) ++b;
       const unsigned ctx = occupied.neighbours(b, n);
       unsigned low[3];
-      for (int a = 0; a < 3; ++a) {
-        const std::int64_t at = occupied.lower(b, n, a);
-        low[a] = at >= 0 ? bytes[static_cast<std::size_t>(at)] : 0U;
-      }
+      occupied.lower_bytes(b, n, bytes, low);
       unsigned prefix = 1;
       for (unsigned i = 0; i < 8; ++i) {
         const unsigned bit = (byte >> i) & 1U;
@@ -223,10 +231,7 @@ bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, st
       while (occupied.key(b) != (n >> 6)) ++b;
       const unsigned ctx = occupied.neighbours(b, n);
       unsigned low[3];
-      for (int a = 0; a < 3; ++a) {
-        const std::int64_t at = occupied.lower(b, n, a);  // earlier in the level: decoded
-        low[a] = at >= 0 ? bytes[static_cast<std::size_t>(at)] : 0U;
-      }
+      occupied.lower_bytes(b, n, bytes, low);
       unsigned prefix = 1, byte = 0;
       for (unsigned i = 0; i < 8; ++i) {
         const bool bit = (i == 7 && prefix == 1) || dec.get(models.at(lower_children(i, byte, low), ctx, prefix));

@@ -9,10 +9,18 @@
 
 using namespace lex3d;
 
-TEST(Octomap, WritesOccupiedAndFreeSpaceFromTheSensor) {
+namespace {
+/// A wall 5 m ahead of the origin, 2 m x 1 m, points 5 cm apart.
+Cloud wall_at_5m() {
   Cloud wall;
   for (int i = -20; i <= 20; ++i)
     for (int k = -10; k <= 10; ++k) wall.points.emplace_back(5.0F, 0.05F * static_cast<float>(i), 0.05F * static_cast<float>(k));
+  return wall;
+}
+}  // namespace
+
+TEST(Octomap, WritesOccupiedAndFreeSpaceFromTheSensor) {
+  const Cloud wall = wall_at_5m();
   const auto dir = test::temp_dir("octomap");
   const std::string path = (dir / "wall.bt").string();
   const auto r = io::write_octomap(path, wall, Eigen::Vector3d::Zero(), 0.1);
@@ -31,9 +39,7 @@ TEST(Octomap, WritesOccupiedAndFreeSpaceFromTheSensor) {
 }
 
 TEST(Octomap, WithoutAnOriginOnlyThePointsAreOccupied) {
-  Cloud wall;
-  for (int i = -20; i <= 20; ++i)
-    for (int k = -10; k <= 10; ++k) wall.points.emplace_back(5.0F, 0.05F * static_cast<float>(i), 0.05F * static_cast<float>(k));
+  const Cloud wall = wall_at_5m();
   const auto dir = test::temp_dir("octomap_map");
   const std::string path = (dir / "map.bt").string();
   const auto r = io::write_octomap(path, wall, std::nullopt, 0.1);

@@ -356,6 +356,16 @@ Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t mi
   return file;
 }
 
+/// Model file `file` decodes, and its cloud meets bound `e` both ways against `input`.
+void expect_bound(const Bytes& file, const Cloud& input, double e) {
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+  const auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
+  EXPECT_LE(hausdorff(input, cloud.value()), e) << "input to decoded";
+  EXPECT_LE(hausdorff(cloud.value(), input), e) << "decoded to input";
+}
+
 /// Decoding model file `file` fails, and the message names `needle`.
 void expect_rejected(const Bytes& file, const std::string& needle) {
   const auto d = codec::decode_model(file);
@@ -372,12 +382,7 @@ TEST(ResidualSweep, ModelFileVersionRules) {
   ASSERT_TRUE(st.sweep);
   const Bytes file = codec::encode_model(d);
   EXPECT_EQ(file[10], 2) << "a sweep-coded layer makes the file format 1.2";
-  const auto ok = codec::decode_model(file);
-  ASSERT_TRUE(ok.ok()) << ok.status().to_string();
-  const auto cloud = residual::decode_cloud(ok.value());
-  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
-  EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
-  EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
+  expect_bound(file, scan, 0.01);
   // RESW in a file that claims 1.1; a sweep payload in a RESD chunk; a RESD payload in a RESW chunk.
   expect_rejected(retype_chunk(file, "RESW", "RESW", 1), "1.2");
   expect_rejected(retype_chunk(file, "RESW", "RESD", 2), "RESW");
@@ -903,12 +908,7 @@ TEST(ResidualVoxel, WordsAndAFarFrameKeepTheBound) {
   EXPECT_GT(st.kept_word_points, 0U);
   const Bytes file = codec::encode_model(d);
   EXPECT_EQ(file[10], 3) << "a voxel-coded layer makes the file format 1.3";
-  const auto decoded = codec::decode_model(file);
-  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
-  const auto cloud = residual::decode_cloud(decoded.value());
-  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
-  EXPECT_LE(hausdorff(input, cloud.value()), 0.01);
-  EXPECT_LE(hausdorff(cloud.value(), input), 0.01);
+  expect_bound(file, input, 0.01);
 }
 
 }  // namespace
