@@ -110,10 +110,18 @@ class PointBallGrid {
     mask_ = cap - 1;
     points_.reserve(expected);
     next_.reserve(expected);
+    // ~32 filter bits a point (at most 2^23): an empty cell's bit is mostly clear.
+    std::size_t bits = 4096;
+    while (bits < 32 * expected && bits < (std::size_t{1} << 23)) bits <<= 1;
+    filter_.assign(bits / 64, 0);
+    filter_mask_ = bits - 1;
   }
   void insert(const Eigen::Vector3f& p) {
     if (2 * (used_ + 1) > keys_.size()) grow();
-    const std::size_t s = slot(key_of(cell(p.x()), cell(p.y()), cell(p.z())), true);
+    const std::uint64_t k = key_of(cell(p.x()), cell(p.y()), cell(p.z()));
+    const std::size_t b = (hash(k) >> 40) & filter_mask_;
+    filter_[b >> 6] |= std::uint64_t{1} << (b & 63);
+    const std::size_t s = slot(k, true);
     next_.push_back(heads_[s]);
     heads_[s] = static_cast<std::uint32_t>(points_.size());
     points_.push_back(p);
@@ -130,7 +138,10 @@ class PointBallGrid {
       for (int dy = 0; dy < 2; ++dy)
         for (int dz = 0; dz < 2; ++dz) {
           const std::uint64_t k = key_of(base[0] + dx * step[0], base[1] + dy * step[1], base[2] + dz * step[2]);
-          std::size_t s = hash(k) & mask_;
+          const std::uint64_t h = hash(k);
+          const std::size_t b = (h >> 40) & filter_mask_;
+          if (((filter_[b >> 6] >> (b & 63)) & 1U) == 0) continue;  // no point in that cell
+          std::size_t s = h & mask_;
           while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
           for (std::uint32_t i = heads_[s]; i != kNone; i = next_[i])
             if ((points_[i].cast<double>() - p).squaredNorm() <= r2) return true;
@@ -181,6 +192,8 @@ class PointBallGrid {
   std::vector<std::uint32_t> heads_;
   std::vector<std::uint32_t> next_;
   std::vector<Eigen::Vector3f> points_;
+  std::vector<std::uint64_t> filter_;  // bit (hash >> 40) of every occupied cell's key
+  std::size_t filter_mask_ = 0;
   std::size_t mask_ = 0;
   std::size_t used_ = 0;
 };
