@@ -38,7 +38,9 @@ void check_output_path(const std::string& output, const std::vector<std::string>
 }
 
 std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
-                              const std::string& poses_path) {
+                              const std::string& poses_path, bool points_in_world) {
+  if (points_in_world && poses_path.empty())
+    throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");
   std::vector<Cloud> clouds;
   clouds.reserve(paths.size());
   for (const auto& p : paths) clouds.push_back(load_cloud(p, format).cloud);
@@ -49,7 +51,12 @@ std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format 
       throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
                             std::to_string(clouds.size()) + " scans (one pose a scan, in order)");
     for (std::size_t i = 0; i < clouds.size(); ++i) {
-      clouds[i].T_world_cloud = poses.value()[i];
+      if (points_in_world) {
+        clouds[i].T_cloud_sensor = poses.value()[i];
+        clouds[i].T_world_cloud = Pose::Identity();
+      } else {
+        clouds[i].T_world_cloud = poses.value()[i];
+      }
       clouds[i].has_world_pose = true;
     }
   }

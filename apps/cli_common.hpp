@@ -44,9 +44,12 @@ void check_output_path(const std::string& output, const std::vector<std::string>
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option);
 
 /// Reads scans in order; with `poses_path` (one KITTI-style pose a scan, world <- sensor)
-/// each cloud gets its world pose, so features stay upright for tilted sensors.
+/// each cloud gets its world pose, so features stay upright for tilted sensors. With
+/// `points_in_world` (which needs the poses) the points are already in the world frame:
+/// each pose becomes the cloud's T_cloud_sensor (where its sensor was) and its world pose
+/// the identity.
 std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
-                              const std::string& poses_path);
+                              const std::string& poses_path, bool points_in_world = false);
 
 /// A distinct, stable colour for a word id.
 std::array<std::uint8_t, 3> word_color(std::uint32_t word);

@@ -121,7 +121,10 @@ void run_decompress(const DecompressOptions& o) {
   eval::InlierResult inl;
   const bool compare = !o.reference.empty();
   if (compare) {
-    const Cloud ref = load_cloud(o.reference, parse_format_option(o.reference_format)).cloud;
+    Cloud ref = load_cloud(o.reference, parse_format_option(o.reference_format)).cloud;
+    // A reference without a viewpoint of its own (a PLY or .bin in the model's frame, say a
+    // world-frame scan compressed with --input-frame world) is seen from the model's sensor.
+    if (ref.T_cloud_sensor.matrix() == Pose::Identity().matrix()) ref.T_cloud_sensor = d.T_cloud_sensor;
     dist = eval::compare_clouds(ref, cloud);
     const auto res = estimate_angular_resolution(ref);
     eval::RangeSigma sigma;

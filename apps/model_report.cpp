@@ -39,13 +39,18 @@ ModelParams ModelOptions::params() const {
 void ScanSetOptions::add_to(CLI::App& app) {
   app.add_option("--format", format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
   app.add_option("--poses", poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
+  app.add_option("--input-frame", input_frame,
+                 "Frame of the scans' points: sensor (each scan in its own sensor frame), or world (already in "
+                 "the world frame of --poses, as the scans of a registered map; the poses then place each "
+                 "scan's sensor, which the range image and the residual layer are centred on)")
+      ->check(CLI::IsMember({"sensor", "world"}));
   app.add_option("--iterations", iterations, "Candidate words drawn at most when learning")
       ->check(CLI::Range(1, 1000000));
   app.add_option("--seed", seed, "Seed of the candidate order when learning");
 }
 
 std::vector<Cloud> ScanSetOptions::load(const std::vector<std::string>& inputs) const {
-  return load_scans(inputs, parse_format_option(format), poses);
+  return load_scans(inputs, parse_format_option(format), poses, input_frame == "world");
 }
 
 LearnParams ScanSetOptions::learn_params(const ModelParams& model) const {

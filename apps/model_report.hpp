@@ -28,10 +28,11 @@ struct ModelOptions {
 };
 
 /// Options of the commands that read a set of scans and may learn an alphabet for them:
-/// --format, --poses, --iterations, --seed.
+/// --format, --poses, --input-frame, --iterations, --seed.
 struct ScanSetOptions {
   std::string format = "auto";
   std::string poses;
+  std::string input_frame = "sensor";  ///< "world": the points are in the frame of the poses
   int iterations = LearnParams{}.max_iterations;
   std::uint64_t seed = LearnParams{}.seed;
   void add_to(CLI::App& app);

@@ -219,3 +219,45 @@ run(1 decompress.sequence_octomap decompress "${WORK}/set.lex3dq" --octomap "${W
 if(EXISTS "${WORK}/nc_bad.lex3dm")
   message(SEND_ERROR "[compress] an output was written for a refused residual layer")
 endif()
+
+# Scans already in the world frame (a registered map's scans, as PLY, no sensor pose):
+# --input-frame world with the poses centres the coding on each scan's sensor again, so the
+# layer costs about what the scan costs in its own frame; without them, centred on the
+# world origin 50 m away, it costs much more. The inliers are counted from that sensor too.
+file(WRITE "${WORK}/world_pose.txt" "0.8775825619 -0.4794255386 0 50 0.4794255386 0.8775825619 0 20 0 0 1 2\n")
+execute_process(COMMAND "${TRANSFORM}" "${KITTI}" "${WORK}/world.ply" "${WORK}/world_pose.txt" RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(SEND_ERROR "[world] the test helper could not write the world-frame scan (${rc})")
+endif()
+function(total_bytes name var)
+  string(REGEX MATCH "\"total_bytes\":([0-9]+)" m "${LAST_OUT}")
+  if(NOT m)
+    message(SEND_ERROR "[${name}] no total_bytes in: ${LAST_OUT}")
+  endif()
+  set(${var} "${CMAKE_MATCH_1}" PARENT_SCOPE)
+endfunction()
+run(0 world.sensor compress "${KITTI}" -o "${WORK}/w_s.lex3dm" --max-error 0.014 --json)
+total_bytes(world.sensor sensor_bytes)
+run(0 world.posed compress "${WORK}/world.ply" --poses "${WORK}/world_pose.txt" --input-frame world
+    -o "${WORK}/w_p.lex3dm" --max-error 0.014 --json)
+total_bytes(world.posed posed_bytes)
+run(0 world.origin compress "${WORK}/world.ply" -o "${WORK}/w_o.lex3dm" --max-error 0.014 --json)
+total_bytes(world.origin origin_bytes)
+math(EXPR posed_limit "${sensor_bytes} * 102 / 100")
+math(EXPR origin_floor "${sensor_bytes} * 115 / 100")
+if(posed_bytes GREATER posed_limit OR origin_bytes LESS origin_floor)
+  message(SEND_ERROR "[world] bytes: sensor frame ${sensor_bytes}, world + poses ${posed_bytes} "
+                     "(at most ${posed_limit}), world without ${origin_bytes} (at least ${origin_floor})")
+endif()
+run(0 world.words compress "${WORK}/world.ply" --poses "${WORK}/world_pose.txt" --input-frame world
+    -o "${WORK}/w_w.lex3dm" --iterations 20)
+run(0 world.inliers decompress "${WORK}/w_w.lex3dm" -o "${WORK}/w_w.ply" --reference "${WORK}/world.ply" --json)
+string(REGEX MATCH "\"inliers\":0\\.([0-9][0-9])" m "${LAST_OUT}")
+if(NOT m OR CMAKE_MATCH_1 LESS 50)
+  message(SEND_ERROR "[world.inliers] under 50 % inliers from the model's sensor: ${LAST_OUT}")
+endif()
+run(1 world.no_poses compress "${WORK}/world.ply" --input-frame world -o "${WORK}/w_bad.lex3dm")
+run(1 world.bad_frame compress "${WORK}/world.ply" --input-frame map -o "${WORK}/w_bad.lex3dm")
+if(EXISTS "${WORK}/w_bad.lex3dm")
+  message(SEND_ERROR "[world] an output was written for a refused command")
+endif()
