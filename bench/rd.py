@@ -26,7 +26,8 @@ Codecs and settings:
                out equally over the dataset's scans in this run
   Both lex3d modes are word-only unless `lex3d compress --help` lists --max-error; then
   lex3d sweeps LEX3D_E with the residual layer alone (lex3d's default with --max-error) and
-  lex3d-seq sweeps LEX3D_SEQ_E with words + layer (--words on); both also run word-only.
+  lex3d-seq sweeps LEX3D_SEQ_E with --words auto (per scan, words + layer or the layer alone,
+  whichever file is smaller); both also run word-only.
 
 Times: encode_ms / decode_ms are what each codec reports about itself (Draco's "ms to
 encode/decode", the bench tools' timers around PCL's / OctoMap's calls, lex3d compress's
@@ -52,7 +53,7 @@ PCL_PROFILES = ["LOW_RES_ONLINE", "MED_RES_ONLINE", "HIGH_RES_ONLINE",
 PCL_RES = [0.002, 0.005, 0.01, 0.02, 0.05, 0.1]
 OCTOMAP_RES = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2]
 LEX3D_E = [0.005, 0.008, 0.012, 0.02, 0.035, 0.1]
-LEX3D_SEQ_E = [0.02, 0.1]
+LEX3D_SEQ_E = LEX3D_E
 LEARN_SCANS = 4
 MAP_SCANS = 10   # balm_map: scans merged into one map,
 MAP_STEP = 3     # this many scans apart (3 s),
@@ -267,7 +268,8 @@ class Bench:
         stream, decoded = os.path.join(w, "l.lex3dm"), os.path.join(w, "l.ply")
         # lex3d: words alone (alphabet learned on the scan, embedded), then the residual layer
         # alone (the default with --max-error). lex3d-seq: the dataset's shared alphabet, words
-        # alone and words + layer (--words on), its bytes shared by the scans of the run.
+        # alone and, with a bound, --words auto (words + layer where that file is smaller), its
+        # bytes shared by the scans of the run.
         own_e = [None] + (env_list("RD_LEX3D_E", LEX3D_E) if self.has_max_error else [])
         seq_e = [None] + (env_list("RD_LEX3D_SEQ_E", LEX3D_SEQ_E) if self.has_max_error else [])
         for mode, es in (("lex3d", own_e), ("lex3d-seq", seq_e)):
@@ -276,7 +278,7 @@ class Bench:
             for e in es:
                 e_args = ["--max-error", e] if e is not None else []
                 if e is not None and mode == "lex3d-seq":
-                    e_args += ["--words", "on"]
+                    e_args += ["--words", "auto"]
                 a_args = ["--alphabet", alphabet["path"]] if mode == "lex3d-seq" else []
 
                 def parse_enc(out, err, e=e):
