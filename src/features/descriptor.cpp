@@ -21,6 +21,9 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/features/features.hpp"
@@ -273,6 +276,141 @@ Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp,
   return f;
 }
 
+// Where a patch of s x s cells lives in its flat array: cell (x, y) at
+// begin + y * pitch + x, surrounded by empty border cells; cells end before `end`.
+// The array has room for blocks of eight from `begin` past `end`, plus their
+// neighbours one row down.
+struct PatchLayout {
+  explicit PatchLayout(int s)
+      : pitch(s + 1), begin(s + 2), end(s * (s + 1) + s + 1),
+        size(static_cast<std::size_t>(begin + 8 * ((end - begin + 7) / 8) + pitch + 8)) {}
+  int pitch;
+  int begin;
+  int end;
+  std::size_t size;
+};
+
+// One or two passes of hole filling over the cells of `cur` (the z-buffer), writing
+// each pass to the other array (`nxt`, all empty on entry); returns the array that
+// holds the result. A hole takes the mean of its filled 3x3 neighbours as they were
+// before the pass, summed in row-major order, when it has at least two. Empty
+// neighbours add +0, which changes nothing (a sum started at +0 never becomes -0), so
+// the sums need no branches. `cells` is -1 at cells and 0 at border positions, which
+// are never filled. Every variant does the same operations in each lane, so they
+// give the same bits.
+#if defined(__SSE2__)
+const float* fill_holes_sse2(float* cur, float* nxt, const std::int32_t* cells, const PatchLayout& lay) {
+  const int ps = lay.pitch;
+  const __m128 empty = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+  const __m128 one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
+  for (int pass = 0; pass < 2; ++pass) {
+    int holes = 0, left = 0;
+    for (int i = lay.begin; i < lay.end; i += 4) {
+      const float* const c = cur + i;
+      const __m128 cv = _mm_loadu_ps(c);
+      const __m128 hole =
+          _mm_and_ps(_mm_cmpeq_ps(cv, empty), _mm_castsi128_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(cells + i))));
+      if (_mm_movemask_ps(hole) == 0) {  // nothing to fill in these four cells
+        _mm_storeu_ps(nxt + i, cv);
+        continue;
+      }
+      holes = 1;
+      __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const __m128 v = _mm_loadu_ps(c + dy * ps + dx);
+          const __m128 ok = _mm_cmpneq_ps(v, empty);
+          sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
+          n = _mm_add_ps(n, _mm_and_ps(ok, one));
+        }
+      const __m128 fill = _mm_and_ps(hole, _mm_cmpge_ps(n, two));
+      left |= _mm_movemask_ps(_mm_andnot_ps(fill, hole));
+      _mm_storeu_ps(nxt + i, _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
+    }
+    if (holes == 0) break;  // `nxt` is a copy of `cur`
+    std::swap(cur, nxt);
+    if (left == 0) break;   // no hole left for a second pass
+  }
+  return cur;
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(__SANITIZE_ADDRESS__)
+#define LEX3D_FILL_HOLES_AVX 1
+// The same eight cells at a time (no FMA: only adds, compares and a division).
+__attribute__((target("avx"))) const float* fill_holes_avx(float* cur, float* nxt, const std::int32_t* cells,
+                                                            const PatchLayout& lay) {
+  const int ps = lay.pitch;
+  const __m256 empty = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+  const __m256 one = _mm256_set1_ps(1.0F), two = _mm256_set1_ps(2.0F);
+  for (int pass = 0; pass < 2; ++pass) {
+    int holes = 0, left = 0;
+    for (int i = lay.begin; i < lay.end; i += 8) {
+      const float* const c = cur + i;
+      const __m256 cv = _mm256_loadu_ps(c);
+      const __m256 hole = _mm256_and_ps(_mm256_cmp_ps(cv, empty, _CMP_EQ_OQ),
+                                        _mm256_castsi256_ps(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells + i))));
+      if (_mm256_movemask_ps(hole) == 0) {
+        _mm256_storeu_ps(nxt + i, cv);
+        continue;
+      }
+      holes = 1;
+      __m256 sum = _mm256_setzero_ps(), n = _mm256_setzero_ps();
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const __m256 v = _mm256_loadu_ps(c + dy * ps + dx);
+          const __m256 ok = _mm256_cmp_ps(v, empty, _CMP_NEQ_UQ);
+          sum = _mm256_add_ps(sum, _mm256_and_ps(ok, v));
+          n = _mm256_add_ps(n, _mm256_and_ps(ok, one));
+        }
+      const __m256 fill = _mm256_and_ps(hole, _mm256_cmp_ps(n, two, _CMP_GE_OS));
+      left |= _mm256_movemask_ps(_mm256_andnot_ps(fill, hole));
+      _mm256_storeu_ps(nxt + i, _mm256_or_ps(_mm256_and_ps(fill, _mm256_div_ps(sum, n)), _mm256_andnot_ps(fill, cv)));
+    }
+    if (holes == 0) break;
+    std::swap(cur, nxt);
+    if (left == 0) break;
+  }
+  return cur;
+}
+#endif
+
+const float* fill_holes(float* cur, float* nxt, const std::int32_t* cells, const PatchLayout& lay) {
+#if defined(LEX3D_FILL_HOLES_AVX)
+  static const bool avx = __builtin_cpu_supports("avx");
+  if (avx) return fill_holes_avx(cur, nxt, cells, lay);
+#endif
+  return fill_holes_sse2(cur, nxt, cells, lay);
+}
+#else
+const float* fill_holes(float* cur, float* nxt, const std::int32_t* cells, const PatchLayout& lay) {
+  const float kEmpty = -std::numeric_limits<float>::infinity();
+  for (int pass = 0; pass < 2; ++pass) {
+    bool holes = false, left = false;
+    for (int i = lay.begin; i < lay.end; ++i) {
+      const float* const c = cur + i;
+      nxt[i] = *c;
+      if (cells[i] == 0 || *c != kEmpty) continue;
+      holes = true;
+      float sum = 0.0F;
+      float n = 0.0F;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const float v = c[dy * lay.pitch + dx];
+          const bool ok = v != kEmpty;
+          sum += ok ? v : 0.0F;
+          n += ok ? 1.0F : 0.0F;
+        }
+      if (n >= 2.0F) nxt[i] = sum / n;
+      else left = true;
+    }
+    if (!holes) break;
+    std::swap(cur, nxt);
+    if (!left) break;
+  }
+  return cur;
+}
+#endif
+
 void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& kp, const WindowCentre& centre,
                       const Eigen::Matrix3f& R, const DescriptorParams& params, Window& win, float* out) {
   const int s = params.patch_size;
@@ -280,11 +418,14 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   const float inv_cell = static_cast<float>(s) / (2.0F * rad);
   const float kEmpty = -std::numeric_limits<float>::infinity();
   // The patch with a border of empty cells, so that hole filling needs no bounds
-  // checks; rows padded to a multiple of four cells plus four, for 4-wide blocks.
-  const int ps = 4 * ((s + 5) / 4) + 4;
+  // checks. One border column between rows (the right border of a row is the left
+  // one of the next) lets hole filling run over the cells as one flat array in
+  // blocks, with few lanes wasted on borders.
+  const PatchLayout lay(s);
   thread_local std::vector<float> depth;
-  depth.assign(static_cast<std::size_t>((s + 2) * ps), kEmpty);
-  float* const d0 = depth.data() + ps + 1;  // cell (0, 0)
+  depth.assign(lay.size, kEmpty);
+  const int ps = lay.pitch;
+  float* const d0 = depth.data() + lay.begin;  // cell (0, 0)
   // Rows of R^T; each coordinate sums its products as Eigen's 3x3 product does.
   const float a00 = R(0, 0), a01 = R(1, 0), a02 = R(2, 0);
   const float a10 = R(0, 1), a11 = R(1, 1), a12 = R(2, 1);
@@ -323,82 +464,19 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
                if (std::abs(lx) < rad && std::abs(ly) < rad && std::abs(lz) < rad) put(lx, ly, lz);
              });
   // Interpolate small holes from filled neighbours (two passes); what stays empty
-  // is "nothing seen within the support" and gets the far value -radius. A hole takes
-  // the mean of its filled 3x3 neighbours as they were before the pass, summed in
-  // row-major order. Empty neighbours add +0, which changes nothing (a sum started at
-  // +0 never becomes -0), so the sums need no branches.
-#if defined(__SSE2__)
+  // is "nothing seen within the support" and gets the far value -radius.
   thread_local std::vector<float> next;
-  next.assign(depth.size(), kEmpty);
-  const __m128 empty = _mm_set1_ps(kEmpty), one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
-  // Lanes past the last column are border cells and stay empty.
-  const __m128 last_lanes =
-      _mm_castsi128_ps(_mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(s - 4 * ((s - 1) / 4))));
-  for (int pass = 0; pass < 2; ++pass) {
-    const float* const c0 = depth.data() + ps + 1;
-    float* const n0 = next.data() + ps + 1;
-    int holes = 0, left = 0;
+  thread_local std::vector<std::int32_t> cells;
+  thread_local int cells_for = -1;
+  if (cells_for != s) {
+    cells.assign(lay.size, 0);
     for (int y = 0; y < s; ++y)
-      for (int x = 0; x < s; x += 4) {
-        const float* const c = c0 + y * ps + x;
-        const __m128 cv = _mm_loadu_ps(c);
-        __m128 hole = _mm_cmpeq_ps(cv, empty);
-        if (s - x < 4) hole = _mm_and_ps(hole, last_lanes);
-        if (_mm_movemask_ps(hole) == 0) {  // nothing to fill in these four cells
-          _mm_storeu_ps(n0 + y * ps + x, cv);
-          continue;
-        }
-        holes = 1;
-        __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const __m128 v = _mm_loadu_ps(c + dy * ps + dx);
-            const __m128 ok = _mm_cmpneq_ps(v, empty);
-            sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
-            n = _mm_add_ps(n, _mm_and_ps(ok, one));
-          }
-        const __m128 fill = _mm_and_ps(hole, _mm_cmpge_ps(n, two));
-        left |= _mm_movemask_ps(_mm_andnot_ps(fill, hole));
-        _mm_storeu_ps(n0 + y * ps + x,
-                      _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
-      }
-    if (holes == 0) break;  // `next` is a copy of `depth`
-    depth.swap(next);
-    if (left == 0) break;   // no hole left for a second pass
+      for (int x = 0; x < s; ++x) cells[static_cast<std::size_t>(lay.begin + y * ps + x)] = -1;
+    cells_for = s;
   }
-#else
-  thread_local std::vector<int> holes;
-  thread_local std::vector<float> filled;
-  holes.clear();
-  for (int y = 0; y < s; ++y)
-    for (int x = 0; x < s; ++x)
-      if (d0[y * ps + x] == kEmpty) holes.push_back((y + 1) * ps + x + 1);
-  filled.resize(holes.size());
-  float* const dp = depth.data();
-  for (int pass = 0; pass < 2 && !holes.empty(); ++pass) {
-    const std::size_t nh = holes.size();
-    for (std::size_t i = 0; i < nh; ++i) {
-      const float* const c = dp + holes[i];
-      float sum = 0.0F;
-      int n = 0;
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const float v = c[dy * ps + dx];
-          const bool ok = v != kEmpty;
-          sum += ok ? v : 0.0F;
-          n += ok ? 1 : 0;
-        }
-      filled[i] = n >= 2 ? sum / static_cast<float>(n) : kEmpty;
-    }
-    std::size_t kept = 0;
-    for (std::size_t i = 0; i < nh; ++i) {
-      dp[holes[i]] = filled[i];
-      if (filled[i] == kEmpty) holes[kept++] = holes[i];
-    }
-    holes.resize(kept);
-  }
-#endif
-  const float* const f0 = depth.data() + ps + 1;
+  next.assign(lay.size, kEmpty);
+  const float* const filled = fill_holes(depth.data(), next.data(), cells.data(), lay);
+  const float* const f0 = filled + lay.begin;
   for (int y = 0; y < s; ++y) {
     int x = 0;
 #if defined(__SSE2__)
