@@ -12,6 +12,10 @@
 #include "features/point_hash.hpp"
 #include "lex3d/features/features.hpp"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace lex3d {
 
 void InterestParams::validate() const {
@@ -93,6 +97,36 @@ constexpr float kSameSurface = 0.05F;
 
 // Both gradient images at once: they are known at the same pixels (every return), so
 // the weights of a pixel's neighbours are the same for both.
+#if defined(__SSE2__)
+// The normalised convolution of `smooth` at four neighbouring pixels (lanes), taps
+// i0..i1 `step` floats apart: a tap a lane rejects keeps
+// that lane's sums as they were (a select, not an added zero, so even a -0 sum stays
+// -0), so each lane's result has the bits of the scalar loop. A lane whose own value
+// is unknown gets NaN.
+inline void smooth_block(const float* vx, const float* vy, const float* rr, std::ptrdiff_t step, int i0, int i1,
+                         const float* kc, float* ox, float* oy) {
+  const __m128 rc = _mm_loadu_ps(rr);
+  const __m128 tol = _mm_mul_ps(_mm_set1_ps(kSameSurface), rc);
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+  __m128 sx = _mm_setzero_ps(), sy = _mm_setzero_ps(), ws = _mm_setzero_ps();
+  for (int i = i0; i <= i1; ++i) {
+    const std::ptrdiff_t o = i * step;
+    const __m128 v = _mm_loadu_ps(vx + o);
+    const __m128 ok = _mm_and_ps(_mm_cmpord_ps(v, v),
+                                 _mm_cmple_ps(_mm_and_ps(_mm_sub_ps(_mm_loadu_ps(rr + o), rc), abs_mask), tol));
+    const __m128 k = _mm_set1_ps(kc[i]);
+    sx = _mm_or_ps(_mm_and_ps(ok, _mm_add_ps(sx, _mm_mul_ps(k, v))), _mm_andnot_ps(ok, sx));
+    sy = _mm_or_ps(_mm_and_ps(ok, _mm_add_ps(sy, _mm_mul_ps(k, _mm_loadu_ps(vy + o)))), _mm_andnot_ps(ok, sy));
+    ws = _mm_or_ps(_mm_and_ps(ok, _mm_add_ps(ws, k)), _mm_andnot_ps(ok, ws));
+  }
+  const __m128 centre = _mm_loadu_ps(vx);
+  const __m128 known = _mm_cmpord_ps(centre, centre);
+  const __m128 nan = _mm_set1_ps(kNaN);
+  _mm_storeu_ps(ox, _mm_or_ps(_mm_and_ps(known, _mm_div_ps(sx, ws)), _mm_andnot_ps(known, nan)));
+  _mm_storeu_ps(oy, _mm_or_ps(_mm_and_ps(known, _mm_div_ps(sy, ws)), _mm_andnot_ps(known, nan)));
+}
+#endif
+
 void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& img, double sigma) {
   const int w = img.width;
   const int h = img.height;
@@ -112,6 +146,15 @@ void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& im
     const float* const vy = gy.data() + row;
     const float* const rr = range + row;
     for (int x = 0; x < w; ++x) {
+#if defined(__SSE2__)
+      // Four pixels whose taps all lie inside the row at once; each lane adds the
+      // same products in the same order as the code below.
+      if (x >= radius && x + 3 + radius < w) {
+        smooth_block(vx + x, vy + x, rr + x, 1, -radius, radius, kc, tx.data() + row + x, ty.data() + row + x);
+        x += 3;
+        continue;
+      }
+#endif
       if (std::isnan(vx[x])) continue;
       const float rc = rr[x];
       const float tol = kSameSurface * rc;
@@ -140,6 +183,13 @@ void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& im
     const int i1 = std::min(radius, h - 1 - y);
     for (int x = 0; x < w; ++x) {
       const std::size_t k0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+#if defined(__SSE2__)
+      if (x + 3 < w) {
+        smooth_block(tx.data() + k0, ty.data() + k0, range + k0, stride, i0, i1, kc, gx.data() + k0, gy.data() + k0);
+        x += 3;
+        continue;
+      }
+#endif
       if (std::isnan(tx[k0])) continue;
       const float rc = range[k0];
       const float tol = kSameSurface * rc;
