@@ -66,6 +66,20 @@ inline Neighbour neighbour(const RangeImage& img, int x, int y, int dx, int dy) 
   return {kNaN, 1.0F};
 }
 
+// neighbour() for a pixel k whose neighbours 1 and 2 steps of `step` away lie inside
+// the image.
+inline Neighbour inner_neighbour(const RangeImage& img, std::size_t k, std::ptrdiff_t step) {
+  for (int s = 1; s <= 2; ++s) {
+    const auto q = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k) + s * step);
+    switch (img.state[q]) {
+      case PixelState::kValid: return {img.range[q], static_cast<float>(s)};
+      case PixelState::kMaxRange: return {std::numeric_limits<float>::infinity(), static_cast<float>(s)};
+      default: break;
+    }
+  }
+  return {kNaN, 1.0F};
+}
+
 // Normalised gradient (eq. 1-2) from the two neighbours along one axis, per pixel
 // of distance, so that atan(g / (tan α · r)) is the surface's slope angle against
 // the beam; a max-range neighbour is a jump to infinity (±1). NaN when neither
@@ -225,6 +239,22 @@ inline float second_derivative(const std::vector<float>& g, const RangeImage& im
   return 0.0F;
 }
 
+#if defined(__SSE2__)
+// second_derivative at four neighbouring pixels g[0..3] away from the image's edges,
+// neighbours `step` floats before and after.
+inline __m128 second_derivatives(const float* g, std::ptrdiff_t step) {
+  const __m128 c = _mm_loadu_ps(g);
+  const __m128 b = _mm_loadu_ps(g - step);
+  const __m128 a = _mm_loadu_ps(g + step);
+  const __m128 a_ok = _mm_cmpord_ps(a, a), b_ok = _mm_cmpord_ps(b, b);
+  const __m128 two = _mm_set1_ps(2.0F);
+  const __m128 only_b = _mm_and_ps(b_ok, _mm_mul_ps(two, _mm_sub_ps(c, b)));  // 0 when neither
+  const __m128 one_side = _mm_or_ps(_mm_and_ps(a_ok, _mm_mul_ps(two, _mm_sub_ps(a, c))), _mm_andnot_ps(a_ok, only_b));
+  const __m128 both = _mm_and_ps(a_ok, b_ok);
+  return _mm_or_ps(_mm_and_ps(both, _mm_sub_ps(a, b)), _mm_andnot_ps(both, one_side));
+}
+#endif
+
 inline float angle_diff_mod_pi(float a, float b) {
   float d = std::fmod(std::abs(a - b), static_cast<float>(M_PI));
   return std::min(d, static_cast<float>(M_PI) - d);
@@ -257,9 +287,17 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
       const std::size_t k = img.index(x, y);
       if (img.state[k] != PixelState::kValid) continue;
       const float r = img.range[k];
-      gx[k] = normalised_gradient(r, neighbour(img, x, y, -1, 0), neighbour(img, x, y, 1, 0), tan_ax);
-      gy[k] = normalised_gradient(r, neighbour(img, x, y, 0, -1), neighbour(img, x, y, 0, 1),
-                                  tan_row[static_cast<std::size_t>(y)]);
+      if (x >= 2 && x + 2 < w && y >= 2 && y + 2 < h) {
+        // Both steps of every neighbour inside the image: no wrap or bounds to check.
+        const auto wide = static_cast<std::ptrdiff_t>(w);
+        gx[k] = normalised_gradient(r, inner_neighbour(img, k, -1), inner_neighbour(img, k, 1), tan_ax);
+        gy[k] = normalised_gradient(r, inner_neighbour(img, k, -wide), inner_neighbour(img, k, wide),
+                                    tan_row[static_cast<std::size_t>(y)]);
+      } else {
+        gx[k] = normalised_gradient(r, neighbour(img, x, y, -1, 0), neighbour(img, x, y, 1, 0), tan_ax);
+        gy[k] = normalised_gradient(r, neighbour(img, x, y, 0, -1), neighbour(img, x, y, 0, 1),
+                                    tan_row[static_cast<std::size_t>(y)]);
+      }
       if (std::isnan(gx[k])) gx[k] = 0.0F;
       if (std::isnan(gy[k])) gy[k] = 0.0F;
     }
@@ -279,36 +317,56 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
                               ? std::numeric_limits<float>::infinity()
                               : static_cast<float>(std::tan(params.occlusion_gradient * M_PI / 2.0));
   const float thr = static_cast<float>(params.threshold);
+  // Eq. 5 done; the occlusion filter, then the pixel's value.
+  auto finish = [&](int x, int y, std::size_t k, float interest) {
+    if (interest >= thr) {
+      // Shadow side of a jump: a nearer neighbour (1 or 2 px away) with a normalised
+      // range step close to 1. Such borders depend on the viewpoint.
+      const float r = img.range[k];
+      bool shadow = false;
+      for (int step = 1; step <= 2 && !shadow; ++step) {
+        const int dxs[4] = {-step, step, 0, 0};
+        const int dys[4] = {0, 0, -step, step};
+        for (int j = 0; j < 4 && !shadow; ++j) {
+          const float rq = neighbour_range(img, x + dxs[j], y + dys[j]);
+          if (!(rq < r)) continue;  // NaN, inf or not nearer
+          const float tan_a = dxs[j] != 0 ? tan_ax : tan_row[static_cast<std::size_t>(y)];
+          shadow = (r - rq) > occ_ratio * tan_a * r * static_cast<float>(step);
+        }
+      }
+      if (shadow) {
+        interest = 0.0F;
+        ++out.occlusion_rejected;
+      }
+    }
+    out.value[k] = interest;
+  };
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t k = img.index(x, y);
+#if defined(__SSE2__)
+      // Four pixels with all their neighbours inside the image (no wrap, no edge):
+      // the same differences, products and square root in each lane, chosen by
+      // selects where the scalar code branches.
+      if (y > 0 && y + 1 < h && x > 0 && x + 4 < w) {
+        const __m128 dx2 = second_derivatives(gx.data() + k, 1);
+        const __m128 dy2 = second_derivatives(gy.data() + k, static_cast<std::ptrdiff_t>(w));
+        alignas(16) float value[4];
+        _mm_store_ps(value, _mm_mul_ps(_mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(dx2, dx2), _mm_mul_ps(dy2, dy2))),
+                                       _mm_set1_ps(kInvMaxInterest)));
+        for (int l = 0; l < 4; ++l)
+          if (img.state[k + static_cast<std::size_t>(l)] == PixelState::kValid)
+            finish(x + l, y, k + static_cast<std::size_t>(l), value[l]);
+        x += 3;
+        continue;
+      }
+#endif
       if (img.state[k] != PixelState::kValid) continue;
       const float gx2 = second_derivative(gx, img, x, y, true);
       const float gy2 = second_derivative(gy, img, x, y, false);
       // |G'| <= 1 bounds each second derivative by 2, so dividing by 2·sqrt(2) maps
       // eq. 5 onto [0, 1] without clipping the strongest corners into a tie.
-      float interest = std::sqrt(gx2 * gx2 + gy2 * gy2) * kInvMaxInterest;
-      if (interest >= thr) {
-        // Shadow side of a jump: a nearer neighbour (1 or 2 px away) with a normalised
-        // range step close to 1. Such borders depend on the viewpoint.
-        const float r = img.range[k];
-        bool shadow = false;
-        for (int step = 1; step <= 2 && !shadow; ++step) {
-          const int dxs[4] = {-step, step, 0, 0};
-          const int dys[4] = {0, 0, -step, step};
-          for (int j = 0; j < 4 && !shadow; ++j) {
-            const float rq = neighbour_range(img, x + dxs[j], y + dys[j]);
-            if (!(rq < r)) continue;  // NaN, inf or not nearer
-            const float tan_a = dxs[j] != 0 ? tan_ax : tan_row[static_cast<std::size_t>(y)];
-            shadow = (r - rq) > occ_ratio * tan_a * r * static_cast<float>(step);
-          }
-        }
-        if (shadow) {
-          interest = 0.0F;
-          ++out.occlusion_rejected;
-        }
-      }
-      out.value[k] = interest;
+      finish(x, y, k, std::sqrt(gx2 * gx2 + gy2 * gy2) * kInvMaxInterest);
     }
 
   // Local maxima above the threshold, then the straight-line filter.
