@@ -21,6 +21,9 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/features/features.hpp"
@@ -132,8 +135,8 @@ void make_window(const RangeImage& img, const WindowCentre& c, double radius, in
     const int x = img.wrap_x(c.cx + dx);
     if (x >= 0) w.cols[w.ncols++] = x;
   }
-  // Room for a whole last block of four: the last column again (its lanes masked off).
-  for (int j = w.ncols; j < ((w.ncols + 3) & ~3); ++j) w.cols[j] = w.cols[w.ncols - 1];
+  // Room for a whole last block of eight: the last column again (its lanes masked off).
+  for (int j = w.ncols; j < ((w.ncols + 7) & ~7); ++j) w.cols[j] = w.cols[w.ncols - 1];
 }
 
 // Calls the kernel for the window's points in order: row by row, columns left to
@@ -189,6 +192,135 @@ inline void for_window(const Pixel* pix, int width, int /*height*/, const Window
 }
 #endif
 
+// Running sums of a plane fit's offsets and of their products (xx, xy, xz, yy, yz,
+// zz), in double, added in visiting order.
+struct PlaneSums {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+  double sxx = 0.0, sxy = 0.0, sxz = 0.0, syy = 0.0, syz = 0.0, szz = 0.0;
+  int count = 0;
+  void add(float dx, float dy, float dz) {
+    const double ex = dx, ey = dy, ez = dz;
+    s0 += ex;
+    s1 += ey;
+    s2 += ez;
+    sxx += ex * ex;
+    sxy += ex * ey;
+    sxz += ex * ez;
+    syy += ey * ey;
+    syz += ey * ez;
+    szz += ez * ez;
+    ++count;
+  }
+};
+
+#if defined(__SSE2__) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && \
+    !defined(__SANITIZE_ADDRESS__)
+#define LEX3D_DESCRIBE_AVX 1
+bool cpu_has_avx() {
+  static const bool avx = __builtin_cpu_supports("avx");
+  return avx;
+}
+
+// Eight pixels of a window row as x, y, z lanes (columns c[0..7]).
+__attribute__((target("avx"))) inline void load8(const float* row, const int* c, bool last_row, __m256& x,
+                                                 __m256& y, __m256& z) {
+  const __m256 t0 = _mm256_insertf128_ps(_mm256_castps128_ps256(load_pixel(row + 3 * c[0], last_row)),
+                                         load_pixel(row + 3 * c[4], last_row), 1);
+  const __m256 t1 = _mm256_insertf128_ps(_mm256_castps128_ps256(load_pixel(row + 3 * c[1], last_row)),
+                                         load_pixel(row + 3 * c[5], last_row), 1);
+  const __m256 t2 = _mm256_insertf128_ps(_mm256_castps128_ps256(load_pixel(row + 3 * c[2], last_row)),
+                                         load_pixel(row + 3 * c[6], last_row), 1);
+  const __m256 t3 = _mm256_insertf128_ps(_mm256_castps128_ps256(load_pixel(row + 3 * c[3], last_row)),
+                                         load_pixel(row + 3 * c[7], last_row), 1);
+  const __m256 u0 = _mm256_unpacklo_ps(t0, t1);  // x0 x1 y0 y1 | x4 x5 y4 y5
+  const __m256 u1 = _mm256_unpackhi_ps(t0, t1);  // z0 z1 .  .  | z4 z5 .  .
+  const __m256 u2 = _mm256_unpacklo_ps(t2, t3);  // x2 x3 y2 y3 | x6 x7 y6 y7
+  const __m256 u3 = _mm256_unpackhi_ps(t2, t3);  // z2 z3 .  .  | z6 z7 .  .
+  x = _mm256_shuffle_ps(u0, u2, _MM_SHUFFLE(1, 0, 1, 0));
+  y = _mm256_shuffle_ps(u0, u2, _MM_SHUFFLE(3, 2, 3, 2));
+  z = _mm256_shuffle_ps(u1, u3, _MM_SHUFFLE(1, 0, 1, 0));
+}
+
+// The plane-fit sums of feature_frame over the window's points within sqrt(r2) of
+// p, eight pixels at a time: the same float test in each lane as its four-pixel
+// kernel, and the points added in the same order.
+__attribute__((target("avx"))) void plane_sums_avx(const Pixel* pix, int width, int height, const Window& w,
+                                                   const Eigen::Vector3f& p, float r2, PlaneSums& sums) {
+  const __m256 vpx = _mm256_set1_ps(p.x()), vpy = _mm256_set1_ps(p.y()), vpz = _mm256_set1_ps(p.z());
+  const __m256 vr2 = _mm256_set1_ps(r2);
+  for (int r = 0; r < w.nrows; ++r) {
+    const float* row = pix[static_cast<std::ptrdiff_t>(w.rows[r]) * width].data();
+    const bool last_row = w.rows[r] + 1 == height;
+    for (int j = 0; j < w.ncols; j += 8) {
+      const int lanes = w.ncols - j >= 8 ? 0xFF : (1 << (w.ncols - j)) - 1;
+      __m256 x, y, z;
+      load8(row, w.cols + j, last_row, x, y, z);
+      const __m256 dx = _mm256_sub_ps(x, vpx), dy = _mm256_sub_ps(y, vpy), dz = _mm256_sub_ps(z, vpz);
+      const __m256 sq = _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_add_ps(_mm256_mul_ps(dy, dy), _mm256_mul_ps(dz, dz)));
+      int m = _mm256_movemask_ps(_mm256_cmp_ps(sq, vr2, _CMP_LE_OS)) & lanes;
+      if (m == 0) continue;
+      alignas(32) float ax[8], ay[8], az[8];
+      _mm256_store_ps(ax, dx);
+      _mm256_store_ps(ay, dy);
+      _mm256_store_ps(az, dz);
+      for (; m != 0; m &= m - 1) {
+        const int l = __builtin_ctz(static_cast<unsigned>(m));
+        sums.add(ax[l], ay[l], az[l]);
+      }
+    }
+  }
+}
+
+// The patch's z-buffer filled from a window eight pixels at a time: the same
+// products, sums and comparisons in each lane as the four-pixel kernel of
+// patch_descriptor, the cells found from the same float values (the cell index
+// clamped before truncation instead of after: the same for the non-negative values
+// of points inside the cube), and the points put in the same order.
+__attribute__((target("avx"))) void rasterise_avx(const Pixel* pix, int width, int height, const Window& w,
+                                                  const float* a, const Eigen::Vector3f& p, float rad,
+                                                  float inv_cell, int s, int pitch, float* d0) {
+  const __m256 a00 = _mm256_set1_ps(a[0]), a01 = _mm256_set1_ps(a[1]), a02 = _mm256_set1_ps(a[2]);
+  const __m256 a10 = _mm256_set1_ps(a[3]), a11 = _mm256_set1_ps(a[4]), a12 = _mm256_set1_ps(a[5]);
+  const __m256 a20 = _mm256_set1_ps(a[6]), a21 = _mm256_set1_ps(a[7]), a22 = _mm256_set1_ps(a[8]);
+  const __m256 vpx = _mm256_set1_ps(p.x()), vpy = _mm256_set1_ps(p.y()), vpz = _mm256_set1_ps(p.z());
+  const __m256 vrad = _mm256_set1_ps(rad), vinv = _mm256_set1_ps(inv_cell);
+  const __m256 vlast = _mm256_set1_ps(static_cast<float>(s - 1));
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  for (int r = 0; r < w.nrows; ++r) {
+    const float* row = pix[static_cast<std::ptrdiff_t>(w.rows[r]) * width].data();
+    const bool last_row = w.rows[r] + 1 == height;
+    for (int j = 0; j < w.ncols; j += 8) {
+      const int lanes = w.ncols - j >= 8 ? 0xFF : (1 << (w.ncols - j)) - 1;
+      __m256 x, y, z;
+      load8(row, w.cols + j, last_row, x, y, z);
+      const __m256 dx = _mm256_sub_ps(x, vpx), dy = _mm256_sub_ps(y, vpy), dz = _mm256_sub_ps(z, vpz);
+      const __m256 lx = _mm256_add_ps(_mm256_mul_ps(a00, dx), _mm256_add_ps(_mm256_mul_ps(a01, dy), _mm256_mul_ps(a02, dz)));
+      const __m256 ly = _mm256_add_ps(_mm256_mul_ps(a10, dx), _mm256_add_ps(_mm256_mul_ps(a11, dy), _mm256_mul_ps(a12, dz)));
+      const __m256 lz = _mm256_add_ps(_mm256_mul_ps(a20, dx), _mm256_add_ps(_mm256_mul_ps(a21, dy), _mm256_mul_ps(a22, dz)));
+      const __m256 in =
+          _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(lx, abs_mask), vrad, _CMP_LT_OS),
+                                      _mm256_cmp_ps(_mm256_and_ps(ly, abs_mask), vrad, _CMP_LT_OS)),
+                        _mm256_cmp_ps(_mm256_and_ps(lz, abs_mask), vrad, _CMP_LT_OS));
+      int m = _mm256_movemask_ps(in) & lanes;
+      if (m == 0) continue;
+      alignas(32) std::int32_t ix[8], iy[8];
+      alignas(32) float depth_of[8];
+      _mm256_store_si256(reinterpret_cast<__m256i*>(ix),
+                         _mm256_cvttps_epi32(_mm256_min_ps(_mm256_mul_ps(_mm256_add_ps(lx, vrad), vinv), vlast)));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(iy),
+                         _mm256_cvttps_epi32(_mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(vrad, ly), vinv), vlast)));
+      _mm256_store_ps(depth_of, lz);
+      for (; m != 0; m &= m - 1) {
+        const int l = __builtin_ctz(static_cast<unsigned>(m));
+        float& d = d0[iy[l] * pitch + ix[l]];
+        d = std::max(d, depth_of[l]);  // z-buffer: the viewpoint sits on +z
+      }
+    }
+  }
+}
+#endif
+
+
 struct Frame {
   Eigen::Matrix3f R;  // columns: x, y, z of the feature frame in the sensor frame
   std::uint16_t support;
@@ -204,25 +336,16 @@ Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp,
   const double radius = std::min(params.support_radius, std::max(params.normal_radius, 2.5 * spacing));
   const float r2 = static_cast<float>(radius * radius);
   make_window(img, centre, radius, 7, win);
-  // Sums of the offsets and of their products (xx, xy, xz, yy, yz, zz), in visiting order.
-  double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-  double sxx = 0.0, sxy = 0.0, sxz = 0.0, syy = 0.0, syz = 0.0, szz = 0.0;
-  int count = 0;
+  // Sums of the offsets and of their products, in visiting order.
+  PlaneSums sums;
   const float px = p.x(), py = p.y(), pz = p.z();
-  auto add = [&](float dx, float dy, float dz) {
-    const double ex = dx, ey = dy, ez = dz;
-    s0 += ex;
-    s1 += ey;
-    s2 += ez;
-    sxx += ex * ex;
-    sxy += ex * ey;
-    sxz += ex * ez;
-    syy += ey * ey;
-    syz += ey * ez;
-    szz += ez * ez;
-    ++count;
-  };
+  auto add = [&](float dx, float dy, float dz) { sums.add(dx, dy, dz); };
   // Same association as Eigen's squaredNorm of a 3-vector; NaN (no return) fails.
+#if defined(LEX3D_DESCRIBE_AVX)
+  if (cpu_has_avx()) {
+    plane_sums_avx(pix, img.width, img.height, win, p, r2, sums);
+  } else
+#endif
   for_window(pix, img.width, img.height, win,
 #if defined(__SSE2__)
              [&, vpx = _mm_set1_ps(px), vpy = _mm_set1_ps(py), vpz = _mm_set1_ps(pz),
@@ -237,6 +360,9 @@ Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp,
                const float dx = q.x() - px, dy = q.y() - py, dz = q.z() - pz;
                if (dx * dx + (dy * dy + dz * dz) <= r2) add(dx, dy, dz);
              });
+  int count = sums.count;
+  const double s0 = sums.s0, s1 = sums.s1, s2 = sums.s2;
+  const double sxx = sums.sxx, sxy = sums.sxy, sxz = sums.sxz, syy = sums.syy, syz = sums.syz, szz = sums.szz;
   Eigen::Vector3f normal = -view;
   if (count >= 3) {
     const Eigen::Vector3d sum(s0, s1, s2);
@@ -273,6 +399,139 @@ Frame feature_frame(const RangeImage& img, const Pixel* pix, const Keypoint& kp,
   return f;
 }
 
+// Where a patch of s x s cells lives in its flat array: cell (x, y) at
+// begin + y * pitch + x, surrounded by empty border cells; cells end before `end`.
+// The array has room for blocks of eight from `begin` past `end`, plus their
+// neighbours one row down.
+struct PatchLayout {
+  explicit PatchLayout(int s)
+      : pitch(s + 1), begin(s + 2), end(s * (s + 1) + s + 1),
+        size(static_cast<std::size_t>(begin + 8 * ((end - begin + 7) / 8) + pitch + 8)) {}
+  int pitch;
+  int begin;
+  int end;
+  std::size_t size;
+};
+
+// One or two passes of hole filling over the cells of `cur` (the z-buffer), writing
+// each pass to the other array (`nxt`, all empty on entry); returns the array that
+// holds the result. A hole takes the mean of its filled 3x3 neighbours as they were
+// before the pass, summed in row-major order, when it has at least two. Empty
+// neighbours add +0, which changes nothing (a sum started at +0 never becomes -0), so
+// the sums need no branches. `cells` is -1 at cells and 0 at border positions, which
+// are never filled. Every variant does the same operations in each lane, so they
+// give the same bits.
+#if defined(__SSE2__)
+const float* fill_holes_sse2(float* cur, float* nxt, const std::int32_t* cells, const PatchLayout& lay) {
+  const int ps = lay.pitch;
+  const __m128 empty = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+  const __m128 one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
+  for (int pass = 0; pass < 2; ++pass) {
+    int holes = 0, left = 0;
+    for (int i = lay.begin; i < lay.end; i += 4) {
+      const float* const c = cur + i;
+      const __m128 cv = _mm_loadu_ps(c);
+      const __m128 hole =
+          _mm_and_ps(_mm_cmpeq_ps(cv, empty), _mm_castsi128_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(cells + i))));
+      if (_mm_movemask_ps(hole) == 0) {  // nothing to fill in these four cells
+        _mm_storeu_ps(nxt + i, cv);
+        continue;
+      }
+      holes = 1;
+      __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const __m128 v = _mm_loadu_ps(c + dy * ps + dx);
+          const __m128 ok = _mm_cmpneq_ps(v, empty);
+          sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
+          n = _mm_add_ps(n, _mm_and_ps(ok, one));
+        }
+      const __m128 fill = _mm_and_ps(hole, _mm_cmpge_ps(n, two));
+      left |= _mm_movemask_ps(_mm_andnot_ps(fill, hole));
+      _mm_storeu_ps(nxt + i, _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
+    }
+    if (holes == 0) break;  // `nxt` is a copy of `cur`
+    std::swap(cur, nxt);
+    if (left == 0) break;   // no hole left for a second pass
+  }
+  return cur;
+}
+
+#if defined(LEX3D_DESCRIBE_AVX)
+// The same eight cells at a time (no FMA: only adds, compares and a division).
+__attribute__((target("avx"))) const float* fill_holes_avx(float* cur, float* nxt, const std::int32_t* cells,
+                                                            const PatchLayout& lay) {
+  const int ps = lay.pitch;
+  const __m256 empty = _mm256_set1_ps(-std::numeric_limits<float>::infinity());
+  const __m256 one = _mm256_set1_ps(1.0F), two = _mm256_set1_ps(2.0F);
+  for (int pass = 0; pass < 2; ++pass) {
+    int holes = 0, left = 0;
+    for (int i = lay.begin; i < lay.end; i += 8) {
+      const float* const c = cur + i;
+      const __m256 cv = _mm256_loadu_ps(c);
+      const __m256 hole = _mm256_and_ps(_mm256_cmp_ps(cv, empty, _CMP_EQ_OQ),
+                                        _mm256_castsi256_ps(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells + i))));
+      if (_mm256_movemask_ps(hole) == 0) {
+        _mm256_storeu_ps(nxt + i, cv);
+        continue;
+      }
+      holes = 1;
+      __m256 sum = _mm256_setzero_ps(), n = _mm256_setzero_ps();
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const __m256 v = _mm256_loadu_ps(c + dy * ps + dx);
+          const __m256 ok = _mm256_cmp_ps(v, empty, _CMP_NEQ_UQ);
+          sum = _mm256_add_ps(sum, _mm256_and_ps(ok, v));
+          n = _mm256_add_ps(n, _mm256_and_ps(ok, one));
+        }
+      const __m256 fill = _mm256_and_ps(hole, _mm256_cmp_ps(n, two, _CMP_GE_OS));
+      left |= _mm256_movemask_ps(_mm256_andnot_ps(fill, hole));
+      _mm256_storeu_ps(nxt + i, _mm256_or_ps(_mm256_and_ps(fill, _mm256_div_ps(sum, n)), _mm256_andnot_ps(fill, cv)));
+    }
+    if (holes == 0) break;
+    std::swap(cur, nxt);
+    if (left == 0) break;
+  }
+  return cur;
+}
+#endif
+
+const float* fill_holes(float* cur, float* nxt, const std::int32_t* cells, const PatchLayout& lay) {
+#if defined(LEX3D_DESCRIBE_AVX)
+  if (cpu_has_avx()) return fill_holes_avx(cur, nxt, cells, lay);
+#endif
+  return fill_holes_sse2(cur, nxt, cells, lay);
+}
+#else
+const float* fill_holes(float* cur, float* nxt, const std::int32_t* cells, const PatchLayout& lay) {
+  const float kEmpty = -std::numeric_limits<float>::infinity();
+  for (int pass = 0; pass < 2; ++pass) {
+    bool holes = false, left = false;
+    for (int i = lay.begin; i < lay.end; ++i) {
+      const float* const c = cur + i;
+      nxt[i] = *c;
+      if (cells[i] == 0 || *c != kEmpty) continue;
+      holes = true;
+      float sum = 0.0F;
+      float n = 0.0F;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const float v = c[dy * lay.pitch + dx];
+          const bool ok = v != kEmpty;
+          sum += ok ? v : 0.0F;
+          n += ok ? 1.0F : 0.0F;
+        }
+      if (n >= 2.0F) nxt[i] = sum / n;
+      else left = true;
+    }
+    if (!holes) break;
+    std::swap(cur, nxt);
+    if (!left) break;
+  }
+  return cur;
+}
+#endif
+
 void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& kp, const WindowCentre& centre,
                       const Eigen::Matrix3f& R, const DescriptorParams& params, Window& win, float* out) {
   const int s = params.patch_size;
@@ -280,11 +539,14 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   const float inv_cell = static_cast<float>(s) / (2.0F * rad);
   const float kEmpty = -std::numeric_limits<float>::infinity();
   // The patch with a border of empty cells, so that hole filling needs no bounds
-  // checks; rows padded to a multiple of four cells plus four, for 4-wide blocks.
-  const int ps = 4 * ((s + 5) / 4) + 4;
+  // checks. One border column between rows (the right border of a row is the left
+  // one of the next) lets hole filling run over the cells as one flat array in
+  // blocks, with few lanes wasted on borders.
+  const PatchLayout lay(s);
   thread_local std::vector<float> depth;
-  depth.assign(static_cast<std::size_t>((s + 2) * ps), kEmpty);
-  float* const d0 = depth.data() + ps + 1;  // cell (0, 0)
+  depth.assign(lay.size, kEmpty);
+  const int ps = lay.pitch;
+  float* const d0 = depth.data() + lay.begin;  // cell (0, 0)
   // Rows of R^T; each coordinate sums its products as Eigen's 3x3 product does.
   const float a00 = R(0, 0), a01 = R(1, 0), a02 = R(2, 0);
   const float a10 = R(0, 1), a11 = R(1, 1), a12 = R(2, 1);
@@ -298,6 +560,12 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
     d = std::max(d, lz);  // z-buffer: the viewpoint sits on +z
   };
   // Points inside the cube of half side rad (NaN, no return, fails).
+#if defined(LEX3D_DESCRIBE_AVX)
+  if (cpu_has_avx()) {
+    const float a[9] = {a00, a01, a02, a10, a11, a12, a20, a21, a22};
+    rasterise_avx(pix, img.width, img.height, win, a, kp.point_sensor, rad, inv_cell, s, ps, d0);
+  } else
+#endif
   for_window(pix, img.width, img.height, win,
 #if defined(__SSE2__)
              [&, vpx = _mm_set1_ps(px), vpy = _mm_set1_ps(py), vpz = _mm_set1_ps(pz), vrad = _mm_set1_ps(rad),
@@ -323,82 +591,19 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
                if (std::abs(lx) < rad && std::abs(ly) < rad && std::abs(lz) < rad) put(lx, ly, lz);
              });
   // Interpolate small holes from filled neighbours (two passes); what stays empty
-  // is "nothing seen within the support" and gets the far value -radius. A hole takes
-  // the mean of its filled 3x3 neighbours as they were before the pass, summed in
-  // row-major order. Empty neighbours add +0, which changes nothing (a sum started at
-  // +0 never becomes -0), so the sums need no branches.
-#if defined(__SSE2__)
+  // is "nothing seen within the support" and gets the far value -radius.
   thread_local std::vector<float> next;
-  next.assign(depth.size(), kEmpty);
-  const __m128 empty = _mm_set1_ps(kEmpty), one = _mm_set1_ps(1.0F), two = _mm_set1_ps(2.0F);
-  // Lanes past the last column are border cells and stay empty.
-  const __m128 last_lanes =
-      _mm_castsi128_ps(_mm_cmplt_epi32(_mm_set_epi32(3, 2, 1, 0), _mm_set1_epi32(s - 4 * ((s - 1) / 4))));
-  for (int pass = 0; pass < 2; ++pass) {
-    const float* const c0 = depth.data() + ps + 1;
-    float* const n0 = next.data() + ps + 1;
-    int holes = 0, left = 0;
+  thread_local std::vector<std::int32_t> cells;
+  thread_local int cells_for = -1;
+  if (cells_for != s) {
+    cells.assign(lay.size, 0);
     for (int y = 0; y < s; ++y)
-      for (int x = 0; x < s; x += 4) {
-        const float* const c = c0 + y * ps + x;
-        const __m128 cv = _mm_loadu_ps(c);
-        __m128 hole = _mm_cmpeq_ps(cv, empty);
-        if (s - x < 4) hole = _mm_and_ps(hole, last_lanes);
-        if (_mm_movemask_ps(hole) == 0) {  // nothing to fill in these four cells
-          _mm_storeu_ps(n0 + y * ps + x, cv);
-          continue;
-        }
-        holes = 1;
-        __m128 sum = _mm_setzero_ps(), n = _mm_setzero_ps();
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dx = -1; dx <= 1; ++dx) {
-            const __m128 v = _mm_loadu_ps(c + dy * ps + dx);
-            const __m128 ok = _mm_cmpneq_ps(v, empty);
-            sum = _mm_add_ps(sum, _mm_and_ps(ok, v));
-            n = _mm_add_ps(n, _mm_and_ps(ok, one));
-          }
-        const __m128 fill = _mm_and_ps(hole, _mm_cmpge_ps(n, two));
-        left |= _mm_movemask_ps(_mm_andnot_ps(fill, hole));
-        _mm_storeu_ps(n0 + y * ps + x,
-                      _mm_or_ps(_mm_and_ps(fill, _mm_div_ps(sum, n)), _mm_andnot_ps(fill, cv)));
-      }
-    if (holes == 0) break;  // `next` is a copy of `depth`
-    depth.swap(next);
-    if (left == 0) break;   // no hole left for a second pass
+      for (int x = 0; x < s; ++x) cells[static_cast<std::size_t>(lay.begin + y * ps + x)] = -1;
+    cells_for = s;
   }
-#else
-  thread_local std::vector<int> holes;
-  thread_local std::vector<float> filled;
-  holes.clear();
-  for (int y = 0; y < s; ++y)
-    for (int x = 0; x < s; ++x)
-      if (d0[y * ps + x] == kEmpty) holes.push_back((y + 1) * ps + x + 1);
-  filled.resize(holes.size());
-  float* const dp = depth.data();
-  for (int pass = 0; pass < 2 && !holes.empty(); ++pass) {
-    const std::size_t nh = holes.size();
-    for (std::size_t i = 0; i < nh; ++i) {
-      const float* const c = dp + holes[i];
-      float sum = 0.0F;
-      int n = 0;
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const float v = c[dy * ps + dx];
-          const bool ok = v != kEmpty;
-          sum += ok ? v : 0.0F;
-          n += ok ? 1 : 0;
-        }
-      filled[i] = n >= 2 ? sum / static_cast<float>(n) : kEmpty;
-    }
-    std::size_t kept = 0;
-    for (std::size_t i = 0; i < nh; ++i) {
-      dp[holes[i]] = filled[i];
-      if (filled[i] == kEmpty) holes[kept++] = holes[i];
-    }
-    holes.resize(kept);
-  }
-#endif
-  const float* const f0 = depth.data() + ps + 1;
+  next.assign(lay.size, kEmpty);
+  const float* const filled = fill_holes(depth.data(), next.data(), cells.data(), lay);
+  const float* const f0 = filled + lay.begin;
   for (int y = 0; y < s; ++y) {
     int x = 0;
 #if defined(__SSE2__)

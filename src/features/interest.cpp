@@ -12,6 +12,10 @@
 #include "features/point_hash.hpp"
 #include "lex3d/features/features.hpp"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace lex3d {
 
 void InterestParams::validate() const {
@@ -62,6 +66,20 @@ inline Neighbour neighbour(const RangeImage& img, int x, int y, int dx, int dy) 
   return {kNaN, 1.0F};
 }
 
+// neighbour() for a pixel k whose neighbours 1 and 2 steps of `step` away lie inside
+// the image.
+inline Neighbour inner_neighbour(const RangeImage& img, std::size_t k, std::ptrdiff_t step) {
+  for (int s = 1; s <= 2; ++s) {
+    const auto q = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k) + s * step);
+    switch (img.state[q]) {
+      case PixelState::kValid: return {img.range[q], static_cast<float>(s)};
+      case PixelState::kMaxRange: return {std::numeric_limits<float>::infinity(), static_cast<float>(s)};
+      default: break;
+    }
+  }
+  return {kNaN, 1.0F};
+}
+
 // Normalised gradient (eq. 1-2) from the two neighbours along one axis, per pixel
 // of distance, so that atan(g / (tan α · r)) is the surface's slope angle against
 // the beam; a max-range neighbour is a jump to infinity (±1). NaN when neither
@@ -93,6 +111,36 @@ constexpr float kSameSurface = 0.05F;
 
 // Both gradient images at once: they are known at the same pixels (every return), so
 // the weights of a pixel's neighbours are the same for both.
+#if defined(__SSE2__)
+// The normalised convolution of `smooth` at four neighbouring pixels (lanes), taps
+// i0..i1 `step` floats apart: a tap a lane rejects keeps
+// that lane's sums as they were (a select, not an added zero, so even a -0 sum stays
+// -0), so each lane's result has the bits of the scalar loop. A lane whose own value
+// is unknown gets NaN.
+inline void smooth_block(const float* vx, const float* vy, const float* rr, std::ptrdiff_t step, int i0, int i1,
+                         const float* kc, float* ox, float* oy) {
+  const __m128 rc = _mm_loadu_ps(rr);
+  const __m128 tol = _mm_mul_ps(_mm_set1_ps(kSameSurface), rc);
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+  __m128 sx = _mm_setzero_ps(), sy = _mm_setzero_ps(), ws = _mm_setzero_ps();
+  for (int i = i0; i <= i1; ++i) {
+    const std::ptrdiff_t o = i * step;
+    const __m128 v = _mm_loadu_ps(vx + o);
+    const __m128 ok = _mm_and_ps(_mm_cmpord_ps(v, v),
+                                 _mm_cmple_ps(_mm_and_ps(_mm_sub_ps(_mm_loadu_ps(rr + o), rc), abs_mask), tol));
+    const __m128 k = _mm_set1_ps(kc[i]);
+    sx = _mm_or_ps(_mm_and_ps(ok, _mm_add_ps(sx, _mm_mul_ps(k, v))), _mm_andnot_ps(ok, sx));
+    sy = _mm_or_ps(_mm_and_ps(ok, _mm_add_ps(sy, _mm_mul_ps(k, _mm_loadu_ps(vy + o)))), _mm_andnot_ps(ok, sy));
+    ws = _mm_or_ps(_mm_and_ps(ok, _mm_add_ps(ws, k)), _mm_andnot_ps(ok, ws));
+  }
+  const __m128 centre = _mm_loadu_ps(vx);
+  const __m128 known = _mm_cmpord_ps(centre, centre);
+  const __m128 nan = _mm_set1_ps(kNaN);
+  _mm_storeu_ps(ox, _mm_or_ps(_mm_and_ps(known, _mm_div_ps(sx, ws)), _mm_andnot_ps(known, nan)));
+  _mm_storeu_ps(oy, _mm_or_ps(_mm_and_ps(known, _mm_div_ps(sy, ws)), _mm_andnot_ps(known, nan)));
+}
+#endif
+
 void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& img, double sigma) {
   const int w = img.width;
   const int h = img.height;
@@ -112,6 +160,15 @@ void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& im
     const float* const vy = gy.data() + row;
     const float* const rr = range + row;
     for (int x = 0; x < w; ++x) {
+#if defined(__SSE2__)
+      // Four pixels whose taps all lie inside the row at once; each lane adds the
+      // same products in the same order as the code below.
+      if (x >= radius && x + 3 + radius < w) {
+        smooth_block(vx + x, vy + x, rr + x, 1, -radius, radius, kc, tx.data() + row + x, ty.data() + row + x);
+        x += 3;
+        continue;
+      }
+#endif
       if (std::isnan(vx[x])) continue;
       const float rc = rr[x];
       const float tol = kSameSurface * rc;
@@ -140,6 +197,13 @@ void smooth(std::vector<float>& gx, std::vector<float>& gy, const RangeImage& im
     const int i1 = std::min(radius, h - 1 - y);
     for (int x = 0; x < w; ++x) {
       const std::size_t k0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+#if defined(__SSE2__)
+      if (x + 3 < w) {
+        smooth_block(tx.data() + k0, ty.data() + k0, range + k0, stride, i0, i1, kc, gx.data() + k0, gy.data() + k0);
+        x += 3;
+        continue;
+      }
+#endif
       if (std::isnan(tx[k0])) continue;
       const float rc = range[k0];
       const float tol = kSameSurface * rc;
@@ -175,6 +239,22 @@ inline float second_derivative(const std::vector<float>& g, const RangeImage& im
   return 0.0F;
 }
 
+#if defined(__SSE2__)
+// second_derivative at four neighbouring pixels g[0..3] away from the image's edges,
+// neighbours `step` floats before and after.
+inline __m128 second_derivatives(const float* g, std::ptrdiff_t step) {
+  const __m128 c = _mm_loadu_ps(g);
+  const __m128 b = _mm_loadu_ps(g - step);
+  const __m128 a = _mm_loadu_ps(g + step);
+  const __m128 a_ok = _mm_cmpord_ps(a, a), b_ok = _mm_cmpord_ps(b, b);
+  const __m128 two = _mm_set1_ps(2.0F);
+  const __m128 only_b = _mm_and_ps(b_ok, _mm_mul_ps(two, _mm_sub_ps(c, b)));  // 0 when neither
+  const __m128 one_side = _mm_or_ps(_mm_and_ps(a_ok, _mm_mul_ps(two, _mm_sub_ps(a, c))), _mm_andnot_ps(a_ok, only_b));
+  const __m128 both = _mm_and_ps(a_ok, b_ok);
+  return _mm_or_ps(_mm_and_ps(both, _mm_sub_ps(a, b)), _mm_andnot_ps(both, one_side));
+}
+#endif
+
 inline float angle_diff_mod_pi(float a, float b) {
   float d = std::fmod(std::abs(a - b), static_cast<float>(M_PI));
   return std::min(d, static_cast<float>(M_PI) - d);
@@ -207,9 +287,17 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
       const std::size_t k = img.index(x, y);
       if (img.state[k] != PixelState::kValid) continue;
       const float r = img.range[k];
-      gx[k] = normalised_gradient(r, neighbour(img, x, y, -1, 0), neighbour(img, x, y, 1, 0), tan_ax);
-      gy[k] = normalised_gradient(r, neighbour(img, x, y, 0, -1), neighbour(img, x, y, 0, 1),
-                                  tan_row[static_cast<std::size_t>(y)]);
+      if (x >= 2 && x + 2 < w && y >= 2 && y + 2 < h) {
+        // Both steps of every neighbour inside the image: no wrap or bounds to check.
+        const auto wide = static_cast<std::ptrdiff_t>(w);
+        gx[k] = normalised_gradient(r, inner_neighbour(img, k, -1), inner_neighbour(img, k, 1), tan_ax);
+        gy[k] = normalised_gradient(r, inner_neighbour(img, k, -wide), inner_neighbour(img, k, wide),
+                                    tan_row[static_cast<std::size_t>(y)]);
+      } else {
+        gx[k] = normalised_gradient(r, neighbour(img, x, y, -1, 0), neighbour(img, x, y, 1, 0), tan_ax);
+        gy[k] = normalised_gradient(r, neighbour(img, x, y, 0, -1), neighbour(img, x, y, 0, 1),
+                                    tan_row[static_cast<std::size_t>(y)]);
+      }
       if (std::isnan(gx[k])) gx[k] = 0.0F;
       if (std::isnan(gy[k])) gy[k] = 0.0F;
     }
@@ -229,36 +317,56 @@ std::vector<Keypoint> detect_interest_points(const RangeImage& img, const Intere
                               ? std::numeric_limits<float>::infinity()
                               : static_cast<float>(std::tan(params.occlusion_gradient * M_PI / 2.0));
   const float thr = static_cast<float>(params.threshold);
+  // Eq. 5 done; the occlusion filter, then the pixel's value.
+  auto finish = [&](int x, int y, std::size_t k, float interest) {
+    if (interest >= thr) {
+      // Shadow side of a jump: a nearer neighbour (1 or 2 px away) with a normalised
+      // range step close to 1. Such borders depend on the viewpoint.
+      const float r = img.range[k];
+      bool shadow = false;
+      for (int step = 1; step <= 2 && !shadow; ++step) {
+        const int dxs[4] = {-step, step, 0, 0};
+        const int dys[4] = {0, 0, -step, step};
+        for (int j = 0; j < 4 && !shadow; ++j) {
+          const float rq = neighbour_range(img, x + dxs[j], y + dys[j]);
+          if (!(rq < r)) continue;  // NaN, inf or not nearer
+          const float tan_a = dxs[j] != 0 ? tan_ax : tan_row[static_cast<std::size_t>(y)];
+          shadow = (r - rq) > occ_ratio * tan_a * r * static_cast<float>(step);
+        }
+      }
+      if (shadow) {
+        interest = 0.0F;
+        ++out.occlusion_rejected;
+      }
+    }
+    out.value[k] = interest;
+  };
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t k = img.index(x, y);
+#if defined(__SSE2__)
+      // Four pixels with all their neighbours inside the image (no wrap, no edge):
+      // the same differences, products and square root in each lane, chosen by
+      // selects where the scalar code branches.
+      if (y > 0 && y + 1 < h && x > 0 && x + 4 < w) {
+        const __m128 dx2 = second_derivatives(gx.data() + k, 1);
+        const __m128 dy2 = second_derivatives(gy.data() + k, static_cast<std::ptrdiff_t>(w));
+        alignas(16) float value[4];
+        _mm_store_ps(value, _mm_mul_ps(_mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(dx2, dx2), _mm_mul_ps(dy2, dy2))),
+                                       _mm_set1_ps(kInvMaxInterest)));
+        for (int l = 0; l < 4; ++l)
+          if (img.state[k + static_cast<std::size_t>(l)] == PixelState::kValid)
+            finish(x + l, y, k + static_cast<std::size_t>(l), value[l]);
+        x += 3;
+        continue;
+      }
+#endif
       if (img.state[k] != PixelState::kValid) continue;
       const float gx2 = second_derivative(gx, img, x, y, true);
       const float gy2 = second_derivative(gy, img, x, y, false);
       // |G'| <= 1 bounds each second derivative by 2, so dividing by 2·sqrt(2) maps
       // eq. 5 onto [0, 1] without clipping the strongest corners into a tie.
-      float interest = std::sqrt(gx2 * gx2 + gy2 * gy2) * kInvMaxInterest;
-      if (interest >= thr) {
-        // Shadow side of a jump: a nearer neighbour (1 or 2 px away) with a normalised
-        // range step close to 1. Such borders depend on the viewpoint.
-        const float r = img.range[k];
-        bool shadow = false;
-        for (int step = 1; step <= 2 && !shadow; ++step) {
-          const int dxs[4] = {-step, step, 0, 0};
-          const int dys[4] = {0, 0, -step, step};
-          for (int j = 0; j < 4 && !shadow; ++j) {
-            const float rq = neighbour_range(img, x + dxs[j], y + dys[j]);
-            if (!(rq < r)) continue;  // NaN, inf or not nearer
-            const float tan_a = dxs[j] != 0 ? tan_ax : tan_row[static_cast<std::size_t>(y)];
-            shadow = (r - rq) > occ_ratio * tan_a * r * static_cast<float>(step);
-          }
-        }
-        if (shadow) {
-          interest = 0.0F;
-          ++out.occlusion_rejected;
-        }
-      }
-      out.value[k] = interest;
+      finish(x, y, k, std::sqrt(gx2 * gx2 + gy2 * gy2) * kInvMaxInterest);
     }
 
   // Local maxima above the threshold, then the straight-line filter.

@@ -34,8 +34,10 @@ int row_index(const RangeImage& img, double el) {
   if (el >= e.front()) return 0;  // row_at <= 0
   if (!(el > e.back())) return h - 1;  // row_at >= height (row_at's search would run off at e.back())
   // The row y with e[y] >= el > e[y+1] (upper_bound's answer): a guess, then a check.
-  const double nominal = img.elevation_resolution_rad > 0 ? img.elevation_resolution_rad : 1.0;
-  double g = std::floor((e.front() - el) / nominal);
+  // The guess only picks where the search starts (the two loops below end at the same
+  // row from any start), so a product with the reciprocal does as well as a division.
+  const double inv_nominal = img.elevation_resolution_rad > 0 ? 1.0 / img.elevation_resolution_rad : 1.0;
+  double g = std::floor((e.front() - el) * inv_nominal);
   if (!(g >= 0.0)) g = 0.0;
   if (g > h - 1) g = h - 1;
   auto y = static_cast<std::size_t>(g);
@@ -221,7 +223,8 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
       if (daz < 0) daz += kTwoPi;
     }
     int x = static_cast<int>(daz / img.azimuth_resolution_rad);
-    if (img.full_circle) x %= img.width;
+    // x %= width, without the integer division for the columns already in range.
+    if (img.full_circle && (x < 0 || x >= img.width)) x %= img.width;
     if (x < 0 || x >= img.width) continue;
     const int y = row_index(img, dir.el);
     const std::size_t k = img.index(x, y);
