@@ -589,6 +589,38 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
   return true;
 }
 
+// The n points pts[idx[k]] in a frame T (m: its 4x4 matrix, column-major), computed as
+// Eigen's Isometry3f * Vector3f does (row r: ((T(r,0) x + T(r,1) y) + T(r,2) z) + T(r,3)),
+// eight at a time, into (x, y, z); with each point's reach2[idx[k]] into r2.
+LEX3D_CLONES void points_in_frame(const float* m, const Eigen::Vector3f* pts, const std::uint32_t* idx,
+                                  const float* reach2, std::size_t n, float* x, float* y, float* z, float* r2) {
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    V8f px, py, pz, pr;
+    for (std::size_t l = 0; l < 8; ++l) {
+      const std::uint32_t j = idx[k + l];
+      px[l] = pts[j].x();
+      py[l] = pts[j].y();
+      pz[l] = pts[j].z();
+      pr[l] = reach2[j];
+    }
+    float* const c[3] = {x, y, z};
+    for (int r = 0; r < 3; ++r) {
+      const V8f v = ((splat8(m[r]) * px + splat8(m[4 + r]) * py) + splat8(m[8 + r]) * pz) + splat8(m[12 + r]);
+      std::memcpy(c[r] + k, &v, sizeof v);
+    }
+    std::memcpy(r2 + k, &pr, sizeof pr);
+  }
+  for (; k < n; ++k) {
+    const std::uint32_t j = idx[k];
+    const float px = pts[j].x(), py = pts[j].y(), pz = pts[j].z();
+    x[k] = ((m[0] * px + m[4] * py) + m[8] * pz) + m[12];
+    y[k] = ((m[1] * px + m[5] * py) + m[9] * pz) + m[13];
+    z[k] = ((m[2] * px + m[6] * py) + m[10] * pz) + m[14];
+    r2[k] = reach2[j];
+  }
+}
+
 }  // namespace
 
 ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
@@ -607,7 +639,6 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
     log_floor_[j] = -1.5 * std::log(c) - 4.5 - log_n;
   }
   S_.assign(n, 0.0);
-  delta_.assign(n, 0.0);
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
   pose_.resize(nf);
@@ -618,21 +649,23 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   ly_.resize(entries);
   lz_.resize(entries);
   reach2_e_.resize(entries);
-  cache_.assign(entries, 0.0F);
+  // cache_ and delta_ stay empty until first used (all zeros then): the encoder fills
+  // cache_ by scoring and never stages a change, so zeroing them here would only cost
+  // first touches of memory that is then written over or never read.
   const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
     const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
-    for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
-      const std::uint32_t j = near[k];
-      const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
-      lx_[k] = q.x();
-      ly_[k] = q.y();
-      lz_[k] = q.z();
-      reach2_e_[k] = reach2[j];
-    }
+    const std::size_t b = off_[f];
+    points_in_frame(T_feature_cloud.matrix().data(), scan.cloud.points.data(), near + b, reach2.data(), off_[f + 1] - b,
+                    lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b);
   }, 64);
   recompute();
+}
+
+void ScanState::zeroed_scratch() {
+  if (cache_.size() != off_[word_.size()]) cache_.assign(off_[word_.size()], 0.0F);
+  if (delta_.size() != S_.size()) delta_.assign(S_.size(), 0.0);
 }
 
 double ScanState::log_or_minus_inf(double s) noexcept {
@@ -680,6 +713,7 @@ void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<
 }
 
 std::int64_t ScanState::stage(const std::vector<Change>& changes) {
+  zeroed_scratch();
   std::int64_t dm = 0;
   for (const auto& c : changes) {
     const std::size_t b = begin_of(c.feature), e = end_of(c.feature);
@@ -699,6 +733,7 @@ std::int64_t ScanState::stage(const std::vector<Change>& changes) {
 }
 
 std::int64_t ScanState::stage_removal(std::size_t f) {
+  zeroed_scratch();
   for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
     const double before = cache_[k];
     if (before == 0.0) continue;
@@ -776,6 +811,8 @@ void ScanState::assign_words(const std::vector<std::int32_t>& words, const Alpha
 }
 
 void ScanState::score_contributions(const Alphabet& alphabet, int threads) {
+  // Every entry is written below: an unfilled cache_ needs no zeros first.
+  cache_.resize(off_[word_.size()]);
   const std::vector<PackedWord> packed = pack(alphabet);
   parallel_for(word_.size(), threads, [&](std::size_t f) {
     const std::size_t b = begin_of(f), e = end_of(f);
@@ -813,6 +850,8 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
     M_ = 0;
     for (std::size_t f = 0; f < word_.size(); ++f)
       if (word_[f] >= 0) M_ += word_points_[f];
+  } else {
+    zeroed_scratch();
   }
   std::vector<std::size_t> count(alphabet.size(), 0);
   for (const auto w : word_)
