@@ -649,9 +649,9 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   ly_.resize(entries);
   lz_.resize(entries);
   reach2_e_.resize(entries);
-  // cache_ and delta_ stay empty until first used (all zeros then): the encoder fills
-  // cache_ by scoring and never stages a change, so zeroing them here would only cost
-  // first touches of memory that is then written over or never read.
+  cache_.assign(entries, 0.0F);
+  // delta_ stays empty until a change is first staged (all zeros then): the encoder never
+  // stages one, so zeroing it here would only cost first touches of memory never read.
   const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
@@ -663,8 +663,7 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   recompute();
 }
 
-void ScanState::zeroed_scratch() {
-  if (cache_.size() != off_[word_.size()]) cache_.assign(off_[word_.size()], 0.0F);
+void ScanState::zeroed_delta() {
   if (delta_.size() != S_.size()) delta_.assign(S_.size(), 0.0);
 }
 
@@ -713,7 +712,7 @@ void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<
 }
 
 std::int64_t ScanState::stage(const std::vector<Change>& changes) {
-  zeroed_scratch();
+  zeroed_delta();
   std::int64_t dm = 0;
   for (const auto& c : changes) {
     const std::size_t b = begin_of(c.feature), e = end_of(c.feature);
@@ -733,7 +732,7 @@ std::int64_t ScanState::stage(const std::vector<Change>& changes) {
 }
 
 std::int64_t ScanState::stage_removal(std::size_t f) {
-  zeroed_scratch();
+  zeroed_delta();
   for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
     const double before = cache_[k];
     if (before == 0.0) continue;
@@ -811,8 +810,6 @@ void ScanState::assign_words(const std::vector<std::int32_t>& words, const Alpha
 }
 
 void ScanState::score_contributions(const Alphabet& alphabet, int threads) {
-  // Every entry is written below: an unfilled cache_ needs no zeros first.
-  cache_.resize(off_[word_.size()]);
   const std::vector<PackedWord> packed = pack(alphabet);
   parallel_for(word_.size(), threads, [&](std::size_t f) {
     const std::size_t b = begin_of(f), e = end_of(f);
@@ -850,8 +847,6 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
     M_ = 0;
     for (std::size_t f = 0; f < word_.size(); ++f)
       if (word_[f] >= 0) M_ += word_points_[f];
-  } else {
-    zeroed_scratch();
   }
   std::vector<std::size_t> count(alphabet.size(), 0);
   for (const auto w : word_)

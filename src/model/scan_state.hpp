@@ -190,8 +190,8 @@ class ScanState {
   // (`delta`: what staged_delta returned), then unstages.
   void commit_staged(std::uint64_t m_new, double delta);
   void unstage();
-  // Allocates cache_ and delta_, all zeros, when they are not yet.
-  void zeroed_scratch();
+  // Allocates delta_, all zeros, when it is not yet.
+  void zeroed_delta();
   // Fills ln S from S.
   void refresh_logs();
   // The contribution of every instance into cache_ (rescore's first part).
