@@ -18,9 +18,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -66,13 +71,25 @@ class BallGrid {
     // balls of each cell gathered by a counting sort: centre, r² and id apart, each
     // cell padded to a multiple of 4 with far balls of r² = -1.
     std::vector<std::uint32_t> cell_balls(cells + 1, 0);
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> reg;
-    reg.reserve(16 * nb);
+    struct Reg {
+      std::uint32_t c, b;
+    };
+    std::size_t cap = 16 * nb, nreg = 0;
+    std::unique_ptr<Reg[]> reg(new Reg[cap]);  // not zeroed: each pair is written before it is read
     for (std::size_t b = 0; b < nb; ++b)
       for_cells(centre[b], radius[b], [&](std::uint32_t c) {
-        if (occupied[c] == 0) return;
-        reg.emplace_back(c, static_cast<std::uint32_t>(b));
-        ++cell_balls[c + 1];
+        // Written always, kept when the cell holds points (no branch on that: most do
+        // not, in no pattern a predictor learns).
+        if (nreg == cap) {
+          std::unique_ptr<Reg[]> more(new Reg[2 * cap]);
+          std::copy(reg.get(), reg.get() + nreg, more.get());
+          reg.swap(more);
+          cap *= 2;
+        }
+        reg[nreg] = {c, static_cast<std::uint32_t>(b)};
+        const std::uint32_t o = occupied[c];
+        cell_balls[c + 1] += o;
+        nreg += o;
       });
     for (std::size_t c = 0; c < cells; ++c) cell_balls[c + 1] = cell_balls[c] + ((cell_balls[c + 1] + 3U) & ~3U);
     const std::size_t slots = cell_balls[cells];
@@ -80,7 +97,8 @@ class BallGrid {
     std::vector<std::uint32_t> bid(slots, 0);
     {
       std::vector<std::uint32_t> fill(cell_balls.begin(), cell_balls.end() - 1);
-      for (const auto& [c, b] : reg) {
+      for (std::size_t r = 0; r < nreg; ++r) {
+        const std::uint32_t c = reg[r].c, b = reg[r].b;
         const std::uint32_t k = fill[c]++;
         bx[k] = centre[b].x();
         by[k] = centre[b].y();
@@ -132,6 +150,15 @@ class BallGrid {
       }
     }
     offset[nb] = total;
+    // The lists are megabytes of fresh memory, filled once: on huge pages where the kernel
+    // allows, so that the first touch costs a fault per 2 MiB rather than per 4 KiB (the
+    // reserve's slack makes room for a whole aligned 2 MiB page).
+    if (index.capacity() < total) {
+      std::vector<std::uint32_t> fresh;
+      fresh.reserve(total + kHugePage / sizeof(std::uint32_t));
+      index.swap(fresh);
+      advise_huge(index.data(), index.capacity() * sizeof(std::uint32_t));
+    }
     index.resize(total);
     std::uint32_t* const out = index.data();
     parallel_for(blocks, threads, [&](std::size_t blk) {
@@ -209,6 +236,10 @@ class BallGrid {
   void for_cells(const Eigen::Vector3f& c, float radius, Fn&& fn) const {
     const Eigen::Vector3i lo = cell_of(c - Eigen::Vector3f::Constant(radius));
     const Eigen::Vector3i hi = cell_of(c + Eigen::Vector3f::Constant(radius));
+    if (small_box(lo, hi)) {
+      for_cells_small(c, radius, lo, hi, fn);
+      return;
+    }
     // Cells are skipped against a slightly larger ball: a point's cell comes from
     // rounded products, so it may sit a hair outside the cell's exact bounds.
     const float rc = radius + 1e-4F * cell_;
@@ -242,6 +273,79 @@ class BallGrid {
         }
       }
     }
+  }
+
+  static constexpr int kSmall = 16;  // cells an axis for_cells_small takes
+  // Whether the cells [lo, hi] span at most kSmall an axis, their blocks in increasing
+  // order (no wrap of the 21-bit keys inside).
+  [[nodiscard]] static bool small_box(const Eigen::Vector3i& lo, const Eigen::Vector3i& hi) {
+    for (int a = 0; a < 3; ++a)
+      if (hi[a] - lo[a] >= kSmall || (wrap(hi[a]) >> 2) < (wrap(lo[a]) >> 2)) return false;
+    return true;
+  }
+  // for_cells over a small box: the same cells in the same order, tested with the same
+  // float values, the per-axis gaps squared once per axis instead of once per cell, and
+  // each block looked up once (the general loop looks a block up again on every row).
+  template <typename Fn>
+  void for_cells_small(const Eigen::Vector3f& c, float radius, const Eigen::Vector3i& lo, const Eigen::Vector3i& hi,
+                       Fn&& fn) const {
+    const float rc = radius + 1e-4F * cell_;
+    const float rc2 = rc * rc;
+    // Per axis and cell: the gap squared, the block (from the box's first) and the place in it.
+    float g2[3][kSmall];
+    std::uint32_t blk[3][kSmall], loc[3][kSmall];
+    int n[3];
+    std::uint32_t first[3];
+    for (int a = 0; a < 3; ++a) {
+      n[a] = hi[a] - lo[a] + 1;
+      first[a] = wrap(lo[a]) >> 2;
+      for (int i = 0; i < n[a]; ++i) {
+        const int v = lo[a] + i;
+        const float x0 = static_cast<float>(v) * cell_;
+        const float x1 = x0 + cell_;
+        const float cv = c[a];
+        const float g = cv < x0 ? x0 - cv : (cv > x1 ? cv - x1 : 0.0F);
+        g2[a][i] = g * g;
+        blk[a][i] = (wrap(v) >> 2) - first[a];
+        loc[a][i] = wrap(v) & 3;
+      }
+    }
+    // Block numbers by (z, y, x) block offset, looked up when first needed.
+    constexpr std::uint32_t kUnknown = kNone - 1;
+    const std::uint32_t nbx = blk[0][n[0] - 1] + 1, nby = blk[1][n[1] - 1] + 1, nbz = blk[2][n[2] - 1] + 1;
+    std::uint32_t block[125];  // 16 cells an axis span at most 5 blocks
+    std::fill(block, block + nbx * nby * nbz, kUnknown);
+    for (int z = 0; z < n[2]; ++z) {
+      const float gz2 = g2[2][z];
+      if (gz2 > rc2) continue;
+      for (int y = 0; y < n[1]; ++y) {
+        const float gyz2 = gz2 + g2[1][y];
+        if (gyz2 > rc2) continue;
+        for (int x = 0; x < n[0]; ++x) {
+          if (gyz2 + g2[0][x] > rc2) continue;  // the cell lies outside the ball
+          std::uint32_t& id = block[(blk[2][z] * nby + blk[1][y]) * nbx + blk[0][x]];
+          if (id == kUnknown)
+            id = find(static_cast<std::uint64_t>(first[0] + blk[0][x]) |
+                      (static_cast<std::uint64_t>(first[1] + blk[1][y]) << 19) |
+                      (static_cast<std::uint64_t>(first[2] + blk[2][z]) << 38));
+          if (id != kNone) fn(64 * id + (loc[0][x] | loc[1][y] << 2 | loc[2][z] << 4));
+        }
+      }
+    }
+  }
+
+  static constexpr std::size_t kHugePage = std::size_t{2} << 20;
+  // Asks for huge pages on the whole 2 MiB pages of [p, p + bytes) (advice only).
+  static void advise_huge(void* p, std::size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    const auto a = reinterpret_cast<std::uintptr_t>(p);
+    const std::uintptr_t lo = (a + kHugePage - 1) / kHugePage * kHugePage;
+    const std::uintptr_t hi = (a + bytes) / kHugePage * kHugePage;
+    if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+#else
+    (void)p;
+    (void)bytes;
+#endif
   }
 
   static constexpr std::uint64_t kEmpty = ~0ULL;

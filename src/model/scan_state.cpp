@@ -131,23 +131,23 @@ inline void box_of(const float* x, const float* y, const float* z, std::size_t p
 }
 
 // Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), times
-// norm[idx[k]] when not 0 (in double, rounded to float), for the n entries of a feature
-// (a and norm are per scan point, read through idx).
+// norm when not 0 (in double, rounded to float), for the n entries of a feature (a and
+// norm are per scan point: scale[idx[k]]).
 // Word arrays hold np points padded to npad, a multiple of 8, with far points; the sum
 // keeps eight lanes (point p in lane p % 8), each adding its blocks of eight points in
 // order, the lanes then added pairwise, so the SSE and AVX2 builds give the same bits.
 // A block with no point in reach would add only zeros and is left out (about 60 % of
 // them on KITTI). Passes with no data-dependent branch in their inner loops: the entries
 // within reach of the word's bounding box; per block, those of them within reach of the
-// block's bounding box (eight entries a test), then the exponents of the pairs with a
-// point in reach; all the exponentials; their sums into each entry's lanes (block order).
+// block's bounding box (eight entries a test), then their exponentials added into each
+// entry's lanes (blocks in order).
 LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
-                                const float* a, std::size_t n, const float* wx, const float* wy, const float* wz,
+                                const PointScale* scale, std::size_t n, const float* wx, const float* wy, const float* wz,
                                 std::size_t np, std::size_t npad, const float* lo, const float* hi,
-                                const std::uint32_t* idx, const double* norm, float* out) {
+                                const std::uint32_t* idx, float* out) {
   // Scratch as plain floats, read and written without alignment assumptions.
-  thread_local std::vector<float> cx, cy, cz, cr, cna, xs, ms, acc;
-  thread_local std::vector<std::uint32_t> live, cand, owner;
+  thread_local std::vector<float> cx, cy, cz, cr, cna, acc;
+  thread_local std::vector<std::uint32_t> live, cand;
   const std::size_t nb = npad / 8;
   const std::size_t n8 = (n + 7) / 8 * 8;
   if (live.size() < n8) {
@@ -159,11 +159,6 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     cr.resize(n8);
     cna.resize(n8);
     acc.resize(8 * n8);
-  }
-  if (xs.size() < 8 * n * nb) {
-    xs.resize(8 * n * nb);
-    ms.resize(8 * n * nb);
-    owner.resize(n * nb);
   }
   std::fill(out, out + n, 0.0F);
   // The entries within 3σ of the word's bounding box (the others get nothing).
@@ -194,9 +189,9 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     cy[u] = ly[k];
     cz[u] = lz[k];
     cr[u] = u < nl ? reach2[k] : -1.0F;
-    cna[u] = -a[idx[k]];
+    cna[u] = -scale[idx[k]].a;
   }
-  std::uint32_t items = 0;
+  std::fill(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(8 * nl8), 0.0F);
   for (std::size_t b = 0; b < nb; ++b) {
     const std::size_t p = 8 * b;
     if (p >= np) break;  // only far padding from here on
@@ -213,6 +208,10 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
         nc -= static_cast<std::size_t>(near[l]);
       }
     }
+    // The exponentials go straight into the entry's lanes, in block order. A candidate
+    // none of whose points is in reach adds eight zeros, which changes no sum (they are
+    // +0 and the sums start at +0): cheaper than a branch, or than storing the
+    // exponents for a pass of their own.
     const V8f bx = load8(wx + p), by = load8(wy + p), bz = load8(wz + p);
     for (std::size_t c = 0; c < nc; ++c) {
       const std::uint32_t u = cand[c];
@@ -220,31 +219,17 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
       const V8f d2 = dx * dx + dy * dy + dz * dz;
       // Points beyond reach: d² and the result masked to 0 (as bits).
       const V8i mk = d2 <= splat8(cr[u]);
-      const V8f xv = mask8(d2, mk) * splat8(cna[u]);
-      std::memcpy(xs.data() + 8 * static_cast<std::size_t>(items), &xv, sizeof xv);
-      std::memcpy(ms.data() + 8 * static_cast<std::size_t>(items), &mk, sizeof mk);
-      owner[items] = u;
-      items += any8(mk) ? 1U : 0U;
+      const V8f e = mask8(exp_neg8(mask8(d2, mk) * splat8(cna[u])), mk);
+      float* const s = acc.data() + 8 * static_cast<std::size_t>(u);
+      const V8f v = load8(s) + e;
+      std::memcpy(s, &v, sizeof v);
     }
-  }
-  float* const x = xs.data();
-  for (std::size_t i = 0; i < 8 * static_cast<std::size_t>(items); i += 8) {
-    V8i mk;
-    std::memcpy(&mk, ms.data() + i, sizeof mk);
-    const V8f e = mask8(exp_neg8(load8(x + i)), mk);
-    std::memcpy(x + i, &e, sizeof e);
-  }
-  std::fill(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(8 * nl), 0.0F);
-  for (std::size_t i = 0; i < items; ++i) {
-    float* const s = acc.data() + 8 * static_cast<std::size_t>(owner[i]);
-    const V8f v = load8(s) + load8(x + 8 * i);
-    std::memcpy(s, &v, sizeof v);
   }
   for (std::size_t u = 0; u < nl; ++u) {
     const V8f v = load8(acc.data() + 8 * u);
     const float sum = ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]));
     const std::size_t k = live[u];
-    out[k] = sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * norm[idx[k]]);
+    out[k] = sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * scale[idx[k]].norm);
   }
 }
 
@@ -604,26 +589,56 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
   return true;
 }
 
+// The n points pts[idx[k]] in a frame T (m: its 4x4 matrix, column-major), computed as
+// Eigen's Isometry3f * Vector3f does (row r: ((T(r,0) x + T(r,1) y) + T(r,2) z) + T(r,3)),
+// eight at a time, into (x, y, z); with each point's reach2[idx[k]] into r2.
+LEX3D_CLONES void points_in_frame(const float* m, const Eigen::Vector3f* pts, const std::uint32_t* idx,
+                                  const float* reach2, std::size_t n, float* x, float* y, float* z, float* r2) {
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    V8f px, py, pz, pr;
+    for (std::size_t l = 0; l < 8; ++l) {
+      const std::uint32_t j = idx[k + l];
+      px[l] = pts[j].x();
+      py[l] = pts[j].y();
+      pz[l] = pts[j].z();
+      pr[l] = reach2[j];
+    }
+    float* const c[3] = {x, y, z};
+    for (int r = 0; r < 3; ++r) {
+      const V8f v = ((splat8(m[r]) * px + splat8(m[4 + r]) * py) + splat8(m[8 + r]) * pz) + splat8(m[12 + r]);
+      std::memcpy(c[r] + k, &v, sizeof v);
+    }
+    std::memcpy(r2 + k, &pr, sizeof pr);
+  }
+  for (; k < n; ++k) {
+    const std::uint32_t j = idx[k];
+    const float px = pts[j].x(), py = pts[j].y(), pz = pts[j].z();
+    x[k] = ((m[0] * px + m[4] * py) + m[8] * pz) + m[12];
+    y[k] = ((m[1] * px + m[5] * py) + m[9] * pz) + m[13];
+    z[k] = ((m[2] * px + m[6] * py) + m[10] * pz) + m[14];
+    r2[k] = reach2[j];
+  }
+}
+
 }  // namespace
 
 ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   const std::size_t n = scan.cloud.size();
   const std::size_t nf = scan.features.size();
-  inv_two_sigma2_.resize(n);
-  norm_.resize(n);
+  scale_.resize(n);
   log_floor_.resize(n);
   LargeVector<float> reach2(n);
   const double log_n = std::log(static_cast<double>(std::max<std::size_t>(n, 1)));
   for (std::size_t j = 0; j < n; ++j) {
     const double s = std::max(1e-4, static_cast<double>(scan.sigma[j]));
-    inv_two_sigma2_[j] = static_cast<float>(1.0 / (2.0 * s * s));
+    scale_[j].a = static_cast<float>(1.0 / (2.0 * s * s));
     reach2[j] = static_cast<float>(9.0 * s * s);
     const double c = 2.0 * M_PI * s * s;
-    norm_[j] = 1.0 / (c * std::sqrt(c));  // c^(-3/2)
+    scale_[j].norm = 1.0 / (c * std::sqrt(c));  // c^(-3/2)
     log_floor_[j] = -1.5 * std::log(c) - 4.5 - log_n;
   }
   S_.assign(n, 0.0);
-  delta_.assign(n, 0.0);
   word_.assign(nf, -1);
   word_points_.assign(nf, 0);
   pose_.resize(nf);
@@ -635,20 +650,21 @@ ScanState::ScanState(const PreparedScan& scan, int threads) : scan_(scan) {
   lz_.resize(entries);
   reach2_e_.resize(entries);
   cache_.assign(entries, 0.0F);
+  // delta_ stays empty until a change is first staged (all zeros then): the encoder never
+  // stages one, so zeroing it here would only cost first touches of memory never read.
   const std::uint32_t* near = scan.nearby_index.data();
   parallel_for(nf, threads, [&](std::size_t f) {
     pose_[f] = scan.features.features[f].T_cloud_feature.cast<float>();
     const Eigen::Isometry3f T_feature_cloud = pose_[f].inverse();
-    for (std::size_t k = off_[f]; k < off_[f + 1]; ++k) {
-      const std::uint32_t j = near[k];
-      const Eigen::Vector3f q = T_feature_cloud * scan.cloud.points[j];
-      lx_[k] = q.x();
-      ly_[k] = q.y();
-      lz_[k] = q.z();
-      reach2_e_[k] = reach2[j];
-    }
+    const std::size_t b = off_[f];
+    points_in_frame(T_feature_cloud.matrix().data(), scan.cloud.points.data(), near + b, reach2.data(), off_[f + 1] - b,
+                    lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b);
   }, 64);
   recompute();
+}
+
+void ScanState::zeroed_delta() {
+  if (delta_.size() != S_.size()) delta_.assign(S_.size(), 0.0);
 }
 
 double ScanState::log_or_minus_inf(double s) noexcept {
@@ -685,9 +701,9 @@ void ScanState::contribution_into(std::size_t f, const PackedWord& word, float* 
   }
   const float lo[3] = {word.lo.x(), word.lo.y(), word.lo.z()};
   const float hi[3] = {word.hi.x(), word.hi.y(), word.hi.z()};
-  gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, inv_two_sigma2_.data(), e - b,
+  gaussian_sums(lx_.data() + b, ly_.data() + b, lz_.data() + b, reach2_e_.data() + b, scale_.data(), e - b,
                 word.xp.data(), word.yp.data(), word.zp.data(), word.size(), word.xp.size(), lo, hi, idx_ + b,
-                norm_.data(), out);
+                out);
 }
 
 void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<float>& out) const {
@@ -696,6 +712,7 @@ void ScanState::contribution(std::size_t f, const PackedWord& word, std::vector<
 }
 
 std::int64_t ScanState::stage(const std::vector<Change>& changes) {
+  zeroed_delta();
   std::int64_t dm = 0;
   for (const auto& c : changes) {
     const std::size_t b = begin_of(c.feature), e = end_of(c.feature);
@@ -715,6 +732,7 @@ std::int64_t ScanState::stage(const std::vector<Change>& changes) {
 }
 
 std::int64_t ScanState::stage_removal(std::size_t f) {
+  zeroed_delta();
   for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
     const double before = cache_[k];
     if (before == 0.0) continue;

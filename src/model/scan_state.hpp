@@ -18,6 +18,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <new>
+#include <type_traits>
+#include <utility>
 #include <vector>
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -55,6 +57,18 @@ struct LargeAllocator {
     if (n * sizeof(T) < kLarge) ::operator delete(p);
     else std::free(p);
   }
+  // resize() and the size constructor leave the elements default-initialised (for
+  // numbers: unwritten): every one of these arrays is filled right after, and zeroing it
+  // first would touch all its memory twice. assign() and the (size, value) constructor
+  // still write their value.
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
   template <class U>
   bool operator==(const LargeAllocator<U>& /*other*/) const noexcept { return true; }
   template <class U>
@@ -62,6 +76,14 @@ struct LargeAllocator {
 };
 template <class T>
 using LargeVector = std::vector<T, LargeAllocator<T>>;
+
+/// The two per-point factors of a point's Gaussian, side by side: the contribution of
+/// an entry reads both, and one cache line then serves the two (the entries of a
+/// neighbourhood visit the scan's points in no useful order).
+struct PointScale {
+  double norm;  // (2πσ²)^(-3/2)
+  float a;      // 1 / (2σ²)
+};
 
 /// A word's points as separate coordinate arrays (the inner loops over word points
 /// vectorise), with their bounding box.
@@ -168,6 +190,8 @@ class ScanState {
   // (`delta`: what staged_delta returned), then unstages.
   void commit_staged(std::uint64_t m_new, double delta);
   void unstage();
+  // Allocates delta_, all zeros, when it is not yet.
+  void zeroed_delta();
   // Fills ln S from S.
   void refresh_logs();
   // The contribution of every instance into cache_ (rescore's first part).
@@ -184,8 +208,7 @@ class ScanState {
   LargeVector<float> lx_, ly_, lz_;     // the entry's point in its feature's instance frame
   LargeVector<float> reach2_e_;         // (3σ)² of the entry's point (σ² taken as (3σ)² / 9)
   LargeVector<float> cache_;            // current contribution of each feature's instance
-  LargeVector<float> inv_two_sigma2_;   // 1 / (2σ²), per point
-  LargeVector<double> norm_;            // (2πσ²)^(-3/2), per point
+  LargeVector<PointScale> scale_;       // per point: its Gaussian's norm and exponent factor
   LargeVector<double> log_floor_;       // ln of the background density, per point
   LargeVector<double> S_;
   LargeVector<double> log_s_;  // ln S_j, -inf when S_j is not positive (kept with S_)
