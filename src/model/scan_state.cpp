@@ -1039,68 +1039,56 @@ Eigen::Matrix3d kabsch_rotation(const Eigen::Matrix3d& H) {
 // One rigid correction D (q ≈ D p) from the np word points (mx, my, mz) to their nearest
 // targets, in the instance's frame; identity when fewer than 3 pairs fall within reach.
 // `match[i]` is the target (tx, ty, tz)[match[i]] of word point i or -1. The pairs are
-// gathered first (no branch on the match); the sums run in double, in word point order.
+// gathered first (no branch on the match), each point as one vector of four doubles
+// (x, y, z, 0); the sums run in double, in word point order, each coordinate (and each
+// entry of H) in its own lane, so they are the sums one coordinate at a time would give.
+typedef double V4d __attribute__((vector_size(32)));
+inline V4d load4d(const double* p) {
+  V4d v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
 LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
                             const float* ty, const float* tz, const std::int32_t* match) {
   thread_local std::vector<double> pairs_buf;
-  pairs_buf.resize(6 * np);
-  double* const a0 = pairs_buf.data();
-  double* const a1 = a0 + np;
-  double* const a2 = a1 + np;
-  double* const b0 = a2 + np;
-  double* const b1 = b0 + np;
-  double* const b2 = b1 + np;
+  pairs_buf.resize(8 * np);
+  double* const a = pairs_buf.data();
+  double* const b = a + 4 * np;
   std::size_t pairs = 0;
   for (std::size_t i = 0; i < np; ++i) {
     // matched: 1 when match[i] >= 0; t: the target, 0 when none (as bits, no branch).
     const auto mi = static_cast<std::uint32_t>(match[i]);
     const std::uint32_t matched = (~mi) >> 31;
     const std::size_t t = mi & (0U - matched);
-    a0[pairs] = static_cast<double>(mx[i]);
-    a1[pairs] = static_cast<double>(my[i]);
-    a2[pairs] = static_cast<double>(mz[i]);
-    b0[pairs] = static_cast<double>(tx[t]);
-    b1[pairs] = static_cast<double>(ty[t]);
-    b2[pairs] = static_cast<double>(tz[t]);
+    const V4d va = {static_cast<double>(mx[i]), static_cast<double>(my[i]), static_cast<double>(mz[i]), 0.0};
+    const V4d vb = {static_cast<double>(tx[t]), static_cast<double>(ty[t]), static_cast<double>(tz[t]), 0.0};
+    std::memcpy(a + 4 * pairs, &va, sizeof va);
+    std::memcpy(b + 4 * pairs, &vb, sizeof vb);
     pairs += matched;
   }
   Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
   if (pairs < 3) return D;
-  double ca0 = 0.0, ca1 = 0.0, ca2 = 0.0, cb0 = 0.0, cb1 = 0.0, cb2 = 0.0;
+  V4d ca = {0.0, 0.0, 0.0, 0.0}, cb = ca;
   for (std::size_t i = 0; i < pairs; ++i) {
-    ca0 += a0[i];
-    ca1 += a1[i];
-    ca2 += a2[i];
-    cb0 += b0[i];
-    cb1 += b1[i];
-    cb2 += b2[i];
+    ca += load4d(a + 4 * i);
+    cb += load4d(b + 4 * i);
   }
   const auto n = static_cast<double>(pairs);
-  ca0 /= n;
-  ca1 /= n;
-  ca2 /= n;
-  cb0 /= n;
-  cb1 /= n;
-  cb2 /= n;
-  double h[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // row-major
+  const V4d nv = {n, n, n, n};
+  ca /= nv;
+  cb /= nv;
+  V4d h0 = {0.0, 0.0, 0.0, 0.0}, h1 = h0, h2 = h0;  // the rows of H
   for (std::size_t i = 0; i < pairs; ++i) {
-    const double p0 = a0[i] - ca0, p1 = a1[i] - ca1, p2 = a2[i] - ca2;
-    const double q0 = b0[i] - cb0, q1 = b1[i] - cb1, q2 = b2[i] - cb2;
-    h[0] += p0 * q0;
-    h[1] += p0 * q1;
-    h[2] += p0 * q2;
-    h[3] += p1 * q0;
-    h[4] += p1 * q1;
-    h[5] += p1 * q2;
-    h[6] += p2 * q0;
-    h[7] += p2 * q1;
-    h[8] += p2 * q2;
+    const V4d p = load4d(a + 4 * i) - ca, q = load4d(b + 4 * i) - cb;
+    h0 += V4d{p[0], p[0], p[0], p[0]} * q;
+    h1 += V4d{p[1], p[1], p[1], p[1]} * q;
+    h2 += V4d{p[2], p[2], p[2], p[2]} * q;
   }
   Eigen::Matrix3d H;
-  H << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
-  const Eigen::Vector3d ca(ca0, ca1, ca2), cb(cb0, cb1, cb2);
+  H << h0[0], h0[1], h0[2], h1[0], h1[1], h1[2], h2[0], h2[1], h2[2];
+  const Eigen::Vector3d centre_a(ca[0], ca[1], ca[2]), centre_b(cb[0], cb[1], cb[2]);
   const Eigen::Matrix3d R = kabsch_rotation(H);
-  const Eigen::Vector3d t = cb - R * ca;
+  const Eigen::Vector3d t = centre_b - R * centre_a;
   if (!R.allFinite() || !t.allFinite()) return D;
   D.linear() = R.cast<float>();
   D.translation() = t.cast<float>();
@@ -1164,13 +1152,12 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     pose_[f] = pose_[f] * correction[i];
     // Keep the rotation exactly orthonormal: float products drift.
     pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
+    // The entries by the inverse correction, eight at a time (move_points computes each
+    // as Eigen's Isometry3f * Vector3f does).
     const Eigen::Isometry3f inv = correction[i].inverse();
-    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
-      lx_[k] = q.x();
-      ly_[k] = q.y();
-      lz_[k] = q.z();
-    }
+    float box[6];
+    const std::size_t b = begin_of(f);
+    move_points(inv, lx_.data() + b, ly_.data() + b, lz_.data() + b, end_of(f) - b, box);
   };
   // The ICP fit of instance i (correction[i]).
   const auto fit = [&](std::size_t i) {
@@ -1243,6 +1230,34 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
 
 namespace {
 
+// descriptor_distances_sq of q to every word, eight words at a time: the descriptors
+// are stored transposed (value i of words w..w+7 side by side, nw8 words a row, the extra
+// ones zero), a lane per word. Each lane does what descriptor_distances_sq does for its
+// word, in the same order (value i into running sum i % 8, the values past the last
+// block of 8 after the blocks, the eight sums added pairwise), so the distances have
+// the same bits; there is no horizontal sum and no chain of dependent adds to wait on.
+LEX3D_CLONES void distances_to_words(const float* q, const float* rows_t, std::size_t nw8, int dim, float* out) {
+  const int blocks = dim / 8;
+  for (std::size_t w = 0; w < nw8; w += 8) {
+    V8f acc[8];
+    for (int l = 0; l < 8; ++l) acc[l] = splat8(0.0F);
+    for (int k = 0; k < blocks; ++k)
+      for (int l = 0; l < 8; ++l) {
+        const int i = 8 * k + l;
+        const V8f d = splat8(q[i]) - load8(rows_t + static_cast<std::size_t>(i) * nw8 + w);
+        acc[l] += d * d;
+      }
+    for (int l = 0; l < 8; ++l) {  // fixed indices keep acc in registers
+      const int i = 8 * blocks + l;
+      if (i >= dim) break;
+      const V8f d = splat8(q[i]) - load8(rows_t + static_cast<std::size_t>(i) * nw8 + w);
+      acc[l] += d * d;
+    }
+    const V8f sum = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+    std::memcpy(out + w, &sum, sizeof sum);
+  }
+}
+
 // Word choice by fit for one feature: among the kk words `near` (nearest descriptor
 // first), the one that best fits the feature's n entries (lx, ly, lz; r2: (3σ)² of each),
 // as ScanState::choose_by_fit describes. Compiled for AVX2 too, with the slab loops.
@@ -1314,11 +1329,12 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
   const int dim = alphabet.descriptor_dim;
   const std::size_t nw = alphabet.size();
   const std::vector<PackedWord> packed = pack(alphabet);
-  // The words' descriptors one after another.
-  std::vector<float> descriptors(nw * static_cast<std::size_t>(dim));
+  // The words' descriptors transposed (distances_to_words).
+  const std::size_t nw8 = (nw + 7) / 8 * 8;
+  std::vector<float> descriptors_t(nw8 * static_cast<std::size_t>(dim), 0.0F);
   for (std::size_t w = 0; w < nw; ++w)
-    std::copy(alphabet.words[w].descriptor.begin(), alphabet.words[w].descriptor.begin() + dim,
-              descriptors.begin() + static_cast<std::ptrdiff_t>(w * static_cast<std::size_t>(dim)));
+    for (int i = 0; i < dim; ++i)
+      descriptors_t[static_cast<std::size_t>(i) * nw8 + w] = alphabet.words[w].descriptor[static_cast<std::size_t>(i)];
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (all_features || word_[f] >= 0) active.push_back(f);
@@ -1330,8 +1346,8 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     thread_local std::vector<std::pair<float, std::uint32_t>> near;
     // The kk nearest words by descriptor (ties: lower id), in order: words come by
     // increasing id, so one enters the list when strictly nearer than its last.
-    dist.resize(nw);
-    descriptor_distances_sq(scan_.features.descriptor(f), descriptors.data(), nw, dim, dist.data());
+    dist.resize(nw8);
+    distances_to_words(scan_.features.descriptor(f), descriptors_t.data(), nw8, dim, dist.data());
     near.clear();
     for (std::size_t w = 0; w < nw; ++w) {
       const float d = dist[w];
