@@ -564,11 +564,15 @@ struct Slabs {
 };
 
 // Word choice by fit with slabs: the counts of fit_counts (entries with a word point
-// within their σ, and the word points with no entry within σ), testing each word point
-// against its three slabs only, widened to whole blocks of 8 entries. Every pair tested
-// is compared as in fit_counts; the pairs skipped are farther than σ apart along x.
+// within their σ, and the word points with no entry within σ). Each word point needs
+// testing only against its three slabs, widened to whole blocks of 8 entries; the points
+// go by in fours (the word's points sorted by x, so their windows mostly overlap), each
+// four testing the union of their windows: the entry loads, the update of the hits and
+// the loop with its hard-to-predict exit are shared by the four (the rest one by one).
+// Every pair tested is compared as in fit_counts, and an entry outside a point's own
+// window is farther than σ from it along x, so testing it as well changes no count.
 // Gives up (returns false, the counts unset) once `max_lonely` word points have no entry
-// within σ.
+// within σ (the count only grows, so that is the same as its final value reaching it).
 LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
                                    std::size_t max_lonely, std::int32_t* hit, std::size_t& explained,
                                    std::size_t& unsupported) {
@@ -579,7 +583,48 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
   const float* sig2 = s.sig2.data();
   for (std::size_t k = 0; k < npad; ++k) hit[k] = 0;
   std::size_t lonely = 0;
-  for (std::size_t p = 0; p < np; ++p) {
+  std::size_t p = 0;
+  for (; p + 4 <= np; p += 4) {
+    // The union of the four windows (empty ones left out).
+    std::uint32_t lo = ~0U, hi = 0;
+    for (std::size_t g = 0; g < 4; ++g) {
+      std::uint32_t a = 0, b = 0;
+      s.window(wx[p + g], a, b);
+      if (a < b) {
+        lo = std::min(lo, a);
+        hi = std::max(hi, b);
+      }
+    }
+    const V8f ax = splat8(wx[p]), ay = splat8(wy[p]), az = splat8(wz[p]);
+    const V8f bx = splat8(wx[p + 1]), by = splat8(wy[p + 1]), bz = splat8(wz[p + 1]);
+    const V8f cx = splat8(wx[p + 2]), cy = splat8(wy[p + 2]), cz = splat8(wz[p + 2]);
+    const V8f dx = splat8(wx[p + 3]), dy = splat8(wy[p + 3]), dz = splat8(wz[p + 3]);
+    V8i anya = {0, 0, 0, 0, 0, 0, 0, 0}, anyb = anya, anyc = anya, anyd = anya;
+    if (lo < hi) {
+      for (std::size_t k = lo & ~7U; k < hi; k += 8) {
+        const V8f ex = load8(lx + k), ey = load8(ly + k), ez = load8(lz + k), es = load8(sig2 + k);
+        const V8f a0 = ax - ex, a1 = ay - ey, a2 = az - ez;
+        const V8f b0 = bx - ex, b1 = by - ey, b2 = bz - ez;
+        const V8f c0 = cx - ex, c1 = cy - ey, c2 = cz - ez;
+        const V8f d0 = dx - ex, d1 = dy - ey, d2 = dz - ez;
+        const V8i ma = (a0 * a0 + a1 * a1 + a2 * a2 <= es) & 1;
+        const V8i mb = (b0 * b0 + b1 * b1 + b2 * b2 <= es) & 1;
+        const V8i mc = (c0 * c0 + c1 * c1 + c2 * c2 <= es) & 1;
+        const V8i md = (d0 * d0 + d1 * d1 + d2 * d2 <= es) & 1;
+        V8i h;
+        std::memcpy(&h, hit + k, sizeof h);
+        h |= (ma | mb) | (mc | md);
+        std::memcpy(hit + k, &h, sizeof h);
+        anya |= ma;
+        anyb |= mb;
+        anyc |= mc;
+        anyd |= md;
+      }
+    }
+    lonely += (any8(anya) ? 0 : 1) + (any8(anyb) ? 0 : 1) + (any8(anyc) ? 0 : 1) + (any8(anyd) ? 0 : 1);
+    if (lonely >= max_lonely) return false;
+  }
+  for (; p < np; ++p) {
     const float px = wx[p], py = wy[p], pz = wz[p];
     std::uint32_t lo = 0, hi = 0;
     s.window(px, lo, hi);
@@ -1328,7 +1373,17 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
   if (!all_features && (k <= 1 || alphabet.size() < 2)) return 0;
   const int dim = alphabet.descriptor_dim;
   const std::size_t nw = alphabet.size();
-  const std::vector<PackedWord> packed = pack(alphabet);
+  // The words' points sorted by x (the fit counts do not depend on the order of the
+  // points; fit_counts_slabs takes them four by four, and neighbours in x share most of
+  // their slabs).
+  std::vector<PackedWord> packed;
+  packed.reserve(nw);
+  for (const auto& w : alphabet.words) {
+    Word sorted = w;
+    std::stable_sort(sorted.points.begin(), sorted.points.end(),
+                     [](const Eigen::Vector3f& a, const Eigen::Vector3f& b) { return a.x() < b.x(); });
+    packed.emplace_back(sorted);
+  }
   // The words' descriptors transposed (distances_to_words).
   const std::size_t nw8 = (nw + 7) / 8 * 8;
   std::vector<float> descriptors_t(nw8 * static_cast<std::size_t>(dim), 0.0F);
