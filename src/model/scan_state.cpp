@@ -248,10 +248,44 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
 }
 
+// The smallest and the largest of eight floats (none NaN), halving the lanes three
+// times: min and max pick one of their operands, so any order gives the same values
+// (up to the sign of a zero, which the squared gaps between boxes do not see).
+inline void min_max8(V8f v, float& lo, float& hi) {
+#if defined(__clang__)
+  const V8f s4 = __builtin_shufflevector(v, v, 4, 5, 6, 7, 0, 1, 2, 3);
+#else
+  const V8f s4 = __builtin_shuffle(v, V8i{4, 5, 6, 7, 0, 1, 2, 3});
+#endif
+  V8f mn = v < s4 ? v : s4, mx = max8(v, s4);
+#if defined(__clang__)
+  const V8f n2 = __builtin_shufflevector(mn, mn, 2, 3, 0, 1, 6, 7, 4, 5);
+  const V8f x2 = __builtin_shufflevector(mx, mx, 2, 3, 0, 1, 6, 7, 4, 5);
+#else
+  const V8f n2 = __builtin_shuffle(mn, V8i{2, 3, 0, 1, 6, 7, 4, 5});
+  const V8f x2 = __builtin_shuffle(mx, V8i{2, 3, 0, 1, 6, 7, 4, 5});
+#endif
+  mn = mn < n2 ? mn : n2;
+  mx = max8(mx, x2);
+#if defined(__clang__)
+  const V8f n1 = __builtin_shufflevector(mn, mn, 1, 0, 3, 2, 5, 4, 7, 6);
+  const V8f x1 = __builtin_shufflevector(mx, mx, 1, 0, 3, 2, 5, 4, 7, 6);
+#else
+  const V8f n1 = __builtin_shuffle(mn, V8i{1, 0, 3, 2, 5, 4, 7, 6});
+  const V8f x1 = __builtin_shuffle(mx, V8i{1, 0, 3, 2, 5, 4, 7, 6});
+#endif
+  mn = mn < n1 ? mn : n1;
+  mx = max8(mx, x1);
+  lo = mn[0];
+  hi = mx[0];
+}
+
 // The bounding boxes of the nt targets (tx, ty, tz) in runs of eight, as six arrays of
 // nr8 values (lo x, y, z, hi x, y, z; nr8: the runs rounded up to a multiple of 8, the
-// extra ones empty boxes far away); returns nr8.
-std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::size_t nt, std::vector<float>& box) {
+// extra ones empty boxes far away); returns nr8. A full run's box comes from one vector
+// per axis (a chain of seven scalar min / max steps per axis was most of the time).
+LEX3D_CLONES std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::size_t nt,
+                                   std::vector<float>& box) {
   const std::size_t nr = (nt + 7) / 8;
   const std::size_t nr8 = (nr + 7) / 8 * 8;
   box.assign(6 * nr8, 1e9F);
@@ -262,9 +296,13 @@ std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::si
     const std::size_t t0 = 8 * r, t1 = std::min(t0 + 8, nt);  // the real targets of the run
     for (int a = 0; a < 3; ++a) {
       float l = t[a][t0], h = t[a][t0];
-      for (std::size_t u = t0 + 1; u < t1; ++u) {
-        l = std::min(l, t[a][u]);
-        h = std::max(h, t[a][u]);
+      if (t1 == t0 + 8) {
+        min_max8(load8(t[a] + t0), l, h);
+      } else {
+        for (std::size_t u = t0 + 1; u < t1; ++u) {
+          l = std::min(l, t[a][u]);
+          h = std::max(h, t[a][u]);
+        }
       }
       lo[a][r] = l;
       hi[a][r] = h;
