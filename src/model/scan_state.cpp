@@ -233,10 +233,44 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   }
 }
 
+// The smallest and the largest of eight floats (none NaN), halving the lanes three
+// times: min and max pick one of their operands, so any order gives the same values
+// (up to the sign of a zero, which the squared gaps between boxes do not see).
+inline void min_max8(V8f v, float& lo, float& hi) {
+#if defined(__clang__)
+  const V8f s4 = __builtin_shufflevector(v, v, 4, 5, 6, 7, 0, 1, 2, 3);
+#else
+  const V8f s4 = __builtin_shuffle(v, V8i{4, 5, 6, 7, 0, 1, 2, 3});
+#endif
+  V8f mn = v < s4 ? v : s4, mx = max8(v, s4);
+#if defined(__clang__)
+  const V8f n2 = __builtin_shufflevector(mn, mn, 2, 3, 0, 1, 6, 7, 4, 5);
+  const V8f x2 = __builtin_shufflevector(mx, mx, 2, 3, 0, 1, 6, 7, 4, 5);
+#else
+  const V8f n2 = __builtin_shuffle(mn, V8i{2, 3, 0, 1, 6, 7, 4, 5});
+  const V8f x2 = __builtin_shuffle(mx, V8i{2, 3, 0, 1, 6, 7, 4, 5});
+#endif
+  mn = mn < n2 ? mn : n2;
+  mx = max8(mx, x2);
+#if defined(__clang__)
+  const V8f n1 = __builtin_shufflevector(mn, mn, 1, 0, 3, 2, 5, 4, 7, 6);
+  const V8f x1 = __builtin_shufflevector(mx, mx, 1, 0, 3, 2, 5, 4, 7, 6);
+#else
+  const V8f n1 = __builtin_shuffle(mn, V8i{1, 0, 3, 2, 5, 4, 7, 6});
+  const V8f x1 = __builtin_shuffle(mx, V8i{1, 0, 3, 2, 5, 4, 7, 6});
+#endif
+  mn = mn < n1 ? mn : n1;
+  mx = max8(mx, x1);
+  lo = mn[0];
+  hi = mx[0];
+}
+
 // The bounding boxes of the nt targets (tx, ty, tz) in runs of eight, as six arrays of
 // nr8 values (lo x, y, z, hi x, y, z; nr8: the runs rounded up to a multiple of 8, the
-// extra ones empty boxes far away); returns nr8.
-std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::size_t nt, std::vector<float>& box) {
+// extra ones empty boxes far away); returns nr8. A full run's box comes from one vector
+// per axis (a chain of seven scalar min / max steps per axis was most of the time).
+LEX3D_CLONES std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::size_t nt,
+                                   std::vector<float>& box) {
   const std::size_t nr = (nt + 7) / 8;
   const std::size_t nr8 = (nr + 7) / 8 * 8;
   box.assign(6 * nr8, 1e9F);
@@ -247,9 +281,13 @@ std::size_t run_boxes(const float* tx, const float* ty, const float* tz, std::si
     const std::size_t t0 = 8 * r, t1 = std::min(t0 + 8, nt);  // the real targets of the run
     for (int a = 0; a < 3; ++a) {
       float l = t[a][t0], h = t[a][t0];
-      for (std::size_t u = t0 + 1; u < t1; ++u) {
-        l = std::min(l, t[a][u]);
-        h = std::max(h, t[a][u]);
+      if (t1 == t0 + 8) {
+        min_max8(load8(t[a] + t0), l, h);
+      } else {
+        for (std::size_t u = t0 + 1; u < t1; ++u) {
+          l = std::min(l, t[a][u]);
+          h = std::max(h, t[a][u]);
+        }
       }
       lo[a][r] = l;
       hi[a][r] = h;
@@ -549,11 +587,15 @@ struct Slabs {
 };
 
 // Word choice by fit with slabs: the counts of fit_counts (entries with a word point
-// within their σ, and the word points with no entry within σ), testing each word point
-// against its three slabs only, widened to whole blocks of 8 entries. Every pair tested
-// is compared as in fit_counts; the pairs skipped are farther than σ apart along x.
+// within their σ, and the word points with no entry within σ). Each word point needs
+// testing only against its three slabs, widened to whole blocks of 8 entries; the points
+// go by in fours (the word's points sorted by x, so their windows mostly overlap), each
+// four testing the union of their windows: the entry loads, the update of the hits and
+// the loop with its hard-to-predict exit are shared by the four (the rest one by one).
+// Every pair tested is compared as in fit_counts, and an entry outside a point's own
+// window is farther than σ from it along x, so testing it as well changes no count.
 // Gives up (returns false, the counts unset) once `max_lonely` word points have no entry
-// within σ.
+// within σ (the count only grows, so that is the same as its final value reaching it).
 LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
                                    std::size_t max_lonely, std::int32_t* hit, std::size_t& explained,
                                    std::size_t& unsupported) {
@@ -564,7 +606,48 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
   const float* sig2 = s.sig2.data();
   for (std::size_t k = 0; k < npad; ++k) hit[k] = 0;
   std::size_t lonely = 0;
-  for (std::size_t p = 0; p < np; ++p) {
+  std::size_t p = 0;
+  for (; p + 4 <= np; p += 4) {
+    // The union of the four windows (empty ones left out).
+    std::uint32_t lo = ~0U, hi = 0;
+    for (std::size_t g = 0; g < 4; ++g) {
+      std::uint32_t a = 0, b = 0;
+      s.window(wx[p + g], a, b);
+      if (a < b) {
+        lo = std::min(lo, a);
+        hi = std::max(hi, b);
+      }
+    }
+    const V8f ax = splat8(wx[p]), ay = splat8(wy[p]), az = splat8(wz[p]);
+    const V8f bx = splat8(wx[p + 1]), by = splat8(wy[p + 1]), bz = splat8(wz[p + 1]);
+    const V8f cx = splat8(wx[p + 2]), cy = splat8(wy[p + 2]), cz = splat8(wz[p + 2]);
+    const V8f dx = splat8(wx[p + 3]), dy = splat8(wy[p + 3]), dz = splat8(wz[p + 3]);
+    V8i anya = {0, 0, 0, 0, 0, 0, 0, 0}, anyb = anya, anyc = anya, anyd = anya;
+    if (lo < hi) {
+      for (std::size_t k = lo & ~7U; k < hi; k += 8) {
+        const V8f ex = load8(lx + k), ey = load8(ly + k), ez = load8(lz + k), es = load8(sig2 + k);
+        const V8f a0 = ax - ex, a1 = ay - ey, a2 = az - ez;
+        const V8f b0 = bx - ex, b1 = by - ey, b2 = bz - ez;
+        const V8f c0 = cx - ex, c1 = cy - ey, c2 = cz - ez;
+        const V8f d0 = dx - ex, d1 = dy - ey, d2 = dz - ez;
+        const V8i ma = (a0 * a0 + a1 * a1 + a2 * a2 <= es) & 1;
+        const V8i mb = (b0 * b0 + b1 * b1 + b2 * b2 <= es) & 1;
+        const V8i mc = (c0 * c0 + c1 * c1 + c2 * c2 <= es) & 1;
+        const V8i md = (d0 * d0 + d1 * d1 + d2 * d2 <= es) & 1;
+        V8i h;
+        std::memcpy(&h, hit + k, sizeof h);
+        h |= (ma | mb) | (mc | md);
+        std::memcpy(hit + k, &h, sizeof h);
+        anya |= ma;
+        anyb |= mb;
+        anyc |= mc;
+        anyd |= md;
+      }
+    }
+    lonely += (any8(anya) ? 0 : 1) + (any8(anyb) ? 0 : 1) + (any8(anyc) ? 0 : 1) + (any8(anyd) ? 0 : 1);
+    if (lonely >= max_lonely) return false;
+  }
+  for (; p < np; ++p) {
     const float px = wx[p], py = wy[p], pz = wz[p];
     std::uint32_t lo = 0, hi = 0;
     s.window(px, lo, hi);
@@ -1057,68 +1140,56 @@ Eigen::Matrix3d kabsch_rotation(const Eigen::Matrix3d& H) {
 // One rigid correction D (q ≈ D p) from the np word points (mx, my, mz) to their nearest
 // targets, in the instance's frame; identity when fewer than 3 pairs fall within reach.
 // `match[i]` is the target (tx, ty, tz)[match[i]] of word point i or -1. The pairs are
-// gathered first (no branch on the match); the sums run in double, in word point order.
+// gathered first (no branch on the match), each point as one vector of four doubles
+// (x, y, z, 0); the sums run in double, in word point order, each coordinate (and each
+// entry of H) in its own lane, so they are the sums one coordinate at a time would give.
+typedef double V4d __attribute__((vector_size(32)));
+inline V4d load4d(const double* p) {
+  V4d v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
 LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
                             const float* ty, const float* tz, const std::int32_t* match) {
   thread_local std::vector<double> pairs_buf;
-  pairs_buf.resize(6 * np);
-  double* const a0 = pairs_buf.data();
-  double* const a1 = a0 + np;
-  double* const a2 = a1 + np;
-  double* const b0 = a2 + np;
-  double* const b1 = b0 + np;
-  double* const b2 = b1 + np;
+  pairs_buf.resize(8 * np);
+  double* const a = pairs_buf.data();
+  double* const b = a + 4 * np;
   std::size_t pairs = 0;
   for (std::size_t i = 0; i < np; ++i) {
     // matched: 1 when match[i] >= 0; t: the target, 0 when none (as bits, no branch).
     const auto mi = static_cast<std::uint32_t>(match[i]);
     const std::uint32_t matched = (~mi) >> 31;
     const std::size_t t = mi & (0U - matched);
-    a0[pairs] = static_cast<double>(mx[i]);
-    a1[pairs] = static_cast<double>(my[i]);
-    a2[pairs] = static_cast<double>(mz[i]);
-    b0[pairs] = static_cast<double>(tx[t]);
-    b1[pairs] = static_cast<double>(ty[t]);
-    b2[pairs] = static_cast<double>(tz[t]);
+    const V4d va = {static_cast<double>(mx[i]), static_cast<double>(my[i]), static_cast<double>(mz[i]), 0.0};
+    const V4d vb = {static_cast<double>(tx[t]), static_cast<double>(ty[t]), static_cast<double>(tz[t]), 0.0};
+    std::memcpy(a + 4 * pairs, &va, sizeof va);
+    std::memcpy(b + 4 * pairs, &vb, sizeof vb);
     pairs += matched;
   }
   Eigen::Isometry3f D = Eigen::Isometry3f::Identity();
   if (pairs < 3) return D;
-  double ca0 = 0.0, ca1 = 0.0, ca2 = 0.0, cb0 = 0.0, cb1 = 0.0, cb2 = 0.0;
+  V4d ca = {0.0, 0.0, 0.0, 0.0}, cb = ca;
   for (std::size_t i = 0; i < pairs; ++i) {
-    ca0 += a0[i];
-    ca1 += a1[i];
-    ca2 += a2[i];
-    cb0 += b0[i];
-    cb1 += b1[i];
-    cb2 += b2[i];
+    ca += load4d(a + 4 * i);
+    cb += load4d(b + 4 * i);
   }
   const auto n = static_cast<double>(pairs);
-  ca0 /= n;
-  ca1 /= n;
-  ca2 /= n;
-  cb0 /= n;
-  cb1 /= n;
-  cb2 /= n;
-  double h[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // row-major
+  const V4d nv = {n, n, n, n};
+  ca /= nv;
+  cb /= nv;
+  V4d h0 = {0.0, 0.0, 0.0, 0.0}, h1 = h0, h2 = h0;  // the rows of H
   for (std::size_t i = 0; i < pairs; ++i) {
-    const double p0 = a0[i] - ca0, p1 = a1[i] - ca1, p2 = a2[i] - ca2;
-    const double q0 = b0[i] - cb0, q1 = b1[i] - cb1, q2 = b2[i] - cb2;
-    h[0] += p0 * q0;
-    h[1] += p0 * q1;
-    h[2] += p0 * q2;
-    h[3] += p1 * q0;
-    h[4] += p1 * q1;
-    h[5] += p1 * q2;
-    h[6] += p2 * q0;
-    h[7] += p2 * q1;
-    h[8] += p2 * q2;
+    const V4d p = load4d(a + 4 * i) - ca, q = load4d(b + 4 * i) - cb;
+    h0 += V4d{p[0], p[0], p[0], p[0]} * q;
+    h1 += V4d{p[1], p[1], p[1], p[1]} * q;
+    h2 += V4d{p[2], p[2], p[2], p[2]} * q;
   }
   Eigen::Matrix3d H;
-  H << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
-  const Eigen::Vector3d ca(ca0, ca1, ca2), cb(cb0, cb1, cb2);
+  H << h0[0], h0[1], h0[2], h1[0], h1[1], h1[2], h2[0], h2[1], h2[2];
+  const Eigen::Vector3d centre_a(ca[0], ca[1], ca[2]), centre_b(cb[0], cb[1], cb[2]);
   const Eigen::Matrix3d R = kabsch_rotation(H);
-  const Eigen::Vector3d t = cb - R * ca;
+  const Eigen::Vector3d t = centre_b - R * centre_a;
   if (!R.allFinite() || !t.allFinite()) return D;
   D.linear() = R.cast<float>();
   D.translation() = t.cast<float>();
@@ -1182,13 +1253,12 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     pose_[f] = pose_[f] * correction[i];
     // Keep the rotation exactly orthonormal: float products drift.
     pose_[f].linear() = Eigen::Quaternionf(pose_[f].linear()).normalized().toRotationMatrix();
+    // The entries by the inverse correction, eight at a time (move_points computes each
+    // as Eigen's Isometry3f * Vector3f does).
     const Eigen::Isometry3f inv = correction[i].inverse();
-    for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-      const Eigen::Vector3f q = inv * Eigen::Vector3f(lx_[k], ly_[k], lz_[k]);
-      lx_[k] = q.x();
-      ly_[k] = q.y();
-      lz_[k] = q.z();
-    }
+    float box[6];
+    const std::size_t b = begin_of(f);
+    move_points(inv, lx_.data() + b, ly_.data() + b, lz_.data() + b, end_of(f) - b, box);
   };
   // The ICP fit of instance i (correction[i]).
   const auto fit = [&](std::size_t i) {
@@ -1261,6 +1331,34 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
 
 namespace {
 
+// descriptor_distances_sq of q to every word, eight words at a time: the descriptors
+// are stored transposed (value i of words w..w+7 side by side, nw8 words a row, the extra
+// ones zero), a lane per word. Each lane does what descriptor_distances_sq does for its
+// word, in the same order (value i into running sum i % 8, the values past the last
+// block of 8 after the blocks, the eight sums added pairwise), so the distances have
+// the same bits; there is no horizontal sum and no chain of dependent adds to wait on.
+LEX3D_CLONES void distances_to_words(const float* q, const float* rows_t, std::size_t nw8, int dim, float* out) {
+  const int blocks = dim / 8;
+  for (std::size_t w = 0; w < nw8; w += 8) {
+    V8f acc[8];
+    for (int l = 0; l < 8; ++l) acc[l] = splat8(0.0F);
+    for (int k = 0; k < blocks; ++k)
+      for (int l = 0; l < 8; ++l) {
+        const int i = 8 * k + l;
+        const V8f d = splat8(q[i]) - load8(rows_t + static_cast<std::size_t>(i) * nw8 + w);
+        acc[l] += d * d;
+      }
+    for (int l = 0; l < 8; ++l) {  // fixed indices keep acc in registers
+      const int i = 8 * blocks + l;
+      if (i >= dim) break;
+      const V8f d = splat8(q[i]) - load8(rows_t + static_cast<std::size_t>(i) * nw8 + w);
+      acc[l] += d * d;
+    }
+    const V8f sum = ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+    std::memcpy(out + w, &sum, sizeof sum);
+  }
+}
+
 // Word choice by fit for one feature: among the kk words `near` (nearest descriptor
 // first), the one that best fits the feature's n entries (lx, ly, lz; r2: (3σ)² of each),
 // as ScanState::choose_by_fit describes. Compiled for AVX2 too, with the slab loops.
@@ -1331,12 +1429,23 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
   if (!all_features && (k <= 1 || alphabet.size() < 2)) return 0;
   const int dim = alphabet.descriptor_dim;
   const std::size_t nw = alphabet.size();
-  const std::vector<PackedWord> packed = pack(alphabet);
-  // The words' descriptors one after another.
-  std::vector<float> descriptors(nw * static_cast<std::size_t>(dim));
+  // The words' points sorted by x (the fit counts do not depend on the order of the
+  // points; fit_counts_slabs takes them four by four, and neighbours in x share most of
+  // their slabs).
+  std::vector<PackedWord> packed;
+  packed.reserve(nw);
+  for (const auto& w : alphabet.words) {
+    Word sorted = w;
+    std::stable_sort(sorted.points.begin(), sorted.points.end(),
+                     [](const Eigen::Vector3f& a, const Eigen::Vector3f& b) { return a.x() < b.x(); });
+    packed.emplace_back(sorted);
+  }
+  // The words' descriptors transposed (distances_to_words).
+  const std::size_t nw8 = (nw + 7) / 8 * 8;
+  std::vector<float> descriptors_t(nw8 * static_cast<std::size_t>(dim), 0.0F);
   for (std::size_t w = 0; w < nw; ++w)
-    std::copy(alphabet.words[w].descriptor.begin(), alphabet.words[w].descriptor.begin() + dim,
-              descriptors.begin() + static_cast<std::ptrdiff_t>(w * static_cast<std::size_t>(dim)));
+    for (int i = 0; i < dim; ++i)
+      descriptors_t[static_cast<std::size_t>(i) * nw8 + w] = alphabet.words[w].descriptor[static_cast<std::size_t>(i)];
   std::vector<std::size_t> active;
   for (std::size_t f = 0; f < word_.size(); ++f)
     if (all_features || word_[f] >= 0) active.push_back(f);
@@ -1348,8 +1457,8 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
     thread_local std::vector<std::pair<float, std::uint32_t>> near;
     // The kk nearest words by descriptor (ties: lower id), in order: words come by
     // increasing id, so one enters the list when strictly nearer than its last.
-    dist.resize(nw);
-    descriptor_distances_sq(scan_.features.descriptor(f), descriptors.data(), nw, dim, dist.data());
+    dist.resize(nw8);
+    distances_to_words(scan_.features.descriptor(f), descriptors_t.data(), nw8, dim, dist.data());
     near.clear();
     for (std::size_t w = 0; w < nw; ++w) {
       const float d = dist[w];
