@@ -37,29 +37,40 @@ void check_output_path(const std::string& output, const std::vector<std::string>
   }
 }
 
-std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
-                              const std::string& poses_path, bool points_in_world) {
+ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path,
+                       bool points_in_world)
+    : paths_(std::move(paths)), format_(format), points_in_world_(points_in_world) {
   if (points_in_world && poses_path.empty())
     throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");
+  if (poses_path.empty()) return;
+  auto poses = io::read_pose_list(poses_path);
+  if (!poses.ok()) throw CliError(2, poses.status().to_string());
+  if (poses.value().size() != paths_.size())
+    throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
+                          std::to_string(paths_.size()) + " scans (one pose a scan, in order)");
+  poses_ = std::move(poses).value();
+}
+
+Cloud ScanLoader::load(std::size_t i) const {
+  Cloud cloud = load_cloud(paths_.at(i), format_).cloud;
+  if (!poses_.empty()) {
+    if (points_in_world_) {
+      cloud.T_cloud_sensor = poses_[i];
+      cloud.T_world_cloud = Pose::Identity();
+    } else {
+      cloud.T_world_cloud = poses_[i];
+    }
+    cloud.has_world_pose = true;
+  }
+  return cloud;
+}
+
+std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
+                              const std::string& poses_path, bool points_in_world) {
+  const ScanLoader loader(paths, format, poses_path, points_in_world);
   std::vector<Cloud> clouds;
   clouds.reserve(paths.size());
-  for (const auto& p : paths) clouds.push_back(load_cloud(p, format).cloud);
-  if (!poses_path.empty()) {
-    auto poses = io::read_pose_list(poses_path);
-    if (!poses.ok()) throw CliError(2, poses.status().to_string());
-    if (poses.value().size() != clouds.size())
-      throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
-                            std::to_string(clouds.size()) + " scans (one pose a scan, in order)");
-    for (std::size_t i = 0; i < clouds.size(); ++i) {
-      if (points_in_world) {
-        clouds[i].T_cloud_sensor = poses.value()[i];
-        clouds[i].T_world_cloud = Pose::Identity();
-      } else {
-        clouds[i].T_world_cloud = poses.value()[i];
-      }
-      clouds[i].has_world_pose = true;
-    }
-  }
+  for (std::size_t i = 0; i < paths.size(); ++i) clouds.push_back(loader.load(i));
   return clouds;
 }
 

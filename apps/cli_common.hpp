@@ -51,6 +51,22 @@ Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option
 std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
                               const std::string& poses_path, bool points_in_world = false);
 
+/// The scans of load_scans one at a time, for commands that need only one in memory: the
+/// poses are read (and their count checked) when it is made, a scan when it is asked for.
+class ScanLoader {
+ public:
+  ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path, bool points_in_world);
+  [[nodiscard]] std::size_t size() const { return paths_.size(); }
+  /// Scan i with its poses (load_scans's clouds[i]); throws CliError as load_scans does.
+  [[nodiscard]] Cloud load(std::size_t i) const;
+
+ private:
+  std::vector<std::string> paths_;
+  io::Format format_;
+  std::vector<Pose> poses_;  // empty: no poses file
+  bool points_in_world_;
+};
+
 /// A distinct, stable colour for a word id.
 std::array<std::uint8_t, 3> word_color(std::uint32_t word);
 

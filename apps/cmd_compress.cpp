@@ -13,6 +13,7 @@
 #include "lex3d/core/timer.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "model_report.hpp"
+#include "progress.hpp"
 
 namespace lex3d::cli {
 
@@ -127,17 +128,22 @@ void run_compress(const CompressOptions& o) {
   if (!o.save_alphabet.empty()) check_output_path(o.save_alphabet, protected_paths);
 
   Stopwatch sw;
-  const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
-  const double read_ms = sw.elapsed_ms();
+  // Learning needs every scan at once; with an alphabet given, or without words, the scans
+  // are read, modelled, coded and written one at a time, so a long sequence needs the memory
+  // of one scan (89 balm scans: 870 MB resident when all were held).
+  const bool learning = use_words && o.alphabet.empty();
+  const ScanLoader loader = o.scan_set.loader(o.inputs);
+  std::vector<Cloud> clouds;
+  if (learning) clouds = o.scan_set.load(o.inputs);
+  double read_ms = sw.elapsed_ms();
   const ModelParams mp = o.model.params();
   LearnParams p = o.scan_set.learn_params(mp);
   std::optional<AlphabetFile> reuse;
   if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
   ModelSet set;
-  if (use_words) set = build_models(clouds, p, reuse ? &reuse->alphabet : nullptr, o.inputs);
-  else set.models.resize(clouds.size());
+  if (learning) set = build_models(clouds, p, nullptr, o.inputs);
+  else if (reuse) set.alphabet = reuse->alphabet;
   const Alphabet& alphabet = set.alphabet;
-  const std::vector<Model>& models = set.models;
   codec::Quantization quantization = o.quantization;
   {
     const codec::Quantization derived = codec::quantization_for_word_radius(alphabet.word_radius);
@@ -178,15 +184,38 @@ void run_compress(const CompressOptions& o) {
   layer_options.spherical = o.layer_coding != "voxel";
   layer_options.voxel = o.layer_coding != "spherical";
   layer_options.threads = mp.threads;
-  for (std::size_t i = 0; i < clouds.size(); ++i) {
-    Stopwatch code_sw;
+  ProgressBar bar("encoding");
+  for (std::size_t i = 0; i < loader.size(); ++i) {
+    // The scan and its model: learnt with the alphabet, or made now (where each stage's time
+    // went is reported then).
+    Cloud streamed;
+    std::size_t features = 0;
+    std::optional<PreparedScan> prepared;  // without its cloud and neighbourhoods
+    EncodeTimings et;
     codec::ModelData d;
-    d.input_points = clouds[i].size();
-    d.T_cloud_sensor = clouds[i].T_cloud_sensor;
-    d.model = models[i];
+    if (learning) {
+      features = set.scans[i].features.size();
+      d.model = set.models[i];
+    } else {
+      Stopwatch read_sw;
+      streamed = loader.load(i);
+      read_ms += read_sw.elapsed_ms();
+      if (use_words) {
+        PreparedScan ps = prepare_scan(streamed, p.model, alphabet.word_radius);
+        d.model = encode_scan(ps, alphabet, p.prune, p.model, &et);
+        features = ps.features.size();
+        prepared.emplace();
+        prepared->timings = ps.timings;
+        prepared->prepare_ms = ps.prepare_ms;
+      }
+    }
+    const Cloud& cloud = learning ? clouds[i] : streamed;
+    Stopwatch code_sw;
+    d.input_points = cloud.size();
+    d.T_cloud_sensor = cloud.T_cloud_sensor;
     if (embed) d.alphabet = alphabet;
     else d.alphabet_hash = hash;
-    const Coded coded = code_scan(clouds[i], d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
+    const Coded coded = code_scan(cloud, d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
                                   words_mode, layer_options, quantization);
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
@@ -203,13 +232,12 @@ void run_compress(const CompressOptions& o) {
           .value("input", o.inputs[i])
           .value("output", o.one_file ? o.output : outputs[i])
           .value("points", d.input_points)
-          .value("features", i < set.scans.size() ? set.scans[i].features.size() : std::size_t{0})
+          .value("features", features)
           .value("instances", d.model.instances.size())
           .value("bytes", static_cast<std::uint64_t>(bytes.size()))
           .value("bits_per_point", bpp);
-      if (i < set.timings.size()) {  // an alphabet reused: where each scan's time went
-        const PreparedScan& ps = set.scans[i];
-        const EncodeTimings& et = set.timings[i];
+      if (prepared) {  // an alphabet reused: where each scan's time went
+        const PreparedScan& ps = *prepared;
         j.begin_object("timings_ms")
             .value("range_image", ps.timings.range_image_ms)
             .value("interest_points", ps.timings.interest_ms)
@@ -243,7 +271,9 @@ void run_compress(const CompressOptions& o) {
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
     }
+    bar.update(static_cast<long>(i + 1), static_cast<long>(loader.size()), o.inputs[i]);
   }
+  bar.finish();
   j.end_array();
   // A saved alphabet is written once the models are; it is counted only when a model uses it.
   if (!o.save_alphabet.empty()) throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));

@@ -53,6 +53,10 @@ std::vector<Cloud> ScanSetOptions::load(const std::vector<std::string>& inputs) 
   return load_scans(inputs, parse_format_option(format), poses, input_frame == "world");
 }
 
+ScanLoader ScanSetOptions::loader(const std::vector<std::string>& inputs) const {
+  return ScanLoader(inputs, parse_format_option(format), poses, input_frame == "world");
+}
+
 LearnParams ScanSetOptions::learn_params(const ModelParams& model) const {
   LearnParams p;
   p.model = model;

@@ -38,6 +38,8 @@ struct ScanSetOptions {
   void add_to(CLI::App& app);
   /// Reads `inputs` with these options (formats, poses).
   [[nodiscard]] std::vector<Cloud> load(const std::vector<std::string>& inputs) const;
+  /// The same scans one at a time.
+  [[nodiscard]] ScanLoader loader(const std::vector<std::string>& inputs) const;
   /// Learner parameters: these options plus `model`.
   [[nodiscard]] LearnParams learn_params(const ModelParams& model) const;
 };

@@ -261,3 +261,21 @@ run(1 world.bad_frame compress "${WORK}/world.ply" --input-frame map -o "${WORK}
 if(EXISTS "${WORK}/w_bad.lex3dm")
   message(SEND_ERROR "[world] an output was written for a refused command")
 endif()
+
+# With an alphabet given, scans are read, coded and written one at a time: a bad scan in
+# the middle of a set stops the command (exit 2, its name in the message) after the scans
+# before it are written complete; nothing is written for it or after it.
+run(2 stream.bad_middle compress "${NC}" "${WORK}/odd.bin" "${NC}" --format binxyz -o "${WORK}/st.lex3dm"
+    --alphabet "${WORK}/nc.lex3da")
+expect_match(stream.bad_middle "${LAST_ERR}" "odd.bin")
+if(NOT EXISTS "${WORK}/st_000.lex3dm" OR EXISTS "${WORK}/st_001.lex3dm" OR EXISTS "${WORK}/st_002.lex3dm")
+  message(SEND_ERROR "[stream.bad_middle] expected st_000 alone to be written")
+endif()
+run(0 stream.first_decodes decompress "${WORK}/st_000.lex3dm" --alphabet "${WORK}/nc.lex3da" -o "${WORK}/st_000.ply")
+# The same scan twice gives the same file twice (one scan's state never leaks into the next).
+run(0 stream.twice compress "${NC}" "${NC}" -o "${WORK}/tw.lex3dm" --alphabet "${WORK}/nc.lex3da" --max-error 0.02 --words auto)
+file(SHA256 "${WORK}/tw_000.lex3dm" h0)
+file(SHA256 "${WORK}/tw_001.lex3dm" h1)
+if(NOT h0 STREQUAL h1)
+  message(SEND_ERROR "[stream.twice] the same scan coded twice gave two different files")
+endif()
