@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 
@@ -68,11 +69,14 @@ PlaceDatabase read_db(const std::string& path) {
   return std::move(db).value();
 }
 
-Alphabet learn_on(const std::vector<Cloud>& clouds, int learn_scans, int iterations) {
+// Scan i of a set of n, read when asked: building a database of a long drive holds one
+// scan (and the scans the alphabet is learnt from) in memory, not all of them.
+using GetScan = std::function<Cloud(std::size_t)>;
+
+Alphabet learn_on(std::size_t n, const GetScan& get, int learn_scans, int iterations) {
   std::vector<Cloud> subset;
-  const std::size_t n = clouds.size();
   const std::size_t k = std::min<std::size_t>(n, static_cast<std::size_t>(learn_scans));
-  for (std::size_t i = 0; i < k; ++i) subset.push_back(clouds[i * n / k]);
+  for (std::size_t i = 0; i < k; ++i) subset.push_back(get(i * n / k));
   LearnParams p;
   p.model = model_params();
   p.max_iterations = iterations;
@@ -83,16 +87,16 @@ Alphabet learn_on(const std::vector<Cloud>& clouds, int learn_scans, int iterati
   return std::move(r.alphabet);
 }
 
-std::vector<PlaceScan> describe_all(const std::vector<Cloud>& clouds, const std::vector<std::string>& names,
+std::vector<PlaceScan> describe_all(std::size_t n, const GetScan& get, const std::vector<std::string>& names,
                                     const Alphabet& alphabet, const PlaceStorageParams& storage, double* prepare_ms) {
   std::vector<PlaceScan> out;
   const ModelParams mp = model_params();
   ProgressBar bar("preparing scans");
   Stopwatch sw;
-  for (std::size_t i = 0; i < clouds.size(); ++i) {
-    const PreparedScan s = prepare_scan(clouds[i], mp, alphabet.word_radius);
+  for (std::size_t i = 0; i < n; ++i) {
+    const PreparedScan s = prepare_scan(get(i), mp, alphabet.word_radius);
     out.push_back(make_place_scan(s, alphabet, storage, mp.features.range, names[i]));
-    bar.update(static_cast<long>(i + 1), static_cast<long>(clouds.size()), names[i]);
+    bar.update(static_cast<long>(i + 1), static_cast<long>(n), names[i]);
   }
   if (prepare_ms != nullptr) *prepare_ms = sw.elapsed_ms();
   return out;
@@ -100,7 +104,8 @@ std::vector<PlaceScan> describe_all(const std::vector<Cloud>& clouds, const std:
 
 void run_build(const PlaceOptions& o, bool add) {
   check_output_path(o.db, o.inputs);
-  const auto clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  const ScanLoader loader(o.inputs, parse_format_option(o.format), o.poses, false);
+  const GetScan get = [&](std::size_t i) { return loader.load(i); };
   std::vector<std::string> names;
   for (const auto& p : o.inputs) names.push_back(stem(p));
   PlaceDatabase db(o.storage);
@@ -113,10 +118,10 @@ void run_build(const PlaceOptions& o, bool add) {
     if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
     db.set_alphabet(std::move(a).value());
   } else {
-    db.set_alphabet(learn_on(clouds, o.learn_scans, o.iterations));
+    db.set_alphabet(learn_on(loader.size(), get, o.learn_scans, o.iterations));
   }
   double prep = 0;
-  for (auto& s : describe_all(clouds, names, db.alphabet(), db.storage(), &prep)) db.add(std::move(s));
+  for (auto& s : describe_all(loader.size(), get, names, db.alphabet(), db.storage(), &prep)) db.add(std::move(s));
   const auto bytes = db.save();
   throw_if_error(io::write_file_atomic(o.db, bytes));
   if (o.json) {
@@ -142,7 +147,8 @@ void run_query(const PlaceOptions& o) {
   const PlaceDatabase db = read_db(o.db);
   const auto clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
   double prep = 0;
-  const auto scans = describe_all(clouds, {stem(o.inputs[0])}, db.alphabet(), db.storage(), &prep);
+  const auto scans = describe_all(1, [&](std::size_t i) { return clouds[i]; }, {stem(o.inputs[0])}, db.alphabet(),
+                                  db.storage(), &prep);
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
   p.max_distance = std::max(0.0, o.max_distance);
@@ -270,11 +276,13 @@ void run_eval(const PlaceOptions& o) {
     if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
     alphabet = std::move(a).value();
   } else {
-    alphabet = learn_on(clouds, o.learn_scans, o.iterations);
+    alphabet = learn_on(clouds.size(), [&](std::size_t i) { return clouds[i]; }, o.learn_scans, o.iterations);
   }
   const double learn_ms = sw.lap_ms();
   double prep_ms = 0;
-  const auto scans = cached.empty() ? describe_all(clouds, names, alphabet, o.storage, &prep_ms) : cached;
+  const auto scans = cached.empty() ? describe_all(clouds.size(), [&](std::size_t i) { return clouds[i]; }, names,
+                                                   alphabet, o.storage, &prep_ms)
+                                    : cached;
   if (!o.cache.empty() && cached.empty()) {
     PlaceDatabase c(o.storage);
     c.set_alphabet(alphabet);
