@@ -30,6 +30,7 @@ struct CompressOptions {
   bool keep_all_points = false;
   std::string layer_coding = "auto";  ///< auto, spherical or voxel
   bool one_file = false;
+  int learn_scans = 0;  ///< learn the alphabet on this many evenly spaced scans; 0: on all
   /// Instance steps; 0 (the default) scales them to the alphabet's word radius
   /// (codec::quantization_for_word_radius).
   codec::Quantization quantization{0.0, 0.0, 0.0005};
@@ -128,20 +129,33 @@ void run_compress(const CompressOptions& o) {
   if (!o.save_alphabet.empty()) check_output_path(o.save_alphabet, protected_paths);
 
   Stopwatch sw;
-  // Learning needs every scan at once; with an alphabet given, or without words, the scans
-  // are read, modelled, coded and written one at a time, so a long sequence needs the memory
-  // of one scan (89 balm scans: 870 MB resident when all were held).
+  // Learning needs the scans it learns from at once (every scan, or --learn-scans K evenly
+  // spaced ones); the others, and every scan with an alphabet given or without words, are
+  // read, modelled, coded and written one at a time, so a long sequence needs the memory of
+  // one scan (89 balm scans: 826 MB resident when all were held).
   const bool learning = use_words && o.alphabet.empty();
   const ScanLoader loader = o.scan_set.loader(o.inputs);
-  std::vector<Cloud> clouds;
-  if (learning) clouds = o.scan_set.load(o.inputs);
+  const std::size_t n_scans = loader.size();
+  std::vector<std::int64_t> learnt_as(n_scans, -1);  // scan -> its place among the learnt scans
+  std::vector<Cloud> clouds;                         // the learnt scans
+  std::vector<std::string> learnt_names;
+  if (learning) {
+    const std::size_t k = o.learn_scans > 0 ? std::min<std::size_t>(n_scans, static_cast<std::size_t>(o.learn_scans))
+                                            : n_scans;
+    for (std::size_t j = 0; j < k; ++j) {
+      const std::size_t i = j * n_scans / k;
+      learnt_as[i] = static_cast<std::int64_t>(j);
+      clouds.push_back(loader.load(i));
+      learnt_names.push_back(o.inputs[i]);
+    }
+  }
   double read_ms = sw.elapsed_ms();
   const ModelParams mp = o.model.params();
   LearnParams p = o.scan_set.learn_params(mp);
   std::optional<AlphabetFile> reuse;
   if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
   ModelSet set;
-  if (learning) set = build_models(clouds, p, nullptr, o.inputs);
+  if (learning) set = build_models(clouds, p, nullptr, learnt_names);
   else if (reuse) set.alphabet = reuse->alphabet;
   const Alphabet& alphabet = set.alphabet;
   codec::Quantization quantization = o.quantization;
@@ -185,7 +199,7 @@ void run_compress(const CompressOptions& o) {
   layer_options.voxel = o.layer_coding != "spherical";
   layer_options.threads = mp.threads;
   ProgressBar bar("encoding");
-  for (std::size_t i = 0; i < loader.size(); ++i) {
+  for (std::size_t i = 0; i < n_scans; ++i) {
     // The scan and its model: learnt with the alphabet, or made now (where each stage's time
     // went is reported then).
     Cloud streamed;
@@ -193,9 +207,11 @@ void run_compress(const CompressOptions& o) {
     std::optional<PreparedScan> prepared;  // without its cloud and neighbourhoods
     EncodeTimings et;
     codec::ModelData d;
-    if (learning) {
-      features = set.scans[i].features.size();
-      d.model = set.models[i];
+    const bool learnt = learnt_as[i] >= 0;
+    if (learnt) {
+      const auto slot = static_cast<std::size_t>(learnt_as[i]);
+      features = set.scans[slot].features.size();
+      d.model = set.models[slot];
     } else {
       Stopwatch read_sw;
       streamed = loader.load(i);
@@ -209,7 +225,7 @@ void run_compress(const CompressOptions& o) {
         prepared->prepare_ms = ps.prepare_ms;
       }
     }
-    const Cloud& cloud = learning ? clouds[i] : streamed;
+    const Cloud& cloud = learnt ? clouds[static_cast<std::size_t>(learnt_as[i])] : streamed;
     Stopwatch code_sw;
     d.input_points = cloud.size();
     d.T_cloud_sensor = cloud.T_cloud_sensor;
@@ -271,7 +287,7 @@ void run_compress(const CompressOptions& o) {
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
     }
-    bar.update(static_cast<long>(i + 1), static_cast<long>(loader.size()), o.inputs[i]);
+    bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), o.inputs[i]);
   }
   bar.finish();
   j.end_array();
@@ -314,6 +330,10 @@ void register_compress(CLI::App& app) {
   sub->add_option("-o,--output", o->output,
                   "Model file (numbered _000, _001... for several scans), or the sequence file with --one-file")
       ->required();
+  sub->add_option("--learn-scans", o->learn_scans,
+                  "Learn the alphabet on this many evenly spaced scans and code the others with it, one at a "
+                  "time (0, the default: learn on every scan)")
+      ->check(CLI::Range(0, 1000000));
   sub->add_flag("--one-file", o->one_file,
                 "Write one sequence file holding every scan's model and the shared alphabet (formats/sequence.md)");
   sub->add_option("--alphabet", o->alphabet, "Reuse this alphabet file (nothing is learned)");
