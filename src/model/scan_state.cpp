@@ -630,10 +630,11 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
         const V8f b0 = bx - ex, b1 = by - ey, b2 = bz - ez;
         const V8f c0 = cx - ex, c1 = cy - ey, c2 = cz - ez;
         const V8f d0 = dx - ex, d1 = dy - ey, d2 = dz - ez;
-        const V8i ma = (a0 * a0 + a1 * a1 + a2 * a2 <= es) & 1;
-        const V8i mb = (b0 * b0 + b1 * b1 + b2 * b2 <= es) & 1;
-        const V8i mc = (c0 * c0 + c1 * c1 + c2 * c2 <= es) & 1;
-        const V8i md = (d0 * d0 + d1 * d1 + d2 * d2 <= es) & 1;
+        // The masks as they come (all ones or zero): hit[k] is nonzero when entry k is hit.
+        const V8i ma = a0 * a0 + a1 * a1 + a2 * a2 <= es;
+        const V8i mb = b0 * b0 + b1 * b1 + b2 * b2 <= es;
+        const V8i mc = c0 * c0 + c1 * c1 + c2 * c2 <= es;
+        const V8i md = d0 * d0 + d1 * d1 + d2 * d2 <= es;
         V8i h;
         std::memcpy(&h, hit + k, sizeof h);
         h |= (ma | mb) | (mc | md);
@@ -655,7 +656,7 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
     V8i any = {0, 0, 0, 0, 0, 0, 0, 0};
     for (std::size_t k = lo & ~7U; k < hi; k += 8) {
       const V8f dx = x - load8(lx + k), dy = y - load8(ly + k), dz = z - load8(lz + k);
-      const V8i m = (dx * dx + dy * dy + dz * dz <= load8(sig2 + k)) & 1;
+      const V8i m = dx * dx + dy * dy + dz * dz <= load8(sig2 + k);
       V8i h;
       std::memcpy(&h, hit + k, sizeof h);
       h |= m;
@@ -666,7 +667,7 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
     if (lonely >= max_lonely) return false;
   }
   std::size_t e = 0;
-  for (std::size_t k = 0; k < s.size; ++k) e += static_cast<std::size_t>(hit[k]);
+  for (std::size_t k = 0; k < s.size; ++k) e += hit[k] != 0 ? 1 : 0;
   explained = e;
   unsupported = lonely;
   return true;
