@@ -496,6 +496,15 @@ LEX3D_CLONES std::size_t box_count(const float* lx, const float* ly, const float
 // within its σ of a word point lies in the point's slab or one next to it, and those
 // three slabs are one contiguous run. Entries left out are farther than σ from every
 // point of those words.
+// Makes v at least n long. The scratch arrays below are reused from one feature to the
+// next with different lengths; resize() to a smaller then a larger length zero-fills the
+// difference every time, where growing only does it once (every element read is written
+// first).
+template <class V>
+inline void grow(V& v, std::size_t n) {
+  if (v.size() < n) v.resize(n);
+}
+
 struct Slabs {
   std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8
   std::vector<std::uint32_t> start;  // slab b holds [start[b], start[b + 1])
@@ -507,18 +516,17 @@ struct Slabs {
   void build(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n, const float* blo,
              const float* bhi) {
     constexpr int kMaxSlabs = 64;
-    s2_.resize(n);
+    grow(s2_, n);
     for (std::size_t k = 0; k < n; ++k) s2_[k] = r2[k] / 9.0F;
     const float* const s2 = s2_.data();
-    keep_.resize(n);
+    grow(keep_, n);
     box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
-    kept_.resize(n);
+    grow(kept_, n);
     std::size_t m = 0;
     for (std::size_t k = 0; k < n; ++k) {
       kept_[m] = static_cast<std::uint32_t>(k);
       m += static_cast<std::size_t>(keep_[k]);
     }
-    kept_.resize(m);
     float lo = 0.0F, hi = 0.0F, smax = 0.0F;
     if (m > 0) {
       lo = hi = lx[kept_[0]];
@@ -530,7 +538,7 @@ struct Slabs {
       hi = std::max(hi, v);
       smax = std::max(smax, s2[kept_[i]]);
     }
-    size = kept_.size();
+    size = m;
     const std::size_t npad = (size + 7) / 8 * 8;
     // Padded with entries nothing reaches (tests run in blocks of 8).
     x.assign(npad, 1e9F);
@@ -550,7 +558,7 @@ struct Slabs {
     inv = 1.0F / width;
     count = std::min(kMaxSlabs, static_cast<int>((hi - lo) * inv) + 1);
     start.assign(static_cast<std::size_t>(count) + 1, 0);
-    slab_.resize(size);
+    grow(slab_, size);
     for (std::size_t i = 0; i < size; ++i) {
       const int b = std::min(count - 1, std::max(0, static_cast<int>((lx[kept_[i]] - x0) * inv)));
       slab_[i] = static_cast<std::uint32_t>(b);
@@ -1153,7 +1161,7 @@ inline V4d load4d(const double* p) {
 LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
                             const float* ty, const float* tz, const std::int32_t* match) {
   thread_local std::vector<double> pairs_buf;
-  pairs_buf.resize(8 * np);
+  grow(pairs_buf, 8 * np);
   double* const a = pairs_buf.data();
   double* const b = a + 4 * np;
   std::size_t pairs = 0;
@@ -1283,17 +1291,17 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     std::size_t nr8 = 0;
     thread_local std::vector<std::int32_t> match;
     const std::size_t b = begin_of(f), e = end_of(f);
-    fx.resize(e - b + 8);
-    fy.resize(e - b + 8);
-    fz.resize(e - b + 8);
+    grow(fx, e - b + 8);
+    grow(fy, e - b + 8);
+    grow(fz, e - b + 8);
     std::size_t nf = 0;
     float slo[3] = {0.0F, 0.0F, 0.0F}, shi[3] = {-1.0F, -1.0F, -1.0F};  // empty: filled in the first round
     const std::size_t npad = pw.xp.size();
     mx.assign(pw.xp.begin(), pw.xp.end());
     my.assign(pw.yp.begin(), pw.yp.end());
     mz.assign(pw.zp.begin(), pw.zp.end());
-    best.resize(npad);
-    match.resize(npad);
+    grow(best, npad);
+    grow(match, npad);
     // The moved word's bounding box (lo x, y, z, hi x, y, z), kept by move_points.
     float box[6] = {pw.lo.x(), pw.lo.y(), pw.lo.z(), pw.hi.x(), pw.hi.y(), pw.hi.z()};
     for (int it = 0; it < iterations; ++it) {
@@ -1378,7 +1386,7 @@ LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near,
     }
   }
   slabs.build(lx, ly, lz, r2, n, lo, hi);
-  hits.resize(slabs.x.size());
+  grow(hits, slabs.x.size());
   if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
     std::size_t pick = 0;
     for (std::size_t c = 1; c < kk; ++c)
