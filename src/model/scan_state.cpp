@@ -506,11 +506,12 @@ inline void grow(V& v, std::size_t n) {
 }
 
 struct Slabs {
-  std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8
+  std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8 (the first `padded`)
   std::vector<std::uint32_t> start;  // slab b holds [start[b], start[b + 1])
   float x0 = 0.0F, inv = 0.0F;
   int count = 0;
-  std::size_t size = 0;  // entries kept
+  std::size_t size = 0;    // entries kept
+  std::size_t padded = 0;  // size rounded up to a multiple of 8
 
   // r2: (3σ)² of each entry (σ² is taken as (3σ)² / 9).
   void build(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n, const float* blo,
@@ -540,11 +541,17 @@ struct Slabs {
     }
     size = m;
     const std::size_t npad = (size + 7) / 8 * 8;
-    // Padded with entries nothing reaches (tests run in blocks of 8).
-    x.assign(npad, 1e9F);
-    y.assign(npad, 1e9F);
-    z.assign(npad, 1e9F);
-    sig2.assign(npad, -1.0F);
+    // Padded with entries nothing reaches (tests run in blocks of 8). The arrays only
+    // grow: the first `size` are all written below, the padding here.
+    padded = npad;
+    grow(x, npad);
+    grow(y, npad);
+    grow(z, npad);
+    grow(sig2, npad);
+    for (std::size_t i = size; i < npad; ++i) {
+      x[i] = y[i] = z[i] = 1e9F;
+      sig2[i] = -1.0F;
+    }
     if (size == 0) {
       count = 0;
       start.assign(1, 0);
@@ -607,7 +614,7 @@ struct Slabs {
 LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
                                    std::size_t max_lonely, std::int32_t* hit, std::size_t& explained,
                                    std::size_t& unsupported) {
-  const std::size_t npad = s.x.size();
+  const std::size_t npad = s.padded;
   const float* lx = s.x.data();
   const float* ly = s.y.data();
   const float* lz = s.z.data();
@@ -1386,7 +1393,7 @@ LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near,
     }
   }
   slabs.build(lx, ly, lz, r2, n, lo, hi);
-  grow(hits, slabs.x.size());
+  grow(hits, slabs.padded);
   if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
     std::size_t pick = 0;
     for (std::size_t c = 1; c < kk; ++c)
@@ -1403,7 +1410,7 @@ LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near,
     const PackedWord& w = packed[near[c].second];
     const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
     const std::size_t most =
-        box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.x.size(), wlo, whi);
+        box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.padded, wlo, whi);
     order.emplace_back(-static_cast<std::int64_t>(most), static_cast<std::uint32_t>(c));
   }
   std::sort(order.begin(), order.end());
