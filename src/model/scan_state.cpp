@@ -496,29 +496,38 @@ LEX3D_CLONES std::size_t box_count(const float* lx, const float* ly, const float
 // within its σ of a word point lies in the point's slab or one next to it, and those
 // three slabs are one contiguous run. Entries left out are farther than σ from every
 // point of those words.
+// Makes v at least n long. The scratch arrays below are reused from one feature to the
+// next with different lengths; resize() to a smaller then a larger length zero-fills the
+// difference every time, where growing only does it once (every element read is written
+// first).
+template <class V>
+inline void grow(V& v, std::size_t n) {
+  if (v.size() < n) v.resize(n);
+}
+
 struct Slabs {
-  std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8
+  std::vector<float> x, y, z, sig2;  // kept entries in slab order, padded to a multiple of 8 (the first `padded`)
   std::vector<std::uint32_t> start;  // slab b holds [start[b], start[b + 1])
   float x0 = 0.0F, inv = 0.0F;
   int count = 0;
-  std::size_t size = 0;  // entries kept
+  std::size_t size = 0;    // entries kept
+  std::size_t padded = 0;  // size rounded up to a multiple of 8
 
   // r2: (3σ)² of each entry (σ² is taken as (3σ)² / 9).
   void build(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n, const float* blo,
              const float* bhi) {
     constexpr int kMaxSlabs = 64;
-    s2_.resize(n);
+    grow(s2_, n);
     for (std::size_t k = 0; k < n; ++k) s2_[k] = r2[k] / 9.0F;
     const float* const s2 = s2_.data();
-    keep_.resize(n);
+    grow(keep_, n);
     box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
-    kept_.resize(n);
+    grow(kept_, n);
     std::size_t m = 0;
     for (std::size_t k = 0; k < n; ++k) {
       kept_[m] = static_cast<std::uint32_t>(k);
       m += static_cast<std::size_t>(keep_[k]);
     }
-    kept_.resize(m);
     float lo = 0.0F, hi = 0.0F, smax = 0.0F;
     if (m > 0) {
       lo = hi = lx[kept_[0]];
@@ -530,13 +539,19 @@ struct Slabs {
       hi = std::max(hi, v);
       smax = std::max(smax, s2[kept_[i]]);
     }
-    size = kept_.size();
+    size = m;
     const std::size_t npad = (size + 7) / 8 * 8;
-    // Padded with entries nothing reaches (tests run in blocks of 8).
-    x.assign(npad, 1e9F);
-    y.assign(npad, 1e9F);
-    z.assign(npad, 1e9F);
-    sig2.assign(npad, -1.0F);
+    // Padded with entries nothing reaches (tests run in blocks of 8). The arrays only
+    // grow: the first `size` are all written below, the padding here.
+    padded = npad;
+    grow(x, npad);
+    grow(y, npad);
+    grow(z, npad);
+    grow(sig2, npad);
+    for (std::size_t i = size; i < npad; ++i) {
+      x[i] = y[i] = z[i] = 1e9F;
+      sig2[i] = -1.0F;
+    }
     if (size == 0) {
       count = 0;
       start.assign(1, 0);
@@ -550,7 +565,7 @@ struct Slabs {
     inv = 1.0F / width;
     count = std::min(kMaxSlabs, static_cast<int>((hi - lo) * inv) + 1);
     start.assign(static_cast<std::size_t>(count) + 1, 0);
-    slab_.resize(size);
+    grow(slab_, size);
     for (std::size_t i = 0; i < size; ++i) {
       const int b = std::min(count - 1, std::max(0, static_cast<int>((lx[kept_[i]] - x0) * inv)));
       slab_[i] = static_cast<std::uint32_t>(b);
@@ -599,7 +614,7 @@ struct Slabs {
 LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
                                    std::size_t max_lonely, std::int32_t* hit, std::size_t& explained,
                                    std::size_t& unsupported) {
-  const std::size_t npad = s.x.size();
+  const std::size_t npad = s.padded;
   const float* lx = s.x.data();
   const float* ly = s.y.data();
   const float* lz = s.z.data();
@@ -630,10 +645,11 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
         const V8f b0 = bx - ex, b1 = by - ey, b2 = bz - ez;
         const V8f c0 = cx - ex, c1 = cy - ey, c2 = cz - ez;
         const V8f d0 = dx - ex, d1 = dy - ey, d2 = dz - ez;
-        const V8i ma = (a0 * a0 + a1 * a1 + a2 * a2 <= es) & 1;
-        const V8i mb = (b0 * b0 + b1 * b1 + b2 * b2 <= es) & 1;
-        const V8i mc = (c0 * c0 + c1 * c1 + c2 * c2 <= es) & 1;
-        const V8i md = (d0 * d0 + d1 * d1 + d2 * d2 <= es) & 1;
+        // The masks as they come (all ones or zero): hit[k] is nonzero when entry k is hit.
+        const V8i ma = a0 * a0 + a1 * a1 + a2 * a2 <= es;
+        const V8i mb = b0 * b0 + b1 * b1 + b2 * b2 <= es;
+        const V8i mc = c0 * c0 + c1 * c1 + c2 * c2 <= es;
+        const V8i md = d0 * d0 + d1 * d1 + d2 * d2 <= es;
         V8i h;
         std::memcpy(&h, hit + k, sizeof h);
         h |= (ma | mb) | (mc | md);
@@ -655,7 +671,7 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
     V8i any = {0, 0, 0, 0, 0, 0, 0, 0};
     for (std::size_t k = lo & ~7U; k < hi; k += 8) {
       const V8f dx = x - load8(lx + k), dy = y - load8(ly + k), dz = z - load8(lz + k);
-      const V8i m = (dx * dx + dy * dy + dz * dz <= load8(sig2 + k)) & 1;
+      const V8i m = dx * dx + dy * dy + dz * dz <= load8(sig2 + k);
       V8i h;
       std::memcpy(&h, hit + k, sizeof h);
       h |= m;
@@ -666,7 +682,7 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
     if (lonely >= max_lonely) return false;
   }
   std::size_t e = 0;
-  for (std::size_t k = 0; k < s.size; ++k) e += static_cast<std::size_t>(hit[k]);
+  for (std::size_t k = 0; k < s.size; ++k) e += hit[k] != 0 ? 1 : 0;
   explained = e;
   unsupported = lonely;
   return true;
@@ -1152,7 +1168,7 @@ inline V4d load4d(const double* p) {
 LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const float* mz, std::size_t np, const float* tx,
                             const float* ty, const float* tz, const std::int32_t* match) {
   thread_local std::vector<double> pairs_buf;
-  pairs_buf.resize(8 * np);
+  grow(pairs_buf, 8 * np);
   double* const a = pairs_buf.data();
   double* const b = a + 4 * np;
   std::size_t pairs = 0;
@@ -1282,17 +1298,17 @@ void ScanState::refine(const Alphabet& alphabet, int iterations, double max_dist
     std::size_t nr8 = 0;
     thread_local std::vector<std::int32_t> match;
     const std::size_t b = begin_of(f), e = end_of(f);
-    fx.resize(e - b + 8);
-    fy.resize(e - b + 8);
-    fz.resize(e - b + 8);
+    grow(fx, e - b + 8);
+    grow(fy, e - b + 8);
+    grow(fz, e - b + 8);
     std::size_t nf = 0;
     float slo[3] = {0.0F, 0.0F, 0.0F}, shi[3] = {-1.0F, -1.0F, -1.0F};  // empty: filled in the first round
     const std::size_t npad = pw.xp.size();
     mx.assign(pw.xp.begin(), pw.xp.end());
     my.assign(pw.yp.begin(), pw.yp.end());
     mz.assign(pw.zp.begin(), pw.zp.end());
-    best.resize(npad);
-    match.resize(npad);
+    grow(best, npad);
+    grow(match, npad);
     // The moved word's bounding box (lo x, y, z, hi x, y, z), kept by move_points.
     float box[6] = {pw.lo.x(), pw.lo.y(), pw.lo.z(), pw.hi.x(), pw.hi.y(), pw.hi.z()};
     for (int it = 0; it < iterations; ++it) {
@@ -1377,7 +1393,7 @@ LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near,
     }
   }
   slabs.build(lx, ly, lz, r2, n, lo, hi);
-  hits.resize(slabs.x.size());
+  grow(hits, slabs.padded);
   if (slabs.size == 0) {  // nothing explained: the first word with the fewest points
     std::size_t pick = 0;
     for (std::size_t c = 1; c < kk; ++c)
@@ -1394,7 +1410,7 @@ LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near,
     const PackedWord& w = packed[near[c].second];
     const float wlo[3] = {w.lo.x(), w.lo.y(), w.lo.z()}, whi[3] = {w.hi.x(), w.hi.y(), w.hi.z()};
     const std::size_t most =
-        box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.x.size(), wlo, whi);
+        box_count(slabs.x.data(), slabs.y.data(), slabs.z.data(), slabs.sig2.data(), slabs.padded, wlo, whi);
     order.emplace_back(-static_cast<std::int64_t>(most), static_cast<std::uint32_t>(c));
   }
   std::sort(order.begin(), order.end());
