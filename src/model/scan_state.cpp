@@ -212,6 +212,9 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     const V8f qx = load8(lx + k0), qy = load8(ly + k0), qz = load8(lz + k0);
     const V8i in = box_gap2_8(qx, qy, qz, lo, hi) <= load8(reach2 + k0);
     nl = append_lanes(live.data(), nl, lane_bits8(in), static_cast<std::uint32_t>(k0));
+    // The scales of the live entries are read next, at scattered points of the scan
+    // (most of them not in cache): their loads start here, overlapping this pass.
+    for (std::size_t l = 0; l < 8; ++l) __builtin_prefetch(&scale[idx[k0 + l]]);
   }
   for (; k0 < n; ++k0) {
     const float qx = lx[k0], qy = ly[k0], qz = lz[k0];
