@@ -14,6 +14,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <limits>
 #include <stdexcept>
 
 #include <Eigen/Eigenvalues>
@@ -118,7 +120,15 @@ WindowCentre window_centre(const RangeImage& img, const Keypoint& kp) {
   return c;
 }
 
-void make_window(const RangeImage& img, const WindowCentre& c, double radius, int max_half, Window& w) {
+// Where a window may leave out samples: column offsets from the centre column outside
+// [col_lo, col_hi] and rows outside [row_lo, row_hi] (the sampling grid stays as it is).
+struct WindowBounds {
+  int col_lo = std::numeric_limits<int>::min(), col_hi = std::numeric_limits<int>::max();
+  int row_lo = std::numeric_limits<int>::min(), row_hi = std::numeric_limits<int>::max();
+};
+
+void make_window(const RangeImage& img, const WindowCentre& c, double radius, int max_half, Window& w,
+                 const WindowBounds& bounds = WindowBounds{}) {
   const double extent = c.range > radius ? std::asin(radius / c.range) : M_PI;
   const int half_x = static_cast<int>(
       std::min<double>(img.width / 2, std::ceil(extent / (img.azimuth_resolution_rad * c.cos_el))));
@@ -128,15 +138,108 @@ void make_window(const RangeImage& img, const WindowCentre& c, double radius, in
   w.nrows = 0;
   for (int dy = -(half_y / stride_y) * stride_y; dy <= half_y; dy += stride_y) {
     const int y = c.cy + dy;
-    if (y >= 0 && y < img.height) w.rows[w.nrows++] = y;
+    if (y >= 0 && y < img.height && y >= bounds.row_lo && y <= bounds.row_hi) w.rows[w.nrows++] = y;
   }
   w.ncols = 0;
   for (int dx = -(half_x / stride_x) * stride_x; dx <= half_x; dx += stride_x) {
+    if (dx < bounds.col_lo || dx > bounds.col_hi) continue;
     const int x = img.wrap_x(c.cx + dx);
     if (x >= 0) w.cols[w.ncols++] = x;
   }
   // Room for a whole last block of eight: the last column again (its lanes masked off).
   for (int j = w.ncols; j < ((w.ncols + 7) & ~7); ++j) w.cols[j] = w.cols[w.ncols - 1];
+}
+
+// The row make_range_image gives a point at elevation el: the last row whose top edge
+// is at or above it, within the image.
+// Found from a guess at the nominal row height (exact for the evenly spaced rows of
+// make_range_image), then moved to the row that holds el.
+int row_of_elevation(const RangeImage& img, double el) {
+  const std::vector<double>& e = img.row_edges;
+  const int h = img.height;
+  if (!(el < e[0])) return 0;
+  if (!(el > e[static_cast<std::size_t>(h)])) return h - 1;
+  double g = std::floor((e[0] - el) / img.elevation_resolution_rad);
+  if (!(g >= 0.0)) g = 0.0;
+  if (g > h - 1) g = h - 1;
+  auto y = static_cast<std::size_t>(g);
+  while (y > 0 && !(e[y] >= el)) --y;
+  while (!(el > e[y + 1])) ++y;
+  return static_cast<int>(y);
+}
+
+// The columns and rows outside which no image point can lie in the cube
+// |R^T (q - p)| < rad of a patch (p the keypoint, R its frame); false when this gives no
+// usable bound. The patch window is the sphere around the cube, which the cube seen
+// from the sensor fills only when it stands on a corner: for a wall or the ground a
+// good part of the window's pixels hold no point that can fall inside.
+//
+// With `along` the horizontal component towards p, `across` the horizontal one at right
+// angles and z up, and the cube grown by a margin that covers the float rounding of the
+// in-cube test and R being orthonormal only to float precision; along > 0 over the
+// whole cube (checked at its corners):
+// - across / along, a ratio of linear functions, takes its extremes at corners; it is
+//   the tangent of az(q) - az(p), whose size it bounds (|atan t| <= |t|);
+// - so does z / along, and as along <= |q_h| <= along * sqrt(1 + (across/along)^2),
+//   the tangent of the elevation, z / |q_h|, lies between the corners' extremes of
+//   z / along, or those divided by the square root where that moves them towards zero.
+// A point's column is the floor of its continuous column, which moves by 1/res per
+// radian of azimuth, and its row falls as its elevation rises; a margin on the angles
+// and one more column and row on each side cover the float rounding of the image's.
+bool cube_bounds(const RangeImage& img, const WindowCentre& c, const Eigen::Vector3f& p, const Eigen::Matrix3f& R,
+                 double rad, WindowBounds& out) {
+  const double ph = std::sqrt(static_cast<double>(p.x()) * p.x() + static_cast<double>(p.y()) * p.y());
+  if (!(ph > 0.0) || !(img.azimuth_resolution_rad > 0.0) || !(img.elevation_resolution_rad > 0.0) ||
+      img.row_edges.size() != static_cast<std::size_t>(img.height) + 1)
+    return false;
+  const double vx = p.x() / ph, vy = p.y() / ph;
+  const double r = rad * (1.0 + 1e-4) + 1e-4;
+  // Each coordinate of a corner is p's plus a sum of three edge terms of either sign.
+  double a[3], b[3], z[3];  // the edge terms of along, across and z
+  for (int i = 0; i < 3; ++i) {
+    const double cx = R(0, i) * r, cy = R(1, i) * r;
+    a[i] = vx * cx + vy * cy;
+    b[i] = vx * cy - vy * cx;
+    z[i] = R(2, i) * r;
+  }
+  const double a_lo = ph - (std::fabs(a[0]) + std::fabs(a[1]) + std::fabs(a[2]));
+  if (!(a_lo > 1e-3 * ph)) return false;  // the cube reaches the sensor's side plane
+  double t_min = 0.0, t_max = 0.0;             // across / along
+  double e_min = HUGE_VAL, e_max = -HUGE_VAL;  // z / along
+  for (int k = 0; k < 8; ++k) {
+    const double s0 = (k & 1) != 0 ? 1.0 : -1.0, s1 = (k & 2) != 0 ? 1.0 : -1.0, s2 = (k & 4) != 0 ? 1.0 : -1.0;
+    const double along = ph + (s0 * a[0] + s1 * a[1] + s2 * a[2]);
+    const double across = s0 * b[0] + s1 * b[1] + s2 * b[2];
+    const double qz = p.z() + (s0 * z[0] + s1 * z[1] + s2 * z[2]);
+    const double inv = 1.0 / along;  // its rounding is far inside the margins
+    t_min = std::min(t_min, across * inv);
+    t_max = std::max(t_max, across * inv);
+    e_min = std::min(e_min, qz * inv);
+    e_max = std::max(e_max, qz * inv);
+  }
+  // Columns: the keypoint's continuous column (as RangeImage::project has it) relative
+  // to the centre column, across the seam of a 360° image; a larger azimuth is a
+  // smaller column.
+  double daz = img.azimuth_max_rad - std::atan2(static_cast<double>(p.y()), static_cast<double>(p.x()));
+  if (daz < 0.0) daz += 2.0 * M_PI;
+  if (daz >= 2.0 * M_PI) daz -= 2.0 * M_PI;
+  double dc = daz / img.azimuth_resolution_rad - c.cx;
+  if (img.full_circle) dc -= img.width * std::floor(dc / img.width + 0.5);
+  const double flo = dc - t_max / img.azimuth_resolution_rad - 0.05;
+  const double fhi = dc - t_min / img.azimuth_resolution_rad + 0.05;
+  // Well inside a quarter turn of the image, so that no sampled offset (at most half the
+  // width) reaches the same columns the other way round.
+  const double quarter = 0.25 * img.width;
+  if (!(flo > -quarter + 2.0 && fhi < quarter - 2.0)) return false;
+  out.col_lo = static_cast<int>(std::floor(flo)) - 1;
+  out.col_hi = static_cast<int>(std::floor(fhi)) + 1;
+  // Rows.
+  const double k = std::sqrt(1.0 + std::max(t_max * t_max, t_min * t_min));
+  const double lo = e_min <= 0.0 ? e_min : e_min / k;
+  const double hi = e_max >= 0.0 ? e_max : e_max / k;
+  out.row_lo = row_of_elevation(img, std::atan(hi) + 1e-5) - 1;
+  out.row_hi = row_of_elevation(img, std::atan(lo) - 1e-5) + 1;
+  return true;
 }
 
 // Calls the kernel for the window's points in order: row by row, columns left to
@@ -552,7 +655,9 @@ void patch_descriptor(const RangeImage& img, const Pixel* pix, const Keypoint& k
   const float a10 = R(0, 1), a11 = R(1, 1), a12 = R(2, 1);
   const float a20 = R(0, 2), a21 = R(1, 2), a22 = R(2, 2);
   const float px = kp.point_sensor.x(), py = kp.point_sensor.y(), pz = kp.point_sensor.z();
-  make_window(img, centre, params.support_radius * std::sqrt(3.0), s, win);
+  WindowBounds bounds;
+  if (!cube_bounds(img, centre, kp.point_sensor, R, params.support_radius, bounds)) bounds = WindowBounds{};
+  make_window(img, centre, params.support_radius * std::sqrt(3.0), s, win, bounds);
   auto put = [&](float lx, float ly, float lz) {
     const int ix = std::min(s - 1, static_cast<int>((lx + rad) * inv_cell));
     const int iy = std::min(s - 1, static_cast<int>((rad - ly) * inv_cell));

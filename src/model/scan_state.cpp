@@ -130,6 +130,50 @@ inline void box_of(const float* x, const float* y, const float* z, std::size_t p
   }
 }
 
+// The lanes set in eight 0/-1 lanes as the bits of a byte (lane l, bit l): three
+// halvings of the lanes, no lane taken out on its own.
+inline unsigned lane_bits8(V8i m) {
+  V8i t = m & V8i{1, 2, 4, 8, 16, 32, 64, 128};
+#if defined(__clang__)
+  t |= __builtin_shufflevector(t, t, 4, 5, 6, 7, 0, 1, 2, 3);
+  t |= __builtin_shufflevector(t, t, 2, 3, 0, 1, 6, 7, 4, 5);
+  t |= __builtin_shufflevector(t, t, 1, 0, 3, 2, 5, 4, 7, 6);
+#else
+  t |= __builtin_shuffle(t, V8i{4, 5, 6, 7, 0, 1, 2, 3});
+  t |= __builtin_shuffle(t, V8i{2, 3, 0, 1, 6, 7, 4, 5});
+  t |= __builtin_shuffle(t, V8i{1, 0, 3, 2, 5, 4, 7, 6});
+#endif
+  return static_cast<unsigned>(t[0]);
+}
+
+// For each byte of lane bits: the set lanes, lowest first (the rest of the eight
+// unused), and how many there are.
+struct LaneLists {
+  std::int32_t lanes[256][8];  // 32-bit: loaded as one vector, with no widening
+  std::uint8_t count[256];
+};
+constexpr LaneLists make_lane_lists() {
+  LaneLists t{};
+  for (unsigned m = 0; m < 256; ++m) {
+    unsigned n = 0;
+    for (unsigned l = 0; l < 8; ++l)
+      if ((m >> l) & 1U) t.lanes[m][n++] = static_cast<std::int32_t>(l);
+    t.count[m] = static_cast<std::uint8_t>(n);
+  }
+  return t;
+}
+constexpr LaneLists kLaneLists = make_lane_lists();
+
+// Appends base + l for each lane l set in `bits` to list[n...] (eight values written:
+// the list needs room for eight past its end); returns the new length.
+inline std::size_t append_lanes(std::uint32_t* list, std::size_t n, unsigned bits, std::uint32_t base) {
+  V8i l;
+  std::memcpy(&l, kLaneLists.lanes[bits], sizeof l);
+  const V8i v = l + splat8i(static_cast<std::int32_t>(base));
+  std::memcpy(list + n, &v, sizeof v);
+  return n + kLaneLists.count[bits];
+}
+
 // Σ_p exp(-d²·a) over the word points within reach of each entry (0 when none), times
 // norm when not 0 (in double, rounded to float), for the n entries of a feature (a and
 // norm are per scan point: scale[idx[k]]).
@@ -150,9 +194,9 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   thread_local std::vector<std::uint32_t> live, cand;
   const std::size_t nb = npad / 8;
   const std::size_t n8 = (n + 7) / 8 * 8;
-  if (live.size() < n8) {
-    live.resize(n8);
-    cand.resize(n8);
+  if (live.size() < n8 + 8) {
+    live.resize(n8 + 8);
+    cand.resize(n8 + 8);
     cx.resize(n8);
     cy.resize(n8);
     cz.resize(n8);
@@ -166,11 +210,11 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   std::size_t k0 = 0;
   for (; k0 + 8 <= n; k0 += 8) {
     const V8f qx = load8(lx + k0), qy = load8(ly + k0), qz = load8(lz + k0);
-    const V8i far = box_gap2_8(qx, qy, qz, lo, hi) > load8(reach2 + k0);
-    for (std::size_t l = 0; l < 8; ++l) {
-      live[nl] = static_cast<std::uint32_t>(k0 + l);
-      nl += static_cast<std::size_t>(far[l] + 1);
-    }
+    const V8i in = box_gap2_8(qx, qy, qz, lo, hi) <= load8(reach2 + k0);
+    nl = append_lanes(live.data(), nl, lane_bits8(in), static_cast<std::uint32_t>(k0));
+    // The scales of the live entries are read next, at scattered points of the scan
+    // (most of them not in cache): their loads start here, overlapping this pass.
+    for (std::size_t l = 0; l < 8; ++l) __builtin_prefetch(&scale[idx[k0 + l]]);
   }
   for (; k0 < n; ++k0) {
     const float qx = lx[k0], qy = ly[k0], qz = lz[k0];
@@ -203,10 +247,7 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     for (std::size_t u = 0; u < nl8; u += 8) {
       const V8f qx = load8(cx.data() + u), qy = load8(cy.data() + u), qz = load8(cz.data() + u);
       const V8i near = box_gap2_8(qx, qy, qz, blo, bhi) <= load8(cr.data() + u);
-      for (std::size_t l = 0; l < 8; ++l) {
-        cand[nc] = static_cast<std::uint32_t>(u + l);
-        nc -= static_cast<std::size_t>(near[l]);
-      }
+      nc = append_lanes(cand.data(), nc, lane_bits8(near), static_cast<std::uint32_t>(u));
     }
     // The exponentials go straight into the entry's lanes, in block order. A candidate
     // none of whose points is in reach adds eight zeros, which changes no sum (they are
