@@ -75,13 +75,14 @@ inline V8f load8(const float* p) {
 }
 inline V8f max8(V8f a, V8f b) { return a < b ? b : a; }
 // Lane 0 copied to all lanes (a broadcast, not eight inserts).
+// The lanes of v picked by eight indices, with each compiler's builtin.
 #if defined(__clang__)
-inline V8f splat8(float x) { return __builtin_shufflevector(V8f{x}, V8f{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
-inline V8i splat8i(std::int32_t x) { return __builtin_shufflevector(V8i{x}, V8i{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
+#define LEX3D_SHUFFLE8(v, ...) __builtin_shufflevector(v, v, __VA_ARGS__)
 #else
-inline V8f splat8(float x) { return __builtin_shuffle(V8f{x}, V8i{0, 0, 0, 0, 0, 0, 0, 0}); }
-inline V8i splat8i(std::int32_t x) { return __builtin_shuffle(V8i{x}, V8i{0, 0, 0, 0, 0, 0, 0, 0}); }
+#define LEX3D_SHUFFLE8(v, ...) __builtin_shuffle(v, V8i{__VA_ARGS__})
 #endif
+inline V8f splat8(float x) { return LEX3D_SHUFFLE8(V8f{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
+inline V8i splat8i(std::int32_t x) { return LEX3D_SHUFFLE8(V8i{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
 inline V8f mask8(V8f v, V8i m) { return reinterpret_cast<V8f>(reinterpret_cast<V8i>(v) & m); }
 // Squared distances of eight points to the box [lo, hi] (0 inside).
 inline V8f box_gap2_8(V8f qx, V8f qy, V8f qz, const float* lo, const float* hi) {
@@ -134,15 +135,9 @@ inline void box_of(const float* x, const float* y, const float* z, std::size_t p
 // halvings of the lanes, no lane taken out on its own.
 inline unsigned lane_bits8(V8i m) {
   V8i t = m & V8i{1, 2, 4, 8, 16, 32, 64, 128};
-#if defined(__clang__)
-  t |= __builtin_shufflevector(t, t, 4, 5, 6, 7, 0, 1, 2, 3);
-  t |= __builtin_shufflevector(t, t, 2, 3, 0, 1, 6, 7, 4, 5);
-  t |= __builtin_shufflevector(t, t, 1, 0, 3, 2, 5, 4, 7, 6);
-#else
-  t |= __builtin_shuffle(t, V8i{4, 5, 6, 7, 0, 1, 2, 3});
-  t |= __builtin_shuffle(t, V8i{2, 3, 0, 1, 6, 7, 4, 5});
-  t |= __builtin_shuffle(t, V8i{1, 0, 3, 2, 5, 4, 7, 6});
-#endif
+  t |= LEX3D_SHUFFLE8(t, 4, 5, 6, 7, 0, 1, 2, 3);
+  t |= LEX3D_SHUFFLE8(t, 2, 3, 0, 1, 6, 7, 4, 5);
+  t |= LEX3D_SHUFFLE8(t, 1, 0, 3, 2, 5, 4, 7, 6);
   return static_cast<unsigned>(t[0]);
 }
 
@@ -278,28 +273,14 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
 // times: min and max pick one of their operands, so any order gives the same values
 // (up to the sign of a zero, which the squared gaps between boxes do not see).
 inline void min_max8(V8f v, float& lo, float& hi) {
-#if defined(__clang__)
-  const V8f s4 = __builtin_shufflevector(v, v, 4, 5, 6, 7, 0, 1, 2, 3);
-#else
-  const V8f s4 = __builtin_shuffle(v, V8i{4, 5, 6, 7, 0, 1, 2, 3});
-#endif
+  const V8f s4 = LEX3D_SHUFFLE8(v, 4, 5, 6, 7, 0, 1, 2, 3);
   V8f mn = v < s4 ? v : s4, mx = max8(v, s4);
-#if defined(__clang__)
-  const V8f n2 = __builtin_shufflevector(mn, mn, 2, 3, 0, 1, 6, 7, 4, 5);
-  const V8f x2 = __builtin_shufflevector(mx, mx, 2, 3, 0, 1, 6, 7, 4, 5);
-#else
-  const V8f n2 = __builtin_shuffle(mn, V8i{2, 3, 0, 1, 6, 7, 4, 5});
-  const V8f x2 = __builtin_shuffle(mx, V8i{2, 3, 0, 1, 6, 7, 4, 5});
-#endif
+  const V8f n2 = LEX3D_SHUFFLE8(mn, 2, 3, 0, 1, 6, 7, 4, 5);
+  const V8f x2 = LEX3D_SHUFFLE8(mx, 2, 3, 0, 1, 6, 7, 4, 5);
   mn = mn < n2 ? mn : n2;
   mx = max8(mx, x2);
-#if defined(__clang__)
-  const V8f n1 = __builtin_shufflevector(mn, mn, 1, 0, 3, 2, 5, 4, 7, 6);
-  const V8f x1 = __builtin_shufflevector(mx, mx, 1, 0, 3, 2, 5, 4, 7, 6);
-#else
-  const V8f n1 = __builtin_shuffle(mn, V8i{1, 0, 3, 2, 5, 4, 7, 6});
-  const V8f x1 = __builtin_shuffle(mx, V8i{1, 0, 3, 2, 5, 4, 7, 6});
-#endif
+  const V8f n1 = LEX3D_SHUFFLE8(mn, 1, 0, 3, 2, 5, 4, 7, 6);
+  const V8f x1 = LEX3D_SHUFFLE8(mx, 1, 0, 3, 2, 5, 4, 7, 6);
   mn = mn < n1 ? mn : n1;
   mx = max8(mx, x1);
   lo = mn[0];
