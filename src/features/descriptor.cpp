@@ -344,13 +344,13 @@ __attribute__((target("avx"))) inline void load8(const float* row, const int* c,
   z = _mm256_shuffle_ps(u1, u3, _MM_SHUFFLE(1, 0, 1, 0));
 }
 
-// The plane-fit sums of feature_frame over the window's points within sqrt(r2) of
-// p, eight pixels at a time: the same float test in each lane as its four-pixel
-// kernel, and the points added in the same order.
-__attribute__((target("avx"))) void plane_sums_avx(const Pixel* pix, int width, int height, const Window& w,
-                                                   const Eigen::Vector3f& p, float r2, PlaneSums& sums) {
+// Calls block(dx, dy, dz, lanes) for the window's pixels eight at a time, row by row and
+// left to right: their offsets from p as lanes, `lanes` marking the pixels of the window (the
+// last block of a row may be short).
+template <typename Block>
+__attribute__((target("avx"))) inline void for_window8(const Pixel* pix, int width, int height, const Window& w,
+                                                       const Eigen::Vector3f& p, Block&& block) {
   const __m256 vpx = _mm256_set1_ps(p.x()), vpy = _mm256_set1_ps(p.y()), vpz = _mm256_set1_ps(p.z());
-  const __m256 vr2 = _mm256_set1_ps(r2);
   for (int r = 0; r < w.nrows; ++r) {
     const float* row = pix[static_cast<std::ptrdiff_t>(w.rows[r]) * width].data();
     const bool last_row = w.rows[r] + 1 == height;
@@ -358,20 +358,30 @@ __attribute__((target("avx"))) void plane_sums_avx(const Pixel* pix, int width, 
       const int lanes = w.ncols - j >= 8 ? 0xFF : (1 << (w.ncols - j)) - 1;
       __m256 x, y, z;
       load8(row, w.cols + j, last_row, x, y, z);
-      const __m256 dx = _mm256_sub_ps(x, vpx), dy = _mm256_sub_ps(y, vpy), dz = _mm256_sub_ps(z, vpz);
-      const __m256 sq = _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_add_ps(_mm256_mul_ps(dy, dy), _mm256_mul_ps(dz, dz)));
-      int m = _mm256_movemask_ps(_mm256_cmp_ps(sq, vr2, _CMP_LE_OS)) & lanes;
-      if (m == 0) continue;
-      alignas(32) float ax[8], ay[8], az[8];
-      _mm256_store_ps(ax, dx);
-      _mm256_store_ps(ay, dy);
-      _mm256_store_ps(az, dz);
-      for (; m != 0; m &= m - 1) {
-        const int l = __builtin_ctz(static_cast<unsigned>(m));
-        sums.add(ax[l], ay[l], az[l]);
-      }
+      block(_mm256_sub_ps(x, vpx), _mm256_sub_ps(y, vpy), _mm256_sub_ps(z, vpz), lanes);
     }
   }
+}
+
+// The plane-fit sums of feature_frame over the window's points within sqrt(r2) of
+// p, eight pixels at a time: the same float test in each lane as its four-pixel
+// kernel, and the points added in the same order.
+__attribute__((target("avx"))) void plane_sums_avx(const Pixel* pix, int width, int height, const Window& w,
+                                                   const Eigen::Vector3f& p, float r2, PlaneSums& sums) {
+  const __m256 vr2 = _mm256_set1_ps(r2);
+  for_window8(pix, width, height, w, p, [&](__m256 dx, __m256 dy, __m256 dz, int lanes) __attribute__((target("avx"))) {
+    const __m256 sq = _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_add_ps(_mm256_mul_ps(dy, dy), _mm256_mul_ps(dz, dz)));
+    int m = _mm256_movemask_ps(_mm256_cmp_ps(sq, vr2, _CMP_LE_OS)) & lanes;
+    if (m == 0) return;
+    alignas(32) float ax[8], ay[8], az[8];
+    _mm256_store_ps(ax, dx);
+    _mm256_store_ps(ay, dy);
+    _mm256_store_ps(az, dz);
+    for (; m != 0; m &= m - 1) {
+      const int l = __builtin_ctz(static_cast<unsigned>(m));
+      sums.add(ax[l], ay[l], az[l]);
+    }
+  });
 }
 
 // The patch's z-buffer filled from a window eight pixels at a time: the same
@@ -385,41 +395,32 @@ __attribute__((target("avx"))) void rasterise_avx(const Pixel* pix, int width, i
   const __m256 a00 = _mm256_set1_ps(a[0]), a01 = _mm256_set1_ps(a[1]), a02 = _mm256_set1_ps(a[2]);
   const __m256 a10 = _mm256_set1_ps(a[3]), a11 = _mm256_set1_ps(a[4]), a12 = _mm256_set1_ps(a[5]);
   const __m256 a20 = _mm256_set1_ps(a[6]), a21 = _mm256_set1_ps(a[7]), a22 = _mm256_set1_ps(a[8]);
-  const __m256 vpx = _mm256_set1_ps(p.x()), vpy = _mm256_set1_ps(p.y()), vpz = _mm256_set1_ps(p.z());
   const __m256 vrad = _mm256_set1_ps(rad), vinv = _mm256_set1_ps(inv_cell);
   const __m256 vlast = _mm256_set1_ps(static_cast<float>(s - 1));
   const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-  for (int r = 0; r < w.nrows; ++r) {
-    const float* row = pix[static_cast<std::ptrdiff_t>(w.rows[r]) * width].data();
-    const bool last_row = w.rows[r] + 1 == height;
-    for (int j = 0; j < w.ncols; j += 8) {
-      const int lanes = w.ncols - j >= 8 ? 0xFF : (1 << (w.ncols - j)) - 1;
-      __m256 x, y, z;
-      load8(row, w.cols + j, last_row, x, y, z);
-      const __m256 dx = _mm256_sub_ps(x, vpx), dy = _mm256_sub_ps(y, vpy), dz = _mm256_sub_ps(z, vpz);
-      const __m256 lx = _mm256_add_ps(_mm256_mul_ps(a00, dx), _mm256_add_ps(_mm256_mul_ps(a01, dy), _mm256_mul_ps(a02, dz)));
-      const __m256 ly = _mm256_add_ps(_mm256_mul_ps(a10, dx), _mm256_add_ps(_mm256_mul_ps(a11, dy), _mm256_mul_ps(a12, dz)));
-      const __m256 lz = _mm256_add_ps(_mm256_mul_ps(a20, dx), _mm256_add_ps(_mm256_mul_ps(a21, dy), _mm256_mul_ps(a22, dz)));
-      const __m256 in =
-          _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(lx, abs_mask), vrad, _CMP_LT_OS),
-                                      _mm256_cmp_ps(_mm256_and_ps(ly, abs_mask), vrad, _CMP_LT_OS)),
-                        _mm256_cmp_ps(_mm256_and_ps(lz, abs_mask), vrad, _CMP_LT_OS));
-      int m = _mm256_movemask_ps(in) & lanes;
-      if (m == 0) continue;
-      alignas(32) std::int32_t ix[8], iy[8];
-      alignas(32) float depth_of[8];
-      _mm256_store_si256(reinterpret_cast<__m256i*>(ix),
-                         _mm256_cvttps_epi32(_mm256_min_ps(_mm256_mul_ps(_mm256_add_ps(lx, vrad), vinv), vlast)));
-      _mm256_store_si256(reinterpret_cast<__m256i*>(iy),
-                         _mm256_cvttps_epi32(_mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(vrad, ly), vinv), vlast)));
-      _mm256_store_ps(depth_of, lz);
-      for (; m != 0; m &= m - 1) {
-        const int l = __builtin_ctz(static_cast<unsigned>(m));
-        float& d = d0[iy[l] * pitch + ix[l]];
-        d = std::max(d, depth_of[l]);  // z-buffer: the viewpoint sits on +z
-      }
+  for_window8(pix, width, height, w, p, [&](__m256 dx, __m256 dy, __m256 dz, int lanes) __attribute__((target("avx"))) {
+    const __m256 lx = _mm256_add_ps(_mm256_mul_ps(a00, dx), _mm256_add_ps(_mm256_mul_ps(a01, dy), _mm256_mul_ps(a02, dz)));
+    const __m256 ly = _mm256_add_ps(_mm256_mul_ps(a10, dx), _mm256_add_ps(_mm256_mul_ps(a11, dy), _mm256_mul_ps(a12, dz)));
+    const __m256 lz = _mm256_add_ps(_mm256_mul_ps(a20, dx), _mm256_add_ps(_mm256_mul_ps(a21, dy), _mm256_mul_ps(a22, dz)));
+    const __m256 in =
+        _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(lx, abs_mask), vrad, _CMP_LT_OS),
+                                    _mm256_cmp_ps(_mm256_and_ps(ly, abs_mask), vrad, _CMP_LT_OS)),
+                      _mm256_cmp_ps(_mm256_and_ps(lz, abs_mask), vrad, _CMP_LT_OS));
+    int m = _mm256_movemask_ps(in) & lanes;
+    if (m == 0) return;
+    alignas(32) std::int32_t ix[8], iy[8];
+    alignas(32) float depth_of[8];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(ix),
+                       _mm256_cvttps_epi32(_mm256_min_ps(_mm256_mul_ps(_mm256_add_ps(lx, vrad), vinv), vlast)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(iy),
+                       _mm256_cvttps_epi32(_mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(vrad, ly), vinv), vlast)));
+    _mm256_store_ps(depth_of, lz);
+    for (; m != 0; m &= m - 1) {
+      const int l = __builtin_ctz(static_cast<unsigned>(m));
+      float& d = d0[iy[l] * pitch + ix[l]];
+      d = std::max(d, depth_of[l]);  // z-buffer: the viewpoint sits on +z
     }
-  }
+  });
 }
 #endif
 
