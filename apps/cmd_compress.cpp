@@ -204,7 +204,7 @@ void run_compress(const CompressOptions& o) {
     // went is reported then).
     Cloud streamed;
     std::size_t features = 0;
-    std::optional<PreparedScan> prepared;  // without its cloud and neighbourhoods
+    std::optional<PreparedScan> prepared;  // a scan modelled here, for its stage times
     EncodeTimings et;
     codec::ModelData d;
     const bool learnt = learnt_as[i] >= 0;
@@ -220,9 +220,7 @@ void run_compress(const CompressOptions& o) {
         PreparedScan ps = prepare_scan(streamed, p.model, alphabet.word_radius);
         d.model = encode_scan(ps, alphabet, p.prune, p.model, &et);
         features = ps.features.size();
-        prepared.emplace();
-        prepared->timings = ps.timings;
-        prepared->prepare_ms = ps.prepare_ms;
+        prepared = std::move(ps);
       }
     }
     const Cloud& cloud = learnt ? clouds[static_cast<std::size_t>(learnt_as[i])] : streamed;

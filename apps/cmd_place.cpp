@@ -145,10 +145,10 @@ void pose_json(Json& j, const Pose& T) {
 
 void run_query(const PlaceOptions& o) {
   const PlaceDatabase db = read_db(o.db);
-  const auto clouds = load_scans(o.inputs, parse_format_option(o.format), o.poses);
+  const ScanLoader loader(o.inputs, parse_format_option(o.format), o.poses, false);
   double prep = 0;
-  const auto scans = describe_all(1, [&](std::size_t i) { return clouds[i]; }, {stem(o.inputs[0])}, db.alphabet(),
-                                  db.storage(), &prep);
+  const auto scans = describe_all(1, [&](std::size_t i) { return loader.load(i); }, {stem(o.inputs[0])},
+                                  db.alphabet(), db.storage(), &prep);
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
   p.max_distance = std::max(0.0, o.max_distance);
