@@ -710,9 +710,18 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
   return true;
 }
 
-// The n points pts[idx[k]] in a frame T (m: its 4x4 matrix, column-major), computed as
-// Eigen's Isometry3f * Vector3f does (row r: ((T(r,0) x + T(r,1) y) + T(r,2) z) + T(r,3)),
-// eight at a time, into (x, y, z); with each point's reach2[idx[k]] into r2.
+// Coordinate r of T * (x, y, z) as Eigen's Isometry3f * Vector3f computes it, m being T's 4x4
+// matrix (column-major): ((T(r,0) x + T(r,1) y) + T(r,2) z) + T(r,3); for eight points at once
+// and for one.
+inline V8f frame_row(const float* m, int r, V8f x, V8f y, V8f z) {
+  return ((splat8(m[r]) * x + splat8(m[4 + r]) * y) + splat8(m[8 + r]) * z) + splat8(m[12 + r]);
+}
+inline float frame_row(const float* m, int r, float x, float y, float z) {
+  return ((m[r] * x + m[4 + r] * y) + m[8 + r] * z) + m[12 + r];
+}
+
+// The n points pts[idx[k]] in a frame T (m: its 4x4 matrix, column-major), as frame_row
+// computes them, eight at a time, into (x, y, z); with each point's reach2[idx[k]] into r2.
 LEX3D_CLONES void points_in_frame(const float* m, const Eigen::Vector3f* pts, const std::uint32_t* idx,
                                   const float* reach2, std::size_t n, float* x, float* y, float* z, float* r2) {
   std::size_t k = 0;
@@ -727,7 +736,7 @@ LEX3D_CLONES void points_in_frame(const float* m, const Eigen::Vector3f* pts, co
     }
     float* const c[3] = {x, y, z};
     for (int r = 0; r < 3; ++r) {
-      const V8f v = ((splat8(m[r]) * px + splat8(m[4 + r]) * py) + splat8(m[8 + r]) * pz) + splat8(m[12 + r]);
+      const V8f v = frame_row(m, r, px, py, pz);
       std::memcpy(c[r] + k, &v, sizeof v);
     }
     std::memcpy(r2 + k, &pr, sizeof pr);
@@ -735,9 +744,9 @@ LEX3D_CLONES void points_in_frame(const float* m, const Eigen::Vector3f* pts, co
   for (; k < n; ++k) {
     const std::uint32_t j = idx[k];
     const float px = pts[j].x(), py = pts[j].y(), pz = pts[j].z();
-    x[k] = ((m[0] * px + m[4] * py) + m[8] * pz) + m[12];
-    y[k] = ((m[1] * px + m[5] * py) + m[9] * pz) + m[13];
-    z[k] = ((m[2] * px + m[6] * py) + m[10] * pz) + m[14];
+    x[k] = frame_row(m, 0, px, py, pz);
+    y[k] = frame_row(m, 1, px, py, pz);
+    z[k] = frame_row(m, 2, px, py, pz);
     r2[k] = reach2[j];
   }
 }
@@ -1234,9 +1243,8 @@ LEX3D_CLONES Eigen::Isometry3f fit_pairs(const float* mx, const float* my, const
   return D;
 }
 
-// Moves the n points (x, y, z) by D as Eigen's Isometry3f * Vector3f does (row r:
-// ((D(r,0) x + D(r,1) y) + D(r,2) z) + D(r,3)), eight at a time, and stores their bounding
-// box in box (lo x, y, z, hi x, y, z).
+// Moves the n points (x, y, z) by D as Eigen's Isometry3f * Vector3f does (frame_row), eight
+// at a time, and stores their bounding box in box (lo x, y, z, hi x, y, z).
 LEX3D_CLONES void move_points_impl(const float* m, float* x, float* y, float* z, std::size_t n, float* box) {
   V8f lo[3] = {splat8(1e30F), splat8(1e30F), splat8(1e30F)};
   V8f hi[3] = {splat8(-1e30F), splat8(-1e30F), splat8(-1e30F)};
@@ -1245,7 +1253,7 @@ LEX3D_CLONES void move_points_impl(const float* m, float* x, float* y, float* z,
   for (; p + 8 <= n; p += 8) {
     const V8f px = load8(x + p), py = load8(y + p), pz = load8(z + p);
     for (int r = 0; r < 3; ++r) {
-      const V8f v = ((splat8(m[r]) * px + splat8(m[4 + r]) * py) + splat8(m[8 + r]) * pz) + splat8(m[12 + r]);
+      const V8f v = frame_row(m, r, px, py, pz);
       std::memcpy(c[r] + p, &v, sizeof v);
       lo[r] = v < lo[r] ? v : lo[r];
       hi[r] = hi[r] < v ? v : hi[r];
@@ -1262,7 +1270,7 @@ LEX3D_CLONES void move_points_impl(const float* m, float* x, float* y, float* z,
   for (; p < n; ++p) {
     const float px = x[p], py = y[p], pz = z[p];
     for (int r = 0; r < 3; ++r) {
-      const float v = ((m[r] * px + m[4 + r] * py) + m[8 + r] * pz) + m[12 + r];
+      const float v = frame_row(m, r, px, py, pz);
       c[r][p] = v;
       box[r] = std::min(box[r], v);
       box[3 + r] = std::max(box[3 + r], v);
