@@ -138,10 +138,12 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
   res.learn_ms = sw.lap_ms();
 
   for (std::size_t s = 0; s < states.size(); ++s) {
+    // As encode_scan does: words by fit, pruning, then the ICP fit of what is kept (and
+    // the likelihood of the final poses).
     states[s].choose_by_fit(res.alphabet, params.model.fit_candidates, threads);
-    states[s].refine(res.alphabet, params.model.refine_iterations, params.model.refine_reach_factor * radius, threads);
     if (params.prune) states[s].prune(res.alphabet, threads, params.model.prune_keeps_sole_cover);
-    else states[s].rescore(res.alphabet, threads);
+    states[s].refine(res.alphabet, params.model.refine_iterations, params.model.refine_reach_factor * radius, threads);
+    states[s].rescore(res.alphabet, threads);
   }
   res.log_likelihood = 0.0;
   for (const auto& st : states) {

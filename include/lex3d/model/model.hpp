@@ -29,9 +29,11 @@ struct ModelParams {
   /// the scan around it best (scan points it explains minus word points nothing
   /// supports); 1 keeps the nearest descriptor alone (ruhnke2010 §III-C); [1, 64].
   int fit_candidates = 5;
-  /// Rounds of point-to-point ICP that fit each instance's pose to the scan before
-  /// pruning (0 keeps the feature frames); [0, 50].
-  int refine_iterations = 5;
+  /// Rounds of point-to-point ICP that fit each kept instance's pose to the scan after
+  /// pruning (0 keeps the feature frames); [0, 50]. On kitti00 (known alphabet) 0 / 1 / 2 /
+  /// 5 rounds give 67.0 / 70.0 / 70.3 / 70.5 % inliers, and the ICP stage takes 0 / 5 / 9 /
+  /// 16 ms of one core; on balm the rounds change inliers by under 1 %.
+  int refine_iterations = 2;
   /// ICP pairs a word point with a scan point at most this many word radii away; (0, 1].
   double refine_reach_factor = 0.3;
   /// Feature extraction (the coverage distance is set from the word radius).
@@ -106,10 +108,10 @@ struct Reconstruction {
 [[nodiscard]] double bic(double log_likelihood, std::size_t alphabet_points, std::size_t data_points);
 
 /// Encodes a scan with a given alphabet: every feature takes the word with the nearest
-/// descriptor (§III-C), re-chosen among the fit_candidates nearest by its fit to the scan,
-/// each instance's pose is fitted to the scan by ICP (when
-/// params.refine_iterations > 0), then, when `prune`, instances whose removal does not
-/// lower the likelihood are dropped (§III-D).
+/// descriptor (§III-C), re-chosen among the fit_candidates nearest by its fit to the scan;
+/// when `prune`, instances whose removal does not lower the likelihood are dropped
+/// (§III-D); then the pose of each instance kept is fitted to the scan by ICP (when
+/// params.refine_iterations > 0).
 /// Where encode_scan's time went, milliseconds.
 struct EncodeTimings {
   double frames_ms = 0.0;  ///< the points near each feature, moved into its frame

@@ -186,7 +186,7 @@ struct PlaceScan {
 
 /// As above, with word ids assigned directly: every feature (interest and coverage) takes
 /// the word with the nearest descriptor, which is encode_scan's assignment before its
-/// pose refinement and pruning (much cheaper, same ids).
+/// pruning and pose refinement (much cheaper, same ids).
 [[nodiscard]] PlaceScan make_place_scan(const PreparedScan& scan, const Alphabet& alphabet,
                                         const PlaceStorageParams& storage, const RangeImageParams& range = {},
                                         std::string name = {});
