@@ -50,11 +50,15 @@ std::vector<PackedWord> pack(const Alphabet& alphabet) {
 }
 
 // The hot loops below are compiled twice, for AVX2 and the baseline, and picked at load
-// time; neither uses fused multiply-adds, so both give the same bits.
+// time; neither uses fused multiply-adds, so both give the same bits. The Gaussian sums
+// have an AVX-512 build as well (twice the lanes an instruction); AVX-512 brings fused
+// multiply-adds, which contraction is turned off to keep out.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__SANITIZE_ADDRESS__)
 #define LEX3D_CLONES __attribute__((target_clones("avx2", "default")))
+#define LEX3D_CLONES_512 __attribute__((target_clones("avx512f", "avx2", "default"), optimize("fp-contract=off")))
 #else
 #define LEX3D_CLONES
+#define LEX3D_CLONES_512
 #endif
 
 // Eight floats or 32-bit integers as one value (GCC vector extensions: one AVX register in
@@ -83,7 +87,6 @@ inline V8f max8(V8f a, V8f b) { return a < b ? b : a; }
 #endif
 inline V8f splat8(float x) { return LEX3D_SHUFFLE8(V8f{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
 inline V8i splat8i(std::int32_t x) { return LEX3D_SHUFFLE8(V8i{x}, 0, 0, 0, 0, 0, 0, 0, 0); }
-inline V8f mask8(V8f v, V8i m) { return reinterpret_cast<V8f>(reinterpret_cast<V8i>(v) & m); }
 // Squared distances of eight points to the box [lo, hi] (0 inside).
 inline V8f box_gap2_8(V8f qx, V8f qy, V8f qz, const float* lo, const float* hi) {
   const V8f zero = splat8(0.0F);
@@ -97,22 +100,36 @@ inline bool any8(V8i m) {
   const auto q = reinterpret_cast<V4ll>(m);
   return ((q[0] | q[1]) | (q[2] | q[3])) != 0;
 }
+// Sixteen lanes: two groups of eight (one register in the AVX-512 build).
+typedef float V16f __attribute__((vector_size(64)));
+typedef std::int32_t V16i __attribute__((vector_size(64)));
+inline V16f twice8(V8f v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7); }
+// a in the low eight lanes, b in the high eight (two broadcasts and an insert).
+inline V16f splat2(float a, float b) {
+  return __builtin_shufflevector(splat8(a), splat8(b), 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+inline V8f low8(V16f v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7); }
+inline V8f high8(V16f v) { return __builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15); }
+inline V16f mask16(V16f v, V16i m) { return reinterpret_cast<V16f>(reinterpret_cast<V16i>(v) & m); }
 
-// e^x for x in [-87, 0] on eight lanes (Cody-Waite reduction, the Cephes polynomial;
-// relative error about 2e-7), branch-free (the caller keeps x in range).
-inline V8f exp_neg8(V8f x) {
-  const V8f kRound = splat8(12582912.0F);
-  const V8f n = (x * splat8(1.44269504088896341F) + kRound) - kRound;
-  const V8f r = (x - n * splat8(0.693359375F)) - n * splat8(-2.12194440e-4F);
-  V8f y = splat8(1.9875691500E-4F);
-  y = y * r + splat8(1.3981999507E-3F);
-  y = y * r + splat8(8.3334519073E-3F);
-  y = y * r + splat8(4.1665795894E-2F);
-  y = y * r + splat8(1.6666665459E-1F);
-  y = y * r + splat8(5.0000001201E-1F);
-  y = y * (r * r) + r + splat8(1.0F);
-  const V8i bits = (__builtin_convertvector(n, V8i) + 127) << 23;
-  return y * reinterpret_cast<V8f>(bits);
+// e^x for x in [-87, 0] on each lane of V (eight or sixteen floats; Cody-Waite reduction,
+// the Cephes polynomial; relative error about 2e-7), branch-free (the caller keeps x in
+// range). Every lane goes through the same operations whatever the width.
+template <class V>
+inline V exp_neg(V x) {
+  using VI = decltype(x < x);
+  const float kRound = 12582912.0F;
+  const V n = (x * 1.44269504088896341F + kRound) - kRound;
+  const V r = (x - n * 0.693359375F) - n * -2.12194440e-4F;
+  V y = V{} + 1.9875691500E-4F;
+  y = y * r + 1.3981999507E-3F;
+  y = y * r + 8.3334519073E-3F;
+  y = y * r + 4.1665795894E-2F;
+  y = y * r + 1.6666665459E-1F;
+  y = y * r + 5.0000001201E-1F;
+  y = y * (r * r) + r + 1.0F;
+  const VI bits = (__builtin_convertvector(n, VI) + 127) << 23;
+  return y * reinterpret_cast<V>(bits);
 }
 
 // The bounding box (lo, hi) of points [p, e) of (x, y, z), e > p.
@@ -174,16 +191,17 @@ inline std::size_t append_lanes(std::uint32_t* list, std::size_t n, unsigned bit
 // norm are per scan point: scale[idx[k]]).
 // Word arrays hold np points padded to npad, a multiple of 8, with far points; the sum
 // keeps eight lanes (point p in lane p % 8), each adding its blocks of eight points in
-// order, the lanes then added pairwise, so the SSE and AVX2 builds give the same bits.
+// order, the lanes then added pairwise, so the SSE, AVX2 and AVX-512 builds give the
+// same bits.
 // A block with no point in reach would add only zeros and is left out (about 60 % of
 // them on KITTI). Passes with no data-dependent branch in their inner loops: the entries
 // within reach of the word's bounding box; per block, those of them within reach of the
 // block's bounding box (eight entries a test), then their exponentials added into each
 // entry's lanes (blocks in order).
-LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
-                                const PointScale* scale, std::size_t n, const float* wx, const float* wy, const float* wz,
-                                std::size_t np, std::size_t npad, const float* lo, const float* hi,
-                                const std::uint32_t* idx, float* out) {
+LEX3D_CLONES_512 void gaussian_sums(const float* lx, const float* ly, const float* lz, const float* reach2,
+                                    const PointScale* scale, std::size_t n, const float* wx, const float* wy,
+                                    const float* wz, std::size_t np, std::size_t npad, const float* lo,
+                                    const float* hi, const std::uint32_t* idx, float* out) {
   // Scratch as plain floats, read and written without alignment assumptions.
   thread_local std::vector<float> cx, cy, cz, cr, cna, acc;
   thread_local std::vector<std::uint32_t> live, cand;
@@ -192,12 +210,12 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
   if (live.size() < n8 + 8) {
     live.resize(n8 + 8);
     cand.resize(n8 + 8);
-    cx.resize(n8);
-    cy.resize(n8);
-    cz.resize(n8);
-    cr.resize(n8);
-    cna.resize(n8);
-    acc.resize(8 * n8);
+    cx.resize(n8 + 1);
+    cy.resize(n8 + 1);
+    cz.resize(n8 + 1);
+    cr.resize(n8 + 1);
+    cna.resize(n8 + 1);
+    acc.resize(8 * (n8 + 1));
   }
   std::fill(out, out + n, 0.0F);
   // The entries within 3σ of the word's bounding box (the others get nothing).
@@ -220,9 +238,10 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     nl += ox * ox + oy * oy + oz * oz > reach2[k0] ? 0 : 1;
   }
   if (nl == 0) return;
-  // The live entries side by side, padded to eight with entries nothing reaches.
+  // The live entries side by side, padded to eight with entries nothing reaches, and one
+  // more such entry after them (the spare of the pairs below).
   const std::size_t nl8 = (nl + 7) / 8 * 8;
-  for (std::size_t u = 0; u < nl8; ++u) {
+  for (std::size_t u = 0; u <= nl8; ++u) {
     const std::size_t k = live[u < nl ? u : 0];
     cx[u] = lx[k];
     cy[u] = ly[k];
@@ -230,7 +249,7 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
     cr[u] = u < nl ? reach2[k] : -1.0F;
     cna[u] = -scale[idx[k]].a;
   }
-  std::fill(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(8 * nl8), 0.0F);
+  std::fill(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(8 * (nl8 + 1)), 0.0F);
   for (std::size_t b = 0; b < nb; ++b) {
     const std::size_t p = 8 * b;
     if (p >= np) break;  // only far padding from here on
@@ -244,21 +263,28 @@ LEX3D_CLONES void gaussian_sums(const float* lx, const float* ly, const float* l
       const V8i near = box_gap2_8(qx, qy, qz, blo, bhi) <= load8(cr.data() + u);
       nc = append_lanes(cand.data(), nc, lane_bits8(near), static_cast<std::uint32_t>(u));
     }
-    // The exponentials go straight into the entry's lanes, in block order. A candidate
-    // none of whose points is in reach adds eight zeros, which changes no sum (they are
-    // +0 and the sums start at +0): cheaper than a branch, or than storing the
-    // exponents for a pass of their own.
-    const V8f bx = load8(wx + p), by = load8(wy + p), bz = load8(wz + p);
-    for (std::size_t c = 0; c < nc; ++c) {
-      const std::uint32_t u = cand[c];
-      const V8f dx = bx - splat8(cx[u]), dy = by - splat8(cy[u]), dz = bz - splat8(cz[u]);
-      const V8f d2 = dx * dx + dy * dy + dz * dz;
+    // The exponentials go straight into the entry's lanes, in block order, for two
+    // candidates at a time (sixteen lanes: one AVX-512 register; an odd count ends with
+    // the spare entry, which nothing reaches). A candidate none of whose points is in
+    // reach adds eight zeros, which changes no sum (they are +0 and the sums start at
+    // +0): cheaper than a branch, or than storing the exponents for a pass of their own.
+    if (nc % 2 != 0) cand[nc++] = static_cast<std::uint32_t>(nl8);
+    const V8f bx8 = load8(wx + p), by8 = load8(wy + p), bz8 = load8(wz + p);
+    const V16f bx = twice8(bx8), by = twice8(by8), bz = twice8(bz8);
+    for (std::size_t c = 0; c < nc; c += 2) {
+      const std::uint32_t u0 = cand[c], u1 = cand[c + 1];
+      const V16f dx = bx - splat2(cx[u0], cx[u1]), dy = by - splat2(cy[u0], cy[u1]),
+                 dz = bz - splat2(cz[u0], cz[u1]);
+      const V16f d2 = dx * dx + dy * dy + dz * dz;
       // Points beyond reach: d² and the result masked to 0 (as bits).
-      const V8i mk = d2 <= splat8(cr[u]);
-      const V8f e = mask8(exp_neg8(mask8(d2, mk) * splat8(cna[u])), mk);
-      float* const s = acc.data() + 8 * static_cast<std::size_t>(u);
-      const V8f v = load8(s) + e;
-      std::memcpy(s, &v, sizeof v);
+      const V16i mk = d2 <= splat2(cr[u0], cr[u1]);
+      const V16f e = mask16(exp_neg(mask16(d2, mk) * splat2(cna[u0], cna[u1])), mk);
+      float* const s0 = acc.data() + 8 * static_cast<std::size_t>(u0);
+      float* const s1 = acc.data() + 8 * static_cast<std::size_t>(u1);
+      const V8f v0 = load8(s0) + low8(e);
+      std::memcpy(s0, &v0, sizeof v0);
+      const V8f v1 = load8(s1) + high8(e);
+      std::memcpy(s1, &v1, sizeof v1);
     }
   }
   for (std::size_t u = 0; u < nl; ++u) {
@@ -1014,34 +1040,24 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       if (word_[f] >= 0)
         for (std::size_t k = begin_of(f); k < end_of(f); ++k) cover_count[idx_[k]] += covers[k];
   }
-  // The entries each instance contributes to (cache_ not 0), as (point, value) lists.
-  // When some list names a point twice, every removal goes through stage_removal and
-  // staged_delta instead (the points of one neighbourhood are distinct in practice).
+  // Whether some instance names a point twice among the entries it contributes to
+  // (cache_ not 0): every removal then goes through stage_removal and staged_delta
+  // instead (the points of one neighbourhood are distinct in practice).
   const std::size_t nf = word_.size();
-  std::vector<std::size_t> nz_off(nf + 1, 0);
-  LargeVector<std::uint32_t> nz_j(cache_.size());
-  LargeVector<float> nz_c(cache_.size());
   bool repeats = false;
   {
-    LargeVector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
-    std::size_t n = 0;
+    std::vector<std::uint32_t> last(S_.size(), std::numeric_limits<std::uint32_t>::max());
     for (std::size_t f = 0; f < nf; ++f) {
-      nz_off[f] = n;
       const auto ff = static_cast<std::uint32_t>(f);
-      if (fresh)  // rescore's sum (the entries of features without a word hold 0)
-        for (std::size_t k = begin_of(f); k < end_of(f); ++k) S_[idx_[k]] += static_cast<double>(cache_[k]);
       for (std::size_t k = begin_of(f); k < end_of(f); ++k) {
-        // Written always, kept when not 0 (no branch on the value).
+        // rescore's sum (the entries of features without a word hold 0)
         const std::uint32_t j = idx_[k];
+        if (fresh) S_[j] += static_cast<double>(cache_[k]);
         const bool nz = cache_[k] != 0.0F;
         repeats |= nz && last[j] == ff;
         last[j] = nz ? ff : last[j];
-        nz_j[n] = j;
-        nz_c[n] = cache_[k];
-        n += nz ? 1 : 0;
       }
     }
-    nz_off[nf] = n;
   }
   if (fresh) {
     stale_ = false;
@@ -1082,41 +1098,44 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
     recompute();
     return dropped;
   }
-  // No instance names a point twice: a removal is scored from its list alone, Δ_j being
-  // minus the entry's value (staged_delta's sum, in the same order). S_j, ln S_j and the
-  // background of each point sit side by side meanwhile (written back at the end).
-  struct PointTerms {
-    double s, ln_s, floor;
-  };
-  LargeVector<PointTerms> pt(S_.size());
-  for (std::size_t j = 0; j < S_.size(); ++j) pt[j] = {S_[j], log_s_[j], log_floor_[j]};
-  const auto term = [](const PointTerms& q, double ln_s, double lm) {
-    const double v = ln_s - lm;
-    return v > q.floor ? v : q.floor;
-  };
+  // No instance names a point twice: a removal is scored from its entries alone, Δ_j
+  // being minus the entry's value (staged_delta's sum, in the same order). The entries
+  // not 0 of each instance are listed first (no branch on the value), in scratch that
+  // stays in cache: lists of all instances at once would be fresh memory, whose first
+  // touch costs more than the scoring.
+  std::vector<std::uint32_t> nz_j;
+  std::vector<float> nz_c;
   for (const std::uint32_t w : order) {
     for (const std::uint32_t f : of_word[w]) {
+      const std::size_t b = begin_of(f), e = end_of(f);
+      nz_j.resize(e - b);
+      nz_c.resize(e - b);
+      std::size_t ne = 0;
+      for (std::size_t k = b; k < e; ++k) {
+        nz_j[ne] = idx_[k];
+        nz_c[ne] = cache_[k];
+        ne += cache_[k] != 0.0F ? 1 : 0;
+      }
       const auto m_new = static_cast<std::uint64_t>(static_cast<std::int64_t>(M_) -
                                                     static_cast<std::int64_t>(word_points_[f]));
-      const std::size_t nb = nz_off[f], ne = nz_off[f + 1];
       const double lm_old = log_m(M_);
       const double lm_new = log_m(m_new);
       double d = 0.0;
       std::size_t touched_above = 0;
-      staged_log_.resize(ne - nb);
+      staged_log_.resize(ne);
       // A removal is kept out as soon as it is certain to lower ln L: no term still to
       // come adds more than gain = ln M - ln M' (S_j only falls; the background stays), nor
       // does any point above the background not yet seen, so d plus that many gains bounds
       // the final d (the margin covers rounding). Saves the log() of the remaining points.
       const double gain = lm_old - lm_new;
       bool lowers = false;
-      for (std::size_t i = nb; i < ne; ++i) {
-        const PointTerms& q = pt[nz_j[i]];
-        const double ln_new = log_or_minus_inf(std::max(0.0, q.s + -static_cast<double>(nz_c[i])));
-        staged_log_[i - nb] = ln_new;
-        d += term(q, ln_new, lm_new) - term(q, q.ln_s, lm_old);
-        touched_above += q.ln_s - lm_old > q.floor ? 1 : 0;
-        if (((i - nb) & 7) == 7) {
+      for (std::size_t i = 0; i < ne; ++i) {
+        const std::uint32_t j = nz_j[i];
+        const double ln_new = log_or_minus_inf(std::max(0.0, S_[j] + -static_cast<double>(nz_c[i])));
+        staged_log_[i] = ln_new;
+        d += term_of_log(j, ln_new, lm_new) - term_of_log(j, log_s_[j], lm_old);
+        touched_above += above_of_log(j, log_s_[j], lm_old) ? 1 : 0;
+        if ((i & 7) == 7) {
           const double most = d + static_cast<double>(above_ - touched_above + (ne - 1 - i)) * gain;
           if (most < -1e-6 * (1.0 + std::fabs(d))) {
             lowers = true;
@@ -1128,21 +1147,17 @@ std::size_t ScanState::prune(const Alphabet& alphabet, int threads, bool keep_so
       d -= static_cast<double>(above_ - touched_above) * (lm_new - lm_old);
       if (d < 0.0 || sole_cover(f)) continue;
       log_l_ += d;
-      for (std::size_t i = nb; i < ne; ++i) {
-        PointTerms& q = pt[nz_j[i]];
-        const bool was = q.ln_s - lm_old > q.floor;
-        q.s = std::max(0.0, q.s + -static_cast<double>(nz_c[i]));
-        q.ln_s = staged_log_[i - nb];
-        above_ = above_ + (q.ln_s - lm_new > q.floor ? 1 : 0) - (was ? 1 : 0);
+      for (std::size_t i = 0; i < ne; ++i) {
+        const std::uint32_t j = nz_j[i];
+        const bool was = above_of_log(j, log_s_[j], lm_old);
+        S_[j] = std::max(0.0, S_[j] + -static_cast<double>(nz_c[i]));
+        log_s_[j] = staged_log_[i];
+        above_ = above_ + (above_of_log(j, log_s_[j], lm_new) ? 1 : 0) - (was ? 1 : 0);
       }
       M_ = m_new;
       drop(f);
       ++dropped;
     }
-  }
-  for (std::size_t j = 0; j < S_.size(); ++j) {
-    S_[j] = pt[j].s;
-    log_s_[j] = pt[j].ln_s;
   }
   recompute();
   return dropped;
