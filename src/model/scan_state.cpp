@@ -204,6 +204,7 @@ LEX3D_CLONES_512 void gaussian_sums(const float* lx, const float* ly, const floa
                                     const float* hi, const std::uint32_t* idx, float* out) {
   // Scratch as plain floats, read and written without alignment assumptions.
   thread_local std::vector<float> cx, cy, cz, cr, cna, acc;
+  thread_local std::vector<double> cnorm;
   thread_local std::vector<std::uint32_t> live, cand;
   const std::size_t nb = npad / 8;
   const std::size_t n8 = (n + 7) / 8 * 8;
@@ -215,6 +216,7 @@ LEX3D_CLONES_512 void gaussian_sums(const float* lx, const float* ly, const floa
     cz.resize(n8 + 1);
     cr.resize(n8 + 1);
     cna.resize(n8 + 1);
+    cnorm.resize(n8 + 1);
     acc.resize(8 * (n8 + 1));
   }
   std::fill(out, out + n, 0.0F);
@@ -248,6 +250,7 @@ LEX3D_CLONES_512 void gaussian_sums(const float* lx, const float* ly, const floa
     cz[u] = lz[k];
     cr[u] = u < nl ? reach2[k] : -1.0F;
     cna[u] = -scale[idx[k]].a;
+    cnorm[u] = scale[idx[k]].norm;
   }
   std::fill(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(8 * (nl8 + 1)), 0.0F);
   for (std::size_t b = 0; b < nb; ++b) {
@@ -290,8 +293,13 @@ LEX3D_CLONES_512 void gaussian_sums(const float* lx, const float* ly, const floa
   for (std::size_t u = 0; u < nl; ++u) {
     const V8f v = load8(acc.data() + 8 * u);
     const float sum = ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]));
-    const std::size_t k = live[u];
-    out[k] = sum == 0.0F ? sum : static_cast<float>(static_cast<double>(sum) * scale[idx[k]].norm);
+    // A zero sum stays +0 (whatever the norm): the product's bits masked, as a branch
+    // on the sum would often be mispredicted.
+    const float scaled = static_cast<float>(static_cast<double>(sum) * cnorm[u]);
+    std::uint32_t bits;
+    std::memcpy(&bits, &scaled, sizeof bits);
+    bits &= 0U - static_cast<std::uint32_t>(sum != 0.0F);
+    std::memcpy(out + live[u], &bits, sizeof bits);
   }
 }
 
