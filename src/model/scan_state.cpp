@@ -1578,6 +1578,9 @@ std::size_t ScanState::choose_by_fit(const Alphabet& alphabet, int k, int thread
 
 Model ScanState::model() const {
   Model m;
+  // Sized first: growing the list copies it and touches fresh memory at each doubling.
+  m.instances.reserve(static_cast<std::size_t>(
+      std::count_if(word_.begin(), word_.end(), [](std::int32_t w) { return w >= 0; })));
   for (std::size_t f = 0; f < word_.size(); ++f) {
     if (word_[f] < 0) continue;
     Instance inst;
