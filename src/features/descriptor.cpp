@@ -18,6 +18,10 @@
 #include <limits>
 #include <stdexcept>
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
 #include <Eigen/Eigenvalues>
 
 #if defined(__SSE2__)
@@ -86,6 +90,26 @@ std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f
 
 namespace {
 
+// Reserves room for n elements in the empty `v`. An array of a megabyte or more is
+// fresh memory, whose every 4 KiB page costs a page fault when first written: it gets
+// room for a 2 MiB page more and transparent huge pages are asked for on the whole 2 MiB
+// pages of its room, so that only the part before the first 2 MiB boundary is left to
+// small pages (advice only: without huge pages nothing changes).
+template <class T>
+void reserve_on_huge_pages(std::vector<T>& v, std::size_t n) {
+  constexpr std::size_t kHugePage = std::size_t{2} << 20;
+  if (n * sizeof(T) < kHugePage / 2) {
+    v.reserve(n);
+    return;
+  }
+  v.reserve(n + (kHugePage + sizeof(T) - 1) / sizeof(T));
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  const auto a = reinterpret_cast<std::uintptr_t>(v.data());
+  const std::uintptr_t lo = (a + kHugePage - 1) / kHugePage * kHugePage;
+  const std::uintptr_t hi = (a + v.capacity() * sizeof(T)) / kHugePage * kHugePage;
+  if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+#endif
+}
 
 // The image's points (RangeImage::point), NaN where there is no return: NaN fails
 // every distance test, so no state look-up is needed. Read in place rather than
@@ -736,8 +760,12 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
   params.validate();
   Features out;
   out.descriptor_dim = params.patch_size * params.patch_size;
+  // The two largest arrays of a scan's model, all fresh memory.
+  reserve_on_huge_pages(out.features, keypoints.size());
   out.features.resize(keypoints.size());
-  out.descriptors.assign(keypoints.size() * static_cast<std::size_t>(out.descriptor_dim), 0.0F);
+  const std::size_t values = keypoints.size() * static_cast<std::size_t>(out.descriptor_dim);
+  reserve_on_huge_pages(out.descriptors, values);
+  out.descriptors.assign(values, 0.0F);
   for (const auto& kp : keypoints) (kp.kind == FeatureKind::kInterest ? out.interest_count : out.coverage_count)++;
   if (keypoints.empty() || img.empty()) return out;
   const Eigen::Isometry3f T_cloud_sensor = img.T_cloud_sensor.cast<float>();
