@@ -18,10 +18,6 @@
 #include <limits>
 #include <stdexcept>
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
-
 #include <Eigen/Eigenvalues>
 
 #if defined(__SSE2__)
@@ -31,6 +27,7 @@
 #include <immintrin.h>
 #endif
 
+#include "core/huge_pages.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/features/features.hpp"
 
@@ -90,25 +87,17 @@ std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f
 
 namespace {
 
-// Reserves room for n elements in the empty `v`. An array of a megabyte or more is
-// fresh memory, whose every 4 KiB page costs a page fault when first written: it gets
-// room for a 2 MiB page more and transparent huge pages are asked for on the whole 2 MiB
-// pages of its room, so that only the part before the first 2 MiB boundary is left to
-// small pages (advice only: without huge pages nothing changes).
+// Reserves room for n elements in the empty `v`. An array of a megabyte or more (fresh
+// memory) gets room for a 2 MiB page more, all of it on huge pages where it can: only
+// the part before the first 2 MiB boundary is left to small pages.
 template <class T>
 void reserve_on_huge_pages(std::vector<T>& v, std::size_t n) {
-  constexpr std::size_t kHugePage = std::size_t{2} << 20;
-  if (n * sizeof(T) < kHugePage / 2) {
+  if (n * sizeof(T) < detail::kHugePage / 2) {
     v.reserve(n);
     return;
   }
-  v.reserve(n + (kHugePage + sizeof(T) - 1) / sizeof(T));
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  const auto a = reinterpret_cast<std::uintptr_t>(v.data());
-  const std::uintptr_t lo = (a + kHugePage - 1) / kHugePage * kHugePage;
-  const std::uintptr_t hi = (a + v.capacity() * sizeof(T)) / kHugePage * kHugePage;
-  if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-#endif
+  v.reserve(n + (detail::kHugePage + sizeof(T) - 1) / sizeof(T));
+  detail::advise_huge_pages(v.data(), v.capacity() * sizeof(T));
 }
 
 // The image's points (RangeImage::point), NaN where there is no return: NaN fails
