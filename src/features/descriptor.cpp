@@ -27,6 +27,7 @@
 #include <immintrin.h>
 #endif
 
+#include "core/huge_pages.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/features/features.hpp"
 
@@ -86,6 +87,18 @@ std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f
 
 namespace {
 
+// Reserves room for n elements in the empty `v`. An array of a megabyte or more (fresh
+// memory) gets room for a 2 MiB page more, all of it on huge pages where it can: only
+// the part before the first 2 MiB boundary is left to small pages.
+template <class T>
+void reserve_on_huge_pages(std::vector<T>& v, std::size_t n) {
+  if (n * sizeof(T) < detail::kHugePage / 2) {
+    v.reserve(n);
+    return;
+  }
+  v.reserve(n + (detail::kHugePage + sizeof(T) - 1) / sizeof(T));
+  detail::advise_huge_pages(v.data(), v.capacity() * sizeof(T));
+}
 
 // The image's points (RangeImage::point), NaN where there is no return: NaN fails
 // every distance test, so no state look-up is needed. Read in place rather than
@@ -736,8 +749,12 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
   params.validate();
   Features out;
   out.descriptor_dim = params.patch_size * params.patch_size;
+  // The two largest arrays of a scan's model, all fresh memory.
+  reserve_on_huge_pages(out.features, keypoints.size());
   out.features.resize(keypoints.size());
-  out.descriptors.assign(keypoints.size() * static_cast<std::size_t>(out.descriptor_dim), 0.0F);
+  const std::size_t values = keypoints.size() * static_cast<std::size_t>(out.descriptor_dim);
+  reserve_on_huge_pages(out.descriptors, values);
+  out.descriptors.assign(values, 0.0F);
   for (const auto& kp : keypoints) (kp.kind == FeatureKind::kInterest ? out.interest_count : out.coverage_count)++;
   if (keypoints.empty() || img.empty()) return out;
   const Eigen::Isometry3f T_cloud_sensor = img.T_cloud_sensor.cast<float>();

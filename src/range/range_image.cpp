@@ -1,4 +1,5 @@
 #include "lex3d/range/range_image.hpp"
+#include "core/huge_pages.hpp"
 #include "range/spacing.hpp"
 
 #include <algorithm>
@@ -118,10 +119,17 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
   // Per accepted direction: its range and cloud index (-1 for a no-return direction);
   // a point's sensor-frame position is computed again, by the same expression, only
   // when it claims a pixel. Left uninitialised: every used element is written first.
+  // The three arrays share one block of fresh memory (16 bytes a ray, 2 MB on KITTI),
+  // with room for a 2 MiB page more, on huge pages where it can.
   const std::size_t max_rays = cloud.size() + cloud.no_return_directions.size();
-  const std::unique_ptr<float[]> ray_range(new float[max_rays]);
-  const std::unique_ptr<std::int32_t[]> ray_index(new std::int32_t[max_rays]);
-  const std::unique_ptr<detail::Direction[]> dirs(new detail::Direction[max_rays]);
+  constexpr std::size_t kRayBytes = sizeof(detail::Direction) + sizeof(float) + sizeof(std::int32_t);
+  const std::size_t ray_bytes = max_rays * kRayBytes;
+  const std::size_t block_bytes = ray_bytes + (ray_bytes >= detail::kHugePage / 2 ? detail::kHugePage : 0);
+  const std::unique_ptr<unsigned char[]> block(new unsigned char[block_bytes]);
+  detail::advise_huge_pages(block.get(), block_bytes);
+  auto* const dirs = reinterpret_cast<detail::Direction*>(block.get());
+  auto* const ray_range = reinterpret_cast<float*>(dirs + max_rays);
+  auto* const ray_index = reinterpret_cast<std::int32_t*>(ray_range + max_rays);
   std::size_t used = 0;
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     if (!cloud.points[i].allFinite()) {
@@ -153,7 +161,7 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
   double res_az = params.azimuth_resolution_rad;
   double res_el = params.elevation_resolution_rad;
   if (res_az == 0.0 || res_el == 0.0) {
-    const auto est = detail::estimate_spacing(dirs.get(), returns, AngularResolutionParams{}.max_samples);
+    const auto est = detail::estimate_spacing(dirs, returns, AngularResolutionParams{}.max_samples);
     img.beam_spacing = est;
     // Without enough points to measure, fall back to 0.2°, a common lidar spacing.
     const double fallback = 0.2 * M_PI / 180.0;
