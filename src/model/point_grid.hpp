@@ -23,14 +23,11 @@
 
 #include <Eigen/Core>
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
-
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
 
+#include "core/huge_pages.hpp"
 #include "lex3d/core/parallel.hpp"
 
 namespace lex3d::detail {
@@ -157,7 +154,7 @@ class BallGrid {
       std::vector<std::uint32_t> fresh;
       fresh.reserve(total + kHugePage / sizeof(std::uint32_t));
       index.swap(fresh);
-      advise_huge(index.data(), index.capacity() * sizeof(std::uint32_t));
+      advise_huge_pages(index.data(), index.capacity() * sizeof(std::uint32_t));
     }
     index.resize(total);
     std::uint32_t* const out = index.data();
@@ -332,20 +329,6 @@ class BallGrid {
         }
       }
     }
-  }
-
-  static constexpr std::size_t kHugePage = std::size_t{2} << 20;
-  // Asks for huge pages on the whole 2 MiB pages of [p, p + bytes) (advice only).
-  static void advise_huge(void* p, std::size_t bytes) {
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-    const auto a = reinterpret_cast<std::uintptr_t>(p);
-    const std::uintptr_t lo = (a + kHugePage - 1) / kHugePage * kHugePage;
-    const std::uintptr_t hi = (a + bytes) / kHugePage * kHugePage;
-    if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-#else
-    (void)p;
-    (void)bytes;
-#endif
   }
 
   static constexpr std::uint64_t kEmpty = ~0ULL;

@@ -21,10 +21,7 @@
 #include <type_traits>
 #include <utility>
 #include <vector>
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
-
+#include "core/huge_pages.hpp"
 #include "lex3d/alphabet/alphabet.hpp"
 #include "lex3d/model/model.hpp"
 
@@ -38,19 +35,16 @@ template <class T>
 struct LargeAllocator {
   using value_type = T;
   static constexpr std::size_t kLarge = std::size_t{1} << 20;
-  static constexpr std::size_t kHuge = std::size_t{2} << 20;
   LargeAllocator() = default;
   template <class U>
   LargeAllocator(const LargeAllocator<U>& /*other*/) noexcept {}
   T* allocate(std::size_t n) {
     const std::size_t bytes = n * sizeof(T);
     if (bytes < kLarge) return static_cast<T*>(::operator new(bytes));
-    const std::size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
-    void* p = std::aligned_alloc(kHuge, size);
+    const std::size_t size = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+    void* p = std::aligned_alloc(kHugePage, size);
     if (p == nullptr) throw std::bad_alloc();
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-    madvise(p, size, MADV_HUGEPAGE);  // advice only: no huge pages is fine
-#endif
+    advise_huge_pages(p, size);
     return static_cast<T*>(p);
   }
   void deallocate(T* p, std::size_t n) noexcept {
