@@ -494,12 +494,44 @@ inline void box_centre(const float* blo, const float* bhi, float* c, float* h) {
   }
 }
 
-// keep[k] = near_box of entry k and the box [blo, bhi].
-LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
-                           const float* blo, const float* bhi, std::int32_t* keep) {
+// keep[k] = near_box of entry k, with σ² s2[k] = r2[k] / 9 (written), and the box
+// [blo, bhi]; lo and hi: the least and greatest x of the entries kept, smax their largest
+// σ² (all three unset when none is kept), reduced eight lanes at a time (the least and
+// greatest of a set do not depend on the order they are taken in).
+LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n,
+                           const float* blo, const float* bhi, float* s2, std::int32_t* keep, float& lo, float& hi,
+                           float& smax) {
   float c[3], h[3];
   box_centre(blo, bhi, c, h);
-  for (std::size_t k = 0; k < n; ++k) keep[k] = near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+  for (std::size_t k = 0; k < n; ++k) {
+    s2[k] = r2[k] / 9.0F;
+    keep[k] = near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+  }
+  const float inf = std::numeric_limits<float>::infinity();
+  V8f lo8 = splat8(inf), hi8 = splat8(-inf), s8 = hi8;
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    V8i kept;
+    std::memcpy(&kept, keep + k, sizeof kept);
+    kept = kept != 0;
+    const V8f x = load8(lx + k), s = load8(s2 + k);
+    lo8 = (kept & (x < lo8)) != 0 ? x : lo8;
+    hi8 = (kept & (x > hi8)) != 0 ? x : hi8;
+    s8 = (kept & (s > s8)) != 0 ? s : s8;
+  }
+  lo = inf;
+  hi = smax = -inf;
+  for (int l = 0; l < 8; ++l) {
+    lo = std::min(lo, lo8[l]);
+    hi = std::max(hi, hi8[l]);
+    smax = std::max(smax, s8[l]);
+  }
+  for (; k < n; ++k)
+    if (keep[k] != 0) {
+      lo = std::min(lo, lx[k]);
+      hi = std::max(hi, lx[k]);
+      smax = std::max(smax, s2[k]);
+    }
 }
 
 // How many of the n entries near_box finds near the box [blo, bhi].
@@ -540,26 +572,15 @@ struct Slabs {
              const float* bhi) {
     constexpr int kMaxSlabs = 64;
     grow(s2_, n);
-    for (std::size_t k = 0; k < n; ++k) s2_[k] = r2[k] / 9.0F;
-    const float* const s2 = s2_.data();
     grow(keep_, n);
-    box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
+    float lo = 0.0F, hi = 0.0F, smax = 0.0F;
+    box_keep(lx, ly, lz, r2, n, blo, bhi, s2_.data(), keep_.data(), lo, hi, smax);
+    const float* const s2 = s2_.data();
     grow(kept_, n);
     std::size_t m = 0;
     for (std::size_t k = 0; k < n; ++k) {
       kept_[m] = static_cast<std::uint32_t>(k);
       m += static_cast<std::size_t>(keep_[k]);
-    }
-    float lo = 0.0F, hi = 0.0F, smax = 0.0F;
-    if (m > 0) {
-      lo = hi = lx[kept_[0]];
-      smax = s2[kept_[0]];
-    }
-    for (std::size_t i = 1; i < m; ++i) {
-      const float v = lx[kept_[i]];
-      lo = std::min(lo, v);
-      hi = std::max(hi, v);
-      smax = std::max(smax, s2[kept_[i]]);
     }
     size = m;
     const std::size_t npad = (size + 7) / 8 * 8;
