@@ -528,12 +528,44 @@ inline void box_centre(const float* blo, const float* bhi, float* c, float* h) {
   }
 }
 
-// keep[k] = near_box of entry k and the box [blo, bhi].
-LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* s2, std::size_t n,
-                           const float* blo, const float* bhi, std::int32_t* keep) {
+// keep[k] = near_box of entry k, with σ² s2[k] = r2[k] / 9 (written), and the box
+// [blo, bhi]; lo and hi: the least and greatest x of the entries kept, smax their largest
+// σ² (all three unset when none is kept), reduced eight lanes at a time (the least and
+// greatest of a set do not depend on the order they are taken in).
+LEX3D_CLONES void box_keep(const float* lx, const float* ly, const float* lz, const float* r2, std::size_t n,
+                           const float* blo, const float* bhi, float* s2, std::int32_t* keep, float& lo, float& hi,
+                           float& smax) {
   float c[3], h[3];
   box_centre(blo, bhi, c, h);
-  for (std::size_t k = 0; k < n; ++k) keep[k] = near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+  for (std::size_t k = 0; k < n; ++k) {
+    s2[k] = r2[k] / 9.0F;
+    keep[k] = near_box(lx[k], ly[k], lz[k], s2[k], c, h);
+  }
+  const float inf = std::numeric_limits<float>::infinity();
+  V8f lo8 = splat8(inf), hi8 = splat8(-inf), s8 = hi8;
+  std::size_t k = 0;
+  for (; k + 8 <= n; k += 8) {
+    V8i kept;
+    std::memcpy(&kept, keep + k, sizeof kept);
+    kept = kept != 0;
+    const V8f x = load8(lx + k), s = load8(s2 + k);
+    lo8 = (kept & (x < lo8)) != 0 ? x : lo8;
+    hi8 = (kept & (x > hi8)) != 0 ? x : hi8;
+    s8 = (kept & (s > s8)) != 0 ? s : s8;
+  }
+  lo = inf;
+  hi = smax = -inf;
+  for (int l = 0; l < 8; ++l) {
+    lo = std::min(lo, lo8[l]);
+    hi = std::max(hi, hi8[l]);
+    smax = std::max(smax, s8[l]);
+  }
+  for (; k < n; ++k)
+    if (keep[k] != 0) {
+      lo = std::min(lo, lx[k]);
+      hi = std::max(hi, lx[k]);
+      smax = std::max(smax, s2[k]);
+    }
 }
 
 // How many of the n entries near_box finds near the box [blo, bhi].
@@ -574,26 +606,15 @@ struct Slabs {
              const float* bhi) {
     constexpr int kMaxSlabs = 64;
     grow(s2_, n);
-    for (std::size_t k = 0; k < n; ++k) s2_[k] = r2[k] / 9.0F;
-    const float* const s2 = s2_.data();
     grow(keep_, n);
-    box_keep(lx, ly, lz, s2, n, blo, bhi, keep_.data());
+    float lo = 0.0F, hi = 0.0F, smax = 0.0F;
+    box_keep(lx, ly, lz, r2, n, blo, bhi, s2_.data(), keep_.data(), lo, hi, smax);
+    const float* const s2 = s2_.data();
     grow(kept_, n);
     std::size_t m = 0;
     for (std::size_t k = 0; k < n; ++k) {
       kept_[m] = static_cast<std::uint32_t>(k);
       m += static_cast<std::size_t>(keep_[k]);
-    }
-    float lo = 0.0F, hi = 0.0F, smax = 0.0F;
-    if (m > 0) {
-      lo = hi = lx[kept_[0]];
-      smax = s2[kept_[0]];
-    }
-    for (std::size_t i = 1; i < m; ++i) {
-      const float v = lx[kept_[i]];
-      lo = std::min(lo, v);
-      hi = std::max(hi, v);
-      smax = std::max(smax, s2[kept_[i]]);
     }
     size = m;
     const std::size_t npad = (size + 7) / 8 * 8;
@@ -638,20 +659,25 @@ struct Slabs {
       sig2[at] = s2[k];
     }
   }
-  // The run of entries that can be within σ of a point at x = px ([lo, hi), maybe empty).
-  void window(float px, std::uint32_t& lo, std::uint32_t& hi) const {
-    const float g = (px - x0) * inv;
-    if (!(g > -2.0F && g < static_cast<float>(count) + 1.0F)) {
-      lo = hi = 0;
-      return;
-    }
-    const int b = static_cast<int>(std::floor(g));
-    lo = start[static_cast<std::size_t>(std::max(b - 1, 0))];
-    hi = start[static_cast<std::size_t>(std::min(b + 2, count))];
-    if (hi < lo) hi = lo;
+  // The run of entries that can be within σ of a point at x = px is [run_lo, run_hi):
+  // the point's slab and the ones either side, clamped to the slabs there are (empty for
+  // a point two slabs or more outside them; a NaN gives every entry). Both ends only grow
+  // with px, so for x-sorted points a..d, [run_lo(a), run_hi(d)) holds all their runs.
+  std::uint32_t run_lo(float px) const { return start[static_cast<std::size_t>(std::max(slab(px, -2) - 1, 0))]; }
+  std::uint32_t run_hi(float px) const {
+    return start[static_cast<std::size_t>(std::min(slab(px, count + 1) + 2, count))];
   }
 
  private:
+  // floor((px - x0) / width), clamped to [-2, count + 1] (as far out as makes a
+  // difference to the runs); `nan` for a NaN.
+  int slab(float px, int nan) const {
+    const float g = (px - x0) * inv;
+    if (g > -2.0F && g < static_cast<float>(count) + 1.0F) return static_cast<int>(std::floor(g));
+    if (g <= -2.0F) return -2;
+    return g >= static_cast<float>(count) + 1.0F ? count + 1 : nan;
+  }
+
   std::vector<std::uint32_t> kept_, slab_, cursor_;
   std::vector<std::int32_t> keep_;
   std::vector<float> s2_;
@@ -660,11 +686,13 @@ struct Slabs {
 // Word choice by fit with slabs: the counts of fit_counts (entries with a word point
 // within their σ, and the word points with no entry within σ). Each word point needs
 // testing only against its three slabs, widened to whole blocks of 8 entries; the points
-// go by in fours (the word's points sorted by x, so their windows mostly overlap), each
-// four testing the union of their windows: the entry loads, the update of the hits and
-// the loop with its hard-to-predict exit are shared by the four (the rest one by one).
-// Every pair tested is compared as in fit_counts, and an entry outside a point's own
-// window is farther than σ from it along x, so testing it as well changes no count.
+// go by in fours (the word's points sorted by x, so their runs mostly overlap), each four
+// testing the run holding all their runs (Slabs::run_lo, run_hi): the entry loads, the
+// update of the hits and the loop with its hard-to-predict exit are shared by the four.
+// Every pair tested is compared as in fit_counts, and an entry outside a point's own run
+// is farther than σ from it along x, so testing it as well changes no count. The np
+// points are read padded to a multiple of 4 with far points (PackedWord::xp), which hit
+// nothing and are not counted.
 // Gives up (returns false, the counts unset) once `max_lonely` word points have no entry
 // within σ (the count only grows, so that is the same as its final value reaching it).
 LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float* wy, const float* wz, std::size_t np,
@@ -677,64 +705,35 @@ LEX3D_CLONES bool fit_counts_slabs(const Slabs& s, const float* wx, const float*
   const float* sig2 = s.sig2.data();
   for (std::size_t k = 0; k < npad; ++k) hit[k] = 0;
   std::size_t lonely = 0;
-  std::size_t p = 0;
-  for (; p + 4 <= np; p += 4) {
-    // The union of the four windows (empty ones left out).
-    std::uint32_t lo = ~0U, hi = 0;
-    for (std::size_t g = 0; g < 4; ++g) {
-      std::uint32_t a = 0, b = 0;
-      s.window(wx[p + g], a, b);
-      if (a < b) {
-        lo = std::min(lo, a);
-        hi = std::max(hi, b);
-      }
-    }
+  for (std::size_t p = 0; p < np; p += 4) {
+    const std::size_t real = std::min<std::size_t>(4, np - p);  // the rest are padding
+    const std::uint32_t lo = s.run_lo(wx[p]), hi = s.run_hi(wx[p + real - 1]);
     const V8f ax = splat8(wx[p]), ay = splat8(wy[p]), az = splat8(wz[p]);
     const V8f bx = splat8(wx[p + 1]), by = splat8(wy[p + 1]), bz = splat8(wz[p + 1]);
     const V8f cx = splat8(wx[p + 2]), cy = splat8(wy[p + 2]), cz = splat8(wz[p + 2]);
     const V8f dx = splat8(wx[p + 3]), dy = splat8(wy[p + 3]), dz = splat8(wz[p + 3]);
     V8i anya = {0, 0, 0, 0, 0, 0, 0, 0}, anyb = anya, anyc = anya, anyd = anya;
-    if (lo < hi) {
-      for (std::size_t k = lo & ~7U; k < hi; k += 8) {
-        const V8f ex = load8(lx + k), ey = load8(ly + k), ez = load8(lz + k), es = load8(sig2 + k);
-        const V8f a0 = ax - ex, a1 = ay - ey, a2 = az - ez;
-        const V8f b0 = bx - ex, b1 = by - ey, b2 = bz - ez;
-        const V8f c0 = cx - ex, c1 = cy - ey, c2 = cz - ez;
-        const V8f d0 = dx - ex, d1 = dy - ey, d2 = dz - ez;
-        // The masks as they come (all ones or zero): hit[k] is nonzero when entry k is hit.
-        const V8i ma = a0 * a0 + a1 * a1 + a2 * a2 <= es;
-        const V8i mb = b0 * b0 + b1 * b1 + b2 * b2 <= es;
-        const V8i mc = c0 * c0 + c1 * c1 + c2 * c2 <= es;
-        const V8i md = d0 * d0 + d1 * d1 + d2 * d2 <= es;
-        V8i h;
-        std::memcpy(&h, hit + k, sizeof h);
-        h |= (ma | mb) | (mc | md);
-        std::memcpy(hit + k, &h, sizeof h);
-        anya |= ma;
-        anyb |= mb;
-        anyc |= mc;
-        anyd |= md;
-      }
-    }
-    lonely += (any8(anya) ? 0 : 1) + (any8(anyb) ? 0 : 1) + (any8(anyc) ? 0 : 1) + (any8(anyd) ? 0 : 1);
-    if (lonely >= max_lonely) return false;
-  }
-  for (; p < np; ++p) {
-    const float px = wx[p], py = wy[p], pz = wz[p];
-    std::uint32_t lo = 0, hi = 0;
-    s.window(px, lo, hi);
-    const V8f x = splat8(px), y = splat8(py), z = splat8(pz);
-    V8i any = {0, 0, 0, 0, 0, 0, 0, 0};
     for (std::size_t k = lo & ~7U; k < hi; k += 8) {
-      const V8f dx = x - load8(lx + k), dy = y - load8(ly + k), dz = z - load8(lz + k);
-      const V8i m = dx * dx + dy * dy + dz * dz <= load8(sig2 + k);
+      const V8f ex = load8(lx + k), ey = load8(ly + k), ez = load8(lz + k), es = load8(sig2 + k);
+      const V8f a0 = ax - ex, a1 = ay - ey, a2 = az - ez;
+      const V8f b0 = bx - ex, b1 = by - ey, b2 = bz - ez;
+      const V8f c0 = cx - ex, c1 = cy - ey, c2 = cz - ez;
+      const V8f d0 = dx - ex, d1 = dy - ey, d2 = dz - ez;
+      // The masks as they come (all ones or zero): hit[k] is nonzero when entry k is hit.
+      const V8i ma = a0 * a0 + a1 * a1 + a2 * a2 <= es;
+      const V8i mb = b0 * b0 + b1 * b1 + b2 * b2 <= es;
+      const V8i mc = c0 * c0 + c1 * c1 + c2 * c2 <= es;
+      const V8i md = d0 * d0 + d1 * d1 + d2 * d2 <= es;
       V8i h;
       std::memcpy(&h, hit + k, sizeof h);
-      h |= m;
+      h |= (ma | mb) | (mc | md);
       std::memcpy(hit + k, &h, sizeof h);
-      any |= m;
+      anya |= ma;
+      anyb |= mb;
+      anyc |= mc;
+      anyd |= md;
     }
-    lonely += any8(any) ? 0 : 1;
+    lonely += (any8(anya) ? 0 : 1) + (any8(anyb) ? 0 : 1) + (any8(anyc) ? 0 : 1) + (any8(anyd) ? 0 : 1) - (4 - real);
     if (lonely >= max_lonely) return false;
   }
   std::size_t e = 0;
@@ -1496,7 +1495,7 @@ LEX3D_CLONES std::uint32_t best_fit(const std::pair<float, std::uint32_t>* near,
       max_lonely = static_cast<std::size_t>(slack) + 1;
     }
     std::size_t explained = 0, unsupported = 0;
-    if (!fit_counts_slabs(slabs, w.x.data(), w.y.data(), w.z.data(), w.size(), max_lonely, hits.data(), explained,
+    if (!fit_counts_slabs(slabs, w.xp.data(), w.yp.data(), w.zp.data(), w.size(), max_lonely, hits.data(), explained,
                           unsupported))
       continue;
     const std::int64_t score = static_cast<std::int64_t>(explained) - static_cast<std::int64_t>(unsupported);
