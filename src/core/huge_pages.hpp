@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -26,6 +27,19 @@ inline void advise_huge_pages(const void* p, std::size_t bytes) noexcept {
   (void)p;
   (void)bytes;
 #endif
+}
+
+/// Reserves room for n elements in the empty `v`. An array of a megabyte or more (fresh
+/// memory) gets room for a 2 MiB page more, all of it on huge pages where it can: only
+/// the part before the first 2 MiB boundary is left to small pages.
+template <class T>
+void reserve_on_huge_pages(std::vector<T>& v, std::size_t n) {
+  if (n * sizeof(T) < kHugePage / 2) {
+    v.reserve(n);
+    return;
+  }
+  v.reserve(n + (kHugePage + sizeof(T) - 1) / sizeof(T));
+  advise_huge_pages(v.data(), v.capacity() * sizeof(T));
 }
 
 }  // namespace lex3d::detail

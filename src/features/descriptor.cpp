@@ -87,19 +87,6 @@ std::optional<Keypoint> keypoint_at(const RangeImage& img, const Eigen::Vector3f
 
 namespace {
 
-// Reserves room for n elements in the empty `v`. An array of a megabyte or more (fresh
-// memory) gets room for a 2 MiB page more, all of it on huge pages where it can: only
-// the part before the first 2 MiB boundary is left to small pages.
-template <class T>
-void reserve_on_huge_pages(std::vector<T>& v, std::size_t n) {
-  if (n * sizeof(T) < detail::kHugePage / 2) {
-    v.reserve(n);
-    return;
-  }
-  v.reserve(n + (detail::kHugePage + sizeof(T) - 1) / sizeof(T));
-  detail::advise_huge_pages(v.data(), v.capacity() * sizeof(T));
-}
-
 // The image's points (RangeImage::point), NaN where there is no return: NaN fails
 // every distance test, so no state look-up is needed. Read in place rather than
 // copied to 16-byte pixels, whose fresh pages cost more than the unaligned loads.
@@ -750,10 +737,10 @@ Features describe(const RangeImage& img, const std::vector<Keypoint>& keypoints,
   Features out;
   out.descriptor_dim = params.patch_size * params.patch_size;
   // The two largest arrays of a scan's model, all fresh memory.
-  reserve_on_huge_pages(out.features, keypoints.size());
+  detail::reserve_on_huge_pages(out.features, keypoints.size());
   out.features.resize(keypoints.size());
   const std::size_t values = keypoints.size() * static_cast<std::size_t>(out.descriptor_dim);
-  reserve_on_huge_pages(out.descriptors, values);
+  detail::reserve_on_huge_pages(out.descriptors, values);
   out.descriptors.assign(values, 0.0F);
   for (const auto& kp : keypoints) (kp.kind == FeatureKind::kInterest ? out.interest_count : out.coverage_count)++;
   if (keypoints.empty() || img.empty()) return out;

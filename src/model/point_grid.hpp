@@ -148,13 +148,11 @@ class BallGrid {
     }
     offset[nb] = total;
     // The lists are megabytes of fresh memory, filled once: on huge pages where the kernel
-    // allows, so that the first touch costs a fault per 2 MiB rather than per 4 KiB (the
-    // reserve's slack makes room for a whole aligned 2 MiB page).
+    // allows, so that the first touch costs a fault per 2 MiB rather than per 4 KiB.
     if (index.capacity() < total) {
       std::vector<std::uint32_t> fresh;
-      fresh.reserve(total + kHugePage / sizeof(std::uint32_t));
+      reserve_on_huge_pages(fresh, total);
       index.swap(fresh);
-      advise_huge_pages(index.data(), index.capacity() * sizeof(std::uint32_t));
     }
     index.resize(total);
     std::uint32_t* const out = index.data();
