@@ -1,0 +1,44 @@
+#pragma once
+// The process's heap policy (glibc). A compress call allocates and frees tens of
+// megabytes stage after stage; by default glibc serves blocks above 128 KiB (a threshold
+// that then grows) with fresh mappings and returns freed memory to the system, so each
+// stage pays its page faults again: ~4,500 faults, ~10 % of compressing a KITTI scan.
+// Here the heap keeps what it frees, blocks up to 32 MiB come from it, and its first
+// 32 MiB are on transparent huge pages where the system allows them (one fault per 2 MiB).
+// On kitti00/000005, one thread: 4,486 -> 1,161 page faults, whole process 0.95x.
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+namespace lex3d::cli {
+
+inline void keep_heap_on_huge_pages() noexcept {
+#if defined(__GLIBC__) && defined(__linux__) && defined(MADV_HUGEPAGE)
+  constexpr std::size_t kMiB = std::size_t{1} << 20;
+  constexpr std::size_t kHuge = 2 * kMiB;
+  // Below glibc's largest mmap threshold (32 MiB on 64-bit), so the block is heap.
+  constexpr std::size_t kStart = 30 * kMiB;
+  if (mallopt(M_MMAP_THRESHOLD, static_cast<int>(32 * kMiB)) == 0) return;
+  mallopt(M_TRIM_THRESHOLD, static_cast<int>(512 * kMiB));
+  mallopt(M_TOP_PAD, static_cast<int>(16 * kMiB));
+  // Grow the heap by kStart at once and mark it; freed, it stays as the heap's top and
+  // serves the allocations that follow. Nothing is touched here, so nothing is faulted.
+  void* block = std::malloc(kStart);
+  if (block == nullptr) return;
+  const auto a = reinterpret_cast<std::uintptr_t>(block);
+  const std::uintptr_t lo = (a + kHuge - 1) / kHuge * kHuge;
+  const std::uintptr_t hi = (a + kStart) / kHuge * kHuge;
+  if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+  std::free(block);
+#endif
+}
+
+}  // namespace lex3d::cli
