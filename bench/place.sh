@@ -28,6 +28,15 @@ echo "== radius 4 m, min gap 20 s, transforms of any implied distance (--max-dis
 "$build/lex3d" place eval "$data" --poses "$data/poses.txt" --times "$data/times.txt" \
   --min-gap 20 --radius 4 --max-distance 0 --png "$out/any" --cache "$out/scans.lex3dp" "$@"
 
+# Scan Context on the same scans and protocol (bench/scan_context.py: its published 80 m
+# grid, and 40 m, which suits this 18 x 20 m courtyard better), for comparison.
+if [ -x /usr/bin/python3 ]; then
+  for range in 80 40; do
+    echo "== Scan Context, max range ${range} m, min gap 20 s, radius 4 and 8 m =="
+    /usr/bin/python3 "$root/bench/scan_context.py" "$data" --min-gap 20 --radius 4 8 --max-range "$range"
+  done
+fi
+
 # A second sensor: kitti00 (HDL-64E, 10 frames 0.1 s apart), each frame against the frames
 # at least 0.25 s older. KITTI's poses are of the left camera; they are turned into lidar
 # poses with the nominal axes (lidar x, y, z = camera z, -x, -y; the calibration's ~1 degree
