@@ -3,13 +3,16 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
-#include <optional>
+#include <exception>
 #include <iostream>
+#include <optional>
 
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
+#include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "model_report.hpp"
@@ -131,8 +134,9 @@ void run_compress(const CompressOptions& o) {
   Stopwatch sw;
   // Learning needs the scans it learns from at once (every scan, or --learn-scans K evenly
   // spaced ones); the others, and every scan with an alphabet given or without words, are
-  // read, modelled, coded and written one at a time, so a long sequence needs the memory of
-  // one scan (89 balm scans: 826 MB resident when all were held).
+  // read, modelled, coded and written as they come (one a thread, see below), so a long
+  // sequence needs the memory of a scan a thread (89 balm scans: 826 MB resident when all
+  // were held).
   const bool learning = use_words && o.alphabet.empty();
   const ScanLoader loader = o.scan_set.loader(o.inputs);
   const std::size_t n_scans = loader.size();
@@ -198,45 +202,75 @@ void run_compress(const CompressOptions& o) {
   layer_options.spherical = o.layer_coding != "voxel";
   layer_options.voxel = o.layer_coding != "spherical";
   layer_options.threads = mp.threads;
-  ProgressBar bar("encoding");
-  for (std::size_t i = 0; i < n_scans; ++i) {
-    // The scan and its model: learnt with the alphabet, or made now (where each stage's time
-    // went is reported then).
-    Cloud streamed;
-    std::size_t features = 0;
-    std::optional<PreparedScan> prepared;  // a scan modelled here, for its stage times
-    EncodeTimings et;
+  // One scan from its file (or the learnt scans) to its coded bytes: run for several scans
+  // at once when there are threads to spare, each scan then on one thread (its stages are
+  // partly serial: two scans side by side keep both cores busy). The files do not depend on
+  // the thread count; they are written, and reported, in scan order.
+  struct Outcome {
     codec::ModelData d;
-    const bool learnt = learnt_as[i] >= 0;
-    if (learnt) {
-      const auto slot = static_cast<std::size_t>(learnt_as[i]);
-      features = set.scans[slot].features.size();
-      d.model = set.models[slot];
-    } else {
-      Stopwatch read_sw;
-      streamed = loader.load(i);
-      read_ms += read_sw.elapsed_ms();
-      if (use_words) {
-        PreparedScan ps = prepare_scan(streamed, p.model, alphabet.word_radius);
-        d.model = encode_scan(ps, alphabet, p.prune, p.model, &et);
-        features = ps.features.size();
-        prepared = std::move(ps);
+    Coded coded;
+    std::size_t features = 0;
+    bool modelled = false;  // an alphabet reused: stage times below
+    FeatureTimings feature_ms;
+    double neighbourhoods_ms = 0.0;
+    EncodeTimings encode_ms;
+    double read_ms = 0.0, code_ms = 0.0;
+    std::exception_ptr error;
+  };
+  auto produce = [&](std::size_t i, int threads) {
+    Outcome out;
+    try {
+      ModelParams params = p.model;
+      params.threads = threads;
+      residual::LayerOptions layer = layer_options;
+      layer.threads = threads;
+      Cloud streamed;
+      codec::ModelData& d = out.d;
+      const bool learnt = learnt_as[i] >= 0;
+      if (learnt) {
+        const auto slot = static_cast<std::size_t>(learnt_as[i]);
+        out.features = set.scans[slot].features.size();
+        d.model = set.models[slot];
+      } else {
+        Stopwatch read_sw;
+        streamed = loader.load(i);
+        out.read_ms = read_sw.elapsed_ms();
+        if (use_words) {
+          const PreparedScan ps = prepare_scan(streamed, params, alphabet.word_radius);
+          d.model = encode_scan(ps, alphabet, p.prune, params, &out.encode_ms);
+          out.features = ps.features.size();
+          out.modelled = true;
+          out.feature_ms = ps.timings;
+          out.neighbourhoods_ms = ps.prepare_ms - ps.timings.total_ms();
+        }
       }
+      const Cloud& cloud = learnt ? clouds[static_cast<std::size_t>(learnt_as[i])] : streamed;
+      Stopwatch code_sw;
+      d.input_points = cloud.size();
+      d.T_cloud_sensor = cloud.T_cloud_sensor;
+      if (embed) d.alphabet = alphabet;
+      else d.alphabet_hash = hash;
+      out.coded = code_scan(cloud, d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
+                            words_mode, layer, quantization);
+      if (!out.coded.words) d.model.instances.clear();
+      out.code_ms = code_sw.elapsed_ms();
+    } catch (...) {
+      out.error = std::current_exception();
     }
-    const Cloud& cloud = learnt ? clouds[static_cast<std::size_t>(learnt_as[i])] : streamed;
-    Stopwatch code_sw;
-    d.input_points = cloud.size();
-    d.T_cloud_sensor = cloud.T_cloud_sensor;
-    if (embed) d.alphabet = alphabet;
-    else d.alphabet_hash = hash;
-    const Coded coded = code_scan(cloud, d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
-                                  words_mode, layer_options, quantization);
+    return out;
+  };
+  ProgressBar bar("encoding");
+  const auto emit = [&](std::size_t i, Outcome& r) {
+    if (r.error) std::rethrow_exception(r.error);
+    read_ms += r.read_ms;
+    const codec::ModelData& d = r.d;
+    const Coded& coded = r.coded;
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
-    if (!coded.words) d.model.instances.clear();
+    Stopwatch write_sw;
     if (o.one_file) sequence.model_files.push_back(bytes);
     else throw_if_error(io::write_file_atomic(outputs[i], bytes));
-    const double code_ms = code_sw.elapsed_ms();
+    const double code_ms = r.code_ms + write_sw.elapsed_ms();
     const std::string& shown = o.one_file ? o.inputs[i] : outputs[i];
     const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
     total_bytes += bytes.size();
@@ -246,22 +280,21 @@ void run_compress(const CompressOptions& o) {
           .value("input", o.inputs[i])
           .value("output", o.one_file ? o.output : outputs[i])
           .value("points", d.input_points)
-          .value("features", features)
+          .value("features", r.features)
           .value("instances", d.model.instances.size())
           .value("bytes", static_cast<std::uint64_t>(bytes.size()))
           .value("bits_per_point", bpp);
-      if (prepared) {  // an alphabet reused: where each scan's time went
-        const PreparedScan& ps = *prepared;
+      if (r.modelled) {  // an alphabet reused: where each scan's time went
         j.begin_object("timings_ms")
-            .value("range_image", ps.timings.range_image_ms)
-            .value("interest_points", ps.timings.interest_ms)
-            .value("coverage_points", ps.timings.coverage_ms)
-            .value("descriptors", ps.timings.descriptor_ms)
-            .value("neighbourhoods", ps.prepare_ms - ps.timings.total_ms())
-            .value("frames", et.frames_ms)
-            .value("words", et.words_ms)
-            .value("refine", et.refine_ms)
-            .value("prune", et.prune_ms)
+            .value("range_image", r.feature_ms.range_image_ms)
+            .value("interest_points", r.feature_ms.interest_ms)
+            .value("coverage_points", r.feature_ms.coverage_ms)
+            .value("descriptors", r.feature_ms.descriptor_ms)
+            .value("neighbourhoods", r.neighbourhoods_ms)
+            .value("frames", r.encode_ms.frames_ms)
+            .value("words", r.encode_ms.words_ms)
+            .value("refine", r.encode_ms.refine_ms)
+            .value("prune", r.encode_ms.prune_ms)
             .value("code_and_write", code_ms)
             .end_object();
       }
@@ -286,6 +319,16 @@ void run_compress(const CompressOptions& o) {
       std::printf("\n");
     }
     bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), o.inputs[i]);
+  };
+  // Scans side by side: as many as threads (one each), or one scan on all the threads.
+  const auto side_by_side = static_cast<std::size_t>(std::max(1, std::min<int>(mp.threads, static_cast<int>(n_scans))));
+  std::vector<Outcome> batch;
+  for (std::size_t first = 0; first < n_scans; first += side_by_side) {
+    const std::size_t count = std::min(side_by_side, n_scans - first);
+    batch.assign(count, Outcome{});
+    if (count == 1) batch[0] = produce(first, mp.threads);
+    else parallel_for(count, static_cast<int>(count), [&](std::size_t k) { batch[k] = produce(first + k, 1); }, 1);
+    for (std::size_t k = 0; k < count; ++k) emit(first + k, batch[k]);
   }
   bar.finish();
   j.end_array();

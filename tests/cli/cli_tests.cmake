@@ -272,6 +272,26 @@ if(NOT EXISTS "${WORK}/st_000.lex3dm" OR EXISTS "${WORK}/st_001.lex3dm" OR EXIST
   message(SEND_ERROR "[stream.bad_middle] expected st_000 alone to be written")
 endif()
 run(0 stream.first_decodes decompress "${WORK}/st_000.lex3dm" --alphabet "${WORK}/nc.lex3da" -o "${WORK}/st_000.ply")
+# With two threads, scans are coded two at a time, one thread each: a bad third scan stops
+# the command after the first two are written, and nothing of the fourth is.
+run(2 stream.bad_third compress "${NC}" "${NC}" "${WORK}/odd.bin" "${NC}" --format binxyz -o "${WORK}/s3.lex3dm"
+    --alphabet "${WORK}/nc.lex3da" --threads 2)
+if(NOT EXISTS "${WORK}/s3_000.lex3dm" OR NOT EXISTS "${WORK}/s3_001.lex3dm" OR EXISTS "${WORK}/s3_002.lex3dm"
+   OR EXISTS "${WORK}/s3_003.lex3dm")
+  message(SEND_ERROR "[stream.bad_third] expected s3_000 and s3_001 alone to be written")
+endif()
+# Scans side by side give the files of one thread, scan for scan.
+run(0 stream.side_by_side compress "${NC}" "${KITTI}" "${NC}" -o "${WORK}/sb2.lex3dm" --alphabet "${WORK}/nc.lex3da"
+    --threads 2)
+run(0 stream.one_thread compress "${NC}" "${KITTI}" "${NC}" -o "${WORK}/sb1.lex3dm" --alphabet "${WORK}/nc.lex3da"
+    --threads 1)
+foreach(k 000 001 002)
+  file(SHA256 "${WORK}/sb2_${k}.lex3dm" h2)
+  file(SHA256 "${WORK}/sb1_${k}.lex3dm" h1)
+  if(NOT h1 STREQUAL h2)
+    message(SEND_ERROR "[stream.side_by_side] scan ${k} differs between one and two threads")
+  endif()
+endforeach()
 # The same scan twice gives the same file twice (one scan's state never leaks into the next).
 run(0 stream.twice compress "${NC}" "${NC}" -o "${WORK}/tw.lex3dm" --alphabet "${WORK}/nc.lex3da" --max-error 0.02 --words auto)
 file(SHA256 "${WORK}/tw_000.lex3dm" h0)
