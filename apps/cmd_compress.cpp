@@ -9,6 +9,7 @@
 #include <iostream>
 #include <optional>
 
+#include "allocator.hpp"
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
@@ -140,6 +141,10 @@ void run_compress(const CompressOptions& o) {
   const bool learning = use_words && o.alphabet.empty();
   const ScanLoader loader = o.scan_set.loader(o.inputs);
   const std::size_t n_scans = loader.size();
+  const ModelParams mp = o.model.params();
+  // Scans side by side: as many as threads (one each), or one scan on all the threads.
+  const auto side_by_side = static_cast<std::size_t>(std::max(1, std::min<int>(mp.threads, static_cast<int>(n_scans))));
+  if (n_scans == 1) keep_heap_on_huge_pages();
   std::vector<std::int64_t> learnt_as(n_scans, -1);  // scan -> its place among the learnt scans
   std::vector<Cloud> clouds;                         // the learnt scans
   std::vector<std::string> learnt_names;
@@ -154,7 +159,6 @@ void run_compress(const CompressOptions& o) {
     }
   }
   double read_ms = sw.elapsed_ms();
-  const ModelParams mp = o.model.params();
   LearnParams p = o.scan_set.learn_params(mp);
   std::optional<AlphabetFile> reuse;
   if (!o.alphabet.empty()) reuse = read_alphabet_file(o.alphabet);
@@ -320,8 +324,6 @@ void run_compress(const CompressOptions& o) {
     }
     bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), o.inputs[i]);
   };
-  // Scans side by side: as many as threads (one each), or one scan on all the threads.
-  const auto side_by_side = static_cast<std::size_t>(std::max(1, std::min<int>(mp.threads, static_cast<int>(n_scans))));
   std::vector<Outcome> batch;
   for (std::size_t first = 0; first < n_scans; first += side_by_side) {
     const std::size_t count = std::min(side_by_side, n_scans - first);

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "allocator.hpp"
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
@@ -86,6 +87,7 @@ void run_decompress(const DecompressOptions& o) {
     run_decompress_sequence(o, bytes.value());
     return;
   }
+  keep_heap_on_huge_pages();  // one scan to rebuild
   std::vector<std::uint8_t> alphabet_file;
   if (!o.alphabet.empty()) {
     auto a = io::read_file(o.alphabet);

@@ -6,11 +6,9 @@
 #include <exception>
 #include <iostream>
 
-#include "allocator.hpp"
 #include "cli_common.hpp"
 
 int main(int argc, char** argv) {
-  lex3d::cli::keep_heap_on_huge_pages();
   CLI::App app{"lex3d: compact lidar scans and maps from a learned alphabet of local 3D structures"};
   app.set_version_flag("--version", std::string("lex3d ") + LEX3D_VERSION);
   app.require_subcommand(1);
