@@ -12,6 +12,7 @@
 #include <map>
 
 #include "lex3d/codec/codec.hpp"
+#include "allocator.hpp"
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/core/timer.hpp"
@@ -144,6 +145,7 @@ void pose_json(Json& j, const Pose& T) {
 }
 
 void run_query(const PlaceOptions& o) {
+  keep_heap_on_huge_pages();  // one scan to describe and match
   const PlaceDatabase db = read_db(o.db);
   const ScanLoader loader(o.inputs, parse_format_option(o.format), o.poses, false);
   double prep = 0;
