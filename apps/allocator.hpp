@@ -7,11 +7,12 @@
 // 30 MiB are on transparent huge pages where the system allows them (one fault per 2 MiB).
 // On kitti00/000005, one thread: 4,486 -> 1,161 page faults, whole process 0.93x;
 // decompressing it, 0.82x; a place query with it, 0.90x. Called where it pays, before the
-// first large allocation: when compress, decompress or place query handles one scan. Over many scans in one process glibc's own
-// threshold, which rises to the size of the blocks freed, gives nearly the same (nine KITTI
-// scans on one thread: 1.016x the time without this), while a heap that never shrinks
-// grows with fragmentation (88 balm scans: 130 MB resident against 56 MB one at a time, and
-// 125-250 MB against 93 MB two at a time, each thread's heap keeping its largest size).
+// first large allocation: when compress, decompress or place query handles one scan. Over
+// many scans in one process glibc's own threshold, which rises to the size of the blocks
+// freed, gives nearly the same (nine KITTI scans on one thread: 1.016x the time without
+// this), while a heap that never shrinks grows with fragmentation (88 balm scans: 130 MB
+// resident against 56 MB one at a time, and 125-250 MB against 93 MB two at a time, each
+// thread's heap keeping its largest size).
 
 #include <cstddef>
 #include <cstdint>
