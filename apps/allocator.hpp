@@ -15,22 +15,19 @@
 // thread's heap keeping its largest size).
 
 #include <cstddef>
-#include <cstdint>
 #include <cstdlib>
 
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
+
+#include "core/huge_pages.hpp"
 
 namespace lex3d::cli {
 
 inline void keep_heap_on_huge_pages() noexcept {
-#if defined(__GLIBC__) && defined(__linux__) && defined(MADV_HUGEPAGE)
+#if defined(__GLIBC__)
   constexpr std::size_t kMiB = std::size_t{1} << 20;
-  constexpr std::size_t kHuge = 2 * kMiB;
   // Below glibc's largest mmap threshold (32 MiB on 64-bit), so the block is heap.
   constexpr std::size_t kStart = 30 * kMiB;
   if (mallopt(M_MMAP_THRESHOLD, static_cast<int>(32 * kMiB)) == 0) return;
@@ -40,10 +37,7 @@ inline void keep_heap_on_huge_pages() noexcept {
   // serves the allocations that follow. Nothing is touched here, so nothing is faulted.
   void* block = std::malloc(kStart);
   if (block == nullptr) return;
-  const auto a = reinterpret_cast<std::uintptr_t>(block);
-  const std::uintptr_t lo = (a + kHuge - 1) / kHuge * kHuge;
-  const std::uintptr_t hi = (a + kStart) / kHuge * kHuge;
-  if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+  detail::advise_huge_pages(block, kStart);
   std::free(block);
 #endif
 }
