@@ -203,8 +203,9 @@ void run_compress(const CompressOptions& o) {
   codec::SequenceData sequence;
   residual::LayerOptions layer_options;
   layer_options.thin = !o.keep_all_points;
-  layer_options.spherical = o.layer_coding != "voxel";
-  layer_options.voxel = o.layer_coding != "spherical";
+  layer_options.spherical = o.layer_coding == "auto" || o.layer_coding == "spherical";
+  layer_options.voxel = o.layer_coding == "auto" || o.layer_coding == "voxel";
+  layer_options.laser = o.layer_coding == "auto" || o.layer_coding == "laser";
   layer_options.threads = mp.threads;
   // One scan from its file (or the learnt scans) to its coded bytes: run for several scans
   // at once when there are threads to spare, each scan then on one thread (its stages are
@@ -311,9 +312,19 @@ void run_compress(const CompressOptions& o) {
             .value("explained_points", coded.layer.explained_points)
             .value("coded_points", coded.layer.residual_points)
             .value("escaped_points", coded.layer.escaped_points)
-            .value("coding", coded.layer.voxel ? "voxel" : coded.layer.sweep ? "sweep" : "previous-point")
-            .value("bytes", coded.layer.bytes)
-            .end_object();
+            .value("coding", coded.layer.laser   ? "sensor-geometry"
+                             : coded.layer.voxel ? "voxel"
+                             : coded.layer.sweep ? "sweep"
+                                                 : "previous-point")
+            .value("bytes", coded.layer.bytes);
+        if (!coded.layer.laser_table_source.empty())
+          j.begin_object("laser_table")
+              .value("source", coded.layer.laser_table_source)
+              .value("lasers", static_cast<std::uint64_t>(coded.layer.lasers))
+              .value("columns", static_cast<std::uint64_t>(coded.layer.columns))
+              .value("fit_rms_m", coded.layer.laser_table_rms)
+              .end_object();
+        j.end_object();
       }
       j.end_object();
     } else {
@@ -414,10 +425,12 @@ void register_compress(CLI::App& app) {
                 "Residual layer: give every input point its own decoded point (by default a point within the "
                 "error of one decoded before it is not coded again)");
   sub->add_option("--layer-coding", o->layer_coding,
-                  "Residual layer: try the sensor-centred spherical codings and the voxel (octree) coding and keep "
-                  "the smallest (auto), or use only one kind; voxel needs no sensor pose and suits maps merged "
-                  "from many viewpoints (formats/model.md §2.5-2.7)")
-      ->check(CLI::IsMember({"auto", "spherical", "voxel"}))
+                  "Residual layer: try the sensor-centred spherical codings, the voxel (octree) coding and, where "
+                  "the scan's lasers and columns are known, the sensor-geometry coding, and keep the smallest "
+                  "(auto), or use only one kind; voxel needs no sensor pose and suits maps merged from many "
+                  "viewpoints; laser falls back to spherical where the lasers are unknown (formats/model.md "
+                  "§2.5-2.8)")
+      ->check(CLI::IsMember({"auto", "spherical", "voxel", "laser"}))
       ->capture_default_str();
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);

@@ -19,7 +19,7 @@ namespace lex3d::cli {
 namespace {
 
 const char* layer_coding_name(std::uint32_t coding) {
-  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : "previous-point";
+  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : "previous-point";
 }
 
 struct InfoOptions {
@@ -111,7 +111,7 @@ bool info_lex3d_file(const InfoOptions& o) {
   std::uint64_t layer_bytes = 0;
   if (fi.kind == "model")
     for (const auto& c : fi.chunks)
-      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV") && c.crc_ok) {
+      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV" || c.type == "RESL") && c.crc_ok) {
         auto h = residual::read_layer_header(b.data() + c.offset + 12, static_cast<std::size_t>(c.length));
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
@@ -142,14 +142,17 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.value("word_radius_m", *word_radius).value("point_spacing_m", *point_spacing).value("word_point_step_m", *word_point_step);
     if (referenced) j.value("alphabet", "referenced");
     if (layer)
-      j.begin_object("residual")
+      (void)j.begin_object("residual")
           .value("max_error_m", layer->max_error)
           .value("step_m", layer->step)
           .value("coding", layer_coding_name(layer->coding))
           .value("word_points", layer->word_points)
           .value("coded_points", layer->coded_points)
-          .value("bytes", layer_bytes)
-          .end_object();
+          .value("bytes", layer_bytes);
+    if (layer && layer->coding == 3)
+      j.value("tangential_step_m", layer->tangential_step).value("lasers", static_cast<std::uint64_t>(layer->lasers))
+          .value("columns", static_cast<std::uint64_t>(layer->columns));
+    if (layer) j.end_object();
     if (!decode_error.empty()) j.value("error", decode_error);
     j.end_object();
     std::cout << j.str() << "\n";
@@ -174,6 +177,9 @@ bool info_lex3d_file(const InfoOptions& o) {
                     layer->max_error, layer->coding == 2 ? "cell" : "step", layer->step, layer_coding_name(layer->coding),
                     static_cast<unsigned long long>(layer->coded_points), layer->coding == 2 ? "voxels" : "points",
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
+      if (layer && layer->coding == 3)
+        std::printf("laser table    %u lasers, %u columns a turn; step across the beams %.4g m\n", layer->lasers,
+                    layer->columns, layer->tangential_step);
     }
     if (translation_step)
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);

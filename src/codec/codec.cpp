@@ -33,15 +33,15 @@ constexpr std::uint64_t kQhdrBytes = 8;
 constexpr std::uint16_t kMajor = 1;
 constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
 /// The chunk of a residual layer by its coding (layer_coding), with the first minor
-/// version that has it: RESD 1.1, RESW 1.2, RESV 1.3.
+/// version that has it: RESD 1.1, RESW 1.2, RESV 1.3, RESL 1.4.
 struct LayerChunk {
   const char* type;
   std::uint16_t minor;
   const char* coding;
 };
 constexpr LayerChunk kLayerChunks[] = {
-    {"RESD", 1, "previous-point"}, {"RESW", 2, "sweep"}, {"RESV", 3, "voxel"}};
-constexpr std::uint32_t kLayerCodings = 3;
+    {"RESD", 1, "previous-point"}, {"RESW", 2, "sweep"}, {"RESV", 3, "voxel"}, {"RESL", 4, "sensor-geometry"}};
+constexpr std::uint32_t kLayerCodings = 4;
 constexpr std::size_t kHeaderBytes = 20;      // magic 8, major 2, minor 2, flags 4, header_crc 4
 constexpr std::size_t kChunkHeadBytes = 12;   // type 4, length 8
 constexpr std::size_t kChunkCrcBytes = 4;
@@ -835,7 +835,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
   for (const LayerChunk& lc : kLayerChunks) {
     if (!has_chunk(d, bytes.size(), lc.type)) continue;
     if (layer_chunk != nullptr)
-      return ctx.error(std::string("a model file holds at most one of the chunks 'RESD', 'RESW' and 'RESV' ('") +
+      return ctx.error(std::string("a model file holds at most one of the chunks 'RESD', 'RESW', 'RESV' and 'RESL' ('") +
                            layer_chunk->type + "' and '" + lc.type + "' found)",
                        20);
     layer_chunk = &lc;
@@ -845,7 +845,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     return ctx.error(std::string("chunk '") + layer_chunk->type + "' needs format version 1." +
                          std::to_string(layer_chunk->minor) + ", the header says 1." + std::to_string(h.minor),
                      10);
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "IEND"};
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", "IEND"};
   std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
   if (has_residual) sequence.insert(sequence.begin() + 3, layer_chunk->type);
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
@@ -891,7 +891,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
             return ctx.error(std::string("chunk '") + layer_chunk->type + "' (the " + layer_chunk->coding +
                                  " coding) holds a layer of the " +
                                  kLayerChunks[coding].coding + " coding, which belongs in an '" +
-                                 kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.7)",
+                                 kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8)",
                              c.payload_offset);
         }
         return {};

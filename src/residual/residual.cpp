@@ -28,6 +28,8 @@
 #include "lex3d/model/model.hpp"
 #include "lex3d/range/range_image.hpp"
 #include "codec/bytes.hpp"
+#include "residual/laser.hpp"
+#include "residual/point_ball_grid.hpp"
 #include "residual/range_coder.hpp"
 #include "residual/voxel.hpp"
 
@@ -39,6 +41,7 @@ using detail::IntModel;
 using detail::RangeDecoder;
 using detail::RangeEncoder;
 using detail::kMaxVoxelDepth;
+using detail::PointBallGrid;
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::uint64_t kHeadBytes = 32;  // max_error f64, step f64, word_points u64, coded_points u64
@@ -50,10 +53,16 @@ constexpr std::uint64_t kSweepPrefixBytes = 8;  // coding u32, marker u32
 constexpr std::uint64_t kSweepExtraBytes = 8;   // cell f64, after the RESD header fields
 constexpr std::uint32_t kCodingVoxel = 2;
 constexpr std::uint64_t kVoxelExtraBytes = 28;  // origin 3 f64, depth u32, after the RESD header fields
+constexpr std::uint32_t kCodingLaser = 3;
+/// Shares of 2E' the sensor-geometry coding tries for its range step (encoder only): the
+/// largest suits a table that reproduces the points exactly (read from a sensor's metadata),
+/// the smaller ones leave room for corrections across the beams of an estimated table.
+constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
 /// What a payload of a coding adds to its stream besides the fields every coding has.
 constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
-  return coding == kCodingSweep ? kSweepPrefixBytes + kSweepExtraBytes
+  return coding == kCodingSweep   ? kSweepPrefixBytes + kSweepExtraBytes
          : coding == kCodingVoxel ? kSweepPrefixBytes + kVoxelExtraBytes
+         : coding == kCodingLaser ? kSweepPrefixBytes + detail::kLaserFieldBytes
                                   : 0;
 }
 /// A voxel layer's origin lies within this many metres of the model frame's origin.
@@ -92,111 +101,6 @@ constexpr double kMaxSteps = 1073741824.0;  // 2^30
 /// A decoder accepts at most this many coded points per payload byte (each point costs
 /// at least four binary decisions of >= 0.011 bits).
 constexpr std::uint64_t kMaxPointsPerByte = 200;
-
-// ---------------------------------------------------------------------------------------
-// Fixed-radius existence queries
-// ---------------------------------------------------------------------------------------
-
-/// A growing set of points answering "is any within the radius of p?": cells twice the
-/// radius wide, so the ball around any point meets at most 2x2x2 cells, in an
-/// open-addressing table, the points of a cell chained through `next_`.
-class PointBallGrid {
- public:
-  PointBallGrid(double radius, std::size_t expected) : radius_(radius), inv_cell_(1.0 / (2.0 * radius)) {
-    std::size_t cap = 64;
-    while (cap < 2 * expected) cap <<= 1;
-    keys_.assign(cap, 0);
-    heads_.assign(cap, kNone);
-    mask_ = cap - 1;
-    points_.reserve(expected);
-    next_.reserve(expected);
-    // ~32 filter bits a point (at most 2^23): an empty cell's bit is mostly clear.
-    std::size_t bits = 4096;
-    while (bits < 32 * expected && bits < (std::size_t{1} << 23)) bits <<= 1;
-    filter_.assign(bits / 64, 0);
-    filter_mask_ = bits - 1;
-  }
-  void insert(const Eigen::Vector3f& p) {
-    if (2 * (used_ + 1) > keys_.size()) grow();
-    const std::uint64_t k = key_of(cell(p.x()), cell(p.y()), cell(p.z()));
-    const std::size_t b = (hash(k) >> 40) & filter_mask_;
-    filter_[b >> 6] |= std::uint64_t{1} << (b & 63);
-    const std::size_t s = slot(k, true);
-    next_.push_back(heads_[s]);
-    heads_[s] = static_cast<std::uint32_t>(points_.size());
-    points_.push_back(p);
-  }
-  [[nodiscard]] bool any_within(const Eigen::Vector3d& p) const {
-    const double r2 = radius_ * radius_;
-    std::int64_t base[3], step[3];
-    for (int a = 0; a < 3; ++a) {
-      const double c = p[a] * inv_cell_;
-      base[a] = static_cast<std::int64_t>(std::floor(c));
-      step[a] = (c - static_cast<double>(base[a]) < 0.5) ? -1 : 1;
-    }
-    for (int dx = 0; dx < 2; ++dx)
-      for (int dy = 0; dy < 2; ++dy)
-        for (int dz = 0; dz < 2; ++dz) {
-          const std::uint64_t k = key_of(base[0] + dx * step[0], base[1] + dy * step[1], base[2] + dz * step[2]);
-          const std::uint64_t h = hash(k);
-          const std::size_t b = (h >> 40) & filter_mask_;
-          if (((filter_[b >> 6] >> (b & 63)) & 1U) == 0) continue;  // no point in that cell
-          std::size_t s = h & mask_;
-          while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
-          for (std::uint32_t i = heads_[s]; i != kNone; i = next_[i])
-            if ((points_[i].cast<double>() - p).squaredNorm() <= r2) return true;
-        }
-    return false;
-  }
-
- private:
-  static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
-  [[nodiscard]] std::int64_t cell(float v) const { return static_cast<std::int64_t>(std::floor(static_cast<double>(v) * inv_cell_)); }
-  static std::uint64_t key_of(std::int64_t x, std::int64_t y, std::int64_t z) {
-    const auto f = [](std::int64_t v) { return static_cast<std::uint64_t>(v) & 0x1FFFFFU; };
-    return f(x) | (f(y) << 21) | (f(z) << 42);
-  }
-  static std::uint64_t hash(std::uint64_t k) {
-    k ^= k >> 33;
-    k *= 0xff51afd7ed558ccdULL;
-    k ^= k >> 33;
-    return k;
-  }
-  std::size_t slot(std::uint64_t k, bool create) {
-    std::size_t s = hash(k) & mask_;
-    while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
-    if (heads_[s] == kNone && create) {
-      keys_[s] = k;
-      ++used_;
-    }
-    return s;
-  }
-  void grow() {
-    std::vector<std::uint64_t> keys = std::move(keys_);
-    std::vector<std::uint32_t> heads = std::move(heads_);
-    keys_.assign(keys.size() * 2, 0);
-    heads_.assign(keys.size() * 2, kNone);
-    mask_ = keys_.size() - 1;
-    for (std::size_t i = 0; i < keys.size(); ++i) {
-      if (heads[i] == kNone) continue;
-      std::size_t s = hash(keys[i]) & mask_;
-      while (heads_[s] != kNone) s = (s + 1) & mask_;
-      keys_[s] = keys[i];
-      heads_[s] = heads[i];
-    }
-  }
-
-  double radius_;
-  double inv_cell_;
-  std::vector<std::uint64_t> keys_;
-  std::vector<std::uint32_t> heads_;
-  std::vector<std::uint32_t> next_;
-  std::vector<Eigen::Vector3f> points_;
-  std::vector<std::uint64_t> filter_;  // bit (hash >> 40) of every occupied cell's key
-  std::size_t filter_mask_ = 0;
-  std::size_t mask_ = 0;
-  std::size_t used_ = 0;
-};
 
 // ---------------------------------------------------------------------------------------
 // The point predictor and quantiser shared by encoder and decoder
@@ -606,10 +510,10 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
   std::size_t at = 0;
   if (has_coding_field(payload, size)) {
     h.coding = codec::bytes::ld_u32(payload);
-    if (h.coding != kCodingSweep && h.coding != kCodingVoxel)
-      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1 or 2 expected)", 0);
+    if (h.coding != kCodingSweep && h.coding != kCodingVoxel && h.coding != kCodingLaser)
+      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1, 2 or 3 expected)", 0);
     at = kSweepPrefixBytes;
-    const std::uint64_t need = at + kHeadBytes + (h.coding == kCodingSweep ? kSweepExtraBytes : kVoxelExtraBytes);
+    const std::uint64_t need = kHeadBytes + extra_bytes(h.coding);
     if (size < need)
       return bad_data("residual layer is " + std::to_string(size) + " bytes, at least " + std::to_string(need) +
                           " expected",
@@ -630,6 +534,11 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
     h.depth = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
     h.stream_offset += kVoxelExtraBytes;
+  } else if (h.coding == kCodingLaser) {
+    h.tangential_step = ld_f64(payload + at + kHeadBytes);
+    h.lasers = codec::bytes::ld_u32(payload + at + kHeadBytes + 8);
+    h.columns = codec::bytes::ld_u32(payload + at + kHeadBytes + 12);
+    h.stream_offset += detail::kLaserFieldBytes;
   }
   return h;
 }
@@ -736,8 +645,24 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<VoxelLayer> voxel;
   // (a voxel stands for every point in it: not with `thin` off, which gives each its own)
   const bool voxel_allowed = options.voxel && options.thin;
-  if (!options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
-  if (!voxel) {
+  // The sensor-geometry coding (§2.8) where the scan's lasers and columns are known: each
+  // range-step share in full (it is the fastest coding), the smallest kept.
+  std::optional<detail::LaserLayer> laser;
+  std::optional<detail::LaserAssignment> lasers_of;
+  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true);
+  if (lasers_of) {
+    constexpr std::size_t kShares = std::size(kLaserShares);
+    std::array<std::optional<detail::LaserLayer>, kShares> tries;
+    parallel_for(kShares, threads, [&](std::size_t k) {
+      tries[k] = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, check_error, options.thin,
+                                     kLaserShares[k], 1);
+    }, 1);
+    for (auto& t : tries)
+      if (t && (!laser || t->stream.size() < laser->stream.size())) laser = std::move(t);
+  }
+  const bool others = !laser || options.spherical || options.voxel;
+  if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
+  if (others && !voxel) {
     const bool try_voxel = voxel_allowed && options.spherical;
     if (coded.size() > 4 * kOrderTrialPoints) {
       // On a large layer, a window of consecutive input points is coded the spherical ways
@@ -800,6 +725,38 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
                     extra_bytes(ways[best].sweep ? kCodingSweep : 0) + streams[best].size());
   const bool sweep = !use_voxel && ways[best].sweep;
+  const std::size_t others_bytes = !others ? std::numeric_limits<std::size_t>::max()
+                                   : use_voxel ? extra_bytes(kCodingVoxel) + voxel->stream.size()
+                                               : extra_bytes(sweep ? kCodingSweep : 0) + streams[best].size();
+  if (laser && extra_bytes(kCodingLaser) + laser->stream.size() < others_bytes) {
+    std::vector<std::uint8_t> out;
+    out.reserve(kHeadBytes + extra_bytes(kCodingLaser) + laser->stream.size());
+    codec::bytes::put_u32(out, kCodingLaser);
+    codec::bytes::put_u32(out, kSweepMarker);
+    put_f64(out, max_error);
+    put_f64(out, laser->range_step);
+    put_u64(out, n_w);
+    put_u64(out, laser->coded);
+    out.insert(out.end(), laser->fields.begin(), laser->fields.end());
+    out.insert(out.end(), laser->stream.begin(), laser->stream.end());
+    if (stats) {
+      *stats = LayerStats{};
+      stats->max_error = max_error;
+      stats->word_points = n_w;
+      stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
+      stats->explained_points = n_in - coded.size();
+      stats->residual_points = laser->coded;
+      stats->laser = true;
+      stats->bytes = out.size();
+    }
+    if (stats) {
+      stats->laser_table_source = lasers_of->source;
+      stats->laser_table_rms = lasers_of->fit_rms;
+      stats->lasers = lasers_of->table.lasers();
+      stats->columns = lasers_of->table.columns;
+    }
+    return out;
+  }
   const std::vector<std::uint8_t>& stream = use_voxel ? voxel->stream : streams[best];
 
   // The payload: the coding and marker (RESW, RESV), the fields every coding has, the
@@ -831,6 +788,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     stats->sweep = sweep;
     stats->voxel = use_voxel;
     stats->bytes = out.size();
+    if (lasers_of) {
+      stats->laser_table_source = lasers_of->source;
+      stats->laser_table_rms = lasers_of->fit_rms;
+      stats->lasers = lasers_of->table.lasers();
+      stats->columns = lasers_of->table.columns;
+    }
   }
   return out;
 }
@@ -847,7 +810,7 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
   const std::uint64_t at = h.fields_offset;
   if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
     return bad_data("residual layer max_error " + std::to_string(max_error) + " is outside [1e-4, 10] m", at);
-  if (!(q > 0.0 && q <= 2.0 * max_error / std::sqrt(3.0)))
+  if (h.coding != kCodingLaser && !(q > 0.0 && q <= 2.0 * max_error / std::sqrt(3.0)))
     return bad_data("residual layer step " + std::to_string(q) + " is not in (0, 2*max_error/sqrt(3)]", at + 8);
   if (n_w != words.size())
     return bad_data("residual layer covers " + std::to_string(n_w) + " word points but the reconstruction has " +
@@ -860,6 +823,16 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
                         std::to_string(max_points) + " input points) or the stored bytes can hold",
                     at + 24);
   const bool sweep = h.coding == kCodingSweep;
+  const bool laser = h.coding == kCodingLaser;
+  detail::LaserTable table;
+  double tangential_step = 0.0;
+  if (laser) {
+    if (!(q > 0.0 && q <= 2.0 * max_error))
+      return bad_data("residual layer range step " + std::to_string(q) + " is not in (0, 2*max_error]", at + 8);
+    if (auto e = detail::read_laser_fields(payload.data() + at + kHeadBytes, payload.size() - at - kHeadBytes, max_error,
+                                           table, tangential_step))
+      return bad_data("residual layer " + e->message, at + kHeadBytes + e->offset);
+  }
   if (sweep && !(h.cell >= 1e-6 && h.cell <= kPi))
     return bad_data("residual layer direction cell " + std::to_string(h.cell) + " rad is not in [1e-6, pi]", at + 32);
 
@@ -899,6 +872,11 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
       if (!c.allFinite()) return bad_data("residual layer voxel decodes to a non-finite position", h.stream_offset);
       out.points.push_back(c);
     }
+    return out;
+  }
+  if (laser) {
+    if (auto e = detail::decode_laser_points(dec, table, q, tangential_step, n_c, T_cloud_sensor, out.points))
+      return bad_data("residual layer " + e->message, h.stream_offset);
     return out;
   }
   PointModels m;

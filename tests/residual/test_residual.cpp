@@ -412,7 +412,7 @@ TEST(ResidualSweep, CorruptPayloadsAreRejectedOrDecodeBounded) {
     return b;
   };
   Bytes unknown = good;
-  unknown[0] = 3;  // coding 3 does not exist
+  unknown[0] = 4;  // coding 4 does not exist
   EXPECT_FALSE(residual::decode_layer(unknown, Cloud{}, Pose::Identity(), scan.size()).ok());
   for (const double cell : {0.0, -0.01, 4.0, std::nan("")})
     EXPECT_FALSE(residual::decode_layer(poke_f64(good, 40, cell), Cloud{}, Pose::Identity(), scan.size()).ok()) << cell;

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "lex3d/codec/codec.hpp"
@@ -48,6 +49,10 @@ struct LayerOptions {
   /// Try the spherical codings (RESD, and RESW with `sweep`); off with `voxel` on: the
   /// voxel coding alone (the spherical ones still code a layer the voxel one cannot).
   bool spherical = true;
+  /// Also try the sensor-geometry coding (formats/model.md §2.8: a file of format 1.4) where
+  /// the scan's lasers and columns are known (an organised cloud, a `ring` field, a raw
+  /// sensor log) and keep it when it codes smaller.
+  bool laser = true;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
 };
@@ -63,6 +68,12 @@ struct LayerStats {
   std::size_t bytes = 0;               ///< payload bytes of the layer
   bool sweep = false;                  ///< coded with the sweep coding (an RESW chunk)
   bool voxel = false;                  ///< coded with the voxel coding (an RESV chunk)
+  bool laser = false;                  ///< coded with the sensor-geometry coding (an RESL chunk)
+  /// Where the laser table came from when the sensor-geometry coding was tried (empty
+  /// when it was not), and the RMS distance of the points from their table's beams.
+  std::string laser_table_source;
+  double laser_table_rms = 0.0;
+  std::uint32_t lasers = 0, columns = 0;  ///< the table's lasers and columns a turn
 };
 
 /// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5,
@@ -72,10 +83,13 @@ struct LayerHeader {
   double step = 0.0;               ///< q, metres
   std::uint64_t word_points = 0;   ///< reconstruction points the keep mask covers
   std::uint64_t coded_points = 0;  ///< points coded by the layer
-  std::uint32_t coding = 0;        ///< 0: previous-point coding (RESD); 1: sweep (RESW); 2: voxel (RESV)
+  std::uint32_t coding = 0;        ///< 0: previous-point (RESD); 1: sweep (RESW); 2: voxel (RESV); 3: sensor geometry (RESL)
   double cell = 0.0;               ///< sweep coding: direction cell, radians
   std::array<double, 3> origin{};  ///< voxel coding: the grid's corner, model frame, metres
   std::uint32_t depth = 0;         ///< voxel coding: octree levels
+  double tangential_step = 0.0;    ///< sensor-geometry coding: step across the beams, metres
+  std::uint32_t lasers = 0;        ///< sensor-geometry coding: lasers of the table
+  std::uint32_t columns = 0;       ///< sensor-geometry coding: columns a turn
   std::uint64_t fields_offset = 0; ///< where max_error starts (8 in an RESW payload)
   std::uint64_t stream_offset = 0; ///< where the range-coded stream starts
 };

@@ -1,0 +1,823 @@
+// Sensor-geometry coding of a residual layer (formats/model.md §2.8, laser.hpp).
+//
+// Every coded point is given a laser l and a column c of the sensor's azimuth grid; the
+// table then gives the beam it travelled along (origin o, direction u) and the point is
+// coded as its beam length, quantised with a step up to 2E (the whole error budget lies
+// along the beam), plus a tangential correction in the two directions across the beam
+// that is zero wherever the table reproduces the point within the bound. Points are
+// coded column by column, lasers in order within a column, as occupancy bits; a beam
+// length is predicted from the same laser's previous column and the laser above in the
+// same column (the median edge detector of LOCO-I on the range image).
+
+#include "residual/laser.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <numeric>
+
+#include "codec/bytes.hpp"
+#include "lex3d/core/parallel.hpp"
+#include "residual/point_ball_grid.hpp"
+
+namespace lex3d::residual::detail {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kTwoPi = 2.0 * kPi;
+/// Stored table values lie within these many units (angles: 2π; lengths: 64 m).
+constexpr std::int64_t kMaxAngleUnits = 105414357;   // ceil(2π / 2^-24)
+constexpr std::int64_t kMaxLengthUnits = 64 * 65536;
+/// A left neighbour further than this many columns back does not predict.
+constexpr std::uint32_t kMaxColumnGap = 4;
+/// Largest |value| quantised, in steps.
+constexpr double kMaxSteps = 1073741824.0;  // 2^30
+
+/// The table as doubles, with the per-laser trigonometry the beams need.
+struct Beams {
+  std::vector<double> sin_el, cos_el, beam_az, col_az, z, radial;
+  double azimuth0 = 0.0, column_angle = 0.0;  // column_angle: direction · 2π / columns
+  Pose T_cloud_head = Pose::Identity();
+
+  Beams(const LaserTable& t, const Pose& T_cloud_sensor) {
+    const std::size_t n = t.elevation.size();
+    sin_el.resize(n);
+    cos_el.resize(n);
+    beam_az.resize(n);
+    col_az.resize(n);
+    z.resize(n);
+    radial.resize(n);
+    for (std::size_t l = 0; l < n; ++l) {
+      const double el = static_cast<double>(t.elevation[l]) * kLaserAngleUnit;
+      sin_el[l] = std::sin(el);
+      cos_el[l] = std::cos(el);
+      beam_az[l] = static_cast<double>(t.beam_azimuth[l]) * kLaserAngleUnit;
+      col_az[l] = static_cast<double>(t.column_azimuth[l]) * kLaserAngleUnit;
+      z[l] = static_cast<double>(t.z_offset[l]) * kLaserLengthUnit;
+      radial[l] = static_cast<double>(t.radial_offset[l]) * kLaserLengthUnit;
+    }
+    azimuth0 = t.azimuth0;
+    column_angle = static_cast<double>(t.direction) * kTwoPi / static_cast<double>(t.columns);
+    T_cloud_head = T_cloud_sensor * t.T_sensor_head;
+  }
+
+  struct Beam {
+    Eigen::Vector3d o, u, e1, e2;
+  };
+  /// The beam of laser l in column c, head frame: origin, direction and two unit vectors
+  /// across it (e1 horizontal, e2 = u × e1 pointing up).
+  [[nodiscard]] Beam beam(std::uint32_t l, std::uint32_t c) const {
+    const double alpha = azimuth0 + column_angle * static_cast<double>(c) + col_az[l];
+    const double beta = alpha + beam_az[l];
+    const double ca = std::cos(alpha), sa = std::sin(alpha);
+    const double cb = std::cos(beta), sb = std::sin(beta);
+    Beam b;
+    b.o = Eigen::Vector3d(radial[l] * ca, radial[l] * sa, z[l]);
+    b.u = Eigen::Vector3d(cb * cos_el[l], sb * cos_el[l], sin_el[l]);
+    b.e1 = Eigen::Vector3d(-sb, cb, 0.0);
+    b.e2 = Eigen::Vector3d(-cb * sin_el[l], -sb * sin_el[l], cos_el[l]);
+    return b;
+  }
+  /// The decoded point of beam length index k and corrections (k1, k2), cloud frame.
+  [[nodiscard]] Eigen::Vector3f point(const Beam& b, std::int64_t k, std::int64_t k1, std::int64_t k2, double qr,
+                                      double qt) const {
+    const Eigen::Vector3d p = b.o + (static_cast<double>(k) * qr) * b.u + (static_cast<double>(k1) * qt) * b.e1 +
+                              (static_cast<double>(k2) * qt) * b.e2;
+    return (T_cloud_head * p).cast<float>();
+  }
+};
+
+bool quantise(double v, double step, std::int64_t& k) {
+  const double x = std::round(v / step);
+  if (!(std::abs(x) <= kMaxSteps)) return false;
+  k = static_cast<std::int64_t>(x);
+  return true;
+}
+
+/// The models and predictor state shared by encoder and decoder (formats/model.md §2.8.3).
+class PointCoder {
+ public:
+  static constexpr int kClasses = IntModel::kClasses;
+  explicit PointCoder(std::uint32_t lasers)
+      : last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone),
+        last_res_(lasers, 0), last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0) {}
+
+  // --- structure ---
+  int column_ctx() const { return IntModel::context_of(last_dc_); }
+  void start_column(std::uint32_t column, std::int64_t dc) {
+    if (started_) std::swap(occ_prev_, occ_now_);
+    std::fill(occ_now_.begin(), occ_now_.end(), 0);
+    started_ = true;
+    column_ = column;
+    last_dc_ = dc;
+    up_ = kNone;
+  }
+  int occupancy_ctx(std::uint32_t l) const {
+    const int up = l == 0 ? 1 : occ_now_[l - 1];
+    return occ_prev_[l] + 2 * occ_prev_[l + 1] + 4 * up + 8 * (last_dc_ == 0 ? 1 : 0);
+  }
+  void occupied(std::uint32_t l) { occ_now_[l] = 1; }
+
+  // --- one point of laser l in the current column ---
+  struct Prediction {
+    std::int64_t k;
+    int ctx;
+  };
+  Prediction predict(std::uint32_t l) const {
+    const bool has_a = last_c_[l] != kNone && column_ - last_c_[l] <= kMaxColumnGap;
+    const bool has_b = up_ != kNone && l - up_ <= 2;
+    const std::int64_t a = last_k_[l];
+    std::int64_t p = 0;
+    int activity = kClasses - 1;
+    if (has_a && has_b) {
+      const std::int64_t b = last_k_[up_];
+      // the upper laser's value in the left neighbour's column
+      if (prev_c_[up_] != kNone && prev_c_[up_] == last_c_[l]) {
+        const std::int64_t cc = prev_k_[up_];
+        if (cc >= std::max(a, b)) p = std::min(a, b);
+        else if (cc <= std::min(a, b)) p = std::max(a, b);
+        else p = a + b - cc;
+        activity = IntModel::context_of(std::abs(a - cc) + std::abs(b - cc));
+        if (activity == kClasses - 1) activity = kClasses - 2;
+      } else {
+        p = a;
+      }
+    } else if (has_a) {
+      p = a;
+    } else if (has_b) {
+      p = last_k_[up_];
+    } else {
+      p = last_any_;
+    }
+    return {p, activity * kClasses + IntModel::context_of(last_res_[l])};
+  }
+  int k1_ctx(std::uint32_t l) const { return IntModel::context_of(last_k1_[l], last_k1_any_); }
+  int k2_ctx(std::uint32_t l, std::int64_t k1) const { return IntModel::context_of(last_k2_[l], k1); }
+  void update(std::uint32_t l, std::int64_t k, std::int64_t res, std::int64_t k1, std::int64_t k2) {
+    if (last_c_[l] != column_) {
+      prev_k_[l] = last_k_[l];
+      prev_c_[l] = last_c_[l];
+    }
+    last_k_[l] = k;
+    last_c_[l] = column_;
+    last_res_[l] = res;
+    last_k1_[l] = k1;
+    last_k2_[l] = k2;
+    last_k1_any_ = k1;
+    last_any_ = k;
+    up_ = l;
+  }
+
+  BitModel occupancy[16];
+  BitModel more[2];
+  IntModel column_delta{kClasses};
+  IntModel range{kClasses * kClasses};
+  IntModel tangential1{kClasses * kClasses}, tangential2{kClasses * kClasses};
+
+ private:
+  static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
+  std::vector<std::int64_t> last_k_;
+  std::vector<std::uint32_t> last_c_;
+  std::vector<std::int64_t> prev_k_;
+  std::vector<std::uint32_t> prev_c_;
+  std::vector<std::int64_t> last_res_, last_k1_, last_k2_;
+  std::vector<std::uint8_t> occ_prev_, occ_now_;  // one extra laser, never occupied
+  std::int64_t last_dc_ = 0, last_any_ = 0, last_k1_any_ = 0;
+  std::uint32_t column_ = 0, up_ = kNone;
+  bool started_ = false;
+};
+
+/// The table's five per-laser fields, in the order they are stored.
+std::array<std::vector<std::int64_t>*, 5> table_fields(LaserTable& t) {
+  return {&t.elevation, &t.beam_azimuth, &t.column_azimuth, &t.z_offset, &t.radial_offset};
+}
+
+void put_table(RangeEncoder& enc, LaserTable& t) {
+  IntModel m{IntModel::kClasses};
+  for (auto* f : table_fields(t)) {
+    std::int64_t prev = 0, prev_d = 0;
+    for (std::int64_t v : *f) {
+      m.put(enc, IntModel::context_of(prev_d), v - prev);
+      prev_d = v - prev;
+      prev = v;
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// The table from the input
+// ---------------------------------------------------------------------------------------
+
+std::int64_t angle_units(double a) { return static_cast<std::int64_t>(std::llround(a / kLaserAngleUnit)); }
+std::int64_t length_units(double v) { return static_cast<std::int64_t>(std::llround(v / kLaserLengthUnit)); }
+
+/// Whether the table's values are within what a payload may store.
+bool storable(const LaserTable& t) {
+  if (t.lasers() < 1 || t.lasers() > kMaxLasers || t.columns < 1 || t.columns > kMaxLaserColumns) return false;
+  if (!std::isfinite(t.azimuth0) || std::abs(t.azimuth0) > kTwoPi) return false;
+  if (t.direction != 1 && t.direction != -1) return false;
+  if (!t.T_sensor_head.matrix().allFinite()) return false;
+  const auto within = [](const std::vector<std::int64_t>& v, std::int64_t bound) {
+    return std::all_of(v.begin(), v.end(), [&](std::int64_t x) { return x >= -bound && x <= bound; });
+  };
+  return within(t.elevation, kMaxAngleUnits) && within(t.beam_azimuth, kMaxAngleUnits) &&
+         within(t.column_azimuth, kMaxAngleUnits) && within(t.z_offset, kMaxLengthUnits) &&
+         within(t.radial_offset, kMaxLengthUnits);
+}
+
+LaserTable quantise_geometry(const SensorGeometry& g) {
+  LaserTable t;
+  const std::size_t n = g.lasers();
+  const auto field = [&](const std::vector<double>& v, std::size_t l) { return l < v.size() ? v[l] : 0.0; };
+  for (std::size_t l = 0; l < n; ++l) {
+    t.elevation.push_back(angle_units(field(g.elevation, l)));
+    t.beam_azimuth.push_back(angle_units(field(g.beam_azimuth, l)));
+    t.column_azimuth.push_back(angle_units(field(g.column_azimuth, l)));
+    t.z_offset.push_back(length_units(field(g.z_offset, l)));
+    t.radial_offset.push_back(length_units(field(g.radial_offset, l)));
+  }
+  t.columns = g.columns;
+  t.direction = g.direction >= 0 ? 1 : -1;
+  t.azimuth0 = std::isfinite(g.azimuth0) ? std::remainder(g.azimuth0, kTwoPi) : 0.0;
+  t.T_sensor_head = g.T_sensor_head;
+  return t;
+}
+
+/// Mean direction of angles (radians) and its resultant length in [0, 1].
+std::pair<double, double> circular_mean(double sum_cos, double sum_sin, std::size_t n) {
+  if (n == 0) return {0.0, 0.0};
+  return {std::atan2(sum_sin, sum_cos), std::hypot(sum_cos, sum_sin) / static_cast<double>(n)};
+}
+
+/// Estimates a table for points whose lasers and columns are known: per laser, the height
+/// of the beam origin and the elevation by a line fit of z against the horizontal range
+/// (twice, the second time without the points more than 3 median deviations off), and the
+/// azimuth of its columns by a circular mean; the direction of the grid is the one whose
+/// means are the tighter.
+std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring,
+                                         const std::vector<std::uint32_t>& column, std::uint32_t lasers,
+                                         std::uint32_t columns) {
+  if (lasers < 1 || lasers > kMaxLasers || columns < 1 || columns > kMaxLaserColumns) return std::nullopt;
+  std::vector<std::vector<std::uint32_t>> of(lasers);
+  for (std::size_t i = 0; i < p.size(); ++i) of[ring[i]].push_back(static_cast<std::uint32_t>(i));
+  LaserTable t;
+  t.columns = columns;
+  t.elevation.assign(lasers, 0);
+  t.beam_azimuth.assign(lasers, 0);
+  t.column_azimuth.assign(lasers, 0);
+  t.z_offset.assign(lasers, 0);
+  t.radial_offset.assign(lasers, 0);
+  // Direction of the grid: the one that explains the azimuths better over all lasers.
+  double best_r = -1.0;
+  for (int dir : {1, -1}) {
+    double total = 0.0;
+    std::size_t count = 0;
+    std::vector<std::int64_t> offsets(lasers, 0);
+    for (std::uint32_t l = 0; l < lasers; ++l) {
+      double sc = 0.0, ss = 0.0;
+      std::size_t n = 0;
+      for (std::uint32_t i : of[l]) {
+        const double rho = std::hypot(p[i].x(), p[i].y());
+        if (!(rho > 1e-3)) continue;
+        const double a = std::atan2(p[i].y(), p[i].x()) - dir * kTwoPi * static_cast<double>(column[i]) / columns;
+        sc += std::cos(a);
+        ss += std::sin(a);
+        ++n;
+      }
+      const auto [mean, r] = circular_mean(sc, ss, n);
+      offsets[l] = angle_units(mean);
+      total += r * static_cast<double>(n);
+      count += n;
+    }
+    const double r = count ? total / static_cast<double>(count) : 0.0;
+    if (r > best_r) {
+      best_r = r;
+      t.direction = dir;
+      t.column_azimuth = offsets;
+    }
+  }
+  // Elevation and height of each laser's beam origin.
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    std::vector<std::uint32_t> use;
+    for (std::uint32_t i : of[l])
+      if (std::hypot(p[i].x(), p[i].y()) > 1e-3) use.push_back(i);
+    double z0 = 0.0, slope = 0.0;
+    for (int pass = 0; pass < 2 && !use.empty(); ++pass) {
+      double sr = 0, sz = 0, srr = 0, srz = 0;
+      for (std::uint32_t i : use) {
+        const double r = std::hypot(p[i].x(), p[i].y());
+        sr += r;
+        sz += p[i].z();
+        srr += r * r;
+        srz += r * p[i].z();
+      }
+      const double n = static_cast<double>(use.size());
+      const double den = n * srr - sr * sr;
+      if (use.size() >= 8 && den > 1e-9 * n * srr) {
+        slope = (n * srz - sr * sz) / den;
+        z0 = (sz - slope * sr) / n;
+      } else {
+        // too few points or one range: the elevation through the sensor origin
+        double s = 0;
+        for (std::uint32_t i : use) s += p[i].z() / std::hypot(p[i].x(), p[i].y());
+        slope = s / n;
+        z0 = 0.0;
+      }
+      if (std::abs(z0) > 10.0) {  // a wild fit: through the origin instead
+        z0 = 0.0;
+        double s = 0;
+        for (std::uint32_t i : use) s += p[i].z() / std::hypot(p[i].x(), p[i].y());
+        slope = s / n;
+      }
+      if (pass == 1) break;
+      std::vector<double> dev(use.size());
+      for (std::size_t j = 0; j < use.size(); ++j) {
+        const Eigen::Vector3d& q = p[use[j]];
+        dev[j] = std::abs(q.z() - z0 - slope * std::hypot(q.x(), q.y()));
+      }
+      std::vector<double> sorted = dev;
+      std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+      const double mad = sorted[sorted.size() / 2];
+      std::vector<std::uint32_t> kept;
+      for (std::size_t j = 0; j < use.size(); ++j)
+        if (dev[j] <= 3.0 * mad + 1e-6) kept.push_back(use[j]);
+      if (kept.size() >= 8) use.swap(kept);
+    }
+    // z = z0 + tan(φ) ρ: a beam from (0, 0, z0) at elevation φ.
+    t.elevation[l] = angle_units(std::atan(slope));
+    t.z_offset[l] = length_units(z0);
+  }
+  return t;
+}
+
+/// The azimuth grid of points whose lasers are known but not their columns: the step is
+/// the median gap between azimuth-neighbouring points of a laser (the firing interval),
+/// the grid's phase per laser the circular mean of the azimuths modulo the step, and each
+/// point's column its nearest grid step. False when the lasers hold too few points.
+bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring, std::uint32_t lasers,
+                      std::vector<std::uint32_t>& column, std::uint32_t& columns) {
+  std::vector<std::vector<double>> az(lasers);
+  for (std::size_t i = 0; i < p.size(); ++i) az[ring[i]].push_back(std::atan2(p[i].y(), p[i].x()));
+  std::vector<double> gaps;
+  for (auto& a : az) {
+    std::vector<double> s = a;
+    std::sort(s.begin(), s.end());
+    for (std::size_t k = 1; k < s.size(); ++k)
+      if (s[k] - s[k - 1] > 1e-7) gaps.push_back(s[k] - s[k - 1]);
+  }
+  if (gaps.size() < 64) return false;
+  std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
+  const double median = gaps[gaps.size() / 2];
+  const double w = std::round(kTwoPi / median);
+  if (!(w >= 16 && w <= kMaxLaserColumns)) return false;
+  columns = static_cast<std::uint32_t>(w);
+  const double step = kTwoPi / w;
+  std::vector<double> phase(lasers, 0.0);
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    double sc = 0, ss = 0;
+    for (double a : az[l]) {
+      const double f = kTwoPi * (a / step - std::floor(a / step));
+      sc += std::cos(f);
+      ss += std::sin(f);
+    }
+    phase[l] = circular_mean(sc, ss, az[l].size()).first / kTwoPi * step;
+  }
+  column.resize(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    double a = std::atan2(p[i].y(), p[i].x()) - phase[ring[i]];
+    a -= kTwoPi * std::floor(a / kTwoPi);  // [0, 2π)
+    auto c = static_cast<std::int64_t>(std::llround(a / step));
+    if (c >= static_cast<std::int64_t>(columns)) c -= columns;
+    column[i] = static_cast<std::uint32_t>(std::clamp<std::int64_t>(c, 0, columns - 1));
+  }
+  return true;
+}
+
+/// Lasers of points that know none: the elevations (seen from the height that makes them
+/// sharpest) of the points beyond the nearest quarter form one peak a laser; each point
+/// goes to the nearest peak, and then to the laser whose fitted beam passes nearest it.
+bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint16_t>& ring, std::uint32_t& lasers) {
+  const std::size_t n = p.size();
+  if (n < 256) return false;
+  std::vector<double> rho(n);
+  for (std::size_t i = 0; i < n; ++i) rho[i] = std::hypot(p[i].x(), p[i].y());
+  const double near = 1.0;
+  std::vector<std::uint32_t> far;
+  for (std::size_t i = 0; i < n; ++i)
+    if (rho[i] >= near) far.push_back(static_cast<std::uint32_t>(i));
+  if (far.size() < 128) return false;
+  // Histogram of elevations, 0.01 degree bins over what the points span.
+  constexpr double kBin = 0.01 * kPi / 180.0;
+  const auto histogram = [&](double h, std::vector<double>& hist, double& lo) {
+    double mn = 10, mx = -10;
+    for (std::uint32_t i : far) {
+      const double e = std::atan2(p[i].z() - h, rho[i]);
+      mn = std::min(mn, e);
+      mx = std::max(mx, e);
+    }
+    lo = mn - 4 * kBin;
+    hist.assign(static_cast<std::size_t>((mx - lo) / kBin) + 8, 0.0);
+    for (std::uint32_t i : far) hist[static_cast<std::size_t>((std::atan2(p[i].z() - h, rho[i]) - lo) / kBin)] += 1.0;
+  };
+  // The height whose elevations are sharpest: the largest sum of squared bin counts.
+  double best_h = 0.0, best_sharp = -1.0;
+  for (int k = -30; k <= 30; ++k) {
+    const double h = 0.01 * k;
+    std::vector<double> hist;
+    double lo = 0;
+    histogram(h, hist, lo);
+    double sharp = 0;
+    for (double c : hist) sharp += c * c;
+    if (sharp > best_sharp) {
+      best_sharp = sharp;
+      best_h = h;
+    }
+  }
+  std::vector<double> hist;
+  double lo = 0;
+  histogram(best_h, hist, lo);
+  // Smooth over 5 bins; peaks are local maxima above a share of the mean occupied count,
+  // at least 0.08 degrees apart (the closest beams of the sensors known, 0.11 degrees).
+  std::vector<double> sm(hist.size(), 0.0);
+  for (std::size_t b = 2; b + 2 < hist.size(); ++b)
+    sm[b] = (hist[b - 2] + 2 * hist[b - 1] + 3 * hist[b] + 2 * hist[b + 1] + hist[b + 2]) / 9.0;
+  double occupied = 0, sum = 0;
+  for (double c : sm)
+    if (c > 0) {
+      occupied += 1;
+      sum += c;
+    }
+  const double floor_count = 0.25 * sum / std::max(1.0, occupied);
+  std::vector<double> peaks;
+  const auto min_sep = static_cast<std::size_t>(0.08 * kPi / 180.0 / kBin);
+  std::size_t last = 0;
+  for (std::size_t b = 1; b + 1 < sm.size(); ++b) {
+    if (!(sm[b] >= floor_count && sm[b] >= sm[b - 1] && sm[b] > sm[b + 1])) continue;
+    const double e = lo + (static_cast<double>(b) + 0.5) * kBin;
+    if (!peaks.empty() && b - last < min_sep) {
+      if (sm[b] > sm[last]) {
+        peaks.back() = e;
+        last = b;
+      }
+      continue;
+    }
+    peaks.push_back(e);
+    last = b;
+  }
+  if (std::getenv("LEX3D_DEBUG_LASER")) {
+    std::fprintf(stderr, "h %.3f near %.2f peaks %zu:", best_h, near, peaks.size());
+    for (double e : peaks) std::fprintf(stderr, " %.3f", e * 180 / kPi);
+    std::fprintf(stderr, "\n");
+  }
+  if (peaks.size() < 2 || peaks.size() > kMaxLasers) return false;
+  lasers = static_cast<std::uint32_t>(peaks.size());
+  ring.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double e = std::atan2(p[i].z() - best_h, rho[i]);
+    const auto it = std::lower_bound(peaks.begin(), peaks.end(), e);
+    std::size_t l = static_cast<std::size_t>(it - peaks.begin());
+    if (l == peaks.size() || (l > 0 && e - peaks[l - 1] < *it - e)) l = l == 0 ? 0 : l - 1;
+    ring[i] = static_cast<std::uint16_t>(l);
+  }
+  // Refinement: each laser's beam as a line z = h + t ρ fitted to its points, and every
+  // point moved to the laser whose line passes nearest in elevation (beams whose origins
+  // sit at different heights, as a HDL-64E's do).
+  for (int round = 0; round < 3; ++round) {
+    std::vector<double> sr(lasers, 0), sz(lasers, 0), srr(lasers, 0), srz(lasers, 0), cnt(lasers, 0);
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!(rho[i] >= near)) continue;
+      const std::uint16_t l = ring[i];
+      sr[l] += rho[i];
+      sz[l] += p[i].z();
+      srr[l] += rho[i] * rho[i];
+      srz[l] += rho[i] * p[i].z();
+      cnt[l] += 1;
+    }
+    std::vector<double> h(lasers), t(lasers);
+    for (std::uint32_t l = 0; l < lasers; ++l) {
+      const double den = cnt[l] * srr[l] - sr[l] * sr[l];
+      if (cnt[l] >= 8 && den > 1e-6 * cnt[l] * srr[l]) {
+        t[l] = (cnt[l] * srz[l] - sr[l] * sz[l]) / den;
+        h[l] = (sz[l] - t[l] * sr[l]) / cnt[l];
+      } else {
+        t[l] = std::tan(peaks[l]);
+        h[l] = best_h;
+      }
+      if (std::abs(h[l] - best_h) > 0.5) {
+        t[l] = std::tan(peaks[l]);
+        h[l] = best_h;
+      }
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const double r = std::max(rho[i], 1e-3);
+      std::size_t best = ring[i];
+      double best_d = std::abs(std::atan2(p[i].z() - h[best], r) - std::atan(t[best]));
+      for (std::size_t l = best > 2 ? best - 2 : 0; l < std::min<std::size_t>(lasers, best + 3); ++l) {
+        const double d = std::abs(std::atan2(p[i].z() - h[l], r) - std::atan(t[l]));
+        if (d < best_d) {
+          best_d = d;
+          best = l;
+        }
+      }
+      ring[i] = static_cast<std::uint16_t>(best);
+    }
+  }
+  // (ring numbers from the top, as sensors number their beams)
+  for (auto& r : ring) r = static_cast<std::uint16_t>(lasers - 1 - r);
+  return true;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// assign_lasers
+// ---------------------------------------------------------------------------------------
+
+std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate) {
+  const std::size_t n = input.size();
+  if (n == 0) return std::nullopt;
+  LaserAssignment a;
+  std::uint32_t lasers = 0, columns = 0;
+  if (input.has_rings()) {
+    a.ring = input.ring;
+    for (std::size_t i = 0; i < n; ++i) lasers = std::max<std::uint32_t>(lasers, a.ring[i] + 1U);
+  }
+  if (input.has_rings() && input.has_columns()) {
+    a.column = input.column;
+    for (std::size_t i = 0; i < n; ++i) columns = std::max<std::uint32_t>(columns, a.column[i] + 1U);
+  }
+  if (!a.column.empty() && input.geometry && input.geometry->lasers() >= lasers && input.geometry->columns >= columns &&
+      input.geometry->columns > 0) {
+    a.table = quantise_geometry(*input.geometry);
+    a.source = input.geometry->source.empty() ? "sensor metadata" : input.geometry->source;
+  } else {
+    if (a.ring.empty() && !estimate) return std::nullopt;
+    const Pose T_sensor_cloud = T_cloud_sensor.inverse();
+    std::vector<Eigen::Vector3d> p(n);
+    for (std::size_t i = 0; i < n; ++i) p[i] = T_sensor_cloud * input.points[i].cast<double>();
+    if (a.ring.empty()) {
+      if (!estimate_rings(p, a.ring, lasers)) return std::nullopt;
+      a.source = "estimated from the points (lasers by elevation, columns by azimuth)";
+    } else if (a.column.empty()) {
+      a.source = "estimated from the input's lasers (columns by azimuth)";
+    } else {
+      a.source = "estimated from the input's lasers and columns";
+    }
+    if (a.column.empty() && !estimate_columns(p, a.ring, lasers, a.column, columns)) return std::nullopt;
+    if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
+    if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
+    auto t = estimate_table(p, a.ring, a.column, lasers, columns);
+    if (!t) return std::nullopt;
+    a.table = std::move(*t);
+  }
+  if (!storable(a.table)) return std::nullopt;
+  // How far the points lie from their beams.
+  const Beams beams(a.table, T_cloud_sensor);
+  const Pose T_head_cloud = beams.T_cloud_head.inverse();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto b = beams.beam(a.ring[i], a.column[i]);
+    const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
+    sum += (v - v.dot(b.u) * b.u).squaredNorm();
+  }
+  a.fit_rms = std::sqrt(sum / static_cast<double>(n));
+  return a;
+}
+
+// ---------------------------------------------------------------------------------------
+// Encoder
+// ---------------------------------------------------------------------------------------
+
+std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
+                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
+                                      const Pose& T_cloud_sensor, double bound, bool thin, double share, int threads) {
+  LaserTable table = a.table;
+  if (!storable(table)) return std::nullopt;
+  const double qr = 2.0 * share * bound;
+  const double qt = std::sqrt(std::max(0.0, 2.0 * (1.0 - share * share))) * bound * 0.99;
+  if (!(qt > 0.0)) return std::nullopt;
+  const Beams beams(table, T_cloud_sensor);
+  const Pose T_head_cloud = beams.T_cloud_head.inverse();
+  const double e2 = bound * bound;
+
+  // Every point's beam length and corrections, and the point they decode to.
+  struct Coded {
+    std::int64_t k = 0, k1 = 0, k2 = 0;
+    Eigen::Vector3f decoded;
+  };
+  std::vector<Coded> q(coded.size());
+  std::vector<std::uint8_t> failed(coded.size(), 0);
+  parallel_for(coded.size(), threads, [&](std::size_t j) {
+    const std::uint32_t i = coded[j];
+    const Eigen::Vector3d truth = input[i].cast<double>();
+    const auto b = beams.beam(a.ring[i], a.column[i]);
+    const Eigen::Vector3d v = T_head_cloud * truth - b.o;
+    Coded& c = q[j];
+    if (!quantise(v.dot(b.u), qr, c.k)) {
+      failed[j] = 1;
+      return;
+    }
+    c.decoded = beams.point(b, c.k, 0, 0, qr, qt);
+    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
+    if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) {
+      failed[j] = 1;
+      return;
+    }
+    c.decoded = beams.point(b, c.k, c.k1, c.k2, qr, qt);
+    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
+    // rounding at the edge of the bound: the neighbouring steps
+    const Coded base = c;
+    for (int dk = -1; dk <= 1; ++dk)
+      for (int d1 = -1; d1 <= 1; ++d1)
+        for (int d2 = -1; d2 <= 1; ++d2) {
+          const Eigen::Vector3f d = beams.point(b, base.k + dk, base.k1 + d1, base.k2 + d2, qr, qt);
+          if ((d.cast<double>() - truth).squaredNorm() <= e2) {
+            c = {base.k + dk, base.k1 + d1, base.k2 + d2, d};
+            return;
+          }
+        }
+    failed[j] = 1;
+  }, 4096);
+  if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
+
+  // Column by column, lasers in order, then input order.
+  std::vector<std::uint32_t> order(coded.size());
+  std::iota(order.begin(), order.end(), 0U);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    const std::uint32_t ix = coded[x], iy = coded[y];
+    if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
+    if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
+    return ix < iy;
+  });
+  // Thinning: a point that a point decoded before it explains is not coded.
+  if (thin) {
+    PointBallGrid seen(bound, order.size());
+    std::vector<std::uint32_t> kept;
+    kept.reserve(order.size());
+    for (std::uint32_t j : order) {
+      if (seen.any_within(input[coded[j]].cast<double>())) continue;
+      seen.insert(q[j].decoded);
+      kept.push_back(j);
+    }
+    order.swap(kept);
+  }
+
+  LaserLayer out;
+  out.range_step = qr;
+  out.coded = order.size();
+  RangeEncoder enc = head;
+  put_table(enc, table);
+  PointCoder pc(table.lasers());
+  std::size_t at = 0;
+  std::int64_t prev_column = -1;
+  std::uint64_t remaining = order.size();
+  while (at < order.size()) {
+    const std::uint32_t column = a.column[coded[order[at]]];
+    std::size_t end = at;
+    while (end < order.size() && a.column[coded[order[end]]] == column) ++end;
+    const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
+    pc.column_delta.put(enc, pc.column_ctx(), dc);
+    pc.start_column(column, dc);
+    std::size_t j = at;
+    for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
+      const bool occ = j < end && a.ring[coded[order[j]]] == l;
+      enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
+      if (!occ) continue;
+      pc.occupied(l);
+      for (;;) {
+        const Coded& c = q[order[j]];
+        const auto pred = pc.predict(l);
+        const std::int64_t res = c.k - pred.k;
+        pc.range.put(enc, pred.ctx, res);
+        pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
+        pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
+        pc.update(l, c.k, res, c.k1, c.k2);
+        ++j;
+        --remaining;
+        if (remaining == 0) break;
+        const bool more = j < end && a.ring[coded[order[j]]] == l;
+        enc.put(pc.more[0], more);
+        if (!more) break;
+      }
+    }
+    prev_column = column;
+    at = end;
+  }
+  out.stream = enc.finish();
+
+  codec::bytes::put_f64(out.fields, qt);
+  codec::bytes::put_u32(out.fields, table.lasers());
+  codec::bytes::put_u32(out.fields, table.columns);
+  codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
+  codec::bytes::put_f64(out.fields, table.azimuth0);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
+  for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------
+// Decoder
+// ---------------------------------------------------------------------------------------
+
+std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::uint64_t size, double max_error,
+                                                  LaserTable& table, double& tangential_step) {
+  if (size < kLaserFieldBytes)
+    return LaserDecodeError{"sensor-geometry layer fields are truncated", 0};
+  tangential_step = codec::bytes::ld_f64(f);
+  if (!(tangential_step > 0.0 && tangential_step <= 2.0 * max_error))
+    return LaserDecodeError{"tangential step " + std::to_string(tangential_step) + " is not in (0, 2*max_error]", 0};
+  const std::uint32_t lasers = codec::bytes::ld_u32(f + 8);
+  table.columns = codec::bytes::ld_u32(f + 12);
+  const std::uint32_t dir = codec::bytes::ld_u32(f + 16);
+  table.azimuth0 = codec::bytes::ld_f64(f + 20);
+  if (lasers < 1 || lasers > kMaxLasers)
+    return LaserDecodeError{"laser count " + std::to_string(lasers) + " is not in [1, 1024]", 8};
+  if (table.columns < 1 || table.columns > kMaxLaserColumns)
+    return LaserDecodeError{"column count " + std::to_string(table.columns) + " is not in [1, 2^20]", 12};
+  if (dir != 1U && dir != 0xFFFFFFFFU) return LaserDecodeError{"column direction is neither +1 nor -1", 16};
+  table.direction = dir == 1U ? 1 : -1;
+  if (!(std::isfinite(table.azimuth0) && std::abs(table.azimuth0) <= kTwoPi))
+    return LaserDecodeError{"azimuth of column 0 is not in [-2pi, 2pi]", 20};
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) R(r, c) = codec::bytes::ld_f64(f + 28 + 8 * (3 * r + c));
+  for (int r = 0; r < 3; ++r) t[r] = codec::bytes::ld_f64(f + 100 + 8 * r);
+  if (!R.allFinite() || !t.allFinite() || (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
+      !(R.determinant() > 0.0) || !(t.cwiseAbs().maxCoeff() <= 1e3))
+    return LaserDecodeError{"T_sensor_head is not a rigid transform within 1 km", 28};
+  table.T_sensor_head = Pose::Identity();
+  table.T_sensor_head.linear() = R;
+  table.T_sensor_head.translation() = t;
+  for (auto* field : table_fields(table)) field->assign(lasers, 0);
+  return std::nullopt;
+}
+
+std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double qr, double qt,
+                                                    std::uint64_t coded_points, const Pose& T_cloud_sensor,
+                                                    std::vector<Eigen::Vector3f>& out) {
+  {
+    IntModel m{IntModel::kClasses};
+    const std::array<std::int64_t, 5> bounds = {kMaxAngleUnits, kMaxAngleUnits, kMaxAngleUnits, kMaxLengthUnits,
+                                                kMaxLengthUnits};
+    std::size_t f_index = 0;
+    for (auto* f : table_fields(table)) {
+      std::int64_t prev = 0, prev_d = 0;
+      for (auto& v : *f) {
+        const std::int64_t d = m.get(dec, IntModel::context_of(prev_d));
+        v = prev + d;
+        if (v < -bounds[f_index] || v > bounds[f_index])
+          return LaserDecodeError{"laser table value out of range", 0};
+        prev_d = d;
+        prev = v;
+      }
+      ++f_index;
+    }
+  }
+  const Beams beams(table, T_cloud_sensor);
+  PointCoder pc(table.lasers());
+  std::uint64_t remaining = coded_points;
+  std::int64_t prev_column = -1;
+  while (remaining > 0) {
+    if (dec.overrun() > 8) return LaserDecodeError{"stream ends early", 0};
+    const std::int64_t dc = pc.column_delta.get(dec, pc.column_ctx());
+    const std::int64_t column = prev_column + 1 + dc;
+    if (dc < 0 || column >= static_cast<std::int64_t>(table.columns))
+      return LaserDecodeError{"column " + std::to_string(column) + " is outside the grid of " +
+                                  std::to_string(table.columns),
+                              0};
+    const auto c = static_cast<std::uint32_t>(column);
+    pc.start_column(c, dc);
+    for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
+      if (!dec.get(pc.occupancy[pc.occupancy_ctx(l)])) continue;
+      pc.occupied(l);
+      const auto b = beams.beam(l, c);
+      for (;;) {
+        const auto pred = pc.predict(l);
+        const std::int64_t res = pc.range.get(dec, pred.ctx);
+        const std::int64_t k1 = pc.tangential1.get(dec, pc.k1_ctx(l));
+        const std::int64_t k2 = pc.tangential2.get(dec, pc.k2_ctx(l, k1));
+        const std::int64_t k = pred.k + res;
+        if (std::abs(k) > static_cast<std::int64_t>(kMaxSteps) || std::abs(k1) > static_cast<std::int64_t>(kMaxSteps) ||
+            std::abs(k2) > static_cast<std::int64_t>(kMaxSteps))
+          return LaserDecodeError{"point " + std::to_string(out.size()) + " lies beyond 2^30 steps", 0};
+        const Eigen::Vector3f p = beams.point(b, k, k1, k2, qr, qt);
+        if (!p.allFinite()) return LaserDecodeError{"point decodes to a non-finite position", 0};
+        out.push_back(p);
+        pc.update(l, k, res, k1, k2);
+        --remaining;
+        if (remaining == 0 || !dec.get(pc.more[0])) break;
+      }
+    }
+    prev_column = column;
+  }
+  if (dec.overrun() > 8) return LaserDecodeError{"stream ends " + std::to_string(dec.overrun()) + " bytes early", 0};
+  return std::nullopt;
+}
+
+}  // namespace lex3d::residual::detail

@@ -1,0 +1,86 @@
+#pragma once
+// Sensor-geometry coding of a residual layer (formats/model.md §2.8): a spinning lidar's
+// points coded as (column, laser, beam length), the direction of every beam implied by a
+// laser table stored in the layer, so that only the range — and, where the table does not
+// reproduce a point within the bound, a small tangential correction — costs bits.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lex3d/core/cloud.hpp"
+#include "residual/range_coder.hpp"
+
+namespace lex3d::residual::detail {
+
+/// Stored units of the laser table: angles in 2^-24 rad, lengths in 2^-16 m.
+constexpr double kLaserAngleUnit = 1.0 / 16777216.0;
+constexpr double kLaserLengthUnit = 1.0 / 65536.0;
+constexpr std::uint32_t kMaxLasers = 1024;
+constexpr std::uint32_t kMaxLaserColumns = 1U << 20;
+
+/// A laser table as a layer stores it: quantised per-laser fields and the azimuth grid.
+struct LaserTable {
+  std::vector<std::int64_t> elevation, beam_azimuth, column_azimuth, z_offset, radial_offset;  // stored units
+  std::uint32_t columns = 0;
+  std::int32_t direction = 1;
+  double azimuth0 = 0.0;
+  Pose T_sensor_head = Pose::Identity();
+
+  [[nodiscard]] std::uint32_t lasers() const { return static_cast<std::uint32_t>(elevation.size()); }
+};
+
+/// Where each input point sits in a laser table: its laser and column.
+struct LaserAssignment {
+  LaserTable table;
+  std::vector<std::uint16_t> ring;     ///< per input point
+  std::vector<std::uint32_t> column;   ///< per input point
+  std::string source;                  ///< "sensor metadata", "rings and columns of the input", "estimated"
+  double fit_rms = 0.0;                ///< RMS distance of the points from their beams, metres
+};
+
+/// The laser table and every point's laser and column: from the cloud's geometry, rings and
+/// columns when it has them, else estimated from its points (in the sensor frame given by
+/// `T_cloud_sensor`): columns from the azimuths of a laser's points, and, with `estimate`,
+/// lasers from the points' elevations. nullopt when the cloud does not look like a spinning
+/// lidar's scan.
+[[nodiscard]] std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor,
+                                                           bool estimate);
+
+/// A coded sensor-geometry layer: the fields after the ones every coding has, and the stream.
+struct LaserLayer {
+  std::vector<std::uint8_t> fields;  ///< tangential step f64, lasers, columns, direction, azimuth0, T_sensor_head
+  std::vector<std::uint8_t> stream;  ///< the keep mask (as `head` holds it), the table, the points
+  double range_step = 0.0;
+  std::uint64_t coded = 0;           ///< points coded (after thinning)
+};
+
+/// Size of `fields` in a payload.
+constexpr std::uint64_t kLaserFieldBytes = 8 + 4 + 4 + 4 + 8 + 96;
+
+/// Codes the input points `coded` with the table of `a` for error bound `bound` (E'),
+/// continuing `head` (which holds the keep mask). nullopt when a point cannot be coded
+/// within the bound (float32 resolution) or the table's values are out of the stored range.
+/// `share`: the range step's share of 2E' (the rest goes to tangential corrections).
+[[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
+                                                    const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
+                                                    const Pose& T_cloud_sensor, double bound, bool thin, double share,
+                                                    int threads);
+
+/// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
+/// bytes from there to the payload's end) after the keep mask was read from `dec`.
+/// Appends `coded_points` points to `out`. Returns an error message (empty on success)
+/// and the byte offset (relative to `fields`) it refers to.
+struct LaserDecodeError {
+  std::string message;
+  std::uint64_t offset = 0;
+};
+[[nodiscard]] std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* fields, std::uint64_t size,
+                                                                double max_error, LaserTable& table, double& tangential_step);
+[[nodiscard]] std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double range_step,
+                                                                  double tangential_step, std::uint64_t coded_points,
+                                                                  const Pose& T_cloud_sensor,
+                                                                  std::vector<Eigen::Vector3f>& out);
+
+}  // namespace lex3d::residual::detail
