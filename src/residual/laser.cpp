@@ -22,6 +22,7 @@
 
 #include "codec/bytes.hpp"
 #include "lex3d/core/parallel.hpp"
+#include "lex3d/core/layout.hpp"
 #include "residual/point_ball_grid.hpp"
 
 namespace lex3d::residual::detail {
@@ -41,6 +42,7 @@ constexpr double kMaxSteps = 1073741824.0;  // 2^30
 struct Beams {
   std::vector<double> sin_el, cos_el, beam_az, col_az, z, radial;
   double azimuth0 = 0.0, column_angle = 0.0;  // column_angle: direction · 2π / columns
+  double shift_unit = 0.0;
   Pose T_cloud_head = Pose::Identity();
 
   Beams(const LaserTable& t, const Pose& T_cloud_sensor) {
@@ -61,17 +63,18 @@ struct Beams {
       radial[l] = static_cast<double>(t.radial_offset[l]) * kLaserLengthUnit;
     }
     azimuth0 = t.azimuth0;
-    column_angle = static_cast<double>(t.direction) * kTwoPi / static_cast<double>(t.columns);
+    column_angle = static_cast<double>(t.direction) * (kTwoPi / static_cast<double>(t.columns));
+    shift_unit = t.shift_unit;
     T_cloud_head = T_cloud_sensor * t.T_sensor_head;
   }
 
   struct Beam {
     Eigen::Vector3d o, u, e1, e2;
   };
-  /// The beam of laser l in column c, head frame: origin, direction and two unit vectors
-  /// across it (e1 horizontal, e2 = u × e1 pointing up).
-  [[nodiscard]] Beam beam(std::uint32_t l, std::uint32_t c) const {
-    const double alpha = azimuth0 + column_angle * static_cast<double>(c) + col_az[l];
+  /// The beam of laser l in column c shifted by `shift` units, head frame: origin,
+  /// direction and two unit vectors across it (e1 horizontal, e2 = u × e1 pointing up).
+  [[nodiscard]] Beam beam(std::uint32_t l, std::uint32_t c, std::int64_t shift) const {
+    const double alpha = azimuth0 + column_angle * static_cast<double>(c) + col_az[l] + static_cast<double>(shift) * shift_unit;
     const double beta = alpha + beam_az[l];
     const double ca = std::cos(alpha), sa = std::sin(alpha);
     const double cb = std::cos(beta), sb = std::sin(beta);
@@ -102,12 +105,20 @@ bool quantise(double v, double step, std::int64_t& k) {
 class PointCoder {
  public:
   static constexpr int kClasses = IntModel::kClasses;
-  explicit PointCoder(std::uint32_t lasers)
-      : last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone),
+  /// `spacing`: range step · grid step / E, so that a beam length index times it is the gap,
+  /// in units of E, between neighbouring columns' points at that range.
+  PointCoder(std::uint32_t lasers, double spacing)
+      : spacing_(spacing), last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone),
         last_res_(lasers, 0), last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0) {}
 
   // --- structure ---
   int column_ctx() const { return IntModel::context_of(last_dc_); }
+  int shift_ctx() const { return IntModel::context_of(last_shift_delta_); }
+  std::int64_t last_shift() const { return last_shift_; }
+  void set_shift(std::int64_t shift) {
+    last_shift_delta_ = shift - last_shift_;
+    last_shift_ = shift;
+  }
   void start_column(std::uint32_t column, std::int64_t dc) {
     if (started_) std::swap(occ_prev_, occ_now_);
     std::fill(occ_now_.begin(), occ_now_.end(), 0);
@@ -118,7 +129,14 @@ class PointCoder {
   }
   int occupancy_ctx(std::uint32_t l) const {
     const int up = l == 0 ? 1 : occ_now_[l - 1];
-    return occ_prev_[l] + 2 * occ_prev_[l + 1] + 4 * up + 8 * (last_dc_ == 0 ? 1 : 0);
+    // How far this pixel lies from the laser's last point, in E: under E, thinning
+    // has likely dropped it.
+    int near = 3;
+    if (last_c_[l] != kNone) {
+      const double gap = static_cast<double>(std::abs(last_k_[l])) * spacing_ * static_cast<double>(column_ - last_c_[l]);
+      near = gap < 0.8 ? 0 : gap < 1.0 ? 1 : gap < 1.25 ? 2 : 3;
+    }
+    return occ_prev_[l] + 2 * occ_prev_[l + 1] + 4 * up + 8 * (last_dc_ == 0 ? 1 : 0) + 16 * near;
   }
   void occupied(std::uint32_t l) { occ_now_[l] = 1; }
 
@@ -172,21 +190,23 @@ class PointCoder {
     up_ = l;
   }
 
-  BitModel occupancy[16];
+  BitModel occupancy[64];
   BitModel more[2];
   IntModel column_delta{kClasses};
+  IntModel column_shift{kClasses};
   IntModel range{kClasses * kClasses};
   IntModel tangential1{kClasses * kClasses}, tangential2{kClasses * kClasses};
 
  private:
   static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
+  double spacing_;
   std::vector<std::int64_t> last_k_;
   std::vector<std::uint32_t> last_c_;
   std::vector<std::int64_t> prev_k_;
   std::vector<std::uint32_t> prev_c_;
   std::vector<std::int64_t> last_res_, last_k1_, last_k2_;
   std::vector<std::uint8_t> occ_prev_, occ_now_;  // one extra laser, never occupied
-  std::int64_t last_dc_ = 0, last_any_ = 0, last_k1_any_ = 0;
+  std::int64_t last_dc_ = 0, last_any_ = 0, last_k1_any_ = 0, last_shift_ = 0, last_shift_delta_ = 0;
   std::uint32_t column_ = 0, up_ = kNone;
   bool started_ = false;
 };
@@ -220,6 +240,7 @@ bool storable(const LaserTable& t) {
   if (t.lasers() < 1 || t.lasers() > kMaxLasers || t.columns < 1 || t.columns > kMaxLaserColumns) return false;
   if (!std::isfinite(t.azimuth0) || std::abs(t.azimuth0) > kTwoPi) return false;
   if (t.direction != 1 && t.direction != -1) return false;
+  if (!(t.shift_unit >= 0.0 && t.shift_unit <= kPi / 64.0)) return false;
   if (!t.T_sensor_head.matrix().allFinite()) return false;
   const auto within = [](const std::vector<std::int64_t>& v, std::int64_t bound) {
     return std::all_of(v.begin(), v.end(), [&](std::int64_t x) { return x >= -bound && x <= bound; });
@@ -559,7 +580,36 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     const Pose T_sensor_cloud = T_cloud_sensor.inverse();
     std::vector<Eigen::Vector3d> p(n);
     for (std::size_t i = 0; i < n; ++i) p[i] = T_sensor_cloud * input.points[i].cast<double>();
-    if (a.ring.empty()) {
+    std::optional<OrderLayout> layout;
+    if (a.ring.empty()) layout = detect_order_layout(input.points);
+    if (layout) {
+      // Stored firing by firing or row by row: the order gives lasers and columns; the
+      // grid's step is the median azimuth step of a laser from one column to the next.
+      lasers = layout->lasers;
+      std::vector<double> steps;
+      const std::size_t apart = layout->firing_major ? layout->lasers : 1;
+      for (std::size_t i = 0; i + apart < n; i += std::max<std::size_t>(1, n / 20000)) {
+        if (!layout->firing_major && layout->column(i) + 1 >= layout->columns) continue;
+        const Eigen::Vector3d& u = p[i];
+        const Eigen::Vector3d& v = p[i + apart];
+        if (std::hypot(u.x(), u.y()) < 0.3 || std::hypot(v.x(), v.y()) < 0.3) continue;
+        const double d = std::abs(std::remainder(std::atan2(v.y(), v.x()) - std::atan2(u.y(), u.x()), kTwoPi));
+        if (d > 1e-7) steps.push_back(d);
+      }
+      if (steps.size() < 16) return std::nullopt;
+      std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+      const double w = std::round(kTwoPi / steps[steps.size() / 2]);
+      if (!(w >= 16 && w <= kMaxLaserColumns)) return std::nullopt;
+      columns = static_cast<std::uint32_t>(w);
+      a.ring.resize(n);
+      a.column.resize(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        a.ring[i] = layout->ring(i);
+        a.column[i] = layout->column(i) % columns;
+      }
+      a.source = std::string("estimated from the points' order (") + (layout->firing_major ? "firing" : "row") +
+                 " by " + (layout->firing_major ? "firing" : "row") + ", " + std::to_string(layout->lasers) + " lasers)";
+    } else if (a.ring.empty()) {
       if (!estimate_rings(p, a.ring, lasers)) return std::nullopt;
       a.source = "estimated from the points (lasers by elevation, columns by azimuth)";
     } else if (a.column.empty()) {
@@ -574,13 +624,31 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     if (!t) return std::nullopt;
     a.table = std::move(*t);
   }
+  a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
+  // Lasers in the order of their elevations, top first, so that a laser's neighbour in the
+  // table is its neighbour in the range image.
+  {
+    const std::uint32_t nl = a.table.lasers();
+    std::vector<std::uint32_t> by(nl);
+    std::iota(by.begin(), by.end(), 0U);
+    std::stable_sort(by.begin(), by.end(),
+                     [&](std::uint32_t x, std::uint32_t y) { return a.table.elevation[x] > a.table.elevation[y]; });
+    std::vector<std::uint16_t> rank(nl);
+    for (std::uint32_t k = 0; k < nl; ++k) rank[by[k]] = static_cast<std::uint16_t>(k);
+    for (auto* f : table_fields(a.table)) {
+      std::vector<std::int64_t> sorted(nl);
+      for (std::uint32_t k = 0; k < nl; ++k) sorted[k] = (*f)[by[k]];
+      *f = std::move(sorted);
+    }
+    for (auto& r : a.ring) r = r < nl ? rank[r] : r;
+  }
   if (!storable(a.table)) return std::nullopt;
   // How far the points lie from their beams.
   const Beams beams(a.table, T_cloud_sensor);
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
   double sum = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
-    const auto b = beams.beam(a.ring[i], a.column[i]);
+    const auto b = beams.beam(a.ring[i], a.column[i], 0);
     const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
     sum += (v - v.dot(b.u) * b.u).squaredNorm();
   }
@@ -594,7 +662,8 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
 
 std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                       const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
-                                      const Pose& T_cloud_sensor, double bound, bool thin, double share, int threads) {
+                                      const Pose& T_cloud_sensor, double max_error, double bound, bool thin, double share,
+                                      int threads) {
   LaserTable table = a.table;
   if (!storable(table)) return std::nullopt;
   const double qr = 2.0 * share * bound;
@@ -604,17 +673,55 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
   const double e2 = bound * bound;
 
+  // Column by column, lasers in order, then input order.
+  std::vector<std::uint32_t> order(coded.size());
+  std::iota(order.begin(), order.end(), 0U);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    const std::uint32_t ix = coded[x], iy = coded[y];
+    if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
+    if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
+    return ix < iy;
+  });
+  // Each column's azimuth shift: the median of its points' azimuths off their beams (a
+  // sensor whose firings do not fall on an even grid), in the table's shift units.
+  std::vector<std::int64_t> shift(coded.size(), 0);  // by position in `order`
+  {
+    std::vector<double> off;
+    std::int64_t last = 0;
+    for (std::size_t at = 0; at < order.size();) {
+      const std::uint32_t column = a.column[coded[order[at]]];
+      std::size_t end = at;
+      off.clear();
+      for (; end < order.size() && a.column[coded[order[end]]] == column; ++end) {
+        const std::uint32_t i = coded[order[end]];
+        const auto b = beams.beam(a.ring[i], column, 0);
+        const Eigen::Vector3d v = T_head_cloud * input[i].cast<double>() - b.o;
+        if (std::hypot(v.x(), v.y()) < 1.0) continue;
+        const double beam = std::atan2(b.u.y(), b.u.x());
+        off.push_back(std::remainder(std::atan2(v.y(), v.x()) - beam, kTwoPi));
+      }
+      std::int64_t s = last;
+      if (!off.empty() && table.shift_unit > 0.0) {
+        std::nth_element(off.begin(), off.begin() + static_cast<std::ptrdiff_t>(off.size() / 2), off.end());
+        s = static_cast<std::int64_t>(std::llround(off[off.size() / 2] / table.shift_unit));
+      }
+      for (std::size_t k = at; k < end; ++k) shift[k] = s;
+      last = s;
+      at = end;
+    }
+  }
+
   // Every point's beam length and corrections, and the point they decode to.
   struct Coded {
     std::int64_t k = 0, k1 = 0, k2 = 0;
     Eigen::Vector3f decoded;
   };
-  std::vector<Coded> q(coded.size());
+  std::vector<Coded> q(coded.size());  // by position in `order`
   std::vector<std::uint8_t> failed(coded.size(), 0);
-  parallel_for(coded.size(), threads, [&](std::size_t j) {
-    const std::uint32_t i = coded[j];
+  parallel_for(order.size(), threads, [&](std::size_t j) {
+    const std::uint32_t i = coded[order[j]];
     const Eigen::Vector3d truth = input[i].cast<double>();
-    const auto b = beams.beam(a.ring[i], a.column[i]);
+    const auto b = beams.beam(a.ring[i], a.column[i], shift[j]);
     const Eigen::Vector3d v = T_head_cloud * truth - b.o;
     Coded& c = q[j];
     if (!quantise(v.dot(b.u), qr, c.k)) {
@@ -644,62 +751,63 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   }, 4096);
   if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
 
-  // Column by column, lasers in order, then input order.
-  std::vector<std::uint32_t> order(coded.size());
-  std::iota(order.begin(), order.end(), 0U);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
-    const std::uint32_t ix = coded[x], iy = coded[y];
-    if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
-    if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
-    return ix < iy;
-  });
   // Thinning: a point that a point decoded before it explains is not coded.
+  std::vector<std::uint32_t> kept(order.size());  // positions in `order`
+  std::iota(kept.begin(), kept.end(), 0U);
   if (thin) {
     PointBallGrid seen(bound, order.size());
-    std::vector<std::uint32_t> kept;
-    kept.reserve(order.size());
-    for (std::uint32_t j : order) {
-      if (seen.any_within(input[coded[j]].cast<double>())) continue;
+    kept.clear();
+    for (std::uint32_t j = 0; j < order.size(); ++j) {
+      if (seen.any_within(input[coded[order[j]]].cast<double>())) continue;
       seen.insert(q[j].decoded);
       kept.push_back(j);
     }
-    order.swap(kept);
   }
 
   LaserLayer out;
   out.range_step = qr;
-  out.coded = order.size();
+  out.coded = kept.size();
   RangeEncoder enc = head;
   put_table(enc, table);
-  PointCoder pc(table.lasers());
+  PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error);
+  const char* skip_env = std::getenv("LEX3D_DEBUG_SKIP");
+  const std::string skip = skip_env ? skip_env : "";
+  std::size_t nonzero_t = 0;
+  const auto ring_at = [&](std::size_t k) { return a.ring[coded[order[kept[k]]]]; };
+  const auto column_at = [&](std::size_t k) { return a.column[coded[order[kept[k]]]]; };
   std::size_t at = 0;
   std::int64_t prev_column = -1;
-  std::uint64_t remaining = order.size();
-  while (at < order.size()) {
-    const std::uint32_t column = a.column[coded[order[at]]];
+  std::uint64_t remaining = kept.size();
+  while (at < kept.size()) {
+    const std::uint32_t column = column_at(at);
     std::size_t end = at;
-    while (end < order.size() && a.column[coded[order[end]]] == column) ++end;
+    while (end < kept.size() && column_at(end) == column) ++end;
     const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
-    pc.column_delta.put(enc, pc.column_ctx(), dc);
+    if (skip.find('c') == std::string::npos) pc.column_delta.put(enc, pc.column_ctx(), dc);
+    const std::int64_t s = shift[kept[at]];
+    if (skip.find('s') == std::string::npos) pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
+    pc.set_shift(s);
     pc.start_column(column, dc);
     std::size_t j = at;
     for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
-      const bool occ = j < end && a.ring[coded[order[j]]] == l;
-      enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
+      const bool occ = j < end && ring_at(j) == l;
+      if (skip.find('o') == std::string::npos) enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
+      if (skip_env) { static thread_local std::array<std::array<std::size_t, 2>, 64> st{}; st[pc.occupancy_ctx(l)][occ]++; if (remaining == 1) for (int k = 0; k < 64; ++k) if (st[k][0] + st[k][1]) std::fprintf(stderr, "ctx %d near %d: %zu empty %zu occ\n", k, k / 16, st[k][0], st[k][1]); }
       if (!occ) continue;
       pc.occupied(l);
       for (;;) {
-        const Coded& c = q[order[j]];
+        const Coded& c = q[kept[j]];
         const auto pred = pc.predict(l);
         const std::int64_t res = c.k - pred.k;
-        pc.range.put(enc, pred.ctx, res);
-        pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
-        pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
+        if (skip.find('r') == std::string::npos) pc.range.put(enc, pred.ctx, res);
+        if (c.k1 != 0 || c.k2 != 0) ++nonzero_t;
+        if (skip.find('t') == std::string::npos) pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
+        if (skip.find('t') == std::string::npos) pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
         pc.update(l, c.k, res, c.k1, c.k2);
         ++j;
         --remaining;
         if (remaining == 0) break;
-        const bool more = j < end && a.ring[coded[order[j]]] == l;
+        const bool more = j < end && ring_at(j) == l;
         enc.put(pc.more[0], more);
         if (!more) break;
       }
@@ -708,8 +816,12 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     at = end;
   }
   out.stream = enc.finish();
+  if (skip_env)
+    std::fprintf(stderr, "share %.3f: %zu bytes, %zu points, %zu with corrections\n", share, out.stream.size(), kept.size(),
+                 nonzero_t);
 
   codec::bytes::put_f64(out.fields, qt);
+  codec::bytes::put_f64(out.fields, table.shift_unit);
   codec::bytes::put_u32(out.fields, table.lasers());
   codec::bytes::put_u32(out.fields, table.columns);
   codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
@@ -730,27 +842,30 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
     return LaserDecodeError{"sensor-geometry layer fields are truncated", 0};
   tangential_step = codec::bytes::ld_f64(f);
   if (!(tangential_step > 0.0 && tangential_step <= 2.0 * max_error))
-    return LaserDecodeError{"tangential step " + std::to_string(tangential_step) + " is not in (0, 2*max_error]", 0};
-  const std::uint32_t lasers = codec::bytes::ld_u32(f + 8);
-  table.columns = codec::bytes::ld_u32(f + 12);
-  const std::uint32_t dir = codec::bytes::ld_u32(f + 16);
-  table.azimuth0 = codec::bytes::ld_f64(f + 20);
+    return LaserDecodeError{"cross step " + std::to_string(tangential_step) + " is not in (0, 2*max_error]", 0};
+  table.shift_unit = codec::bytes::ld_f64(f + 8);
+  if (!(table.shift_unit >= 0.0 && table.shift_unit <= kPi / 64.0))
+    return LaserDecodeError{"azimuth shift unit " + std::to_string(table.shift_unit) + " is not in [0, pi/64]", 8};
+  const std::uint32_t lasers = codec::bytes::ld_u32(f + 16);
+  table.columns = codec::bytes::ld_u32(f + 20);
+  const std::uint32_t dir = codec::bytes::ld_u32(f + 24);
+  table.azimuth0 = codec::bytes::ld_f64(f + 28);
   if (lasers < 1 || lasers > kMaxLasers)
-    return LaserDecodeError{"laser count " + std::to_string(lasers) + " is not in [1, 1024]", 8};
+    return LaserDecodeError{"laser count " + std::to_string(lasers) + " is not in [1, 1024]", 16};
   if (table.columns < 1 || table.columns > kMaxLaserColumns)
-    return LaserDecodeError{"column count " + std::to_string(table.columns) + " is not in [1, 2^20]", 12};
-  if (dir != 1U && dir != 0xFFFFFFFFU) return LaserDecodeError{"column direction is neither +1 nor -1", 16};
+    return LaserDecodeError{"column count " + std::to_string(table.columns) + " is not in [1, 2^20]", 20};
+  if (dir != 1U && dir != 0xFFFFFFFFU) return LaserDecodeError{"column direction is neither +1 nor -1", 24};
   table.direction = dir == 1U ? 1 : -1;
   if (!(std::isfinite(table.azimuth0) && std::abs(table.azimuth0) <= kTwoPi))
-    return LaserDecodeError{"azimuth of column 0 is not in [-2pi, 2pi]", 20};
+    return LaserDecodeError{"azimuth of column 0 is not in [-2pi, 2pi]", 28};
   Eigen::Matrix3d R;
   Eigen::Vector3d t;
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) R(r, c) = codec::bytes::ld_f64(f + 28 + 8 * (3 * r + c));
-  for (int r = 0; r < 3; ++r) t[r] = codec::bytes::ld_f64(f + 100 + 8 * r);
+    for (int c = 0; c < 3; ++c) R(r, c) = codec::bytes::ld_f64(f + 36 + 8 * (3 * r + c));
+  for (int r = 0; r < 3; ++r) t[r] = codec::bytes::ld_f64(f + 108 + 8 * r);
   if (!R.allFinite() || !t.allFinite() || (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
       !(R.determinant() > 0.0) || !(t.cwiseAbs().maxCoeff() <= 1e3))
-    return LaserDecodeError{"T_sensor_head is not a rigid transform within 1 km", 28};
+    return LaserDecodeError{"T_sensor_head is not a rigid transform within 1 km", 36};
   table.T_sensor_head = Pose::Identity();
   table.T_sensor_head.linear() = R;
   table.T_sensor_head.translation() = t;
@@ -758,8 +873,8 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   return std::nullopt;
 }
 
-std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double qr, double qt,
-                                                    std::uint64_t coded_points, const Pose& T_cloud_sensor,
+std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double max_error, double qr,
+                                                    double qt, std::uint64_t coded_points, const Pose& T_cloud_sensor,
                                                     std::vector<Eigen::Vector3f>& out) {
   {
     IntModel m{IntModel::kClasses};
@@ -780,7 +895,7 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
     }
   }
   const Beams beams(table, T_cloud_sensor);
-  PointCoder pc(table.lasers());
+  PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error);
   std::uint64_t remaining = coded_points;
   std::int64_t prev_column = -1;
   while (remaining > 0) {
@@ -792,11 +907,15 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
                                   std::to_string(table.columns),
                               0};
     const auto c = static_cast<std::uint32_t>(column);
+    const std::int64_t shift = pc.last_shift() + pc.column_shift.get(dec, pc.shift_ctx());
+    if (std::abs(shift) > static_cast<std::int64_t>(kMaxSteps))
+      return LaserDecodeError{"column azimuth shift beyond 2^30 units", 0};
+    pc.set_shift(shift);
     pc.start_column(c, dc);
     for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
       if (!dec.get(pc.occupancy[pc.occupancy_ctx(l)])) continue;
       pc.occupied(l);
-      const auto b = beams.beam(l, c);
+      const auto b = beams.beam(l, c, shift);
       for (;;) {
         const auto pred = pc.predict(l);
         const std::int64_t res = pc.range.get(dec, pred.ctx);

@@ -24,6 +24,8 @@ constexpr std::uint32_t kMaxLaserColumns = 1U << 20;
 struct LaserTable {
   std::vector<std::int64_t> elevation, beam_azimuth, column_azimuth, z_offset, radial_offset;  // stored units
   std::uint32_t columns = 0;
+  /// Unit of the per-column azimuth shifts, radians (the grid's step / 64).
+  double shift_unit = 0.0;
   std::int32_t direction = 1;
   double azimuth0 = 0.0;
   Pose T_sensor_head = Pose::Identity();
@@ -50,14 +52,14 @@ struct LaserAssignment {
 
 /// A coded sensor-geometry layer: the fields after the ones every coding has, and the stream.
 struct LaserLayer {
-  std::vector<std::uint8_t> fields;  ///< tangential step f64, lasers, columns, direction, azimuth0, T_sensor_head
+  std::vector<std::uint8_t> fields;  ///< cross step, shift unit, lasers, columns, direction, azimuth0, T_sensor_head
   std::vector<std::uint8_t> stream;  ///< the keep mask (as `head` holds it), the table, the points
   double range_step = 0.0;
   std::uint64_t coded = 0;           ///< points coded (after thinning)
 };
 
 /// Size of `fields` in a payload.
-constexpr std::uint64_t kLaserFieldBytes = 8 + 4 + 4 + 4 + 8 + 96;
+constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 8 + 96;
 
 /// Codes the input points `coded` with the table of `a` for error bound `bound` (E'),
 /// continuing `head` (which holds the keep mask). nullopt when a point cannot be coded
@@ -65,8 +67,8 @@ constexpr std::uint64_t kLaserFieldBytes = 8 + 4 + 4 + 4 + 8 + 96;
 /// `share`: the range step's share of 2E' (the rest goes to tangential corrections).
 [[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                                     const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
-                                                    const Pose& T_cloud_sensor, double bound, bool thin, double share,
-                                                    int threads);
+                                                    const Pose& T_cloud_sensor, double max_error, double bound,
+                                                    bool thin, double share, int threads);
 
 /// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
 /// bytes from there to the payload's end) after the keep mask was read from `dec`.
@@ -78,7 +80,8 @@ struct LaserDecodeError {
 };
 [[nodiscard]] std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* fields, std::uint64_t size,
                                                                 double max_error, LaserTable& table, double& tangential_step);
-[[nodiscard]] std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double range_step,
+[[nodiscard]] std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double max_error,
+                                                                  double range_step,
                                                                   double tangential_step, std::uint64_t coded_points,
                                                                   const Pose& T_cloud_sensor,
                                                                   std::vector<Eigen::Vector3f>& out);

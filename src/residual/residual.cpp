@@ -654,7 +654,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     constexpr std::size_t kShares = std::size(kLaserShares);
     std::array<std::optional<detail::LaserLayer>, kShares> tries;
     parallel_for(kShares, threads, [&](std::size_t k) {
-      tries[k] = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, check_error, options.thin,
+      tries[k] = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, max_error, check_error, options.thin,
                                      kLaserShares[k], 1);
     }, 1);
     for (auto& t : tries)
@@ -875,7 +875,7 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
     return out;
   }
   if (laser) {
-    if (auto e = detail::decode_laser_points(dec, table, q, tangential_step, n_c, T_cloud_sensor, out.points))
+    if (auto e = detail::decode_laser_points(dec, table, max_error, q, tangential_step, n_c, T_cloud_sensor, out.points))
       return bad_data("residual layer " + e->message, h.stream_offset);
     return out;
   }

@@ -221,14 +221,16 @@ TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
     EXPECT_FALSE(residual::decode_layer(poke(good, 40, &step, 8), Cloud{}, Pose::Identity(), scan.size()).ok()) << step;
   }
   for (const std::uint32_t v : {0U, 5000U})  // lasers
-    EXPECT_FALSE(residual::decode_layer(poke(good, 48, &v, 4), Cloud{}, Pose::Identity(), scan.size()).ok()) << v;
+    EXPECT_FALSE(residual::decode_layer(poke(good, 56, &v, 4), Cloud{}, Pose::Identity(), scan.size()).ok()) << v;
   for (const std::uint32_t v : {0U, 1U << 21})  // columns
-    EXPECT_FALSE(residual::decode_layer(poke(good, 52, &v, 4), Cloud{}, Pose::Identity(), scan.size()).ok()) << v;
+    EXPECT_FALSE(residual::decode_layer(poke(good, 60, &v, 4), Cloud{}, Pose::Identity(), scan.size()).ok()) << v;
   const std::uint32_t dir = 2;
-  EXPECT_FALSE(residual::decode_layer(poke(good, 56, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok());
+  EXPECT_FALSE(residual::decode_layer(poke(good, 64, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok());
+  for (const double unit : {-1.0, 0.5, std::nan("")})
+    EXPECT_FALSE(residual::decode_layer(poke(good, 48, &unit, 8), Cloud{}, Pose::Identity(), scan.size()).ok()) << unit;
   const double not_rigid = 2.0;
-  EXPECT_FALSE(residual::decode_layer(poke(good, 68, &not_rigid, 8), Cloud{}, Pose::Identity(), scan.size()).ok());
-  for (std::size_t at = 164; at < good.size(); at += 37) {
+  EXPECT_FALSE(residual::decode_layer(poke(good, 76, &not_rigid, 8), Cloud{}, Pose::Identity(), scan.size()).ok());
+  for (std::size_t at = 172; at < good.size(); at += 37) {
     Bytes b = good;
     b[at] ^= 0x5A;
     const auto d = residual::decode_layer(b, Cloud{}, Pose::Identity(), scan.size());
