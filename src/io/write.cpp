@@ -309,6 +309,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
     case Format::kBinXyz: build_float_binary(cloud, false, bytes); break;
     case Format::kXyz: build_xyz(cloud, with_i, bytes); break;
     case Format::kUos3d:
+    case Format::kPcap:
     case Format::kAuto:
       return invalid(path, "writing format '" + std::string(format_name(f)) + "' is not supported");
   }
