@@ -84,6 +84,7 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
                                   " is not supported (Ethernet, Linux cooked, raw IP or loopback)"));
 
   std::map<FragmentKey, FragmentSet> pending;
+  std::vector<std::pair<FragmentKey, FragmentSet>> abandoned;
   // Per source: first and last capture record of its complete fragmented datagrams.
   std::unordered_map<std::uint32_t, std::pair<std::size_t, std::size_t>> frag_span;
 
@@ -212,6 +213,15 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
       it = pending.emplace(key, FragmentSet{}).first;
       it->second.first_record = record;
     }
+    // A fragment at an offset already held starts another datagram with the same id (the
+    // 16-bit id wrapped, or the first one lost its other fragments): the old set is abandoned.
+    bool repeated = false;
+    for (const auto& g : it->second.got) repeated = repeated || g.first == offset;
+    if (repeated) {
+      abandoned.emplace_back(key, std::move(it->second));
+      it->second = FragmentSet{};
+      it->second.first_record = record;
+    }
     FragmentSet& fs = it->second;
     if (fs.bytes.size() < offset + body_n) fs.bytes.resize(offset + body_n);
     std::memcpy(fs.bytes.data() + offset, body, body_n);
@@ -238,7 +248,8 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
   }
   // Fragment sets left over: tolerated where the capture cut them (before the source's
   // first complete fragmented datagram or after its last one); an error in between.
-  for (const auto& [key, fs] : pending) {
+  for (auto& kv : pending) abandoned.emplace_back(kv.first, std::move(kv.second));
+  for (const auto& [key, fs] : abandoned) {
     const auto sp = frag_span.find(std::get<0>(key));
     const bool at_edge = sp == frag_span.end() || fs.last_record < sp->second.first || fs.first_record > sp->second.second;
     if (!at_edge)
