@@ -272,6 +272,7 @@ void run_info(const InfoOptions& o) {
     j.value("file_bytes", r.file_bytes).value("points", c.size());
     j.value("non_finite_dropped", r.non_finite_dropped).value("no_return_dropped", r.no_return_dropped);
     j.value("has_intensity", c.has_intensity());
+    j.value("rows", c.rows).value("columns", c.columns).value("has_rings", c.has_rings());
     if (b.valid) {
       j.numbers("bounds_min", {b.min.x(), b.min.y(), b.min.z()});
       j.numbers("bounds_max", {b.max.x(), b.max.y(), b.max.z()});
@@ -294,7 +295,10 @@ void run_info(const InfoOptions& o) {
   std::printf("file size      %llu bytes\n", static_cast<unsigned long long>(r.file_bytes));
   std::printf("points         %zu\n", c.size());
   std::printf("NaN/Inf dropped %zu\n", r.non_finite_dropped);
-  if (r.no_return_dropped) std::printf("no-return      %zu (kept as max-range directions)\n", r.no_return_dropped);
+  if (r.no_return_dropped)
+    std::printf("no-return      %zu (%s)\n", r.no_return_dropped,
+                c.no_return_directions.empty() ? "not points" : "kept as max-range directions");
+  if (c.rows > 0) std::printf("organised      %u rows x %u columns\n", c.rows, c.columns);
   if (b.valid)
     std::printf("bounds         [%.3f %.3f %.3f] .. [%.3f %.3f %.3f] m\n", static_cast<double>(b.min.x()),
                 static_cast<double>(b.min.y()), static_cast<double>(b.min.z()), static_cast<double>(b.max.x()),

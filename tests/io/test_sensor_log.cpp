@@ -477,5 +477,62 @@ TEST(SensorLogErrors, FragmentThatNeverCompletes) {
   }
 }
 
+// ------------------------------------------------------------ organised inputs
+
+TEST(OrganisedInput, PcdRoundTripKeepsRowsColumnsAndCountsNoReturns) {
+  LEX3D_REQUIRE_SHARED("ouster/OS-1-32-G_v2.1.1_1024x10.pcap");
+  auto log = read_sensor_log(shared_data("ouster/OS-1-32-G_v2.1.1_1024x10.pcap"));
+  ASSERT_TRUE(log.ok()) << log.status().to_string();
+  const Cloud& c = log.value().scans[0];
+  const fs::path dir = temp_dir("organised_pcd");
+  for (const PcdEncoding enc : {PcdEncoding::kAscii, PcdEncoding::kBinary, PcdEncoding::kBinaryCompressed}) {
+    SCOPED_TRACE(static_cast<int>(enc));
+    const std::string p = (dir / "scan.pcd").string();
+    WriteOptions w;
+    w.pcd_encoding = enc;
+    ASSERT_TRUE(write_cloud(p, c, w).ok());
+    EXPECT_NE(slurp(p).find("HEIGHT 32"), std::string::npos);
+    auto r = read_cloud(p);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    const Cloud& b = r.value().cloud;
+    EXPECT_EQ(b.rows, c.rows);
+    EXPECT_EQ(b.columns, c.columns);
+    EXPECT_EQ(r.value().no_return_dropped, log.value().no_returns[0]);
+    EXPECT_EQ(r.value().non_finite_dropped, 0U);
+    ASSERT_EQ(b.size(), c.size());
+    // written row by row: the same points in the same (ring, column) order
+    EXPECT_EQ(b.ring, c.ring);
+    EXPECT_EQ(b.column, c.column);
+    if (enc != PcdEncoding::kAscii) EXPECT_EQ(b.points, c.points);
+  }
+}
+
+TEST(OrganisedInput, RingFieldAndZeroRecords) {
+  const fs::path dir = temp_dir("ring_field");
+  const std::string pcd = (dir / "ring.pcd").string();
+  write_bytes(pcd,
+              "VERSION 0.7\nFIELDS x y z ring\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 3\nHEIGHT 1\n"
+              "POINTS 3\nDATA ascii\n1 2 3 7\n4 5 6 0\nnan 1 1 2\n");
+  auto r = read_cloud(pcd);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_EQ(r.value().cloud.ring, (std::vector<std::uint16_t>{7, 0}));
+  EXPECT_EQ(r.value().non_finite_dropped, 1U);  // not organised: a NaN is a non-finite drop
+  EXPECT_EQ(r.value().cloud.rows, 0U);
+  write_bytes(pcd,
+              "VERSION 0.7\nFIELDS x y z ring\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+              "POINTS 1\nDATA ascii\n1 2 3 -1\n");
+  EXPECT_FALSE(read_cloud(pcd).ok());
+  // a KITTI .bin with exact (0, 0, 0) records: no-returns, dropped and counted
+  std::string bin;
+  for (const float v : {1.0F, 2.0F, 3.0F, 0.5F, 0.0F, 0.0F, 0.0F, 0.0F, 4.0F, 0.0F, 0.0F, 0.25F})
+    bin.append(reinterpret_cast<const char*>(&v), 4);
+  const std::string b = (dir / "zeros.bin").string();
+  write_bytes(b, bin);
+  auto k = read_cloud(b);
+  ASSERT_TRUE(k.ok()) << k.status().to_string();
+  EXPECT_EQ(k.value().cloud.size(), 2U);
+  EXPECT_EQ(k.value().no_return_dropped, 1U);
+}
+
 }  // namespace
 }  // namespace lex3d::io
