@@ -98,5 +98,6 @@ void register_reconstruct(CLI::App& app);
 void register_place(CLI::App& app);
 void register_compress(CLI::App& app);
 void register_decompress(CLI::App& app);
+void register_convert(CLI::App& app);
 
 }  // namespace lex3d::cli
