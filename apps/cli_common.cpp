@@ -1,5 +1,7 @@
 #include "cli_common.hpp"
 
+#include "lex3d/io/sensor_log.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -22,6 +24,20 @@ io::Format parse_format_option(const std::string& name) {
 io::ReadResult load_cloud(const std::string& path, io::Format format) {
   io::ReadOptions opt;
   opt.format = format;
+  return load_cloud(path, opt);
+}
+
+io::ReadOptions read_options(io::Format format, const std::string& metadata, const std::string& sensor_model) {
+  io::ReadOptions opt;
+  opt.format = format;
+  opt.metadata_path = metadata;
+  opt.sensor_model = sensor_model;
+  if (!sensor_model.empty() && sensor_model != "vlp16" && sensor_model != "hdl32e")
+    throw CliError(1, "unknown --sensor-model '" + sensor_model + "' (expected vlp16 or hdl32e)");
+  return opt;
+}
+
+io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
   auto r = io::read_cloud(path, opt);
   // Any input that cannot be read (missing, unreadable, malformed) is bad input: exit 2.
   if (!r.ok()) throw CliError(2, r.status().to_string());
@@ -39,20 +55,38 @@ void check_output_path(const std::string& output, const std::vector<std::string>
 
 ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path,
                        bool points_in_world)
-    : paths_(std::move(paths)), format_(format), points_in_world_(points_in_world) {
+    : ScanLoader(paths, read_options(format, "", ""), poses_path, points_in_world) {}
+
+ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOptions& options,
+                       const std::string& poses_path, bool points_in_world)
+    : options_(options), points_in_world_(points_in_world) {
+  for (const auto& path : paths) {
+    const bool log = options.format == io::Format::kPcap || (options.format == io::Format::kAuto && io::is_sensor_log(path));
+    if (!log) {
+      entries_.push_back({path, path, nullptr, 0});
+      continue;
+    }
+    auto r = io::read_sensor_log(path, options);
+    if (!r.ok()) throw CliError(exit_code_for(r.status().code()) == 1 ? 1 : 2, r.status().to_string());
+    auto turns = std::make_shared<const std::vector<Cloud>>(std::move(r.value().scans));
+    const auto& ids = r.value().frame_ids;
+    for (std::size_t k = 0; k < turns->size(); ++k)
+      entries_.push_back({path, path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]) + ")", turns, k});
+  }
   if (points_in_world && poses_path.empty())
     throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");
   if (poses_path.empty()) return;
   auto poses = io::read_pose_list(poses_path);
   if (!poses.ok()) throw CliError(2, poses.status().to_string());
-  if (poses.value().size() != paths_.size())
+  if (poses.value().size() != entries_.size())
     throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
-                          std::to_string(paths_.size()) + " scans (one pose a scan, in order)");
+                          std::to_string(entries_.size()) + " scans (one pose a scan, in order)");
   poses_ = std::move(poses).value();
 }
 
 Cloud ScanLoader::load(std::size_t i) const {
-  Cloud cloud = load_cloud(paths_.at(i), format_).cloud;
+  const Entry& e = entries_.at(i);
+  Cloud cloud = e.turns ? (*e.turns)[e.turn] : load_cloud(e.path, options_).cloud;
   if (!poses_.empty()) {
     if (points_in_world_) {
       cloud.T_cloud_sensor = poses_[i];

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -36,6 +37,10 @@ io::Format parse_format_option(const std::string& name);
 
 /// Reads a point cloud or throws CliError (2 bad data, 3 I/O).
 io::ReadResult load_cloud(const std::string& path, io::Format format);
+io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& options);
+
+/// Options of raw lidar logs (--metadata, --sensor-model) on top of `format`.
+io::ReadOptions read_options(io::Format format, const std::string& metadata, const std::string& sensor_model);
 
 /// Refuses an output path that names one of the inputs (never overwrite an input).
 void check_output_path(const std::string& output, const std::vector<std::string>& inputs);
@@ -53,16 +58,28 @@ std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format 
 
 /// The scans of load_scans one at a time, for commands that need only one in memory: the
 /// poses are read (and their count checked) when it is made, a scan when it is asked for.
+/// A raw lidar log (pcap) counts as one scan a complete turn: it is decoded when the loader
+/// is made and its turns are kept in memory.
 class ScanLoader {
  public:
   ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path, bool points_in_world);
-  [[nodiscard]] std::size_t size() const { return paths_.size(); }
+  ScanLoader(const std::vector<std::string>& paths, const io::ReadOptions& options, const std::string& poses_path,
+             bool points_in_world);
+  [[nodiscard]] std::size_t size() const { return entries_.size(); }
   /// Scan i with its poses (load_scans's clouds[i]); throws CliError as load_scans does.
   [[nodiscard]] Cloud load(std::size_t i) const;
+  /// What scan i is: its file, or "<file> turn <k>" for a raw log's turn.
+  [[nodiscard]] const std::string& name(std::size_t i) const { return entries_.at(i).name; }
 
  private:
-  std::vector<std::string> paths_;
-  io::Format format_;
+  struct Entry {
+    std::string path;
+    std::string name;
+    std::shared_ptr<const std::vector<Cloud>> turns;  // raw log: its turns
+    std::size_t turn = 0;
+  };
+  std::vector<Entry> entries_;
+  io::ReadOptions options_;
   std::vector<Pose> poses_;  // empty: no poses file
   bool points_in_world_;
 };
@@ -81,5 +98,6 @@ void register_reconstruct(CLI::App& app);
 void register_place(CLI::App& app);
 void register_compress(CLI::App& app);
 void register_decompress(CLI::App& app);
+void register_convert(CLI::App& app);
 
 }  // namespace lex3d::cli

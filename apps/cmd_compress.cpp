@@ -123,10 +123,12 @@ void run_compress(const CompressOptions& o) {
   const bool use_words = words_mode != "off";
   if (!use_words && (!o.alphabet.empty() || !o.save_alphabet.empty()))
     throw CliError(1, "--words off uses no alphabet: drop --alphabet / --save-alphabet");
+  // A raw log (pcap) gives one scan a complete turn.
+  const ScanLoader loader = o.scan_set.loader(o.inputs);
   std::vector<std::string> outputs;
   if (o.one_file) outputs.push_back(o.output);
   else
-    for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
+    for (std::size_t i = 0; i < loader.size(); ++i) outputs.push_back(numbered_output(o.output, i, loader.size()));
   std::vector<std::string> protected_paths = o.inputs;
   if (!o.alphabet.empty()) protected_paths.push_back(o.alphabet);
   for (const auto& out : outputs) check_output_path(out, protected_paths);
@@ -139,7 +141,6 @@ void run_compress(const CompressOptions& o) {
   // sequence needs the memory of a scan a thread (89 balm scans: 826 MB resident when all
   // were held).
   const bool learning = use_words && o.alphabet.empty();
-  const ScanLoader loader = o.scan_set.loader(o.inputs);
   const std::size_t n_scans = loader.size();
   const ModelParams mp = o.model.params();
   // Scans side by side: as many as threads (one each), or one scan on all the threads.
@@ -155,7 +156,7 @@ void run_compress(const CompressOptions& o) {
       const std::size_t i = j * n_scans / k;
       learnt_as[i] = static_cast<std::int64_t>(j);
       clouds.push_back(loader.load(i));
-      learnt_names.push_back(o.inputs[i]);
+      learnt_names.push_back(loader.name(i));
     }
   }
   double read_ms = sw.elapsed_ms();
@@ -276,13 +277,13 @@ void run_compress(const CompressOptions& o) {
     if (o.one_file) sequence.model_files.push_back(bytes);
     else throw_if_error(io::write_file_atomic(outputs[i], bytes));
     const double code_ms = r.code_ms + write_sw.elapsed_ms();
-    const std::string& shown = o.one_file ? o.inputs[i] : outputs[i];
+    const std::string& shown = o.one_file ? loader.name(i) : outputs[i];
     const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
     total_bytes += bytes.size();
     total_points += d.input_points;
     if (o.json) {
       j.begin_object()
-          .value("input", o.inputs[i])
+          .value("input", loader.name(i))
           .value("output", o.one_file ? o.output : outputs[i])
           .value("points", d.input_points)
           .value("features", r.features)
@@ -333,7 +334,7 @@ void run_compress(const CompressOptions& o) {
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
     }
-    bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), o.inputs[i]);
+    bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), loader.name(i));
   };
   std::vector<Outcome> batch;
   for (std::size_t first = 0; first < n_scans; first += side_by_side) {

@@ -11,6 +11,7 @@
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
+#include "lex3d/io/sensor_log.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "lex3d/range/range_image.hpp"
 
@@ -26,6 +27,8 @@ struct InfoOptions {
   std::string path;
   std::string alphabet;  // the alphabet file a model references
   std::string format = "auto";
+  std::string metadata;      // an Ouster capture's metadata JSON
+  std::string sensor_model;  // a Velodyne capture's model
   bool json = false;
 };
 
@@ -194,9 +197,64 @@ bool info_lex3d_file(const InfoOptions& o) {
   return true;
 }
 
+// A raw lidar log: the sensor, its lasers and columns, and the turns found.
+void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
+  auto r = io::read_sensor_log(o.path, ro);
+  if (!r.ok()) throw CliError(exit_code_for(r.status().code()), r.status().to_string());
+  const io::SensorLog& log = r.value();
+  const io::SensorLogInfo& i = log.info;
+  if (o.json) {
+    Json j;
+    j.begin_object();
+    j.value("file", o.path).value("format", "pcap").value("vendor", i.vendor).value("sensor", i.sensor);
+    j.value("profile", i.profile);
+    if (!i.metadata_path.empty()) j.value("metadata", i.metadata_path);
+    if (!i.model_note.empty()) j.value("model", i.model_note);
+    j.value("lasers", i.lasers).value("columns", i.columns).value("frames", i.frames);
+    j.value("incomplete_frames_dropped", i.incomplete_frames).value("points", i.points).value("no_returns", i.no_returns);
+    j.value("second_returns_not_kept", i.second_returns);
+    j.value("pcap_records", i.pcap_packets).value("udp_datagrams", i.udp_datagrams);
+    j.value("fragmented_datagrams", i.fragmented_datagrams).value("incomplete_datagrams_dropped", i.incomplete_datagrams);
+    j.value("lidar_packets", i.lidar_packets).value("other_packets", i.other_packets);
+    j.begin_array("scans");
+    for (std::size_t k = 0; k < log.scans.size(); ++k)
+      j.begin_object()
+          .value("frame_id", log.frame_ids[k])
+          .value("points", log.scans[k].size())
+          .value("no_returns", log.no_returns[k])
+          .value("rows", log.scans[k].rows)
+          .value("columns", log.scans[k].columns)
+          .end_object();
+    j.end_array();
+    j.end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("file           %s\n", o.path.c_str());
+  std::printf("format         pcap / %s %s\n", i.vendor.c_str(), i.profile.c_str());
+  std::printf("sensor         %s, %u lasers, %u columns a turn\n", i.sensor.c_str(), i.lasers, i.columns);
+  if (!i.metadata_path.empty()) std::printf("metadata       %s\n", i.metadata_path.c_str());
+  if (!i.model_note.empty()) std::printf("model          %s\n", i.model_note.c_str());
+  std::printf("frames         %zu complete (%zu incomplete dropped)\n", i.frames, i.incomplete_frames);
+  std::printf("points         %zu (%zu no-returns not counted)\n", i.points, i.no_returns);
+  if (i.second_returns) std::printf("second returns %zu (not kept)\n", i.second_returns);
+  std::printf("packets        %zu lidar, %zu other; %zu capture records, %zu UDP datagrams (%zu reassembled from fragments, %zu cut by the capture dropped)\n",
+              i.lidar_packets, i.other_packets, i.pcap_packets, i.udp_datagrams, i.fragmented_datagrams,
+              i.incomplete_datagrams);
+  for (std::size_t k = 0; k < log.scans.size(); ++k)
+    std::printf("  turn %-4zu    frame %llu: %zu points, %zu no-returns, %u x %u\n", k,
+                static_cast<unsigned long long>(log.frame_ids[k]), log.scans[k].size(), log.no_returns[k],
+                log.scans[k].rows, log.scans[k].columns);
+}
+
 void run_info(const InfoOptions& o) {
   if (o.format == "auto" && info_lex3d_file(o)) return;
-  const io::ReadResult r = load_cloud(o.path, parse_format_option(o.format));
+  const io::ReadOptions ro = read_options(parse_format_option(o.format), o.metadata, o.sensor_model);
+  if (ro.format == io::Format::kPcap || (ro.format == io::Format::kAuto && io::is_sensor_log(o.path))) {
+    info_sensor_log(o, ro);
+    return;
+  }
+  const io::ReadResult r = load_cloud(o.path, ro);
   const Cloud& c = r.cloud;
   const Bounds b = compute_bounds(c);
   std::vector<float> ranges;
@@ -220,6 +278,7 @@ void run_info(const InfoOptions& o) {
     j.value("file_bytes", r.file_bytes).value("points", c.size());
     j.value("non_finite_dropped", r.non_finite_dropped).value("no_return_dropped", r.no_return_dropped);
     j.value("has_intensity", c.has_intensity());
+    j.value("rows", c.rows).value("columns", c.columns).value("has_rings", c.has_rings());
     if (b.valid) {
       j.numbers("bounds_min", {b.min.x(), b.min.y(), b.min.z()});
       j.numbers("bounds_max", {b.max.x(), b.max.y(), b.max.z()});
@@ -242,7 +301,10 @@ void run_info(const InfoOptions& o) {
   std::printf("file size      %llu bytes\n", static_cast<unsigned long long>(r.file_bytes));
   std::printf("points         %zu\n", c.size());
   std::printf("NaN/Inf dropped %zu\n", r.non_finite_dropped);
-  if (r.no_return_dropped) std::printf("no-return      %zu (kept as max-range directions)\n", r.no_return_dropped);
+  if (r.no_return_dropped)
+    std::printf("no-return      %zu (%s)\n", r.no_return_dropped,
+                c.no_return_directions.empty() ? "not points" : "kept as max-range directions");
+  if (c.rows > 0) std::printf("organised      %u rows x %u columns\n", c.rows, c.columns);
   if (b.valid)
     std::printf("bounds         [%.3f %.3f %.3f] .. [%.3f %.3f %.3f] m\n", static_cast<double>(b.min.x()),
                 static_cast<double>(b.min.y()), static_cast<double>(b.min.z()), static_cast<double>(b.max.x()),
@@ -262,7 +324,9 @@ void register_info(CLI::App& app) {
   auto o = std::make_shared<InfoOptions>();
   CLI::App* sub = app.add_subcommand("info", "Describe a point cloud, model or alphabet file");
   sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d), or a lex3d model, alphabet or sequence file")->required();
-  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
+  sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
+  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references (for its counts)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   sub->callback([o] { run_info(*o); });

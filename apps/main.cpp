@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   lex3d::cli::register_features(app);
   lex3d::cli::register_compress(app);
   lex3d::cli::register_decompress(app);
+  lex3d::cli::register_convert(app);
   lex3d::cli::register_learn(app);
   lex3d::cli::register_reconstruct(app);
   lex3d::cli::register_place(app);

@@ -37,7 +37,9 @@ ModelParams ModelOptions::params() const {
 }
 
 void ScanSetOptions::add_to(CLI::App& app) {
-  app.add_option("--format", format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
+  app.add_option("--format", format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
+  app.add_option("--metadata", metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
+  app.add_option("--sensor-model", sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e (default: detected)");
   app.add_option("--poses", poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
   app.add_option("--input-frame", input_frame,
                  "Frame of the scans' points: sensor (each scan in its own sensor frame), or world (already in "
@@ -50,11 +52,16 @@ void ScanSetOptions::add_to(CLI::App& app) {
 }
 
 std::vector<Cloud> ScanSetOptions::load(const std::vector<std::string>& inputs) const {
-  return load_scans(inputs, parse_format_option(format), poses, input_frame == "world");
+  const ScanLoader l = loader(inputs);
+  std::vector<Cloud> clouds;
+  clouds.reserve(l.size());
+  for (std::size_t i = 0; i < l.size(); ++i) clouds.push_back(l.load(i));
+  return clouds;
 }
 
 ScanLoader ScanSetOptions::loader(const std::vector<std::string>& inputs) const {
-  return ScanLoader(inputs, parse_format_option(format), poses, input_frame == "world");
+  return ScanLoader(inputs, read_options(parse_format_option(format), metadata, sensor_model), poses,
+                    input_frame == "world");
 }
 
 LearnParams ScanSetOptions::learn_params(const ModelParams& model) const {

@@ -31,6 +31,8 @@ struct ModelOptions {
 /// --format, --poses, --input-frame, --iterations, --seed.
 struct ScanSetOptions {
   std::string format = "auto";
+  std::string metadata;      ///< --metadata: an Ouster capture's metadata JSON
+  std::string sensor_model;  ///< --sensor-model: a Velodyne capture's model
   std::string poses;
   std::string input_frame = "sensor";  ///< "world": the points are in the frame of the poses
   int iterations = LearnParams{}.max_iterations;

@@ -15,6 +15,7 @@ PACKAGES=(
   clang libclang-rt-14-dev
   python3 python3-numpy python3-scipy
   draco time python3-matplotlib
+  libpcap-dev nlohmann-json3-dev
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -72,6 +72,14 @@ bool looks_like_pcd(const std::uint8_t* p, std::size_t n) {
   return false;
 }
 
+/// libpcap (microsecond or nanosecond, either byte order) or pcapng magic.
+bool looks_like_pcap(const std::uint8_t* p, std::size_t n) {
+  if (n < 4) return false;
+  std::uint32_t m = 0;
+  std::memcpy(&m, p, 4);
+  return m == 0xA1B2C3D4U || m == 0xD4C3B2A1U || m == 0xA1B23C4DU || m == 0x4D3CB2A1U || m == 0x0A0D0D0AU;
+}
+
 /// Text with at least three numbers on its first data line.
 bool looks_like_numbers(const std::uint8_t* p, std::size_t n) {
   if (n == 0 || std::memchr(p, '\0', n) != nullptr) return false;
@@ -118,12 +126,14 @@ StatusOr<Format> detect_from_bytes(const std::string& path, const std::uint8_t* 
                                    std::size_t head_size, std::uint64_t file_size) {
   if (file_size == 0) return bad_data(msg(path, "file is empty"));
   const std::string ext = extension_lower(path);
+  if (looks_like_pcap(head, head_size)) return Format::kPcap;
   if (looks_like_ply(head, head_size)) return Format::kPly;
   if (looks_like_pcd(head, head_size)) return Format::kPcd;
   if (ext == ".bin") return detect_bin(head, head_size, file_size);
   if (ext == ".pcd") return Format::kPcd;
   if (ext == ".ply") return Format::kPly;
   if (ext == ".3d") return Format::kUos3d;
+  if (ext == ".pcap" || ext == ".pcapng") return Format::kPcap;
   if (ext == ".xyz" || ext == ".txt" || ext == ".asc" || ext == ".csv") return Format::kXyz;
   if (looks_like_numbers(head, head_size)) return Format::kXyz;
   return bad_data(msg(path, "cannot tell the format: unknown extension '" + printable(ext, 16) +
@@ -141,6 +151,7 @@ std::string_view format_name(Format f) noexcept {
     case Format::kPly: return "ply";
     case Format::kXyz: return "xyz";
     case Format::kUos3d: return "uos";
+    case Format::kPcap: return "pcap";
   }
   return "unknown";
 }
@@ -153,7 +164,7 @@ std::optional<Format> parse_format(std::string_view name) noexcept {
     return std::nullopt;
   }
   for (Format f : {Format::kAuto, Format::kKitti, Format::kBinXyz, Format::kPcd, Format::kPly,
-                   Format::kXyz, Format::kUos3d}) {
+                   Format::kXyz, Format::kUos3d, Format::kPcap}) {
     if (lower == format_name(f)) return f;
   }
   if (lower == "3d") return Format::kUos3d;

@@ -270,10 +270,35 @@ class Builder {
     if (color_) r_.colors.push_back(c);
   }
 
+  /// Records each point's laser (`rings`) and column (`columns`) from add_at; with
+  /// `organised`, NaN/Inf and exact (0, 0, 0) points are the sensor's no-returns (counted in
+  /// no_return_dropped, not in non_finite_dropped).
+  void set_layout(bool rings, bool columns, bool organised) {
+    rings_ = rings;
+    columns_ = columns;
+    organised_ = organised;
+  }
+
+  void add_at(float x, float y, float z, float i, const Rgb& c, std::uint16_t ring, std::uint32_t column) {
+    const bool finite = std::isfinite(x) && std::isfinite(y) && std::isfinite(z);
+    if (organised_ && (!finite || (x == 0.0F && y == 0.0F && z == 0.0F))) {
+      ++r_.no_return_dropped;
+      return;
+    }
+    const std::size_t before = r_.cloud.points.size();
+    add(x, y, z, i, c);
+    if (r_.cloud.points.size() == before) return;
+    if (rings_) r_.cloud.ring.push_back(ring);
+    if (columns_) r_.cloud.column.push_back(column);
+  }
+
  private:
   ReadResult& r_;
   bool intensity_;
   bool color_;
+  bool rings_ = false;
+  bool columns_ = false;
+  bool organised_ = false;
 };
 
 // Each reader gets the whole file (`data`, `size` bytes, not empty), fills `r`

@@ -22,6 +22,7 @@
 
 #include "io/internal.hpp"
 #include "lex3d/io/io.hpp"
+#include "lex3d/io/sensor_log.hpp"
 
 namespace lex3d::io {
 
@@ -50,7 +51,26 @@ std::string pose_path_for(const std::string& path) {
   return path.substr(0, dot) + ".pose";
 }
 
+/// A raw log's first complete turn.
+StatusOr<ReadResult> read_log_first_turn(const std::string& path, const ReadOptions& options) {
+  auto log = read_sensor_log(path, options);
+  if (!log.ok()) return log.status();
+  SensorLog& l = log.value();
+  ReadResult r;
+  r.format = Format::kPcap;
+  r.encoding = l.info.vendor + " " + l.info.profile;
+  r.sensor = l.info.sensor;
+  r.scans_in_file = l.scans.size();
+  r.no_return_dropped = l.no_returns.front();
+  r.cloud = std::move(l.scans.front());
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) r.file_bytes = static_cast<std::uint64_t>(st.st_size);
+  return r;
+}
+
 StatusOr<ReadResult> read_cloud_impl(const std::string& path, const ReadOptions& options) {
+  if (options.format == Format::kPcap || (options.format == Format::kAuto && is_sensor_log(path)))
+    return read_log_first_turn(path, options);
   auto file = read_file(path);
   if (!file.ok()) return file.status();
   const std::vector<std::uint8_t>& bytes = file.value();
@@ -76,6 +96,7 @@ StatusOr<ReadResult> read_cloud_impl(const std::string& path, const ReadOptions&
     case Format::kPly: s = detail::read_ply(path, bytes.data(), bytes.size(), r); break;
     case Format::kXyz: s = detail::read_text(path, bytes.data(), bytes.size(), false, options, r); break;
     case Format::kUos3d: s = detail::read_text(path, bytes.data(), bytes.size(), true, options, r); break;
+    case Format::kPcap:  // handled above; reached only when detection disagrees with is_sensor_log
     case Format::kAuto: s = bad_data(msg(path, "cannot tell the format")); break;
   }
   if (!s.ok()) return s;

@@ -30,6 +30,10 @@ Status read_float_binary(const std::string& path, const std::uint8_t* data, std:
     const float y = load<float>(p + 4, kHostBigEndian);
     const float z = load<float>(p + 8, kHostBigEndian);
     const float in = stride == 16 ? load<float>(p + 12, kHostBigEndian) : 0.0F;
+    if (x == 0.0F && y == 0.0F && z == 0.0F) {  // an organised sensor's no-return written out
+      ++r.no_return_dropped;
+      continue;
+    }
     b.add(x, y, z, in);
   }
   return {};

@@ -248,6 +248,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                                   (fx == nullptr ? "x" : fy == nullptr ? "y" : "z") + "' field"));
   }
   const PcdField* fi = find({"intensity"});
+  const PcdField* fr = find({"ring", "laser_id", "ring_id"});
   const PcdField* fc = find({"rgb", "rgba"});
   if (fc != nullptr && fc->size != 4) fc = nullptr;  // only packed 32-bit colours
 
@@ -255,6 +256,26 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   r.cloud.T_cloud_sensor = viewpoint;
   const std::uint64_t avail = size - data_start;
   Builder out(r, fi != nullptr, fc != nullptr);
+  // An organised cloud (HEIGHT > 1): rows are lasers, columns azimuth steps, NaN or (0, 0, 0)
+  // pixels no-returns; a ring field gives each point's laser.
+  const bool organised = height > 1 && height <= 0xFFFF && width <= 0xFFFFFFFFULL;
+  if (organised) {
+    r.cloud.rows = static_cast<std::uint32_t>(height);
+    r.cloud.columns = static_cast<std::uint32_t>(width);
+  }
+  out.set_layout(organised || fr != nullptr, organised, organised);
+  const std::uint64_t row_width = std::max<std::uint64_t>(width, 1);
+  // The laser of point i: its ring field, else its row.
+  auto ring_of = [&](std::uint64_t i, double ring_value, std::uint16_t& ring) -> Status {
+    if (fr == nullptr) {
+      ring = static_cast<std::uint16_t>(i / row_width);
+      return {};
+    }
+    if (!(ring_value >= 0.0 && ring_value <= 65535.0) || ring_value != std::floor(ring_value))
+      return bad_data(msg(path, "point " + std::to_string(i) + ": " + fr->name + " value is not a laser index in [0, 65535]"));
+    ring = static_cast<std::uint16_t>(ring_value);
+    return {};
+  };
 
   // --- ascii
   if (encoding == "ascii") {
@@ -274,6 +295,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       const std::string_view t = trim(dl);
       if (t.empty()) continue;
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
+      double ring_value = 0.0;
       std::uint32_t rgb_bits = 0;
       std::size_t k = 0;
       std::string_view bad;
@@ -295,6 +317,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (col == fy->token) slot = &v[1];
         else if (col == fz->token) slot = &v[2];
         else if (fi != nullptr && col == fi->token) slot = &v[3];
+        else if (fr != nullptr && col == fr->token) return parse_number(b, e, ring_value);
         return slot != nullptr ? parse_number(b, e, *slot) : is_number(b, e);
       });
       const std::uint64_t line_no = first_line + data_lines.line_no() - 1;
@@ -305,7 +328,10 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                                       " values, found " + std::to_string(k)),
                         off);
       }
-      out.add(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits));
+      std::uint16_t ring = 0;
+      Status rs = ring_of(done, ring_value, ring);
+      if (!rs.ok()) return rs;
+      out.add_at(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits), ring, static_cast<std::uint32_t>(done % row_width));
       ++done;
     }
     if (done < points) {
@@ -388,7 +414,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     }
     return a;
   };
-  const PcdAccess ax = access(fx), ay = access(fy), az = access(fz), ai = access(fi), ac = access(fc);
+  const PcdAccess ax = access(fx), ay = access(fy), az = access(fz), ai = access(fi), ac = access(fc),
+                  ar = access(fr);
   out.reserve(static_cast<std::size_t>(points));
   const bool swap = kHostBigEndian;
   for (std::uint64_t i = 0; i < points; ++i) {
@@ -398,7 +425,10 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     const float in = fi != nullptr ? load_float(block + ai.base + i * ai.stride, fi->scalar, swap) : 0.0F;
     Rgb c{};
     if (fc != nullptr) c = unpack_rgb(load_bits32(block + ac.base + i * ac.stride, swap));
-    out.add(x, y, z, in, c);
+    std::uint16_t ring = 0;
+    Status rs = ring_of(i, fr != nullptr ? load_scalar(block + ar.base + i * ar.stride, fr->scalar, swap) : 0.0, ring);
+    if (!rs.ok()) return rs;
+    out.add_at(x, y, z, in, c, ring, static_cast<std::uint32_t>(i % row_width));
   }
   return {};
 }

@@ -99,7 +99,7 @@ std::uint32_t pack_rgb(const std::array<std::uint8_t, 3>& c) {
 }
 
 Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions& o, bool with_i,
-                 bool with_c, std::vector<std::uint8_t>& out) {
+                 bool with_c, std::vector<std::uint8_t>& out, std::size_t height = 1) {
   const std::size_t n = cloud.size();
   const std::size_t point_size = 12 + (with_i ? 4 : 0) + (with_c ? 4 : 0);
   Bytes b(256 + n * point_size + (o.pcd_encoding == PcdEncoding::kAscii ? n * 40 : 0));
@@ -122,8 +122,8 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
                     : o.pcd_encoding == PcdEncoding::kBinary ? "binary"
                                                              : "binary_compressed";
   b.str("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS " + fields + "\nSIZE " +
-        sizes + "\nTYPE " + types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(n) +
-        "\nHEIGHT 1\nVIEWPOINT " + viewpoint_of(cloud.T_cloud_sensor) + "\nPOINTS " + std::to_string(n) +
+        sizes + "\nTYPE " + types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(n / height) +
+        "\nHEIGHT " + std::to_string(height) + "\nVIEWPOINT " + viewpoint_of(cloud.T_cloud_sensor) + "\nPOINTS " + std::to_string(n) +
         "\nDATA " + enc + "\n");
   switch (o.pcd_encoding) {
     case PcdEncoding::kAscii:
@@ -300,7 +300,40 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
   std::vector<std::uint8_t> bytes;
   switch (f) {
     case Format::kPcd: {
-      Status s = build_pcd(path, cloud, options, with_i, with_c, bytes);
+      // An organised cloud (rows x columns, each point's ring and column known, one point a
+      // pixel) is written organised: HEIGHT rows, NaN at its no-return pixels.
+      const std::uint64_t pixels = static_cast<std::uint64_t>(cloud.rows) * cloud.columns;
+      bool organised = cloud.rows > 1 && cloud.columns > 0 && cloud.has_rings() && cloud.has_columns() &&
+                       pixels >= cloud.size() && pixels <= (1ULL << 31);
+      std::vector<std::int64_t> at;
+      if (organised) {
+        at.assign(static_cast<std::size_t>(pixels), -1);
+        for (std::size_t i = 0; i < cloud.size() && organised; ++i) {
+          const std::uint64_t k = static_cast<std::uint64_t>(cloud.ring[i]) * cloud.columns + cloud.column[i];
+          organised = cloud.ring[i] < cloud.rows && cloud.column[i] < cloud.columns && at[k] < 0;
+          if (organised) at[k] = static_cast<std::int64_t>(i);
+        }
+      }
+      Status s;
+      if (organised) {
+        Cloud grid;
+        grid.T_cloud_sensor = cloud.T_cloud_sensor;
+        WriteOptions go = options;
+        const float nan = std::numeric_limits<float>::quiet_NaN();
+        grid.points.assign(at.size(), Eigen::Vector3f(nan, nan, nan));
+        if (with_i) grid.intensity.assign(at.size(), 0.0F);
+        if (with_c) go.colors.assign(at.size(), {0, 0, 0});
+        for (std::size_t k = 0; k < at.size(); ++k) {
+          if (at[k] < 0) continue;
+          const auto i = static_cast<std::size_t>(at[k]);
+          grid.points[k] = cloud.points[i];
+          if (with_i) grid.intensity[k] = cloud.intensity[i];
+          if (with_c) go.colors[k] = options.colors[i];
+        }
+        s = build_pcd(path, grid, go, with_i, with_c, bytes, cloud.rows);
+      } else {
+        s = build_pcd(path, cloud, options, with_i, with_c, bytes);
+      }
       if (!s.ok()) return s;
       break;
     }
@@ -309,6 +342,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
     case Format::kBinXyz: build_float_binary(cloud, false, bytes); break;
     case Format::kXyz: build_xyz(cloud, with_i, bytes); break;
     case Format::kUos3d:
+    case Format::kPcap:
     case Format::kAuto:
       return invalid(path, "writing format '" + std::string(format_name(f)) + "' is not supported");
   }

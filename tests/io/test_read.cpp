@@ -272,8 +272,15 @@ TEST(ReadFixture, PcdViewpointIsTheSensorPose) {
 TEST(ReadFixture, OrganizedPcdWithNaNsAndMixedTypes) {
   const ReadResult r = read_ok(fixture("organized_nan.pcd"));
   EXPECT_EQ(r.encoding, "binary");
-  EXPECT_EQ(r.non_finite_dropped, 2U);  // holes at 2 and 7
+  // An organised cloud's NaN holes (at 2 and 7) are the sensor's no-returns, not bad points.
+  EXPECT_EQ(r.non_finite_dropped, 0U);
+  EXPECT_EQ(r.no_return_dropped, 2U);
   ASSERT_EQ(r.cloud.size(), 10U);
+  EXPECT_GT(r.cloud.rows, 1U);
+  EXPECT_EQ(static_cast<std::size_t>(r.cloud.rows) * r.cloud.columns, 12U);
+  ASSERT_TRUE(r.cloud.has_rings());
+  EXPECT_EQ(r.cloud.ring[2], 0U);
+  EXPECT_EQ(r.cloud.column[2], 3U);
   // point 3 (row 0, column 3): x = 1.5, y = 0, z = 4; intensity U2 = 103; rgb = (3, 6, 9)
   EXPECT_EQ(r.cloud.points[2], Eigen::Vector3f(1.5F, 0.0F, 4.0F));
   ASSERT_TRUE(r.cloud.has_intensity());

@@ -29,6 +29,9 @@ enum class Format : std::uint8_t {
              ///< line `x y z ... intensity ...` names the columns
   kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`;
              ///< read into lex3d's right-handed metric frame: x = z_in/100, y = -x_in/100, z = y_in/100
+  kPcap,     ///< a raw spinning-lidar log: libpcap capture of Ouster (with its metadata JSON) or
+             ///< Velodyne (VLP-16, HDL-32E) UDP packets; read_cloud gives its first complete turn,
+             ///< read_sensor_log (sensor_log.hpp) every turn
 };
 
 /// Canonical lower-case name of a format ("kitti", "binxyz", "pcd", "ply", "xyz", "uos", "auto").
@@ -49,6 +52,11 @@ struct ReadOptions {
   /// For kUos3d: points at or beyond this range (centimetres) are the scanner's
   /// no-return value; they are dropped, counted, and kept as no-return directions.
   float uos_no_return_cm = 3270.0F;
+  /// For kPcap (Ouster): the sensor metadata JSON; empty: `<stem>.json` beside the capture.
+  std::string metadata_path;
+  /// For kPcap (Velodyne): "vlp16" or "hdl32e" to override the model the packets announce
+  /// (and the packet timing check); empty: detected.
+  std::string sensor_model;
 };
 
 struct ReadResult {
@@ -56,7 +64,13 @@ struct ReadResult {
   Format format = Format::kAuto;        ///< the format actually read
   std::string encoding;                 ///< e.g. "binary_compressed", "ascii", "binary_little_endian"
   std::size_t non_finite_dropped = 0;   ///< points with a NaN or Inf coordinate, dropped
-  std::size_t no_return_dropped = 0;    ///< no-return readings dropped (kUos3d)
+  /// No-return readings dropped: kUos3d's no-return range, an organised cloud's NaN or exact
+  /// (0, 0, 0) pixels, a `.bin`'s exact (0, 0, 0) records, a raw log's zero-range pixels.
+  std::size_t no_return_dropped = 0;
+  /// kPcap: the sensor ("OS-1-128", "VLP-16") and how many complete turns the log holds
+  /// (the cloud is the first of them).
+  std::string sensor;
+  std::size_t scans_in_file = 0;
   /// Per-point RGB colour (one per point of `cloud`) when the file has one
   /// (PCD `rgb`/`rgba` field, PLY `red green blue` properties); empty otherwise.
   std::vector<std::array<std::uint8_t, 3>> colors;

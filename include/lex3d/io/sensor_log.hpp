@@ -1,0 +1,76 @@
+#pragma once
+/// \file
+/// Raw spinning-lidar logs: a libpcap capture of the sensor's UDP packets, decoded into
+/// one organised Cloud a complete turn, with each point's laser (`Cloud::ring`), azimuth
+/// column (`Cloud::column`), the range-image shape and the sensor's beam layout
+/// (`Cloud::geometry`).
+///
+/// - Ouster (LEGACY, RNG19_RFL8_SIG16_NIR16, RNG19_RFL8_SIG16_NIR16_DUAL, RNG15_RFL8_NIR8),
+///   with the sensor's metadata JSON (fw 2.x flat layout or the fw 3 nested one). A turn is
+///   one frame_id whose columns cover the metadata's column_window. Rows are the beams in
+///   the metadata's order (highest first), columns the destaggered measurement columns
+///   (pixel_shift_by_row), and each point is placed as Ouster's beam model places it, in
+///   the "sensor" frame (lidar_to_sensor_transform), so the geometry reproduces it exactly.
+///   Intensity is the reflectivity channel. Zero-range pixels are no-returns (counted, not
+///   points); the dual profile's second returns are counted and not kept.
+/// - Velodyne VLP-16 and HDL-32E with the published per-model elevation tables. Rings are the
+///   lasers ordered by elevation, lowest first (ring 0 = lowest beam); a column is one firing
+///   of all lasers, counted from the start of its turn. A turn is 360° of azimuth starting at
+///   the log's first firing (so a log of 1.1 turns gives one). The points use each firing's
+///   own azimuth from the packets (and each laser's firing time within it); the geometry is
+///   the best regular grid (see read_sensor_log), not an exact one.
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lex3d/core/cloud.hpp"
+#include "lex3d/core/status.hpp"
+#include "lex3d/io/io.hpp"
+
+namespace lex3d::io {
+
+/// What a raw log held besides its turns.
+struct SensorLogInfo {
+  std::string vendor;        ///< "ouster" or "velodyne"
+  std::string sensor;        ///< e.g. "OS-1-128", "VLP-16"
+  std::string profile;       ///< Ouster udp_profile_lidar; Velodyne return mode ("strongest", "last")
+  std::string metadata_path; ///< the Ouster metadata JSON read (empty for Velodyne)
+  std::string model_note;    ///< how the Velodyne model was decided (factory byte, timing, override)
+  std::uint32_t lasers = 0;   ///< beams (rows of a turn)
+  std::uint32_t columns = 0;  ///< columns a turn (Ouster: columns_per_frame; Velodyne: median firings a turn)
+  std::size_t frames = 0;     ///< complete turns decoded (= scans.size())
+  std::size_t incomplete_frames = 0;  ///< turns cut by the capture's start or end, or missing packets: dropped
+  std::size_t pcap_packets = 0;       ///< capture records read
+  std::size_t udp_datagrams = 0;      ///< UDP datagrams after IPv4 reassembly
+  std::size_t lidar_packets = 0;      ///< lidar data packets decoded
+  std::size_t other_packets = 0;      ///< other datagrams and non-IPv4/UDP frames (IMU, GPS, ARP, ...), skipped
+  std::size_t fragmented_datagrams = 0;  ///< datagrams reassembled from IPv4 fragments
+  std::size_t incomplete_datagrams = 0;  ///< fragment sets cut by the capture's start or end, dropped
+  std::size_t no_returns = 0;         ///< zero-range pixels of the decoded turns (not points)
+  std::size_t second_returns = 0;     ///< dual-return profile: second returns seen, not kept
+  std::size_t points = 0;             ///< points of all decoded turns
+};
+
+/// The turns of a raw log, in capture order.
+struct SensorLog {
+  SensorLogInfo info;
+  std::vector<Cloud> scans;
+  std::vector<std::uint64_t> frame_ids;        ///< Ouster frame_id, or the turn's index (Velodyne)
+  std::vector<std::size_t> no_returns;         ///< per scan
+};
+
+/// True when `path` starts with a libpcap or pcapng magic number.
+[[nodiscard]] bool is_sensor_log(const std::string& path);
+
+/// Reads every complete turn of a raw lidar log (see the file comment). `options` gives the
+/// Ouster metadata path (`metadata_path`; default `<stem>.json` beside the capture) and a
+/// Velodyne model override (`sensor_model`). Errors (kBadData, one line naming the file):
+/// not a capture, no lidar packets, a truncated packet or capture record, metadata that does
+/// not match the packets (size, beam count, profile, columns, serial number), a fragment set
+/// that never completes in the middle of the capture, a non-finite or out-of-range angle in
+/// the laser table, no complete turn. kIoError when a file cannot be opened.
+[[nodiscard]] StatusOr<SensorLog> read_sensor_log(const std::string& path, const ReadOptions& options = {});
+
+}  // namespace lex3d::io

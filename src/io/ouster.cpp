@@ -1,0 +1,432 @@
+// Ouster lidar packets (LEGACY, RNG19_RFL8_SIG16_NIR16[_DUAL], RNG15_RFL8_NIR8) and the
+// sensor metadata JSON (fw 2.x flat layout, fw 3 nested layout), decoded into one organised
+// Cloud a complete frame, placed with Ouster's documented beam model:
+//
+//   θ_enc = 2π (1 − m / W)           m: measurement column, W: columns_per_frame
+//   θ_az  = −2π beam_azimuth / 360,  φ = 2π beam_altitude / 360,  n: beam origin offset
+//   p     = (r − n) (cos(θ_enc + θ_az) cos φ, sin(θ_enc + θ_az) cos φ, sin φ)
+//           + (n cos θ_enc, n sin θ_enc, z_beam)
+//   p_sensor = lidar_to_sensor_transform · p
+//
+// which is cloud.hpp's SensorGeometry model with r_model = r − n, radial_offset = n,
+// direction = −1, azimuth0 = 0 and column_azimuth = 2π shift / W for the destaggered
+// column c = (m + shift) mod W.
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <optional>
+
+#include "io/internal.hpp"
+#include "io/sensor_log_internal.hpp"
+
+namespace lex3d::io::detail {
+
+namespace {
+
+using nlohmann::json;
+
+enum class Profile { kLegacy, kSingle, kDual, kLowData };
+
+struct Meta {
+  std::string prod_line;
+  std::uint64_t prod_sn = 0;  // 0: unknown
+  std::string profile_name = "LEGACY";
+  Profile profile = Profile::kLegacy;
+  std::uint32_t H = 0, W = 0, cpp = 0;
+  std::uint32_t window0 = 0, window1 = 0;
+  std::vector<double> altitude_deg, azimuth_deg;
+  std::vector<int> shift;
+  double n_mm = 0.0;
+  double z_mm = 0.0;
+  Eigen::Matrix4d lidar_to_sensor = Eigen::Matrix4d::Identity();  // translation in mm
+  int udp_port_lidar = 0;                                        // 0: not given
+  [[nodiscard]] std::size_t pixel_bytes() const {
+    switch (profile) {
+      case Profile::kLegacy: return 12;
+      case Profile::kSingle: return 12;
+      case Profile::kDual: return 16;
+      case Profile::kLowData: return 4;
+    }
+    return 12;
+  }
+  [[nodiscard]] bool legacy() const { return profile == Profile::kLegacy; }
+  [[nodiscard]] std::size_t column_bytes() const { return (legacy() ? 20 : 12) + H * pixel_bytes(); }
+  [[nodiscard]] std::size_t packet_bytes() const { return (legacy() ? 0 : 64) + cpp * column_bytes(); }
+  [[nodiscard]] bool in_window(std::uint32_t m) const {
+    return window0 <= window1 ? (m >= window0 && m <= window1) : (m >= window0 || m <= window1);
+  }
+};
+
+/// Errors of the metadata reader: "<metadata path>: <what>".
+struct MetaError {
+  std::string what;
+};
+
+const json* find(const json& j, std::initializer_list<const char*> path) {
+  const json* cur = &j;
+  for (const char* k : path) {
+    if (!cur->is_object()) return nullptr;
+    auto it = cur->find(k);
+    if (it == cur->end()) return nullptr;
+    cur = &*it;
+  }
+  return cur;
+}
+
+/// The first of several locations that exists.
+const json* find_any(const json& j, std::initializer_list<std::initializer_list<const char*>> paths) {
+  for (const auto& p : paths)
+    if (const json* v = find(j, p)) return v;
+  return nullptr;
+}
+
+double number(const json* v, const std::string& name) {
+  if (v == nullptr) throw MetaError{"no " + name};
+  if (!v->is_number()) throw MetaError{name + " is not a number"};
+  const double d = v->get<double>();
+  if (!std::isfinite(d)) throw MetaError{name + " is not finite"};
+  return d;
+}
+
+std::vector<double> numbers(const json* v, const std::string& name, std::size_t want) {
+  if (v == nullptr) throw MetaError{"no " + name};
+  if (!v->is_array()) throw MetaError{name + " is not an array"};
+  if (want != 0 && v->size() != want)
+    throw MetaError{name + " has " + std::to_string(v->size()) + " entries, expected " + std::to_string(want)};
+  std::vector<double> out;
+  out.reserve(v->size());
+  for (std::size_t i = 0; i < v->size(); ++i) {
+    const json& e = (*v)[i];
+    if (!e.is_number() || !std::isfinite(e.get<double>()))
+      throw MetaError{name + "[" + std::to_string(i) + "] is not a finite number"};
+    out.push_back(e.get<double>());
+  }
+  return out;
+}
+
+std::uint32_t whole(const json* v, const std::string& name, std::uint32_t lo, std::uint32_t hi) {
+  const double d = number(v, name);
+  if (d != std::floor(d) || d < lo || d > hi)
+    throw MetaError{name + " is " + json(d).dump() + ", expected a whole number in [" + std::to_string(lo) + ", " +
+                    std::to_string(hi) + "]"};
+  return static_cast<std::uint32_t>(d);
+}
+
+Meta parse_meta(const json& j) {
+  Meta m;
+  if (!j.is_object()) throw MetaError{"not a JSON object"};
+  const bool nested = find(j, {"beam_intrinsics"}) != nullptr;
+  const json* fmt = nested ? find(j, {"lidar_data_format"}) : find(j, {"data_format"});
+  if (fmt == nullptr || !fmt->is_object())
+    throw MetaError{nested ? "no lidar_data_format object" : "no data_format object (not Ouster metadata?)"};
+  m.H = whole(find(*fmt, {"pixels_per_column"}), "pixels_per_column", 1, 512);
+  m.W = whole(find(*fmt, {"columns_per_frame"}), "columns_per_frame", 1, 16384);
+  m.cpp = whole(find(*fmt, {"columns_per_packet"}), "columns_per_packet", 1, m.W);
+  const std::vector<double> win = numbers(find(*fmt, {"column_window"}), "column_window", 2);
+  for (int k = 0; k < 2; ++k)
+    if (win[k] != std::floor(win[k]) || win[k] < 0 || win[k] >= m.W)
+      throw MetaError{"column_window[" + std::to_string(k) + "] is outside [0, columns_per_frame)"};
+  m.window0 = static_cast<std::uint32_t>(win[0]);
+  m.window1 = static_cast<std::uint32_t>(win[1]);
+  const std::vector<double> shifts = numbers(find(*fmt, {"pixel_shift_by_row"}), "pixel_shift_by_row", m.H);
+  for (std::size_t i = 0; i < shifts.size(); ++i) {
+    if (shifts[i] != std::floor(shifts[i]) || std::abs(shifts[i]) >= m.W)
+      throw MetaError{"pixel_shift_by_row[" + std::to_string(i) + "] is not a whole number of columns below columns_per_frame"};
+    m.shift.push_back(static_cast<int>(shifts[i]));
+  }
+  const json* prof = find_any(j, {{nested ? "lidar_data_format" : "data_format", "udp_profile_lidar"},
+                                  {"config_params", "udp_profile_lidar"}});
+  if (prof != nullptr) {
+    if (!prof->is_string()) throw MetaError{"udp_profile_lidar is not a string"};
+    m.profile_name = prof->get<std::string>();
+  }
+  if (m.profile_name == "LEGACY") m.profile = Profile::kLegacy;
+  else if (m.profile_name == "RNG19_RFL8_SIG16_NIR16") m.profile = Profile::kSingle;
+  else if (m.profile_name == "RNG19_RFL8_SIG16_NIR16_DUAL") m.profile = Profile::kDual;
+  else if (m.profile_name == "RNG15_RFL8_NIR8") m.profile = Profile::kLowData;
+  else
+    throw MetaError{"udp_profile_lidar '" + printable(m.profile_name, 40) +
+                    "' is not supported (LEGACY, RNG19_RFL8_SIG16_NIR16, RNG19_RFL8_SIG16_NIR16_DUAL, RNG15_RFL8_NIR8)"};
+
+  const json* bi = nested ? find(j, {"beam_intrinsics"}) : &j;
+  m.altitude_deg = numbers(find(*bi, {"beam_altitude_angles"}), "beam_altitude_angles", m.H);
+  m.azimuth_deg = numbers(find(*bi, {"beam_azimuth_angles"}), "beam_azimuth_angles", m.H);
+  for (std::uint32_t i = 0; i < m.H; ++i) {
+    if (std::abs(m.altitude_deg[i]) > 90.0)
+      throw MetaError{"beam_altitude_angles[" + std::to_string(i) + "] is outside [-90, 90] degrees"};
+    if (std::abs(m.azimuth_deg[i]) > 180.0)
+      throw MetaError{"beam_azimuth_angles[" + std::to_string(i) + "] is outside [-180, 180] degrees"};
+  }
+  m.n_mm = number(find(*bi, {"lidar_origin_to_beam_origin_mm"}), "lidar_origin_to_beam_origin_mm");
+  if (const json* b2l = find(*bi, {"beam_to_lidar_transform"})) {
+    const std::vector<double> t = numbers(b2l, "beam_to_lidar_transform", 16);
+    // The beam model has a radial offset (t[3]) and a height (t[11]); a rotation or a sideways
+    // offset would need more than it describes.
+    const Eigen::Matrix3d R = Eigen::Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(t.data()).topLeftCorner<3, 3>();
+    if ((R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-9 || std::abs(t[7]) > 1e-9)
+      throw MetaError{"beam_to_lidar_transform has a rotation or a y offset, which the beam model does not describe"};
+    m.n_mm = t[3];
+    m.z_mm = t[11];
+  }
+  if (!(m.n_mm >= 0.0 && m.n_mm < 1000.0)) throw MetaError{"lidar_origin_to_beam_origin_mm is outside [0, 1000)"};
+  const json* l2s = nested ? find(j, {"lidar_intrinsics", "lidar_to_sensor_transform"}) : find(j, {"lidar_to_sensor_transform"});
+  const std::vector<double> t = numbers(l2s, "lidar_to_sensor_transform", 16);
+  m.lidar_to_sensor = Eigen::Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(t.data());
+  const Eigen::Matrix3d R = m.lidar_to_sensor.topLeftCorner<3, 3>();
+  if ((R * R.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
+      m.lidar_to_sensor.row(3).transpose() != Eigen::Vector4d(0, 0, 0, 1))
+    throw MetaError{"lidar_to_sensor_transform is not a rigid transform"};
+  if (const json* pl = find_any(j, {{"prod_line"}, {"sensor_info", "prod_line"}}); pl != nullptr && pl->is_string())
+    m.prod_line = pl->get<std::string>();
+  if (const json* sn = find_any(j, {{"prod_sn"}, {"sensor_info", "prod_sn"}}); sn != nullptr) {
+    if (sn->is_string()) {
+      const std::string s = sn->get<std::string>();
+      std::uint64_t v = 0;
+      if (parse_u64(s, v)) m.prod_sn = v;
+    } else if (sn->is_number_unsigned()) {
+      m.prod_sn = sn->get<std::uint64_t>();
+    }
+  }
+  if (const json* port = find_any(j, {{"udp_port_lidar"}, {"config_params", "udp_port_lidar"}});
+      port != nullptr && port->is_number_integer()) {
+    const auto v = port->get<std::int64_t>();
+    if (v > 0 && v < 65536) m.udp_port_lidar = static_cast<int>(v);
+  }
+  return m;
+}
+
+template <typename T>
+T le(const std::uint8_t* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  return v;  // the host is little-endian (checked in read_sensor_log)
+}
+
+/// One frame being assembled: the staggered range and reflectivity images.
+struct Frame {
+  std::uint32_t id = 0;
+  std::vector<std::uint32_t> range_mm;  // H × W, row-major by beam
+  std::vector<std::uint16_t> refl;
+  std::vector<std::uint8_t> second;     // dual profile: second return present
+  std::vector<std::uint8_t> have;       // per measurement column
+  std::size_t columns_seen = 0;
+};
+
+}  // namespace
+
+Status decode_ouster(const std::string& path, const std::string& metadata_path,
+                     const std::vector<Datagram>& datagrams, SensorLog& log) {
+  auto text = read_file(metadata_path, 64ULL << 20);
+  if (!text.ok()) return text.status();
+  const std::vector<std::uint8_t>& tb = text.value();
+  const json j = json::parse(tb.begin(), tb.end(), nullptr, false);
+  if (j.is_discarded()) {
+    const std::string s(tb.begin(), tb.end());
+    const bool nan = s.find("NaN") != std::string::npos || s.find("Infinity") != std::string::npos;
+    return bad_data(msg(metadata_path, nan ? "a number is NaN or Infinity (the laser table must be finite numbers)"
+                                           : "not valid JSON"));
+  }
+  Meta m;
+  try {
+    m = parse_meta(j);
+  } catch (const MetaError& e) {
+    return bad_data(msg(metadata_path, e.what));
+  } catch (const json::exception& e) {
+    return bad_data(msg(metadata_path, std::string("unexpected value: ") + printable(e.what(), 120)));
+  }
+  SensorLogInfo& info = log.info;
+  info.vendor = "ouster";
+  info.sensor = m.prod_line.empty() ? "Ouster" : m.prod_line;
+  info.profile = m.profile_name;
+  info.metadata_path = metadata_path;
+  info.lasers = m.H;
+  info.columns = m.W;
+  const std::size_t want = m.packet_bytes();
+  const std::string expect = m.profile_name + ", " + std::to_string(m.H) + " beams, " + std::to_string(m.cpp) +
+                             " columns a packet: " + std::to_string(want) + " bytes";
+
+  // Which datagrams are lidar packets: those to the metadata's lidar port, else those of
+  // the expected size, else those to Ouster's default port 7502 (to report a mismatch).
+  const int port = m.udp_port_lidar;
+  std::vector<const Datagram*> packets;
+  std::size_t on_default_port = 0, default_port_size = 0;
+  for (const auto& d : datagrams) {
+    if (d.truncated && (port != 0 ? d.dst_port == port : (d.dst_port == 7502 || d.claimed == want)))
+      return bad_data(msg(path, "capture record " + std::to_string(d.record) + ": lidar packet truncated: " +
+                                    std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
+                                    " bytes captured"));
+    if (d.truncated) continue;  // some other datagram, counted below
+    const bool lidar = port != 0 ? d.dst_port == port : d.payload.size() == want;
+    if (lidar) packets.push_back(&d);
+    if (d.dst_port == 7502) {
+      ++on_default_port;
+      default_port_size = d.payload.size();
+    }
+  }
+  if (packets.empty()) {
+    if (on_default_port > 0)
+      return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: " +
+                                    std::to_string(on_default_port) + " packets on UDP port 7502 are " +
+                                    std::to_string(default_port_size) + " bytes, the metadata (" + expect + ") needs " +
+                                    std::to_string(want)));
+    return bad_data(msg(path, "no Ouster lidar packets (" + std::to_string(datagrams.size()) + " UDP datagrams, none " +
+                                  (port != 0 ? "to port " + std::to_string(port) : "of " + std::to_string(want) + " bytes") +
+                                  ")"));
+  }
+  std::size_t right_size = 0;
+  for (const Datagram* d : packets) right_size += d->payload.size() == want ? 1 : 0;
+  if (right_size == 0)
+    return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: lidar packets are " +
+                                  std::to_string(packets.front()->payload.size()) + " bytes, the metadata (" + expect + ")"));
+  info.other_packets += datagrams.size() - packets.size();
+
+  const std::size_t HW = static_cast<std::size_t>(m.H) * m.W;
+  std::optional<Frame> cur;
+  const double two_pi = 2.0 * M_PI;
+  const double n_m = m.n_mm / 1000.0;
+  const double z_m = m.z_mm / 1000.0;
+  Eigen::Isometry3d T_sensor_lidar = Eigen::Isometry3d::Identity();
+  T_sensor_lidar.linear() = m.lidar_to_sensor.topLeftCorner<3, 3>();
+  T_sensor_lidar.translation() = m.lidar_to_sensor.topRightCorner<3, 1>() / 1000.0;
+  std::uint32_t window_columns =
+      m.window0 <= m.window1 ? m.window1 - m.window0 + 1 : m.W - m.window0 + m.window1 + 1;
+
+  SensorGeometry g;
+  g.columns = m.W;
+  g.azimuth0 = 0.0;
+  g.direction = -1;
+  g.T_sensor_head = T_sensor_lidar;
+  g.source = "metadata";
+  g.sensor = info.sensor;
+  for (std::uint32_t l = 0; l < m.H; ++l) {
+    g.elevation.push_back(m.altitude_deg[l] * M_PI / 180.0);
+    g.beam_azimuth.push_back(-m.azimuth_deg[l] * M_PI / 180.0);
+    g.column_azimuth.push_back(two_pi * m.shift[l] / m.W);
+    g.z_offset.push_back(z_m);
+    g.radial_offset.push_back(n_m);
+  }
+
+  auto finish = [&](Frame& f) {
+    std::size_t in_window = 0;
+    for (std::uint32_t c = 0; c < m.W; ++c) in_window += (f.have[c] != 0 && m.in_window(c)) ? 1 : 0;
+    if (in_window < window_columns) {
+      ++info.incomplete_frames;
+      return;
+    }
+    Cloud cloud;
+    cloud.rows = m.H;
+    cloud.columns = m.W;
+    cloud.geometry = g;
+    std::size_t no_returns = 0;
+    for (std::uint32_t l = 0; l < m.H; ++l) {
+      const double phi = g.elevation[l];
+      const double cphi = std::cos(phi), sphi = std::sin(phi);
+      for (std::uint32_t c = 0; c < m.W; ++c) {
+        const auto mc = static_cast<std::uint32_t>(((static_cast<std::int64_t>(c) - m.shift[l]) % m.W + m.W) % m.W);
+        if (!m.in_window(mc)) continue;
+        const std::size_t k = static_cast<std::size_t>(l) * m.W + mc;
+        if (f.second[k] != 0) ++info.second_returns;
+        const std::uint32_t r_mm = f.range_mm[k];
+        if (r_mm == 0) {
+          ++no_returns;
+          continue;
+        }
+        const double th = two_pi * (1.0 - static_cast<double>(mc) / m.W);
+        const double a = th + g.beam_azimuth[l];
+        const double r = r_mm / 1000.0 - n_m;
+        const Eigen::Vector3d p(r * std::cos(a) * cphi + n_m * std::cos(th), r * std::sin(a) * cphi + n_m * std::sin(th),
+                                r * sphi + z_m);
+        cloud.points.push_back((T_sensor_lidar * p).cast<float>());
+        cloud.intensity.push_back(static_cast<float>(f.refl[k]));
+        cloud.ring.push_back(static_cast<std::uint16_t>(l));
+        cloud.column.push_back(c);
+      }
+    }
+    info.no_returns += no_returns;
+    info.points += cloud.size();
+    log.no_returns.push_back(no_returns);
+    log.frame_ids.push_back(f.id);
+    log.scans.push_back(std::move(cloud));
+  };
+
+  const std::size_t col_bytes = m.column_bytes();
+  const std::size_t head = m.legacy() ? 0 : 32;
+  const std::size_t col_head = m.legacy() ? 16 : 12;
+  for (const Datagram* d : packets) {
+    const std::vector<std::uint8_t>& b = d->payload;
+    if (b.size() != want)
+      return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": lidar packet of " +
+                                    std::to_string(b.size()) + " bytes, expected " + std::to_string(want) + " (" + expect +
+                                    "; truncated packet or metadata of another mode)"));
+    ++info.lidar_packets;
+    std::uint32_t frame_id = 0;
+    if (!m.legacy()) {
+      const auto type = le<std::uint16_t>(b.data());
+      if (type != 1)
+        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": packet type " + std::to_string(type) +
+                                      " is not a lidar data packet"));
+      frame_id = le<std::uint16_t>(b.data() + 2);
+      std::uint64_t sn = 0;
+      std::memcpy(&sn, b.data() + 7, 5);
+      if (m.prod_sn != 0 && sn != 0 && sn != m.prod_sn)
+        return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: they come from sensor " +
+                                      std::to_string(sn) + ", the metadata is for " + std::to_string(m.prod_sn)));
+    } else {
+      frame_id = le<std::uint16_t>(b.data() + 10);
+    }
+    if (!cur || cur->id != frame_id) {
+      if (cur) finish(*cur);
+      cur.emplace();
+      cur->id = frame_id;
+      cur->range_mm.assign(HW, 0);
+      cur->refl.assign(HW, 0);
+      cur->second.assign(HW, 0);
+      cur->have.assign(m.W, 0);
+    }
+    Frame& f = *cur;
+    for (std::uint32_t k = 0; k < m.cpp; ++k) {
+      const std::uint8_t* col = b.data() + head + k * col_bytes;
+      const auto mid = le<std::uint16_t>(col + 8);
+      const bool valid = m.legacy() ? le<std::uint32_t>(col + col_bytes - 4) == 0xFFFFFFFFU
+                                    : (le<std::uint16_t>(col + 10) & 1U) != 0;
+      if (!valid) continue;
+      if (mid >= m.W)
+        return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: capture record " +
+                                      std::to_string(d->record) + " has measurement_id " + std::to_string(mid) +
+                                      ", columns_per_frame is " + std::to_string(m.W)));
+      if (m.legacy() && le<std::uint16_t>(col + 10) != frame_id)
+        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": columns of one packet carry different frame ids"));
+      f.have[mid] = 1;
+      for (std::uint32_t l = 0; l < m.H; ++l) {
+        const std::uint8_t* px = col + col_head + static_cast<std::size_t>(l) * m.pixel_bytes();
+        const std::size_t idx = static_cast<std::size_t>(l) * m.W + mid;
+        switch (m.profile) {
+          case Profile::kLegacy:
+            f.range_mm[idx] = le<std::uint32_t>(px) & 0xFFFFFU;
+            f.refl[idx] = le<std::uint16_t>(px + 4);
+            break;
+          case Profile::kSingle:
+            f.range_mm[idx] = le<std::uint32_t>(px) & 0x7FFFFU;
+            f.refl[idx] = px[4];
+            break;
+          case Profile::kDual:
+            f.range_mm[idx] = le<std::uint32_t>(px) & 0x7FFFFU;
+            f.refl[idx] = px[3];
+            f.second[idx] = (le<std::uint32_t>(px + 4) & 0x7FFFFU) != 0 ? 1 : 0;
+            break;
+          case Profile::kLowData:
+            f.range_mm[idx] = (static_cast<std::uint32_t>(le<std::uint16_t>(px)) & 0x7FFFU) * 8U;
+            f.refl[idx] = px[2];
+            break;
+        }
+      }
+    }
+  }
+  if (cur) finish(*cur);
+  info.frames = log.scans.size();
+  return {};
+}
+
+}  // namespace lex3d::io::detail

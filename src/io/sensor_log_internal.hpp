@@ -1,0 +1,51 @@
+#pragma once
+// Private pieces of the raw-log reader: the UDP datagrams of a capture (pcap.cpp) and
+// the per-vendor decoders (ouster.cpp, velodyne.cpp). Not installed.
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lex3d/core/status.hpp"
+#include "lex3d/io/sensor_log.hpp"
+
+namespace lex3d::io::detail {
+
+/// One UDP datagram of a capture, reassembled from its IPv4 fragments when it had several.
+struct Datagram {
+  std::uint32_t src_ip = 0;
+  std::uint32_t dst_ip = 0;
+  std::uint16_t src_port = 0;
+  std::uint16_t dst_port = 0;
+  std::size_t record = 0;  ///< 1-based capture record of its last fragment (for messages)
+  /// The IPv4 or UDP length claims more bytes than the record holds: `payload` is what is
+  /// there, `claimed` what the headers announce. A decoder refuses a truncated lidar packet
+  /// and counts any other as skipped.
+  bool truncated = false;
+  std::size_t claimed = 0;
+  std::vector<std::uint8_t> payload;
+};
+
+/// Reads every UDP/IPv4 datagram of a libpcap/pcapng capture (Ethernet with VLAN tags,
+/// Linux cooked, raw IP or BSD loopback link types), reassembling IPv4 fragments. Fills the
+/// capture counters of `info`. A datagram whose headers claim more bytes than were captured
+/// is passed on marked `truncated` (only the decoder knows whether it is a lidar packet).
+/// A damaged capture file, or a fragment set that
+/// never completes between two complete fragmented datagrams of its source are errors; a
+/// set cut by the capture's start or end is counted (info.incomplete_datagrams).
+Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, SensorLogInfo& info);
+
+/// Ouster: decodes the lidar packets of `datagrams` with the metadata at `metadata_path`.
+Status decode_ouster(const std::string& path, const std::string& metadata_path,
+                     const std::vector<Datagram>& datagrams, SensorLog& log);
+
+/// True when the payload looks like a Velodyne data packet (1206 bytes, first block flag).
+bool is_velodyne_packet(const std::vector<std::uint8_t>& payload);
+
+/// Velodyne VLP-16 / HDL-32E: decodes the data packets of `datagrams`; `model` overrides
+/// the detected model ("vlp16", "hdl32e"; empty: detect).
+Status decode_velodyne(const std::string& path, const std::string& model,
+                       const std::vector<Datagram>& datagrams, SensorLog& log);
+
+}  // namespace lex3d::io::detail

@@ -1,0 +1,300 @@
+// Velodyne VLP-16 and HDL-32E data packets (1206-byte UDP payloads: 12 blocks of a 0xEEFF
+// flag, an azimuth in 0.01° and 32 × (distance in 2 mm, reflectivity), then a µs timestamp
+// and the return-mode and product bytes), decoded into one organised Cloud a turn with the
+// published per-model elevation tables.
+//
+// Coordinates (Velodyne's convention, azimuth α clockwise from +y, elevation ω):
+//   x = d cos ω sin α,  y = d cos ω cos α,  z = d sin ω
+// with α interpolated for each laser's firing time between the block azimuths.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <numeric>
+
+#include "io/internal.hpp"
+#include "io/sensor_log_internal.hpp"
+
+namespace lex3d::io::detail {
+
+namespace {
+
+constexpr std::size_t kPacketBytes = 1206;
+constexpr std::size_t kBlocks = 12;
+
+struct Model {
+  const char* name;       // "VLP-16"
+  const char* key;        // "vlp16"
+  std::uint8_t product;   // factory byte
+  unsigned lasers;        // lasers a firing
+  unsigned firings_per_block;
+  double firing_us;       // a firing sequence's duration (the column period)
+  double laser_us;        // time between two lasers of a firing
+  double packet_us;       // nominal packet period
+  std::array<double, 32> elevation_deg;
+};
+
+// VLP-16 manual (63-9243), table 9-1; HDL-32E manual (63-9113), appendix: laser id -> elevation.
+const Model kVlp16{"VLP-16", "vlp16", 0x22, 16, 2, 55.296, 2.304, 24 * 55.296,
+                   {-15, 1, -13, 3, -11, 5, -9, 7, -7, 9, -5, 11, -3, 13, -1, 15}};
+const Model kHdl32{"HDL-32E", "hdl32e", 0x21, 32, 1, 46.08, 1.152, 12 * 46.08,
+                   {-30.67, -9.33, -29.33, -8.00, -28.00, -6.67, -26.67, -5.33, -25.33, -4.00, -24.00,
+                    -2.67,  -22.67, -1.33, -21.33, 0.00, -20.00, 1.33, -18.67, 2.67, -17.33, 4.00,
+                    -16.00, 5.33,  -14.67, 6.67, -13.33, 8.00, -12.00, 9.33, -10.67, 10.67}};
+
+const Model* by_product(std::uint8_t b) {
+  if (b == kVlp16.product) return &kVlp16;
+  if (b == kHdl32.product) return &kHdl32;
+  return nullptr;
+}
+
+std::string hex(unsigned v) {
+  char buf[8];
+  std::snprintf(buf, sizeof buf, "0x%02X", v);
+  return buf;
+}
+
+std::string product_name(std::uint8_t b) {
+  switch (b) {
+    case 0x21: return "HDL-32E";
+    case 0x22: return "VLP-16";
+    case 0x24: return "Puck Hi-Res";
+    case 0x28: return "VLP-32C";
+    case 0x31: return "Velarray";
+    case 0xA1: return "VLS-128";
+    default: return "unknown product " + hex(b);
+  }
+}
+
+std::uint16_t le16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | (p[1] << 8)); }
+std::uint32_t le32(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | (static_cast<std::uint32_t>(p[1]) << 8) |
+         (static_cast<std::uint32_t>(p[2]) << 16) | (static_cast<std::uint32_t>(p[3]) << 24);
+}
+
+/// One firing of every laser: its start azimuth (degrees, unwrapped) and its returns.
+struct Firing {
+  double azimuth_deg = 0.0;  // start of the firing, unwrapped across turns
+  double step_deg = 0.0;     // azimuth advance over one firing period
+  std::array<std::uint16_t, 32> dist{};
+  std::array<std::uint8_t, 32> refl{};
+};
+
+double median(std::vector<double> v) {
+  if (v.empty()) return std::nan("");
+  const auto k = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+}  // namespace
+
+bool is_velodyne_packet(const std::vector<std::uint8_t>& payload) {
+  return payload.size() == kPacketBytes && payload[0] == 0xFF && (payload[1] == 0xEE || payload[1] == 0xDD);
+}
+
+Status decode_velodyne(const std::string& path, const std::string& model_key, const std::vector<Datagram>& datagrams,
+                       SensorLog& log) {
+  SensorLogInfo& info = log.info;
+  info.vendor = "velodyne";
+  std::vector<const Datagram*> packets;
+  for (const auto& d : datagrams) {
+    if (d.truncated && (d.dst_port == 2368 || d.claimed == kPacketBytes ||
+                        (d.payload.size() >= 2 && d.payload[0] == 0xFF && d.payload[1] == 0xEE)))
+      return bad_data(msg(path, "capture record " + std::to_string(d.record) + ": Velodyne data packet truncated: " +
+                                    std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
+                                    " bytes captured"));
+    if (is_velodyne_packet(d.payload) && !d.truncated) packets.push_back(&d);
+    else ++info.other_packets;
+  }
+  if (packets.empty()) return bad_data(msg(path, "no Velodyne data packets"));
+  info.lidar_packets = packets.size();
+
+  // The model: the factory byte, checked against the packet period (the firing timing is
+  // fixed per model, the azimuth step is not: it follows the motor speed).
+  const std::uint8_t product = packets.front()->payload[1205];
+  const std::uint8_t mode = packets.front()->payload[1204];
+  for (const Datagram* d : packets) {
+    if (d->payload[1205] != product || d->payload[1204] != mode)
+      return bad_data(msg(path, "capture record " + std::to_string(d->record) +
+                                    ": the factory bytes change within the capture (two sensors on one port?)"));
+  }
+  std::vector<double> dt;
+  for (std::size_t i = 1; i < packets.size(); ++i) {
+    const double a = le32(packets[i - 1]->payload.data() + 1200);
+    const double b = le32(packets[i]->payload.data() + 1200);
+    if (b > a) dt.push_back(b - a);
+  }
+  const double period_us = median(dt);
+  const Model* timing = nullptr;
+  if (std::isfinite(period_us)) {
+    for (const Model* mm : {&kVlp16, &kHdl32})
+      if (std::abs(period_us - mm->packet_us) < 0.1 * mm->packet_us) timing = mm;
+  }
+  const Model* by_byte = by_product(product);
+  const Model* model = nullptr;
+  char period_text[64];
+  std::snprintf(period_text, sizeof period_text, "%.0f", period_us);
+  if (!model_key.empty()) {
+    const std::string k = to_lower(model_key);
+    if (k == "vlp16" || k == "vlp-16") model = &kVlp16;
+    else if (k == "hdl32e" || k == "hdl-32e" || k == "hdl32") model = &kHdl32;
+    else
+      return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key, 32) + "' is not known (vlp16, hdl32e)"};
+    info.model_note = std::string("given: ") + model->name + "; factory byte " + hex(product) + " (" + product_name(product) +
+                      "), packets every " + period_text + " us";
+  } else if (timing != nullptr && by_byte != nullptr && timing != by_byte) {
+    model = timing;
+    info.model_note = std::string("read as ") + timing->name + ": the factory byte " + hex(product) + " says " + by_byte->name +
+                      " but packets arrive every " + period_text + " us, the " + timing->name + "'s period";
+  } else if (by_byte != nullptr) {
+    model = by_byte;
+    info.model_note = std::string("factory byte ") + hex(product) + ", packets every " + period_text + " us" +
+                      (timing == by_byte ? " (agrees)" : " (timing not conclusive)");
+  } else if (timing != nullptr) {
+    model = timing;
+    info.model_note = std::string("read as ") + timing->name + " from the packet period (" + period_text +
+                      " us); factory byte " + hex(product) + " (" + product_name(product) + ")";
+  } else {
+    return bad_data(msg(path, "Velodyne " + product_name(product) + " (factory byte " + hex(product) +
+                                  ") is not supported (VLP-16, HDL-32E; give --sensor-model to read it as one)"));
+  }
+  if (mode == 0x39)
+    return bad_data(msg(path, "dual-return Velodyne packets (return mode byte 0x39) are not supported"));
+  info.sensor = model->name;
+  info.profile = mode == 0x37 ? "strongest" : mode == 0x38 ? "last" : "return mode " + hex(mode);
+  info.lasers = model->lasers;
+
+  // Firings in capture order, the azimuth unwrapped.
+  std::vector<Firing> firings;
+  firings.reserve(packets.size() * kBlocks * model->firings_per_block);
+  double unwrap = 0.0, prev = -1.0, last_gap = std::nan("");
+  for (const Datagram* d : packets) {
+    const std::uint8_t* b = d->payload.data();
+    std::array<double, kBlocks> az{};
+    for (std::size_t k = 0; k < kBlocks; ++k) {
+      const std::uint8_t* blk = b + k * 100;
+      if (blk[0] != 0xFF || blk[1] != 0xEE)
+        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": block " + std::to_string(k) +
+                                      " has flag " + hex(blk[0]) + hex(blk[1]).substr(2) +
+                                      (blk[1] == 0xDD ? " (an HDL-64E upper/lower block: not supported)" : " (not a data block)")));
+      const std::uint16_t a = le16(blk + 2);
+      if (a >= 36000)
+        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": block " + std::to_string(k) +
+                                      " azimuth " + std::to_string(a) + " is not below 36000 (0.01 degree units)"));
+      az[k] = a / 100.0;
+    }
+    for (std::size_t k = 0; k < kBlocks; ++k) {
+      double gap = k + 1 < kBlocks ? az[k + 1] - az[k] : last_gap;
+      if (k + 1 < kBlocks && gap < 0) gap += 360.0;
+      if (!std::isfinite(gap)) gap = 0.0;
+      if (k + 1 < kBlocks) last_gap = gap;
+      double a = az[k];
+      if (prev >= 0.0 && a + unwrap < prev - 180.0) unwrap += 360.0;
+      const double a_unwrapped = a + unwrap;
+      prev = a_unwrapped;
+      const std::uint8_t* blk = b + k * 100 + 4;
+      const double block_step = gap / model->firings_per_block;
+      for (unsigned s = 0; s < model->firings_per_block; ++s) {
+        Firing f;
+        f.azimuth_deg = a_unwrapped + block_step * s;
+        f.step_deg = block_step;
+        for (unsigned l = 0; l < model->lasers; ++l) {
+          const std::uint8_t* ch = blk + (s * model->lasers + l) * 3;
+          f.dist[l] = le16(ch);
+          f.refl[l] = ch[2];
+        }
+        firings.push_back(f);
+      }
+    }
+  }
+
+  // Rings: lasers ordered by elevation, lowest first.
+  std::vector<unsigned> laser_of_ring(model->lasers);
+  std::iota(laser_of_ring.begin(), laser_of_ring.end(), 0U);
+  std::stable_sort(laser_of_ring.begin(), laser_of_ring.end(),
+                   [&](unsigned a, unsigned b) { return model->elevation_deg[a] < model->elevation_deg[b]; });
+
+  // Turns: 360° of azimuth from the first firing on. A turn with a hole (an azimuth jump of
+  // more than 5 firing steps: lost packets) is dropped and counted.
+  std::vector<double> steps;
+  for (const auto& f : firings) steps.push_back(f.step_deg);
+  const double step = median(steps);
+  const double a0 = firings.front().azimuth_deg;
+  std::size_t begin = 0;
+  std::vector<std::size_t> turn_columns;
+  for (std::uint64_t turn = 0;; ++turn) {
+    const double end_az = a0 + 360.0 * static_cast<double>(turn + 1);
+    std::size_t end = begin;
+    while (end < firings.size() && firings[end].azimuth_deg < end_az) ++end;
+    if (end >= firings.size()) {  // the capture ends inside this turn
+      if (end > begin) ++info.incomplete_frames;
+      break;
+    }
+    bool hole = false;
+    for (std::size_t i = begin + 1; i < end; ++i)
+      hole = hole || firings[i].azimuth_deg - firings[i - 1].azimuth_deg > 5.0 * step;
+    if (hole || end - begin < 2) {
+      ++info.incomplete_frames;
+      begin = end;
+      continue;
+    }
+    const auto columns = static_cast<std::uint32_t>(end - begin);
+    Cloud cloud;
+    cloud.rows = model->lasers;
+    cloud.columns = columns;
+    SensorGeometry g;
+    g.columns = columns;
+    g.direction = -1;
+    const double start = firings[begin].azimuth_deg;
+    g.azimuth0 = std::remainder(M_PI / 2 - start * M_PI / 180.0, 2.0 * M_PI);
+    g.source = "model table";
+    g.sensor = model->name;
+    for (unsigned r = 0; r < model->lasers; ++r) {
+      const unsigned l = laser_of_ring[r];
+      g.elevation.push_back(model->elevation_deg[l] * M_PI / 180.0);
+      g.beam_azimuth.push_back(0.0);
+      g.column_azimuth.push_back(-(2.0 * M_PI / columns) * (l * model->laser_us / model->firing_us));
+      g.z_offset.push_back(0.0);
+      g.radial_offset.push_back(0.0);
+    }
+    std::size_t no_returns = 0;
+    for (unsigned r = 0; r < model->lasers; ++r) {
+      const unsigned l = laser_of_ring[r];
+      const double w = g.elevation[r];
+      const double cw = std::cos(w), sw = std::sin(w);
+      const double frac = l * model->laser_us / model->firing_us;
+      for (std::size_t i = begin; i < end; ++i) {
+        const Firing& f = firings[i];
+        if (f.dist[l] == 0) {
+          ++no_returns;
+          continue;
+        }
+        const double d = f.dist[l] * 0.002;
+        const double a = (f.azimuth_deg + f.step_deg * frac) * M_PI / 180.0;
+        cloud.points.emplace_back(static_cast<float>(d * cw * std::sin(a)), static_cast<float>(d * cw * std::cos(a)),
+                                  static_cast<float>(d * sw));
+        cloud.intensity.push_back(static_cast<float>(f.refl[l]));
+        cloud.ring.push_back(static_cast<std::uint16_t>(r));
+        cloud.column.push_back(static_cast<std::uint32_t>(i - begin));
+      }
+    }
+    cloud.geometry = std::move(g);
+    turn_columns.push_back(columns);
+    info.no_returns += no_returns;
+    info.points += cloud.size();
+    log.no_returns.push_back(no_returns);
+    log.frame_ids.push_back(turn);
+    log.scans.push_back(std::move(cloud));
+    begin = end;
+  }
+  if (!turn_columns.empty()) {
+    std::vector<double> c(turn_columns.begin(), turn_columns.end());
+    info.columns = static_cast<std::uint32_t>(median(c));
+  }
+  info.frames = log.scans.size();
+  return {};
+}
+
+}  // namespace lex3d::io::detail
