@@ -50,14 +50,36 @@ DRACO_KD_QP = [8, 9, 10, 11, 12, 13, 14, 15, 16, 18]
 DRACO_SEQ_QP = [10, 12, 13, 14, 16]
 PCL_PROFILES = ["LOW_RES_ONLINE", "MED_RES_ONLINE", "HIGH_RES_ONLINE",
                 "LOW_RES_OFFLINE", "MED_RES_OFFLINE", "HIGH_RES_OFFLINE"]
-PCL_RES = [0.002, 0.005, 0.01, 0.02, 0.05, 0.1]
+PCL_RES = [0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2]
 OCTOMAP_RES = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2]
-LEX3D_E = [0.005, 0.008, 0.012, 0.02, 0.035, 0.1]
+LEX3D_E = [0.005, 0.008, 0.012, 0.02, 0.035, 0.06, 0.1, 0.15, 0.2]
 LEX3D_SEQ_E = LEX3D_E
 LEARN_SCANS = 4
+# G-PCC (TMC13's tmc3, when --tmc3 is given). Octree: integer millimetres in, then
+# positionQuantizationScale = 1 / step for these steps (mm). Predictive + angular: CTC's six
+# lossy (radius inv scale log2, azimuth scale log2) pairs with no cartesian residual, on
+# integer millimetres; and the cartesian residual coded losslessly on integers of these units (mm).
+GPCC_OCTREE_STEP_MM = [1, 2, 4, 8, 16, 32, 64, 128, 256]
+GPCC_PRED_RA = [(1, 12), (2, 11), (4, 9), (5, 8), (7, 7), (8, 7)]
+GPCC_PRED_RES_MM = [2, 5, 10, 20, 50, 100]
 MAP_SCANS = 10   # balm_map: scans merged into one map,
 MAP_STEP = 3     # this many scans apart (3 s),
 MAP_COUNT = 3    # maps, spread over the walk
+
+
+# Sets read from DATA by a glob, one line each: name, glob, lex3d --format (or None), spinning
+# lidar (G-PCC predictive + angular runs on it). A set whose first file lex3d cannot read
+# (lex3d_convert fails) is skipped with a note, so sets for inputs lex3d does not read yet can
+# stand here.
+GLOB_SETS = [
+    ("hdl32e", "velodyne/hdl32e_*.pcd", None, True),
+    ("ouster", "ouster/*.pcap", None, True),
+    ("vlp16", "velodyne/vlp16_*.pcap", None, True),
+    ("las", "las/*.las", None, False),
+]
+SPINNING = {"balm", "kitti00", "newer_college"} | {n for n, _, _, sp in GLOB_SETS if sp}
+OPTIONAL = {n for n, _, _, _ in GLOB_SETS}
+DEFAULT_SETS = ["balm", "kitti00", "newer_college", "indoor", "balm_map"] + [n for n, _, _, _ in GLOB_SETS]
 
 
 def env_list(name, default, kind=float):
@@ -88,7 +110,25 @@ def datasets(data, all_scans):
         starts = range(0, len(balm) - span + 1, max(1, (len(balm) - span) // (MAP_COUNT - 1)))
         out["balm_map"] = ([(("map", [s + MAP_STEP * k for k in range(MAP_SCANS)]), None, None)
                             for s in list(starts)[:MAP_COUNT]], None)
+    for name, pattern, fmt, _ in GLOB_SETS:
+        out[name] = ([(s, fmt, None) for s in sorted(glob.glob(os.path.join(data, pattern)))], None)
     return out
+
+
+def spread(items, n):
+    """n evenly spaced items of the list (all when n is None or not smaller)."""
+    if not n or n >= len(items):
+        return items
+    return [items[round(i * (len(items) - 1) / max(n - 1, 1))] for i in range(n)]
+
+
+def write_ply_xyz(path, xyz):
+    import numpy as np
+    m = np.ascontiguousarray(xyz, dtype="<f4")
+    with open(path, "wb") as f:
+        f.write((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(m)}\n"
+                 "property float x\nproperty float y\nproperty float z\nend_header\n").encode())
+        f.write(m.tobytes())
 
 
 def merge_balm(data, lines, path):
@@ -148,6 +188,7 @@ class Bench:
         self.convert = os.path.join(b, "bench", "lex3d_convert")
         self.pcl = os.path.join(b, "bench", "lex3d_bench_pcl_octree")
         self.octomap = os.path.join(b, "bench", "lex3d_bench_octomap")
+        self.tmc3 = args.tmc3
         self.tmp = tempfile.mkdtemp(prefix="rd_", dir=args.out)
         self.runner = Runner(self.tmp)
         self.rows_path = os.path.join(args.out, "rows.jsonl")
@@ -171,7 +212,7 @@ class Bench:
         return last_json(out)
 
     def case(self, base, codec, setting, order, enc_cmd, dec_cmd, stream, decoded, ref, parse_enc, parse_dec,
-             extra_bytes=0.0):
+             extra_bytes=0.0, post=None, extra=None):
         """One (codec, setting, scan): encode, decode, measure, emit a row. Returns the row or None."""
         row = dict(base, codec=codec, setting=setting, order=order)
         try:
@@ -183,6 +224,8 @@ class Bench:
             if rc != 0:
                 raise RuntimeError(f"decode exit {rc}: {err.strip()[-300:]}")
             dec = parse_dec(out, err)
+            if post is not None:
+                post()  # untimed: the decoded cloud into the PLY lex3d_eval_clouds compares
             stream_bytes = os.path.getsize(stream)
             m = self.measure(ref, decoded)
         except (RuntimeError, ValueError, OSError) as e:
@@ -202,6 +245,7 @@ class Bench:
             hausdorff_m=m["hausdorff_m"], chamfer_m=m["chamfer_m"], mse_ab=m["mse_ab"], mse_ba=m["mse_ba"],
             coverage_2cm=m["coverage_2cm"], coverage_5cm=m["coverage_5cm"],
             outliers_2cm=m["outliers_2cm"], outliers_5cm=m["outliers_5cm"])
+        row.update(extra or {})
         for k in ("max_error_m", "words_used", "instances"):
             if k in enc:
                 row[k] = enc[k]
@@ -258,6 +302,65 @@ class Bench:
         for r in env_list("RD_OCTOMAP_RES", OCTOMAP_RES):
             self.case(base, "octomap", f"r={r:g}", r, [self.octomap, "encode", ref, stream, "--resolution", r],
                       [self.octomap, "decode", stream, decoded], stream, decoded, ref, parse_enc, parse_dec)
+
+    def gpcc(self, base, ref, w, spinning):
+        """G-PCC (tmc3): octree geometry, lossy by positionQuantizationScale, on integer mm; and,
+        on spinning-lidar scans, predictive geometry with angular coding and the scan's laser
+        table (bench/laser_table.py). Geometry only (no attribute coded), trisoup off."""
+        import numpy as np
+        import laser_table
+
+        def parse(out, err):
+            # the codec's own figure: geometry coding time (user CPU), without PLY I/O
+            m = re.search(r"positions processing time \(user\): ([0-9.]+) s", out)
+            return {"ms": 1000.0 * float(m.group(1))} if m else {}
+
+        stream, raw, decoded = os.path.join(w, "g.bin"), os.path.join(w, "g_raw.ply"), os.path.join(w, "g.ply")
+
+        def post():
+            write_ply_xyz(decoded, laser_table.read_ply_xyz(raw))
+
+        common = ["--srcUnit=1", "--srcUnitLength=1", "--disableAttributeCoding=1"]
+        dec_cmd = [self.tmc3, "--mode=1", f"--compressedStreamPath={stream}", f"--reconstructedDataPath={raw}",
+                   "--outputBinaryPly=1", "--outputUnitLength=1"]
+        for step in env_list("RD_GPCC_OCTREE_MM", GPCC_OCTREE_STEP_MM, float):
+            enc = [self.tmc3, "--mode=0", f"--uncompressedDataPath={ref}", f"--compressedStreamPath={stream}",
+                   "--inputScale=1000", f"--positionQuantizationScale={1.0 / step:.10g}", "--trisoupNodeSizeLog2=0",
+                   "--mergeDuplicatedPoints=1"] + common
+            self.case(base, "gpcc-octree", f"step={step:g}mm", step, enc, dec_cmd, stream, decoded, ref, parse, parse,
+                      post=post)
+        if not spinning:
+            return
+        t = laser_table.fit(laser_table.read_ply_xyz(ref))
+        print(f"  laser table ({t['source']}): {t['lasers']} lasers, {t['theta_deg_min']:.2f} to "
+              f"{t['theta_deg_max']:.2f} deg, fit residual RMS {t['fit_rms_mm']:.2f} mm, 95 % "
+              f"{t['fit_p95_mm']:.2f} mm, azimuth steps per turn {min(t['phi_per_turn'])}-{max(t['phi_per_turn'])}",
+              flush=True)
+        table = {"lasers": t["lasers"], "laser_fit_rms_mm": t["fit_rms_mm"], "laser_fit_p95_mm": t["fit_p95_mm"]}
+
+        def pred_args(unit_m, r_log2, a_log2, residual):
+            speed = max(1, round(2 ** (a_log2 + 12) / max(t["phi_per_turn"])))
+            return [f"--inputScale={1.0 / unit_m:.10g}", "--geomTreeType=1", "--angularEnabled=1",
+                    "--sortInputByAzimuth=1", "--predGeomSort=0", "--predGeomAzimuthSortPrecision=1024",
+                    f"--numLasers={t['lasers']}",
+                    "--lasersTheta=" + ",".join(f"{v:.9f}" for v in t["tan_theta"]),
+                    "--lasersZ=" + ",".join(f"{-v / unit_m:.4f}" for v in t["z0_m"]),
+                    "--lasersNumPhiPerTurn=" + ",".join(str(v) for v in t["phi_per_turn"]),
+                    f"--positionRadiusInvScaleLog2={r_log2}", f"--positionAzimuthScaleLog2={a_log2}",
+                    f"--positionAzimuthSpeed={speed}", "--resRContextQphiThresholdPresentFlag=1",
+                    f"--resRContextQphiThreshold={int(1600 / speed)}",
+                    f"--secondaryResidualDisabled={0 if residual else 1}"] + common
+
+        # order: the quantisation step in mm (radius step, or the integer unit), for the plot
+        ra = env_list("RD_GPCC_PRED_RA", [f"{r}:{a}" for r, a in GPCC_PRED_RA], str)
+        runs = [(f"R{r}A{a}", 0.001, int(r), int(a), False, 2.0 ** int(r)) for r, a in (x.split(":") for x in ra)]
+        runs += [(f"res={u:g}mm", u / 1000.0, 0, 12, True, u)
+                 for u in env_list("RD_GPCC_PRED_RES_MM", GPCC_PRED_RES_MM, float)]
+        for setting, unit, r, a, residual, order in runs:
+            enc = [self.tmc3, "--mode=0", f"--uncompressedDataPath={ref}", f"--compressedStreamPath={stream}"] + \
+                pred_args(unit, r, a, residual)
+            self.case(base, "gpcc-pred", setting, order, enc, dec_cmd, stream, decoded, ref, parse, parse,
+                      post=post, extra=table)
 
     def lex3d_codec(self, base, scan, fmt, pose_args, ref, w, alphabet, n_scans):
         def parse_dec(out, err):
@@ -340,6 +443,14 @@ class Bench:
                 merge_balm(self.data, lines, scan)
             made.append((scan, fmt, li))
         scans = made
+        if name in OPTIONAL:
+            probe = os.path.join(w, "probe.ply")
+            fmt = scans[0][1]
+            rc, out, err, _, _ = self.runner.run([self.convert, scans[0][0], probe] + (["--format", fmt] if fmt else []))
+            if rc != 0:
+                print(f"[{name}] skipped: lex3d does not read {os.path.basename(scans[0][0])} yet "
+                      f"({err.strip().splitlines()[-1] if err.strip() else 'exit ' + str(rc)})", flush=True)
+                return
         alphabet = self.learn(name, scans, poses, w)
         pose_lines = open(poses).read().split("\n") if poses else None
         for n, (scan, fmt, li) in enumerate(scans, 1):
@@ -362,6 +473,8 @@ class Bench:
             self.draco(base, ref, w)
             self.pcl_octree(base, ref, w)
             self.octomap_codec(base, ref, w)
+            if self.tmc3:
+                self.gpcc(base, ref, w, name in SPINNING)
             self.lex3d_codec(base, scan, fmt, pose_args, ref, w, alphabet, len(scans))
             el = time.perf_counter() - t_start
             print(f"  [{name} {n}/{len(scans)}] {os.path.basename(scan)}: {points} points, "
@@ -376,23 +489,29 @@ def main():
     ap.add_argument("--all-scans", action="store_true", help="every balm scan (default: every 10th)")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory")
     ap.add_argument("--lex3d", help="the lex3d binary (default BUILD/lex3d)")
-    ap.add_argument("datasets", nargs="*", default=["balm", "kitti00", "newer_college", "indoor", "balm_map"])
+    ap.add_argument("--tmc3", help="MPEG G-PCC's tmc3 binary (TMC13); G-PCC is skipped without it")
+    ap.add_argument("--scans", type=int, help="at most this many scans a dataset, evenly spaced")
+    ap.add_argument("datasets", nargs="*", default=DEFAULT_SETS)
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     all_sets = datasets(args.data, args.all_scans)
     for d in args.datasets:
         if d not in all_sets:
             sys.exit(f"rd.py: unknown dataset {d} (known: {', '.join(all_sets)})")
-        if not all_sets[d][0]:
+        if not all_sets[d][0] and d not in OPTIONAL:
             sys.exit(f"rd.py: no scans for {d} under {args.data}")
     bench = Bench(args)
     print(f"lex3d compress --max-error: {'yes, residual sweep' if bench.has_max_error else 'absent, word-only'}",
           flush=True)
+    print(f"G-PCC: {bench.tmc3 if bench.tmc3 else 'skipped (no tmc3 given)'}", flush=True)
     t_start = time.perf_counter()
     try:
         for d in args.datasets:
             scans, poses = all_sets[d]
-            bench.dataset(d, scans, poses, t_start)
+            if not scans:
+                print(f"[{d}] skipped: no input files under {args.data}", flush=True)
+                continue
+            bench.dataset(d, spread(scans, args.scans), poses, t_start)
     finally:
         bench.close()
     el = time.perf_counter() - t_start

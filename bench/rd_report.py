@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Tables, CSV/JSON and plots from the rows bench/rd.py wrote.
 
-Usage: rd_report.py OUT_DIR [--targets 75 82.2 86]
+Usage: rd_report.py OUT_DIR [--targets 60 70 75 82.2 86]
 
 Reads OUT_DIR/rows.jsonl (one run a line) and OUT_DIR/alphabets.jsonl, writes
 OUT_DIR/rows.csv (every run), OUT_DIR/rd.json (every run, the per-setting medians and
@@ -13,7 +13,10 @@ quality: for each codec the per-setting medians are reduced to their Pareto fron
 (no other setting has both a higher PSNR and fewer bits), and bits per point are
 interpolated linearly in D1 PSNR between the two front settings around the target;
 "—" when no setting reaches the target, "≤ b" when even the cheapest front setting is
-above it (b = that setting's bits per point).
+above it (b = that setting's bits per point). A last table sets the families side by side at
+every target: lex3d (the better of lex3d and lex3d-seq), G-PCC octree, G-PCC predictive +
+angular, Draco (the better of kd-tree and sequential), PCL octree, and lex3d over the best
+standard codec.
 """
 
 import argparse
@@ -24,11 +27,15 @@ import os
 import statistics
 import sys
 
-CODEC_ORDER = ["lex3d", "lex3d-seq", "draco-kd", "draco-seq", "pcl-octree", "octomap"]
+CODEC_ORDER = ["lex3d", "lex3d-seq", "gpcc-octree", "gpcc-pred", "draco-kd", "draco-seq", "pcl-octree", "octomap"]
+# the side-by-side table: family -> codecs whose best rate it takes
+FAMILIES = [("lex3d", ["lex3d", "lex3d-seq"]), ("G-PCC octree", ["gpcc-octree"]),
+            ("G-PCC pred+angular", ["gpcc-pred"]), ("Draco", ["draco-kd", "draco-seq"]), ("PCL octree", ["pcl-octree"])]
 CSV_COLUMNS = ["dataset", "scan", "codec", "setting", "points", "bytes", "stream_bytes", "shared_bytes", "bpp",
                "d1_psnr_db", "rmse_m", "hausdorff_m", "chamfer_m", "mse_ab", "mse_ba", "coverage_2cm", "coverage_5cm",
                "outliers_2cm", "outliers_5cm", "n_decoded", "encode_ms", "decode_ms", "encode_wall_ms",
-               "decode_wall_ms", "encode_peak_kb", "decode_peak_kb", "max_error_m", "words_used", "instances", "error"]
+               "decode_wall_ms", "encode_peak_kb", "decode_peak_kb", "max_error_m", "words_used", "instances",
+               "lasers", "laser_fit_rms_mm", "laser_fit_p95_mm", "error"]
 
 
 def median(values):
@@ -118,6 +125,14 @@ def tables(summary, alphabets, targets, rows):
                          f"{', '.join(a['learn_scans'])} in {a['learn_wall_ms'] / 1000:.1f} s; its bytes are shared "
                          f"equally by the {len(n_scans.get(ds, ()))} scans.")
             lines.append("")
+        fits = [r for r in rows if r["dataset"] == ds and r.get("laser_fit_rms_mm") is not None]
+        if fits:
+            per_scan = {r["scan"]: r for r in fits}.values()
+            lines.append(f"G-PCC predictive laser tables (bench/laser_table.py, one a scan): "
+                         f"{median([r['lasers'] for r in per_scan]):g} lasers (median), fit residual RMS "
+                         f"{median([r['laser_fit_rms_mm'] for r in per_scan]):.2f} mm, 95th percentile "
+                         f"{median([r['laser_fit_p95_mm'] for r in per_scan]):.2f} mm (medians over the scans).")
+            lines.append("")
         lines.append("| codec | setting | bits/pt | D1 PSNR dB | RMSE mm | Hausdorff m | ≤2 cm % | ≤5 cm % | "
                      "enc ms | dec ms | peak MB |")
         lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -147,7 +162,48 @@ def tables(summary, alphabets, targets, rows):
                 cells.append("—" if kind == "none" else (f"≤ {b:.3f}" if kind == "below" else f"{b:.3f}"))
             lines.append(f"| {c} | " + " | ".join(cells) + " |")
         lines.append("")
+    lines += side_by_side(interp, targets)
     return "\n".join(lines), interp
+
+
+def side_by_side(interp, targets):
+    """Families at every target: the best interpolated rate of their codecs."""
+    def best(cells):
+        got = [c for c in cells if c and c["kind"] != "none"]
+        if not got:
+            return None
+        inter = [c for c in got if c["kind"] == "interp"]
+        pick = min(inter or got, key=lambda c: c["bpp"])
+        return pick
+
+    def show(c):
+        if c is None:
+            return "—"
+        return f"≤ {c['bpp']:.3f}" if c["kind"] == "below" else f"{c['bpp']:.3f}"
+
+    lines = ["## All data sets: bits per point at equal D1 PSNR", "",
+             "lex3d = better of lex3d and lex3d-seq; Draco = better of kd-tree and sequential; "
+             "ratio = lex3d / the best standard codec (G-PCC, Draco, PCL) at that PSNR.", "",
+             "| data | codec | " + " | ".join(f"{t:g} dB" for t in targets) + " |",
+             "|---|---|" + "---|" * len(targets)]
+    for ds, codecs in interp.items():
+        fam = {}
+        for name, members in FAMILIES:
+            fam[name] = [best([codecs.get(m, {}).get(f"{t:g}") for m in members]) for t in targets]
+            if all(c is None for c in fam[name]) and not any(m in codecs for m in members):
+                continue
+            lines.append(f"| {ds} | {name} | " + " | ".join(show(c) for c in fam[name]) + " |")
+        ratio = []
+        for i in range(len(targets)):
+            lex = fam["lex3d"][i]
+            std = [fam[n][i] for n, _ in FAMILIES[1:] if fam[n][i] is not None and fam[n][i]["kind"] == "interp"]
+            if lex is None or lex["kind"] != "interp" or not std:
+                ratio.append("—")
+            else:
+                ratio.append(f"{lex['bpp'] / min(c['bpp'] for c in std):.2f}")
+        lines.append(f"| {ds} | ratio | " + " | ".join(ratio) + " |")
+    lines.append("")
+    return lines
 
 
 def plot(summary, targets, out_dir):
@@ -160,7 +216,8 @@ def plot(summary, targets, out_dir):
         return []
     paths = []
     styles = {"lex3d": ("tab:red", "o"), "lex3d-seq": ("tab:purple", "D"), "draco-kd": ("tab:blue", "s"),
-              "draco-seq": ("tab:cyan", "v"), "pcl-octree": ("tab:green", "^"), "octomap": ("tab:orange", "x")}
+              "draco-seq": ("tab:cyan", "v"), "pcl-octree": ("tab:green", "^"), "octomap": ("tab:orange", "x"),
+              "gpcc-octree": ("black", "P"), "gpcc-pred": ("tab:brown", "*")}
     for ds, settings in summary.items():
         fig, ax = plt.subplots(figsize=(8, 5.5))
         codecs = []
@@ -172,9 +229,14 @@ def plot(summary, targets, out_dir):
             cs = [s for s in settings if s["codec"] == c and s["bpp"] and s["d1_psnr_db"] is not None
                   and math.isfinite(s["d1_psnr_db"])]
             sweep = sorted((s for s in cs if s["order"] > 0), key=lambda s: s["order"])
-            if sweep:
-                ax.plot([s["bpp"] for s in sweep], [s["d1_psnr_db"] for s in sweep], color=color, marker=marker,
-                        label=c, linewidth=1.2, markersize=5)
+            # G-PCC predictive: two sweeps (radius/azimuth steps without residual; residual on an
+            # integer grid), drawn apart
+            parts = [(c, "-", [s for s in sweep if not s["setting"].startswith("res=")]),
+                     (c + " (cartesian residual)", ":", [s for s in sweep if s["setting"].startswith("res=")])]
+            for label, style, part in parts:
+                if part:
+                    ax.plot([s["bpp"] for s in part], [s["d1_psnr_db"] for s in part], color=color, marker=marker,
+                            label=label, linewidth=1.2, markersize=5, linestyle=style)
             single = [s for s in cs if s["order"] <= 0]
             if single:
                 ax.scatter([s["bpp"] for s in single], [s["d1_psnr_db"] for s in single], color=color,
@@ -203,7 +265,7 @@ def plot(summary, targets, out_dir):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out")
-    ap.add_argument("--targets", type=float, nargs="+", default=[75.0, 82.2, 86.0])
+    ap.add_argument("--targets", type=float, nargs="+", default=[60.0, 70.0, 75.0, 82.2, 86.0])
     args = ap.parse_args()
     rows = load_jsonl(os.path.join(args.out, "rows.jsonl"))
     if not rows:
