@@ -108,8 +108,9 @@ class PointCoder {
   /// `spacing`: range step · grid step / E, so that a beam length index times it is the gap,
   /// in units of E, between neighbouring columns' points at that range.
   PointCoder(std::uint32_t lasers, double spacing)
-      : spacing_(spacing), last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone),
-        last_res_(lasers, 0), last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0) {}
+      : spacing_(spacing), last_k_(lasers, 0), last_c_(lasers, kNone),
+        last_res_(lasers, 0), last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0),
+        err_(lasers, 0) {}
 
   // --- structure ---
   int column_ctx() const { return IntModel::context_of(last_dc_); }
@@ -141,6 +142,13 @@ class PointCoder {
   void occupied(std::uint32_t l) { occ_now_[l] = 1; }
 
   // --- one point of laser l in the current column ---
+  /// A beam length is predicted by the laser's left neighbour (the same laser's last point
+  /// within kMaxColumnGap columns), else by the laser above in this column, else by the
+  /// last point; its context is the size of the recent prediction errors at the left and
+  /// upper pixels and the class of the laser's last residual. (Measured on an OS-0-128 and
+  /// a HDL-32E scan at 14 mm, the left neighbour alone coded 2-6 % smaller than the median
+  /// edge detector over the left, upper and upper-left pixels, a line through the laser's
+  /// last two points, or the best of these chosen by their recent errors.)
   struct Prediction {
     std::int64_t k;
     int ctx;
@@ -148,38 +156,18 @@ class PointCoder {
   Prediction predict(std::uint32_t l) const {
     const bool has_a = last_c_[l] != kNone && column_ - last_c_[l] <= kMaxColumnGap;
     const bool has_b = up_ != kNone && l - up_ <= 2;
-    const std::int64_t a = last_k_[l];
-    std::int64_t p = 0;
-    int activity = kClasses - 1;
-    if (has_a && has_b) {
-      const std::int64_t b = last_k_[up_];
-      // the upper laser's value in the left neighbour's column
-      if (prev_c_[up_] != kNone && prev_c_[up_] == last_c_[l]) {
-        const std::int64_t cc = prev_k_[up_];
-        if (cc >= std::max(a, b)) p = std::min(a, b);
-        else if (cc <= std::min(a, b)) p = std::max(a, b);
-        else p = a + b - cc;
-        activity = IntModel::context_of(std::abs(a - cc) + std::abs(b - cc));
-        if (activity == kClasses - 1) activity = kClasses - 2;
-      } else {
-        p = a;
-      }
-    } else if (has_a) {
-      p = a;
-    } else if (has_b) {
-      p = last_k_[up_];
-    } else {
-      p = last_any_;
-    }
-    return {p, activity * kClasses + IntModel::context_of(last_res_[l])};
+    const int second = IntModel::context_of(last_res_[l]);
+    if (!has_a && !has_b) return {last_any_, (kClasses - 1) * kClasses + second};
+    std::int64_t score = err_[l];
+    if (has_b) score += err_[up_];
+    else score *= 2;
+    const int activity = std::min(IntModel::context_of(score / 4), kClasses - 1);
+    return {has_a ? last_k_[l] : last_k_[up_], activity * kClasses + second};
   }
   int k1_ctx(std::uint32_t l) const { return IntModel::context_of(last_k1_[l], last_k1_any_); }
   int k2_ctx(std::uint32_t l, std::int64_t k1) const { return IntModel::context_of(last_k2_[l], k1); }
   void update(std::uint32_t l, std::int64_t k, std::int64_t res, std::int64_t k1, std::int64_t k2) {
-    if (last_c_[l] != column_) {
-      prev_k_[l] = last_k_[l];
-      prev_c_[l] = last_c_[l];
-    }
+    err_[l] = 2 * std::min<std::int64_t>(std::abs(res), 1 << 20) + (err_[l] >> 1);
     last_k_[l] = k;
     last_c_[l] = column_;
     last_res_[l] = res;
@@ -202,10 +190,9 @@ class PointCoder {
   double spacing_;
   std::vector<std::int64_t> last_k_;
   std::vector<std::uint32_t> last_c_;
-  std::vector<std::int64_t> prev_k_;
-  std::vector<std::uint32_t> prev_c_;
   std::vector<std::int64_t> last_res_, last_k1_, last_k2_;
   std::vector<std::uint8_t> occ_prev_, occ_now_;  // one extra laser, never occupied
+  std::vector<std::int64_t> err_;                  // per laser: recent prediction errors
   std::int64_t last_dc_ = 0, last_any_ = 0, last_k1_any_ = 0, last_shift_ = 0, last_shift_delta_ = 0;
   std::uint32_t column_ = 0, up_ = kNone;
   bool started_ = false;
@@ -489,11 +476,6 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
     peaks.push_back(e);
     last = b;
   }
-  if (std::getenv("LEX3D_DEBUG_LASER")) {
-    std::fprintf(stderr, "h %.3f near %.2f peaks %zu:", best_h, near, peaks.size());
-    for (double e : peaks) std::fprintf(stderr, " %.3f", e * 180 / kPi);
-    std::fprintf(stderr, "\n");
-  }
   if (peaks.size() < 2 || peaks.size() > kMaxLasers) return false;
   lasers = static_cast<std::uint32_t>(peaks.size());
   ring.resize(n);
@@ -770,9 +752,6 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   RangeEncoder enc = head;
   put_table(enc, table);
   PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error);
-  const char* skip_env = std::getenv("LEX3D_DEBUG_SKIP");
-  const std::string skip = skip_env ? skip_env : "";
-  std::size_t nonzero_t = 0;
   const auto ring_at = [&](std::size_t k) { return a.ring[coded[order[kept[k]]]]; };
   const auto column_at = [&](std::size_t k) { return a.column[coded[order[kept[k]]]]; };
   std::size_t at = 0;
@@ -783,26 +762,24 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     std::size_t end = at;
     while (end < kept.size() && column_at(end) == column) ++end;
     const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
-    if (skip.find('c') == std::string::npos) pc.column_delta.put(enc, pc.column_ctx(), dc);
+    pc.column_delta.put(enc, pc.column_ctx(), dc);
     const std::int64_t s = shift[kept[at]];
-    if (skip.find('s') == std::string::npos) pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
+    pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
     pc.set_shift(s);
     pc.start_column(column, dc);
     std::size_t j = at;
     for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
       const bool occ = j < end && ring_at(j) == l;
-      if (skip.find('o') == std::string::npos) enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
-      if (skip_env) { static thread_local std::array<std::array<std::size_t, 2>, 64> st{}; st[pc.occupancy_ctx(l)][occ]++; if (remaining == 1) for (int k = 0; k < 64; ++k) if (st[k][0] + st[k][1]) std::fprintf(stderr, "ctx %d near %d: %zu empty %zu occ\n", k, k / 16, st[k][0], st[k][1]); }
+      enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
       if (!occ) continue;
       pc.occupied(l);
       for (;;) {
         const Coded& c = q[kept[j]];
         const auto pred = pc.predict(l);
         const std::int64_t res = c.k - pred.k;
-        if (skip.find('r') == std::string::npos) pc.range.put(enc, pred.ctx, res);
-        if (c.k1 != 0 || c.k2 != 0) ++nonzero_t;
-        if (skip.find('t') == std::string::npos) pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
-        if (skip.find('t') == std::string::npos) pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
+        pc.range.put(enc, pred.ctx, res);
+        pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
+        pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
         pc.update(l, c.k, res, c.k1, c.k2);
         ++j;
         --remaining;
@@ -816,9 +793,6 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     at = end;
   }
   out.stream = enc.finish();
-  if (skip_env)
-    std::fprintf(stderr, "share %.3f: %zu bytes, %zu points, %zu with corrections\n", share, out.stream.size(), kept.size(),
-                 nonzero_t);
 
   codec::bytes::put_f64(out.fields, qt);
   codec::bytes::put_f64(out.fields, table.shift_unit);

@@ -720,6 +720,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         if (streams[w].size() < streams[best].size()) best = w;
     }
   }
+  // A spherical winner skipped for a voxel coding that the sensor-geometry coding beats may
+  // beat both: it is coded in full after all.
+  if (others && options.spherical && laser && voxel && streams[best].empty() &&
+      extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size())
+    streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
   const bool use_voxel =
       voxel && (streams[best].empty() ||  // (no spherical stream: `spherical` off, or skipped)
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <

@@ -524,6 +524,7 @@ TEST(ResidualVoxel, MergedViewsKeepTheBound) {
   const Cloud map = merged_views();
   residual::LayerOptions voxel_only;
   voxel_only.spherical = false;
+  voxel_only.laser = false;
   for (const double e : {0.01, 0.03}) {
     residual::LayerStats st;
     const Bytes voxel = residual::encode_layer(map, Cloud{}, Pose::Identity(), e, &st, voxel_only);
@@ -582,6 +583,7 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
   d.alphabet = Alphabet{};
   residual::LayerOptions voxel_only;
   voxel_only.spherical = false;
+  voxel_only.laser = false;
   const residual::LayerStats st = residual::add_layer(d, Alphabet{}, map, 0.02, voxel_only);
   ASSERT_TRUE(st.voxel);
   const Bytes file = codec::encode_model(d);
@@ -620,6 +622,7 @@ TEST(ResidualVoxel, CorruptPayloadsAreRejectedOrDecodeBounded) {
   map.points.resize(map.size() / 4);
   residual::LayerOptions voxel_only;
   voxel_only.spherical = false;
+  voxel_only.laser = false;
   const Bytes good = residual::encode_layer(map, Cloud{}, Pose::Identity(), 0.02, nullptr, voxel_only);
   ASSERT_EQ(codec::layer_coding(good), 2U);
   const std::uint64_t n = residual::read_layer_header(good.data(), good.size()).value().coded_points;
@@ -721,11 +724,16 @@ TEST(ResidualVoxel, RealCloudsWhereVoxelsWin) {
     const Cloud& scan = c.cloud;
     ASSERT_GT(scan.size(), 10000U);
     residual::LayerStats st, sph_st;
-    const Bytes best = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, c.e, &st);
-    residual::LayerOptions spherical;
+    residual::LayerOptions no_laser;
+    no_laser.laser = false;
+    const Bytes best = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, c.e, &st, no_laser);
+    residual::LayerOptions spherical = no_laser;
     spherical.voxel = false;
     const Bytes sph = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, c.e, &sph_st, spherical);
     EXPECT_TRUE(st.voxel) << c.name;
+    // With the sensor-geometry coding too (the room scan's estimated lasers win there), the
+    // layer is never larger.
+    EXPECT_LE(residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, c.e).size(), best.size()) << c.name;
     EXPECT_LT(static_cast<double>(best.size()), 0.9 * static_cast<double>(sph.size())) << c.name;
     const auto d = residual::decode_layer(best, Cloud{}, scan.T_cloud_sensor, scan.size());
     ASSERT_TRUE(d.ok()) << d.status().to_string();
@@ -874,6 +882,7 @@ TEST(ResidualGolden, DISABLED_WriteVoxelGoldenFile) {
   d.alphabet = Alphabet{};
   residual::LayerOptions voxel_only;
   voxel_only.spherical = false;
+  voxel_only.laser = false;
   const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError, voxel_only);
   ASSERT_TRUE(st.voxel);
   write_golden("tiny_residual_voxel_1.3", d, input);
@@ -903,6 +912,7 @@ TEST(ResidualVoxel, WordsAndAFarFrameKeepTheBound) {
   ASSERT_TRUE(alphabet.ok());
   residual::LayerOptions voxel_only;
   voxel_only.spherical = false;
+  voxel_only.laser = false;
   const residual::LayerStats st = residual::add_layer(d, alphabet.value(), input, 0.01, voxel_only);
   ASSERT_TRUE(st.voxel);
   EXPECT_GT(st.kept_word_points, 0U);
