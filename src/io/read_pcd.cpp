@@ -254,7 +254,9 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   r.encoding = encoding;
   r.cloud.T_cloud_sensor = viewpoint;
   const std::uint64_t avail = size - data_start;
-  Builder out(r, fi != nullptr, fc != nullptr);
+  // double coordinates may be georeferenced (Builder::finish)
+  const bool wide = fx->scalar == Scalar::kF64 || fy->scalar == Scalar::kF64 || fz->scalar == Scalar::kF64;
+  Builder out(r, fi != nullptr, fc != nullptr, wide);
 
   // --- ascii
   if (encoding == "ascii") {
@@ -274,6 +276,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       const std::string_view t = trim(dl);
       if (t.empty()) continue;
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
+      double w[3] = {0.0, 0.0, 0.0};
       std::uint32_t rgb_bits = 0;
       std::size_t k = 0;
       std::string_view bad;
@@ -291,6 +294,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
           return parsed;
         }
         float* slot = nullptr;
+        if (wide && (col == fx->token || col == fy->token || col == fz->token))
+          return parse_number(b, e, w[col == fx->token ? 0 : col == fy->token ? 1 : 2]);
         if (col == fx->token) slot = &v[0];
         else if (col == fy->token) slot = &v[1];
         else if (col == fz->token) slot = &v[2];
@@ -305,7 +310,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                                       " values, found " + std::to_string(k)),
                         off);
       }
-      out.add(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits));
+      if (wide) out.add_wide(w[0], w[1], w[2], v[3], unpack_rgb(rgb_bits));
+      else out.add(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits));
       ++done;
     }
     if (done < points) {
@@ -313,7 +319,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                                     " points, header says " + std::to_string(points)),
                       size);
     }
-    return {};
+    return out.finish();
   }
 
   // --- binary and binary_compressed: the data block
@@ -398,9 +404,13 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     const float in = fi != nullptr ? load_float(block + ai.base + i * ai.stride, fi->scalar, swap) : 0.0F;
     Rgb c{};
     if (fc != nullptr) c = unpack_rgb(load_bits32(block + ac.base + i * ac.stride, swap));
-    out.add(x, y, z, in, c);
+    if (wide)
+      out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
+                   load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),
+                   load_scalar(block + az.base + i * az.stride, fz->scalar, swap), in, c);
+    else out.add(x, y, z, in, c);
   }
-  return {};
+  return out.finish();
 }
 
 }  // namespace lex3d::io::detail
