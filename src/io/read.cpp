@@ -40,7 +40,8 @@ std::vector<std::string_view> split_ws(std::string_view line) {
 }
 
 // A cloud whose coordinates lie farther from their frame's origin than the cloud's own
-// extent, where float32 would round them by more than a millionth of that extent (a UTM
+// extent, where float32 would round them by more than a millionth of that extent (at
+// least of a metre; a UTM
 // or state-plane map: 0.25 m at 5,403,850 m), is stored relative to an origin: its bounding
 // box centre rounded to the largest power of ten not above the extent, so that the local
 // coordinates stay within the extent and the origin reads well. Anything else is rounded
@@ -58,12 +59,28 @@ Status Builder::finish() {
   const double max_abs = std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
   const auto f = static_cast<float>(max_abs);
   const double half_ulp = 0.5 * (static_cast<double>(std::nextafter(f, INFINITY)) - static_cast<double>(f));
-  const bool far = n > 0 && centre.cwiseAbs().maxCoeff() > extent && half_ulp > 1e-6 * extent;
-  r_.cloud.points.resize(n);
+  const bool far = n > 0 && centre.cwiseAbs().maxCoeff() > extent && half_ulp > 1e-6 * std::max(extent, 1.0);
   if (!far) {
-    for (std::size_t i = 0; i < n; ++i) r_.cloud.points[i] = wide_points_[i].cast<float>();
+    // float32 as before; a value beyond float's range is not finite there: dropped and counted
+    std::size_t kept = 0;
+    r_.cloud.points.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3f p = wide_points_[i].cast<float>();
+      if (!p.allFinite()) {
+        ++r_.non_finite_dropped;
+        continue;
+      }
+      r_.cloud.points[kept] = p;
+      if (intensity_) r_.cloud.intensity[kept] = r_.cloud.intensity[i];
+      if (color_) r_.colors[kept] = r_.colors[i];
+      ++kept;
+    }
+    r_.cloud.points.resize(kept);
+    if (intensity_) r_.cloud.intensity.resize(kept);
+    if (color_) r_.colors.resize(kept);
     return {};
   }
+  r_.cloud.points.resize(n);
   const double step = std::pow(10.0, std::floor(std::log10(std::max(extent, 1e-3))));
   Georeference g;
   for (int a = 0; a < 3; ++a) g.origin[a] = std::round(centre[a] / step) * step;
