@@ -15,7 +15,7 @@ void throw_if_error(const Status& status) {
 io::Format parse_format_option(const std::string& name) {
   const auto f = io::parse_format(name);
   if (!f)
-    throw CliError(1, "unknown --format '" + name + "' (expected auto, kitti, binxyz, pcd, ply, xyz or uos)");
+    throw CliError(1, "unknown --format '" + name + "' (expected auto, kitti, binxyz, pcd, ply, xyz, uos or las)");
   return *f;
 }
 
