@@ -27,11 +27,11 @@ enum class Format : std::uint8_t {
   kXyz,      ///< ASCII text, `x y z [more columns]` a line, metres (`.xyz`, `.txt`, `.asc`, `.csv`);
              ///< a 4th column is the intensity when lines have exactly 4, or when a first
              ///< line `x y z ... intensity ...` names the columns
+  kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`;
+             ///< read into lex3d's right-handed metric frame: x = z_in/100, y = -x_in/100, z = y_in/100
   kLas,      ///< ASPRS LAS 1.0-1.4 (`.las`, magic "LASF"), point data record formats 0-10: x y z (scale and
              ///< offset, the CRS's units read into metres about a georeference origin), intensity, RGB as
              ///< colours; compressed LAS (`.laz`) is refused
-  kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`;
-             ///< read into lex3d's right-handed metric frame: x = z_in/100, y = -x_in/100, z = y_in/100
 };
 
 /// Canonical lower-case name of a format ("kitti", "binxyz", "pcd", "ply", "xyz", "uos", "auto").
