@@ -17,7 +17,7 @@ void throw_if_error(const Status& status) {
 io::Format parse_format_option(const std::string& name) {
   const auto f = io::parse_format(name);
   if (!f)
-    throw CliError(1, "unknown --format '" + name + "' (expected auto, kitti, binxyz, pcd, ply, xyz or uos)");
+    throw CliError(1, "unknown --format '" + name + "' (expected auto, kitti, binxyz, pcd, ply, xyz, uos or las)");
   return *f;
 }
 
@@ -41,6 +41,16 @@ io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
   auto r = io::read_cloud(path, opt);
   // Any input that cannot be read (missing, unreadable, malformed) is bad input: exit 2.
   if (!r.ok()) throw CliError(2, r.status().to_string());
+  // never drop silently: what the file holds that lex3d does not keep, and what the reader noticed
+  const io::ReadResult& res = r.value();
+  if (!res.dropped_fields.empty()) {
+    std::string list;
+    for (const auto& f : res.dropped_fields) list += (list.empty() ? "" : ", ") + f;
+    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z and intensity): %s\n", path.c_str(), list.c_str());
+  }
+  if (!res.colors.empty())
+    std::fprintf(stderr, "note: %s: RGB colours are read but not coded in lex3d model files\n", path.c_str());
+  for (const auto& n : res.notes) std::fprintf(stderr, "note: %s: %s\n", path.c_str(), n.c_str());
   return std::move(r).value();
 }
 

@@ -254,6 +254,7 @@ void run_compress(const CompressOptions& o) {
       Stopwatch code_sw;
       d.input_points = cloud.size();
       d.T_cloud_sensor = cloud.T_cloud_sensor;
+      d.georef = cloud.georef;  // true coordinates: origin + point (formats/model.md §2.8)
       if (embed) d.alphabet = alphabet;
       else d.alphabet_hash = hash;
       out.coded = code_scan(cloud, d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <iostream>
 
@@ -52,6 +53,7 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
     if (!d.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + d.status().to_string());
     auto cloud = residual::decode_cloud(d.value());
     if (!cloud.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + cloud.status().to_string());
+    cloud.value().georef = d.value().georef;  // written in true coordinates
     throw_if_error(io::write_cloud(outputs[i], cloud.value()));
     input_points += d.value().input_points;
     points += cloud.value().size();
@@ -105,8 +107,16 @@ void run_decompress(const DecompressOptions& o) {
   auto decoded_cloud = residual::decode_cloud(d);
   if (!decoded_cloud.ok()) throw CliError(2, o.input + ": " + decoded_cloud.status().to_string());
   Cloud cloud = std::move(decoded_cloud).value();
+  cloud.georef = d.georef;  // written in true coordinates where the output format can hold them
   const double reconstruct_ms = sw.lap_ms();
-  if (!o.output.empty()) throw_if_error(io::write_cloud(o.output, cloud));
+  if (!o.output.empty()) {
+    throw_if_error(io::write_cloud(o.output, cloud));
+    const std::string ext = std::filesystem::path(o.output).extension().string();
+    if (d.georef && (ext == ".bin" || ext == ".BIN"))
+      std::fprintf(stderr, "note: %s holds float32 coordinates relative to the georeference origin (%.3f, %.3f, %.3f) m; "
+                           "write .las, .pcd, .ply or .xyz for the true coordinates\n",
+                   o.output.c_str(), d.georef->origin.x(), d.georef->origin.y(), d.georef->origin.z());
+  }
   io::OctomapStats oct;
   if (!o.octomap.empty()) {
     auto r = io::write_octomap(o.octomap, cloud,
@@ -124,6 +134,15 @@ void run_decompress(const DecompressOptions& o) {
   const bool compare = !o.reference.empty();
   if (compare) {
     Cloud ref = load_cloud(o.reference, parse_format_option(o.reference_format)).cloud;
+    // compare in the model's local frame: a reference read about another origin (or none) is moved to it
+    if (d.georef || ref.georef) {
+      const Eigen::Vector3d to_model = (ref.georef ? ref.georef->origin : Eigen::Vector3d::Zero()) -
+                                       (d.georef ? d.georef->origin : Eigen::Vector3d::Zero());
+      if (!to_model.isZero()) {
+        for (auto& p : ref.points) p = (p.cast<double>() + to_model).cast<float>();
+        ref.T_cloud_sensor.translation() += to_model;
+      }
+    }
     // A reference without a viewpoint of its own (a PLY or .bin in the model's frame, say a
     // world-frame scan compressed with --input-frame world) is seen from the model's sensor.
     if (ref.T_cloud_sensor.matrix() == Pose::Identity().matrix()) ref.T_cloud_sensor = d.T_cloud_sensor;

@@ -40,6 +40,44 @@ double quantile(std::vector<float> v, double q) {
 }
 
 // lex3d's own files: header, chunk table with checksum status, counts, sizes.
+/// The georeference of a cloud or model file: CRS, units, origin, LAS container.
+void print_georef(const Georeference& g, bool measured) {
+  std::printf("CRS            %s%s\n", g.crs_name.empty() ? "(not named)" : g.crs_name.c_str(),
+              g.epsg ? (" (EPSG:" + std::to_string(g.epsg) + ")").c_str() : "");
+  std::printf("units          %s (%.10g m)", g.unit_name.c_str(), g.unit_m);
+  if (g.vertical_unit_m != g.unit_m) std::printf(", vertical %.10g m", g.vertical_unit_m);
+  std::printf("; points read into metres\n");
+  const Eigen::Vector3d o_crs = g.origin.cwiseQuotient(g.units());
+  std::printf("origin         %.6f %.6f %.6f m = %.6f %.6f %.6f CRS units (true = origin + point)\n", g.origin.x(),
+              g.origin.y(), g.origin.z(), o_crs.x(), o_crs.y(), o_crs.z());
+  if (g.is_las())
+    std::printf("LAS            1.%d, point format %d, scale %.10g %.10g %.10g, offset %.10g %.10g %.10g, %zu CRS records, "
+                "system '%s', software '%s'\n",
+                g.las_version_minor, g.las_point_format, g.las_scale.x(), g.las_scale.y(), g.las_scale.z(),
+                g.las_offset.x(), g.las_offset.y(), g.las_offset.z(), g.crs_records.size(), g.las_system_id.c_str(),
+                g.las_software.c_str());
+  if (measured) std::printf("float32 error  %.3g m at most (positions relative to the origin)\n", g.representation_error_m);
+}
+
+void georef_json(Json& j, const Georeference& g) {
+  j.begin_object("georeference")
+      .value("crs_name", g.crs_name)
+      .value("epsg", static_cast<std::uint64_t>(g.epsg))
+      .value("unit", g.unit_name)
+      .value("unit_m", g.unit_m)
+      .value("vertical_unit_m", g.vertical_unit_m);
+  j.numbers("origin_m", {g.origin.x(), g.origin.y(), g.origin.z()});
+  if (g.is_las()) {
+    j.numbers("las_scale", {g.las_scale.x(), g.las_scale.y(), g.las_scale.z()});
+    j.numbers("las_offset", {g.las_offset.x(), g.las_offset.y(), g.las_offset.z()});
+    j.value("las_version", "1." + std::to_string(g.las_version_minor))
+        .value("las_point_format", static_cast<std::uint64_t>(g.las_point_format))
+        .value("crs_records", g.crs_records.size());
+  }
+  j.value("representation_error_m", g.representation_error_m);
+  j.end_object();
+}
+
 bool info_lex3d_file(const InfoOptions& o) {
   auto bytes = io::read_file(o.path);
   if (!bytes.ok()) return false;  // load_cloud reports the error
@@ -52,6 +90,7 @@ bool info_lex3d_file(const InfoOptions& o) {
   auto info = codec::inspect(b);
   if (!info.ok()) throw CliError(2, o.path + ": " + info.status().to_string());
   const codec::FileInfo& fi = info.value();
+  std::optional<Georeference> georef;
   bool all_crc_ok = true;
   for (const auto& c : fi.chunks) all_crc_ok = all_crc_ok && c.crc_ok;
   std::size_t words = 0, word_points = 0, instances = 0;
@@ -96,6 +135,7 @@ bool info_lex3d_file(const InfoOptions& o) {
       alphabet_file = std::move(a).value();
     }
     auto m = codec::decode_model(b, o.alphabet.empty() ? nullptr : &alphabet_file);
+    if (m.ok()) georef = m.value().georef;
     if (m.ok()) {
       instances = m.value().model.instances.size();
       input_points = m.value().input_points;
@@ -156,6 +196,7 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.value("tangential_step_m", layer->tangential_step).value("lasers", static_cast<std::uint64_t>(layer->lasers))
           .value("columns", static_cast<std::uint64_t>(layer->columns));
     if (layer) j.end_object();
+    if (georef) georef_json(j, *georef);
     if (!decode_error.empty()) j.value("error", decode_error);
     j.end_object();
     std::cout << j.str() << "\n";
@@ -187,6 +228,7 @@ bool info_lex3d_file(const InfoOptions& o) {
     if (translation_step)
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);
     if (words) std::printf("words          %zu (%zu points)\n", words, word_points);
+    if (georef) print_georef(*georef, false);
     if (word_radius)
       std::printf("word radius    %.4g m (points %.4g m apart, stored in steps of %.4g m)\n", *word_radius, *point_spacing,
                   *word_point_step);
@@ -291,6 +333,12 @@ void run_info(const InfoOptions& o) {
           .value("elevation", res->elevation_rad * rad2deg)
           .end_object();
     j.value("has_world_pose", c.has_world_pose);
+    if (c.georef) georef_json(j, *c.georef);
+    if (!r.dropped_fields.empty()) {
+      j.begin_array("fields_not_kept");
+      for (const auto& f : r.dropped_fields) j.value({}, f);
+      j.end_array();
+    }
     j.end_object();
     std::cout << j.str() << "\n";
     return;
@@ -316,6 +364,8 @@ void run_info(const InfoOptions& o) {
     std::printf("beam spacing   %.4f deg horizontal, %.4f deg vertical (estimated)\n", res->azimuth_rad * rad2deg,
                 res->elevation_rad * rad2deg);
   if (c.has_world_pose) std::printf("world pose     yes\n");
+  if (c.georef) print_georef(*c.georef, true);
+  for (const auto& f : r.dropped_fields) std::printf("not kept       %s\n", f.c_str());
 }
 
 }  // namespace

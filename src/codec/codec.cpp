@@ -42,6 +42,16 @@ struct LayerChunk {
 constexpr LayerChunk kLayerChunks[] = {
     {"RESD", 1, "previous-point"}, {"RESW", 2, "sweep"}, {"RESV", 3, "voxel"}, {"RESL", 4, "sensor-geometry"}};
 constexpr std::uint32_t kLayerCodings = 4;
+/// The georeference chunk and the first minor version that has it (model.md §2.9).
+constexpr char kGeorType[] = "GEOR";
+constexpr std::uint16_t kGeorMinor = 5;
+constexpr std::uint64_t kGeorFixedBytes = 96;
+constexpr double kGeorMaxOrigin = 1e9;                        // metres
+constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
+constexpr std::size_t kGeorMaxString = 4096;
+constexpr std::uint32_t kGeorMaxRecords = 256;
+constexpr std::uint64_t kGeorMaxRecordBytes = 1U << 20;       // all CRS records together
+constexpr std::size_t kGeorRecordHead = 16 + 2 + 1 + 32 + 4;  // user_id, record_id, extended, description, length
 constexpr std::size_t kHeaderBytes = 20;      // magic 8, major 2, minor 2, flags 4, header_crc 4
 constexpr std::size_t kChunkHeadBytes = 12;   // type 4, length 8
 constexpr std::size_t kChunkCrcBytes = 4;
@@ -761,6 +771,160 @@ std::uint64_t alphabet_hash(const std::vector<std::uint8_t>& alphabet_file) {
   return h;
 }
 
+namespace {
+
+// ---------------------------------------------------------------------------------------
+// GEOR: the georeference (model.md §2.9)
+// ---------------------------------------------------------------------------------------
+
+void put_fixed_string(std::vector<std::uint8_t>& b, const std::string& s, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i) b.push_back(i < s.size() ? static_cast<std::uint8_t>(s[i]) : 0);
+}
+
+void put_string(std::vector<std::uint8_t>& b, const std::string& s, const char* what) {
+  if (s.size() > kGeorMaxString)
+    throw std::invalid_argument(std::string("lex3d::codec::encode_model: georeference ") + what + " longer than " +
+                                std::to_string(kGeorMaxString) + " bytes");
+  put_u16(b, static_cast<std::uint16_t>(s.size()));
+  b.insert(b.end(), s.begin(), s.end());
+}
+
+std::vector<std::uint8_t> geor_payload(const Georeference& g) {
+  auto fail = [](const std::string& what) {
+    throw std::invalid_argument("lex3d::codec::encode_model: georeference " + what);
+  };
+  if (!g.origin.allFinite() || g.origin.cwiseAbs().maxCoeff() > kGeorMaxOrigin) fail("origin not finite or beyond 1e9 m");
+  for (double u : {g.unit_m, g.vertical_unit_m})
+    if (!(u >= kGeorMinUnit && u <= kGeorMaxUnit)) fail("unit outside [1e-3, 1e4] m");
+  const bool las = g.is_las();
+  for (int a = 0; a < 3; ++a) {
+    if (las && !(g.las_scale[a] > 0.0 && g.las_scale[a] <= 1e6)) fail("LAS scale outside (0, 1e6]");
+    if (!las && g.las_scale[a] != 0.0) fail("LAS scale partly set");
+    if (!std::isfinite(g.las_offset[a]) || std::abs(g.las_offset[a]) > 1e15) fail("LAS offset not finite");
+  }
+  if (g.las_version_minor > 4 || g.las_point_format > 10) fail("LAS version or point format out of range");
+  std::vector<std::uint8_t> b;
+  for (int a = 0; a < 3; ++a) put_f64(b, g.origin[a]);
+  put_f64(b, g.unit_m);
+  put_f64(b, g.vertical_unit_m);
+  put_u32(b, g.epsg);
+  for (int a = 0; a < 3; ++a) put_f64(b, g.las_scale[a]);
+  for (int a = 0; a < 3; ++a) put_f64(b, g.las_offset[a]);
+  b.push_back(g.las_version_minor);
+  b.push_back(g.las_point_format);
+  put_u16(b, g.las_global_encoding);
+  put_string(b, g.crs_name, "CRS name");
+  put_string(b, g.unit_name, "unit name");
+  put_string(b, g.las_system_id, "system id");
+  put_string(b, g.las_software, "software");
+  if (g.crs_records.size() > kGeorMaxRecords) fail("has more than 256 CRS records");
+  std::uint64_t total = 0;
+  put_u32(b, static_cast<std::uint32_t>(g.crs_records.size()));
+  for (const CrsRecord& r : g.crs_records) {
+    total += r.data.size();
+    if (total > kGeorMaxRecordBytes) fail("CRS records hold more than 1 MiB");
+    if (r.user_id.size() > 16 || r.description.size() > 32) fail("CRS record user id or description too long");
+    put_fixed_string(b, r.user_id, 16);
+    put_u16(b, r.record_id);
+    b.push_back(r.extended ? 1 : 0);
+    put_fixed_string(b, r.description, 32);
+    put_u32(b, static_cast<std::uint32_t>(r.data.size()));
+    b.insert(b.end(), r.data.begin(), r.data.end());
+  }
+  return b;
+}
+
+std::string fixed_string(const std::uint8_t* p, std::size_t n) {
+  std::size_t len = 0;
+  while (len < n && p[len] != 0) ++len;
+  return std::string(reinterpret_cast<const char*>(p), len);
+}
+
+Status read_geor(const Chunk& c, const Ctx& ctx, Georeference& g) {
+  const std::uint8_t* p = c.payload;
+  const std::uint64_t base = c.payload_offset;
+  if (c.length < kGeorFixedBytes + 4 * 2 + 4)
+    return ctx.error("chunk 'GEOR' payload is " + std::to_string(c.length) + " bytes, at least " +
+                         std::to_string(kGeorFixedBytes + 12) + " expected",
+                     c.offset + 4);
+  for (int a = 0; a < 3; ++a) {
+    g.origin[a] = ld_f64(p + 8 * a);
+    if (!std::isfinite(g.origin[a]) || std::abs(g.origin[a]) > kGeorMaxOrigin)
+      return ctx.error("GEOR origin is not finite or lies beyond 1e9 m", base + 8 * static_cast<std::uint64_t>(a));
+  }
+  g.unit_m = ld_f64(p + 24);
+  g.vertical_unit_m = ld_f64(p + 32);
+  for (int k = 0; k < 2; ++k) {
+    const double u = k == 0 ? g.unit_m : g.vertical_unit_m;
+    if (!(u >= kGeorMinUnit && u <= kGeorMaxUnit))
+      return ctx.error("GEOR unit of " + std::to_string(u) + " m is outside [0.001, 10000]", base + 24 + 8 * static_cast<std::uint64_t>(k));
+  }
+  g.epsg = ld_u32(p + 40);
+  for (int a = 0; a < 3; ++a) {
+    g.las_scale[a] = ld_f64(p + 44 + 8 * a);
+    g.las_offset[a] = ld_f64(p + 68 + 8 * a);
+  }
+  const bool las = g.las_scale[0] > 0.0;
+  for (int a = 0; a < 3; ++a) {
+    const double s = g.las_scale[a];
+    if (las ? !(s > 0.0 && s <= 1e6) : s != 0.0)
+      return ctx.error("GEOR LAS scale " + std::to_string(s) + " is neither 0 (no LAS) for all axes nor in (0, 1e6]",
+                       base + 44 + 8 * static_cast<std::uint64_t>(a));
+    if (!std::isfinite(g.las_offset[a]) || std::abs(g.las_offset[a]) > 1e15)
+      return ctx.error("GEOR LAS offset is not finite or beyond 1e15", base + 68 + 8 * static_cast<std::uint64_t>(a));
+  }
+  g.las_version_minor = p[92];
+  g.las_point_format = p[93];
+  if (g.las_version_minor > 4) return ctx.error("GEOR LAS minor version " + std::to_string(g.las_version_minor) + " is above 4", base + 92);
+  if (g.las_point_format > 10) return ctx.error("GEOR LAS point format " + std::to_string(g.las_point_format) + " is above 10", base + 93);
+  g.las_global_encoding = ld_u16(p + 94);
+  std::uint64_t pos = kGeorFixedBytes;
+  std::string* strings[] = {&g.crs_name, &g.unit_name, &g.las_system_id, &g.las_software};
+  for (std::string* s : strings) {
+    if (c.length - pos < 2) return ctx.error("GEOR ends inside its strings", base + pos);
+    const std::uint16_t n = ld_u16(p + pos);
+    if (n > kGeorMaxString || n > c.length - pos - 2)
+      return ctx.error("GEOR string of " + std::to_string(n) + " bytes exceeds the " +
+                           std::to_string(std::min<std::uint64_t>(kGeorMaxString, c.length - pos - 2)) + " allowed",
+                       base + pos);
+    s->assign(reinterpret_cast<const char*>(p + pos + 2), n);
+    pos += 2 + n;
+  }
+  if (c.length - pos < 4) return ctx.error("GEOR ends before its record count", base + pos);
+  const std::uint32_t count = ld_u32(p + pos);
+  pos += 4;
+  if (count > kGeorMaxRecords || count > (c.length - pos) / kGeorRecordHead)
+    return ctx.error("GEOR record count " + std::to_string(count) + " is above 256 or more than the " +
+                         std::to_string(c.length - pos) + " bytes left can hold",
+                     base + pos - 4);
+  std::uint64_t total = 0;
+  g.crs_records.resize(count);
+  for (std::uint32_t i = 0; i < count; ++i) {
+    if (c.length - pos < kGeorRecordHead) return ctx.error("GEOR record " + std::to_string(i) + " header is truncated", base + pos);
+    CrsRecord& r = g.crs_records[i];
+    r.user_id = fixed_string(p + pos, 16);
+    r.record_id = ld_u16(p + pos + 16);
+    const std::uint8_t ext = p[pos + 18];
+    if (ext > 1) return ctx.error("GEOR record " + std::to_string(i) + " extended flag is " + std::to_string(ext), base + pos + 18);
+    r.extended = ext == 1;
+    r.description = fixed_string(p + pos + 19, 32);
+    const std::uint32_t len = ld_u32(p + pos + 51);
+    pos += kGeorRecordHead;
+    total += len;
+    if (len > c.length - pos || total > kGeorMaxRecordBytes)
+      return ctx.error("GEOR record " + std::to_string(i) + " length " + std::to_string(len) +
+                           " exceeds the bytes left or the 1 MiB of all records",
+                       base + pos - 4);
+    r.data.assign(p + pos, p + pos + len);
+    pos += len;
+  }
+  if (pos != c.length)
+    return ctx.error(std::to_string(c.length - pos) + " bytes after the last GEOR record", base + pos);
+  return {};
+}
+
+}  // namespace
+
 std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization& q) {
   q.validate();
   const bool embed = data.alphabet.has_value();
@@ -786,7 +950,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   const LayerChunk& layer_chunk = kLayerChunks[coding];
   std::vector<std::uint8_t> out;
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced,
-             data.residual ? layer_chunk.minor : kMinor);
+             data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
@@ -806,6 +970,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   }
   put_chunk(out, "INST", inst_payload(data.model, q));
   if (data.residual) put_chunk(out, layer_chunk.type, *data.residual);
+  if (data.georef) put_chunk(out, kGeorType, geor_payload(*data.georef));
   put_chunk(out, "IEND", {});
   return out;
 }
@@ -845,10 +1010,17 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     return ctx.error(std::string("chunk '") + layer_chunk->type + "' needs format version 1." +
                          std::to_string(layer_chunk->minor) + ", the header says 1." + std::to_string(h.minor),
                      10);
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", "IEND"};
+  const bool has_geor = has_chunk(d, bytes.size(), kGeorType);
+  if (has_geor && h.minor < kGeorMinor)
+    return ctx.error("chunk 'GEOR' needs format version 1." + std::to_string(kGeorMinor) + ", the header says 1." +
+                         std::to_string(h.minor),
+                     10);
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", kGeorType, "IEND"};
   std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
   if (has_residual) sequence.insert(sequence.begin() + 3, layer_chunk->type);
+  if (has_geor) sequence.insert(sequence.end() - 1, kGeorType);
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
+    if (c.is(kGeorType)) return read_geor(c, ctx, out.georef.emplace());
     switch (index) {
       case 0: return read_mhdr(c, ctx, mhdr);
       case 1: {

@@ -127,6 +127,10 @@ StatusOr<Format> detect_from_bytes(const std::string& path, const std::uint8_t* 
   if (file_size == 0) return bad_data(msg(path, "file is empty"));
   const std::string ext = extension_lower(path);
   if (looks_like_pcap(head, head_size)) return Format::kPcap;
+  if (ext == ".laz" || (starts_with(head, head_size, "LASF") && head_size > 104 && (head[104] & 0xC0U) != 0))
+    return bad_data(msg(path, "compressed LAS (LAZ) is not supported: decompress it to .las first (e.g. with laszip)"));
+  if (starts_with(head, head_size, "LASF")) return Format::kLas;
+  if (ext == ".las") return bad_data(msg(path, "not a LAS file (no \"LASF\" signature)"), 0);
   if (looks_like_ply(head, head_size)) return Format::kPly;
   if (looks_like_pcd(head, head_size)) return Format::kPcd;
   if (ext == ".bin") return detect_bin(head, head_size, file_size);
@@ -152,6 +156,7 @@ std::string_view format_name(Format f) noexcept {
     case Format::kXyz: return "xyz";
     case Format::kUos3d: return "uos";
     case Format::kPcap: return "pcap";
+    case Format::kLas: return "las";
   }
   return "unknown";
 }
@@ -164,7 +169,7 @@ std::optional<Format> parse_format(std::string_view name) noexcept {
     return std::nullopt;
   }
   for (Format f : {Format::kAuto, Format::kKitti, Format::kBinXyz, Format::kPcd, Format::kPly,
-                   Format::kXyz, Format::kUos3d, Format::kPcap}) {
+                   Format::kXyz, Format::kUos3d, Format::kPcap, Format::kLas}) {
     if (lower == format_name(f)) return f;
   }
   if (lower == "3d") return Format::kUos3d;

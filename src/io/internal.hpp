@@ -249,18 +249,27 @@ constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties 
 
 using Rgb = std::array<std::uint8_t, 3>;
 
-/// Collects the finite points of a file into a ReadResult.
+/// Collects the finite points of a file into a ReadResult. With `wide` (a file whose
+/// coordinates are doubles) the points are kept in double until finish(), which either
+/// rounds them to float32 or, when they lie far from their frame's origin, stores them
+/// relative to a georeference origin (Cloud::georef; see finish()).
 class Builder {
  public:
-  Builder(ReadResult& r, bool intensity, bool color) : r_(r), intensity_(intensity), color_(color) {}
+  Builder(ReadResult& r, bool intensity, bool color, bool wide = false)
+      : r_(r), intensity_(intensity), color_(color), wide_(wide) {}
 
   void reserve(std::size_t n) {
-    r_.cloud.points.reserve(n);
+    if (wide_) wide_points_.reserve(n);
+    else r_.cloud.points.reserve(n);
     if (intensity_) r_.cloud.intensity.reserve(n);
     if (color_) r_.colors.reserve(n);
   }
 
   void add(float x, float y, float z, float i = 0.0F, const Rgb& c = {}) {
+    if (wide_) {
+      add_wide(x, y, z, i, c);
+      return;
+    }
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
       ++r_.non_finite_dropped;
       return;
@@ -292,6 +301,22 @@ class Builder {
     if (columns_) r_.cloud.column.push_back(column);
   }
 
+  /// A point whose coordinates are doubles (only in `wide` mode).
+  void add_wide(double x, double y, double z, float i = 0.0F, const Rgb& c = {}) {
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+      ++r_.non_finite_dropped;
+      return;
+    }
+    wide_points_.emplace_back(x, y, z);
+    if (intensity_) r_.cloud.intensity.push_back(i);
+    if (color_) r_.colors.push_back(c);
+  }
+
+  [[nodiscard]] bool wide() const { return wide_; }
+
+  /// Ends the reading (read.cpp): in `wide` mode, chooses the georeference.
+  Status finish();
+
  private:
   ReadResult& r_;
   bool intensity_;
@@ -299,6 +324,8 @@ class Builder {
   bool rings_ = false;
   bool columns_ = false;
   bool organised_ = false;
+  bool wide_;
+  std::vector<Eigen::Vector3d> wide_points_;
 };
 
 // Each reader gets the whole file (`data`, `size` bytes, not empty), fills `r`
@@ -321,5 +348,14 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
 /// x y z text in metres, or (`uos`) 3DTK `.3d` in centimetres, left-handed.
 Status read_text(const std::string& path, const std::uint8_t* data, std::size_t size, bool uos,
                  const ReadOptions& options, ReadResult& r);  // read_text.cpp
+
+/// ASPRS LAS 1.0-1.4, point formats 0-10 (read_las.cpp).
+Status read_las(const std::string& path, const std::uint8_t* data, std::size_t size,
+                ReadResult& r);  // read_las.cpp
+
+/// A LAS file of `cloud` (write_las.cpp): the version, point format, scale, offset and CRS
+/// records of its georeference when it came from LAS, else LAS 1.2 format 0 (2 with colours).
+Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions& o,
+                 std::vector<std::uint8_t>& out);  // write_las.cpp
 
 }  // namespace lex3d::io::detail

@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cerrno>
 #include <cstring>
 #include <new>
@@ -37,6 +38,66 @@ std::vector<std::string_view> split_ws(std::string_view line) {
     return true;
   });
   return out;
+}
+
+// A cloud whose coordinates lie farther from their frame's origin than the cloud's own
+// extent, where float32 would round them by more than a millionth of that extent (at
+// least of a metre; a UTM
+// or state-plane map: 0.25 m at 5,403,850 m), is stored relative to an origin: its bounding
+// box centre rounded to the largest power of ten not above the extent, so that the local
+// coordinates stay within the extent and the origin reads well. Anything else is rounded
+// to float32 as before.
+Status Builder::finish() {
+  if (!wide_) return {};
+  const std::size_t n = wide_points_.size();
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    lo = i == 0 ? wide_points_[i] : lo.cwiseMin(wide_points_[i]);
+    hi = i == 0 ? wide_points_[i] : hi.cwiseMax(wide_points_[i]);
+  }
+  const double extent = (hi - lo).maxCoeff();
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  const double max_abs = std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
+  const auto f = static_cast<float>(max_abs);
+  const double half_ulp = 0.5 * (static_cast<double>(std::nextafter(f, INFINITY)) - static_cast<double>(f));
+  const bool far = n > 0 && centre.cwiseAbs().maxCoeff() > extent && half_ulp > 1e-6 * std::max(extent, 1.0);
+  if (!far) {
+    // float32 as before; a value beyond float's range is not finite there: dropped and counted
+    std::size_t kept = 0;
+    r_.cloud.points.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3f p = wide_points_[i].cast<float>();
+      if (!p.allFinite()) {
+        ++r_.non_finite_dropped;
+        continue;
+      }
+      r_.cloud.points[kept] = p;
+      if (intensity_) r_.cloud.intensity[kept] = r_.cloud.intensity[i];
+      if (color_) r_.colors[kept] = r_.colors[i];
+      ++kept;
+    }
+    r_.cloud.points.resize(kept);
+    if (intensity_) r_.cloud.intensity.resize(kept);
+    if (color_) r_.colors.resize(kept);
+    return {};
+  }
+  r_.cloud.points.resize(n);
+  const double step = std::pow(10.0, std::floor(std::log10(std::max(extent, 1e-3))));
+  Georeference g;
+  for (int a = 0; a < 3; ++a) g.origin[a] = std::round(centre[a] / step) * step;
+  g.unit_name = "metre (assumed: the file names no unit)";
+  double worst2 = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d local = wide_points_[i] - g.origin;
+    r_.cloud.points[i] = local.cast<float>();
+    worst2 = std::max(worst2, (r_.cloud.points[i].cast<double>() - local).squaredNorm());
+  }
+  g.representation_error_m = std::sqrt(worst2);
+  r_.cloud.T_cloud_sensor.translation() -= g.origin;
+  r_.cloud.georef = std::move(g);
+  wide_points_.clear();
+  wide_points_.shrink_to_fit();
+  return {};
 }
 
 }  // namespace detail
@@ -95,6 +156,7 @@ StatusOr<ReadResult> read_cloud_impl(const std::string& path, const ReadOptions&
     case Format::kPcd: s = detail::read_pcd(path, bytes.data(), bytes.size(), r); break;
     case Format::kPly: s = detail::read_ply(path, bytes.data(), bytes.size(), r); break;
     case Format::kXyz: s = detail::read_text(path, bytes.data(), bytes.size(), false, options, r); break;
+    case Format::kLas: s = detail::read_las(path, bytes.data(), bytes.size(), r); break;
     case Format::kUos3d: s = detail::read_text(path, bytes.data(), bytes.size(), true, options, r); break;
     case Format::kPcap:  // handled above; reached only when detection disagrees with is_sensor_log
     case Format::kAuto: s = bad_data(msg(path, "cannot tell the format")); break;

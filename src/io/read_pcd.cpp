@@ -255,7 +255,9 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   r.encoding = encoding;
   r.cloud.T_cloud_sensor = viewpoint;
   const std::uint64_t avail = size - data_start;
-  Builder out(r, fi != nullptr, fc != nullptr);
+  // double coordinates may be georeferenced (Builder::finish)
+  const bool wide = fx->scalar == Scalar::kF64 || fy->scalar == Scalar::kF64 || fz->scalar == Scalar::kF64;
+  Builder out(r, fi != nullptr, fc != nullptr, wide);
   // An organised cloud (HEIGHT > 1): rows are lasers, columns azimuth steps, NaN or (0, 0, 0)
   // pixels no-returns; a ring field gives each point's laser.
   const bool organised = height > 1 && height <= 0xFFFF && width <= 0xFFFFFFFFULL;
@@ -296,6 +298,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       if (t.empty()) continue;
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
       double ring_value = 0.0;
+      double w[3] = {0.0, 0.0, 0.0};
       std::uint32_t rgb_bits = 0;
       std::size_t k = 0;
       std::string_view bad;
@@ -313,6 +316,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
           return parsed;
         }
         float* slot = nullptr;
+        if (wide && (col == fx->token || col == fy->token || col == fz->token))
+          return parse_number(b, e, w[col == fx->token ? 0 : col == fy->token ? 1 : 2]);
         if (col == fx->token) slot = &v[0];
         else if (col == fy->token) slot = &v[1];
         else if (col == fz->token) slot = &v[2];
@@ -331,7 +336,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       std::uint16_t ring = 0;
       Status rs = ring_of(done, ring_value, ring);
       if (!rs.ok()) return rs;
-      out.add_at(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits), ring, static_cast<std::uint32_t>(done % row_width));
+      if (wide) out.add_wide(w[0], w[1], w[2], v[3], unpack_rgb(rgb_bits));
+      else out.add_at(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits), ring, static_cast<std::uint32_t>(done % row_width));
       ++done;
     }
     if (done < points) {
@@ -339,7 +345,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                                     " points, header says " + std::to_string(points)),
                       size);
     }
-    return {};
+    return out.finish();
   }
 
   // --- binary and binary_compressed: the data block
@@ -428,9 +434,13 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     std::uint16_t ring = 0;
     Status rs = ring_of(i, fr != nullptr ? load_scalar(block + ar.base + i * ar.stride, fr->scalar, swap) : 0.0, ring);
     if (!rs.ok()) return rs;
-    out.add_at(x, y, z, in, c, ring, static_cast<std::uint32_t>(i % row_width));
+    if (wide)
+      out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
+                   load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),
+                   load_scalar(block + az.base + i * az.stride, fz->scalar, swap), in, c);
+    else out.add_at(x, y, z, in, c, ring, static_cast<std::uint32_t>(i % row_width));
   }
-  return {};
+  return out.finish();
 }
 
 }  // namespace lex3d::io::detail

@@ -246,7 +246,11 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   }
   const bool color = ir >= 0 && ig >= 0 && ib >= 0;
   r.encoding = format;
-  Builder out(r, ii >= 0, color);
+  // double coordinates may be georeferenced (Builder::finish)
+  const bool wide = vertex.props[static_cast<std::size_t>(ix)].type == Scalar::kF64 ||
+                    vertex.props[static_cast<std::size_t>(iy)].type == Scalar::kF64 ||
+                    vertex.props[static_cast<std::size_t>(iz)].type == Scalar::kF64;
+  Builder out(r, ii >= 0, color, wide);
   const std::size_t nprops = vertex.props.size();
 
   // ---------------- ascii
@@ -302,6 +306,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     out.reserve(static_cast<std::size_t>(vertex.count));
     for (std::uint64_t item = 0; item < vertex.count; ++item) {
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
+      double w[3] = {0.0, 0.0, 0.0};
       double c[3] = {0.0, 0.0, 0.0};
       for (std::size_t k = 0; k < nprops; ++k) {
         const PlyProperty& p = vertex.props[k];
@@ -324,7 +329,8 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         }
         const int kk = static_cast<int>(k);
         bool ok = true;
-        if (kk == ix) ok = parse_number(b, e, v[0]);
+        if (wide && (kk == ix || kk == iy || kk == iz)) ok = parse_number(b, e, w[kk == ix ? 0 : kk == iy ? 1 : 2]);
+        else if (kk == ix) ok = parse_number(b, e, v[0]);
         else if (kk == iy) ok = parse_number(b, e, v[1]);
         else if (kk == iz) ok = parse_number(b, e, v[2]);
         else if (kk == ii) ok = parse_number(b, e, v[3]);
@@ -334,9 +340,10 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else ok = is_number(b, e);
         if (!ok) return not_number();
       }
-      out.add(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
+      if (wide) out.add_wide(w[0], w[1], w[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
+      else out.add(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
     }
-    return {};
+    return out.finish();
   }
 
   // ---------------- binary
@@ -422,12 +429,17 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
           c[static_cast<std::size_t>(ch)] = to_u8(load_scalar(p + offsets[u], vertex.props[u].type, swap));
         }
       }
-      out.add(x, y, z, in, c);
+      if (wide)
+        out.add_wide(load_scalar(p + offsets[static_cast<std::size_t>(ix)], sx, swap),
+                     load_scalar(p + offsets[static_cast<std::size_t>(iy)], sy, swap),
+                     load_scalar(p + offsets[static_cast<std::size_t>(iz)], sz, swap), in, c);
+      else out.add(x, y, z, in, c);
     }
-    return {};
+    return out.finish();
   }
   for (std::uint64_t item = 0; item < vertex.count; ++item) {
     float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
+    double w[3] = {0.0, 0.0, 0.0};
     double c[3] = {0.0, 0.0, 0.0};
     for (std::size_t k = 0; k < nprops; ++k) {
       const PlyProperty& p = vertex.props[k];
@@ -437,7 +449,8 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         std::uint64_t n = 0;
         ok = bc.list_count(p.count_type, n) && n <= bc.left() / scalar_size(p.type) &&
              bc.skip(n * scalar_size(p.type));
-      } else if (kk == ix) ok = bc.as_float(p.type, v[0]);
+      } else if (wide && (kk == ix || kk == iy || kk == iz)) ok = bc.scalar(p.type, w[kk == ix ? 0 : kk == iy ? 1 : 2]);
+      else if (kk == ix) ok = bc.as_float(p.type, v[0]);
       else if (kk == iy) ok = bc.as_float(p.type, v[1]);
       else if (kk == iz) ok = bc.as_float(p.type, v[2]);
       else if (kk == ii) ok = bc.as_float(p.type, v[3]);
@@ -451,9 +464,10 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                         bc.offset());
       }
     }
-    out.add(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
+    if (wide) out.add_wide(w[0], w[1], w[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
+    else out.add(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
   }
-  return {};
+  return out.finish();
 }
 
 }  // namespace lex3d::io::detail

@@ -69,7 +69,7 @@ Status read_text(const std::string& path, const std::uint8_t* data, std::size_t 
       if (parse_text_header(t, intensity_col, header_cols)) {
         columns = header_cols;
         columns_line = lines.line_no();
-        out.emplace(r, intensity_col >= 0, false);
+        out.emplace(r, intensity_col >= 0, false, !uos);
         out->reserve(estimate);
         continue;
       }
@@ -84,7 +84,8 @@ Status read_text(const std::string& path, const std::uint8_t* data, std::size_t 
       else if (intensity_col >= 0 ? col == static_cast<std::size_t>(intensity_col)
                                   : (columns == 0 || columns == 4) && col == 3) slot = 3;
       if (slot < 0) return is_number(b, e);
-      return uos ? parse_number(b, e, v[slot]) : parse_number(b, e, f[slot]);
+      // x y z as doubles (a text file may hold projected coordinates; Builder::finish)
+      return uos || slot < 3 ? parse_number(b, e, v[slot]) : parse_number(b, e, f[slot]);
     });
     if (!ok) return bad_data(msg(path, not_a_number(lines.line_no(), bad)), lines.line_offset());
     if (k < 3) {
@@ -97,7 +98,7 @@ Status read_text(const std::string& path, const std::uint8_t* data, std::size_t 
       columns_line = lines.line_no();
       // without a header, a fourth column of exactly four is the intensity
       if (k == 4) intensity_col = 3;
-      out.emplace(r, intensity_col >= 0, false);
+      out.emplace(r, intensity_col >= 0, false, !uos);
       out->reserve(estimate);
     } else if (k != columns) {
       return bad_data(msg(path, line_prefix(lines.line_no()) + std::to_string(k) +
@@ -106,7 +107,7 @@ Status read_text(const std::string& path, const std::uint8_t* data, std::size_t 
                       lines.line_offset());
     }
     if (!uos) {
-      out->add(f[0], f[1], f[2], f[3]);
+      out->add_wide(v[0], v[1], v[2], f[3]);
       continue;
     }
     // 3DTK frame: left-handed, x right, y up, z forward, centimetres. lex3d:
@@ -126,7 +127,7 @@ Status read_text(const std::string& path, const std::uint8_t* data, std::size_t 
     out->add(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
              static_cast<float>(v[3]));
   }
-  return {};
+  return out ? out->finish() : Status{};
 }
 
 }  // namespace lex3d::io::detail

@@ -62,8 +62,28 @@ class Bytes {
     b_.insert(b_.end(), tmp, tmp + sizeof(T));
   }
   void f32(float v) { le(v); }
+  void f64(double v) { le(v); }
+  /// x y z of point i: float32, or with `g` the true coordinates as doubles.
+  void xyz(const Cloud& cloud, std::size_t i, const Georeference* g) {
+    const auto& p = cloud.points[i];
+    if (g != nullptr) {
+      const Eigen::Vector3d t = g->to_crs(p);
+      f64(t.x());
+      f64(t.y());
+      f64(t.z());
+    } else {
+      f32(p.x());
+      f32(p.y());
+      f32(p.z());
+    }
+  }
   /// Shortest round-trip decimal of a float.
   void text(float v) {
+    char buf[32];
+    const auto res = std::to_chars(buf, buf + sizeof(buf), v);
+    b_.insert(b_.end(), buf, res.ptr);
+  }
+  void text(double v) {
     char buf[32];
     const auto res = std::to_chars(buf, buf + sizeof(buf), v);
     b_.insert(b_.end(), buf, res.ptr);
@@ -73,14 +93,24 @@ class Bytes {
     const auto res = std::to_chars(buf, buf + sizeof(buf), v);
     b_.insert(b_.end(), buf, res.ptr);
   }
-  /// "x y z" of point i, then " intensity" when `with_i` (no end of line).
-  void text_point(const Cloud& cloud, std::size_t i, bool with_i) {
+  /// "x y z" of point i, then " intensity" when `with_i` (no end of line); with `g`, the
+  /// true coordinates (doubles) of the georeference.
+  void text_point(const Cloud& cloud, std::size_t i, bool with_i, const Georeference* g = nullptr) {
     const auto& p = cloud.points[i];
-    text(p.x());
-    u8(' ');
-    text(p.y());
-    u8(' ');
-    text(p.z());
+    if (g != nullptr) {
+      const Eigen::Vector3d t = g->to_crs(p);
+      text(t.x());
+      u8(' ');
+      text(t.y());
+      u8(' ');
+      text(t.z());
+    } else {
+      text(p.x());
+      u8(' ');
+      text(p.y());
+      u8(' ');
+      text(p.z());
+    }
     if (with_i) {
       u8(' ');
       text(cloud.intensity[i]);
@@ -99,11 +129,11 @@ std::uint32_t pack_rgb(const std::array<std::uint8_t, 3>& c) {
 }
 
 Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions& o, bool with_i,
-                 bool with_c, std::vector<std::uint8_t>& out, std::size_t height = 1) {
+                 bool with_c, const Georeference* g, std::vector<std::uint8_t>& out, std::size_t height = 1) {
   const std::size_t n = cloud.size();
-  const std::size_t point_size = 12 + (with_i ? 4 : 0) + (with_c ? 4 : 0);
+  const std::size_t point_size = (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0);
   Bytes b(256 + n * point_size + (o.pcd_encoding == PcdEncoding::kAscii ? n * 40 : 0));
-  std::string fields = "x y z", sizes = "4 4 4", types = "F F F", counts = "1 1 1";
+  std::string fields = "x y z", sizes = g != nullptr ? "8 8 8" : "4 4 4", types = "F F F", counts = "1 1 1";
   if (with_i) {
     fields += " intensity";
     sizes += " 4";
@@ -118,17 +148,20 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
     types += o.pcd_encoding == PcdEncoding::kAscii ? " U" : " F";
     counts += " 1";
   }
+  // true coordinates: the viewpoint moves with the points (in the CRS's units when they are metres)
+  Pose viewpoint = cloud.T_cloud_sensor;
+  if (g != nullptr) viewpoint.translation() = g->to_crs(cloud.T_cloud_sensor.translation().cast<float>());
   const char* enc = o.pcd_encoding == PcdEncoding::kAscii    ? "ascii"
                     : o.pcd_encoding == PcdEncoding::kBinary ? "binary"
                                                              : "binary_compressed";
   b.str("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS " + fields + "\nSIZE " +
         sizes + "\nTYPE " + types + "\nCOUNT " + counts + "\nWIDTH " + std::to_string(n / height) +
-        "\nHEIGHT " + std::to_string(height) + "\nVIEWPOINT " + viewpoint_of(cloud.T_cloud_sensor) + "\nPOINTS " + std::to_string(n) +
+        "\nHEIGHT " + std::to_string(height) + "\nVIEWPOINT " + viewpoint_of(viewpoint) + "\nPOINTS " + std::to_string(n) +
         "\nDATA " + enc + "\n");
   switch (o.pcd_encoding) {
     case PcdEncoding::kAscii:
       for (std::size_t i = 0; i < n; ++i) {
-        b.text_point(cloud, i, with_i);
+        b.text_point(cloud, i, with_i, g);
         if (with_c) {  // as PCL does: the packed colour written as an unsigned integer
           b.u8(' ');
           b.text(static_cast<std::uint64_t>(pack_rgb(o.colors[i])));
@@ -138,10 +171,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
       break;
     case PcdEncoding::kBinary:
       for (std::size_t i = 0; i < n; ++i) {
-        const auto& p = cloud.points[i];
-        b.f32(p.x());
-        b.f32(p.y());
-        b.f32(p.z());
+        b.xyz(cloud, i, g);
         if (with_i) b.f32(cloud.intensity[i]);
         if (with_c) b.le(pack_rgb(o.colors[i]));
       }
@@ -154,9 +184,12 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
       }
       // column-major: all x, then all y, ... (as PCL stores binary_compressed)
       Bytes raw(static_cast<std::size_t>(raw_size));
-      for (std::size_t i = 0; i < n; ++i) raw.f32(cloud.points[i].x());
-      for (std::size_t i = 0; i < n; ++i) raw.f32(cloud.points[i].y());
-      for (std::size_t i = 0; i < n; ++i) raw.f32(cloud.points[i].z());
+      for (int a = 0; a < 3; ++a) {
+        for (std::size_t i = 0; i < n; ++i) {
+          if (g != nullptr) raw.f64(g->to_crs(cloud.points[i])[a]);
+          else raw.f32(cloud.points[i][a]);
+        }
+      }
       if (with_i) {
         for (std::size_t i = 0; i < n; ++i) raw.f32(cloud.intensity[i]);
       }
@@ -181,24 +214,22 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
   return {};
 }
 
-void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with_c,
+void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with_c, const Georeference* g,
                std::vector<std::uint8_t>& out) {
   const std::size_t n = cloud.size();
-  Bytes b(256 + n * (o.ply_binary ? 19 : 60));
+  Bytes b(256 + n * (o.ply_binary ? 31 : 60));
+  const char* coord = g != nullptr ? "double" : "float";
   std::string h = "ply\nformat ";
   h += o.ply_binary ? "binary_little_endian" : "ascii";
   h += " 1.0\ncomment written by lex3d\nelement vertex " + std::to_string(n) +
-       "\nproperty float x\nproperty float y\nproperty float z\n";
+       "\nproperty " + coord + " x\nproperty " + coord + " y\nproperty " + coord + " z\n";
   if (with_i) h += "property float intensity\n";
   if (with_c) h += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   h += "end_header\n";
   b.str(h);
   for (std::size_t i = 0; i < n; ++i) {
-    const auto& p = cloud.points[i];
     if (o.ply_binary) {
-      b.f32(p.x());
-      b.f32(p.y());
-      b.f32(p.z());
+      b.xyz(cloud, i, g);
       if (with_i) b.f32(cloud.intensity[i]);
       if (with_c) {
         b.u8(o.colors[i][0]);
@@ -206,7 +237,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
         b.u8(o.colors[i][2]);
       }
     } else {
-      b.text_point(cloud, i, with_i);
+      b.text_point(cloud, i, with_i, g);
       if (with_c) {
         for (int ch = 0; ch < 3; ++ch) {
           b.u8(' ');
@@ -233,11 +264,11 @@ void build_float_binary(const Cloud& cloud, bool kitti, std::vector<std::uint8_t
   out = std::move(b.vec());
 }
 
-void build_xyz(const Cloud& cloud, bool with_i, std::vector<std::uint8_t>& out) {
+void build_xyz(const Cloud& cloud, bool with_i, const Georeference* g, std::vector<std::uint8_t>& out) {
   const std::size_t n = cloud.size();
   Bytes b(n * 48);
   for (std::size_t i = 0; i < n; ++i) {
-    b.text_point(cloud, i, with_i);
+    b.text_point(cloud, i, with_i, g);
     b.u8('\n');
   }
   out = std::move(b.vec());
@@ -282,9 +313,11 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
     else if (ext == ".ply") f = Format::kPly;
     else if (ext == ".bin") f = Format::kKitti;
     else if (ext == ".xyz" || ext == ".txt" || ext == ".asc" || ext == ".csv") f = Format::kXyz;
+    else if (ext == ".las") f = Format::kLas;
+    else if (ext == ".laz") return invalid(path, "writing compressed LAS (.laz) is not supported: use .las");
     else {
       return invalid(path, "cannot tell the output format from the extension '" +
-                               detail::printable(ext, 16) + "' (use .pcd, .ply, .bin, .xyz or .txt)");
+                               detail::printable(ext, 16) + "' (use .pcd, .ply, .bin, .xyz, .txt or .las)");
     }
   }
   if (!cloud.intensity.empty() && cloud.intensity.size() != cloud.points.size()) {
@@ -297,6 +330,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
   }
   const bool with_i = options.write_intensity && cloud.has_intensity();
   const bool with_c = !options.colors.empty();
+  const Georeference* g = options.true_coordinates && cloud.georef ? &*cloud.georef : nullptr;
   std::vector<std::uint8_t> bytes;
   switch (f) {
     case Format::kPcd: {
@@ -330,17 +364,22 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
           if (with_i) grid.intensity[k] = cloud.intensity[i];
           if (with_c) go.colors[k] = options.colors[i];
         }
-        s = build_pcd(path, grid, go, with_i, with_c, bytes, cloud.rows);
+        s = build_pcd(path, grid, go, with_i, with_c, g, bytes, cloud.rows);
       } else {
-        s = build_pcd(path, cloud, options, with_i, with_c, bytes);
+        s = build_pcd(path, cloud, options, with_i, with_c, g, bytes);
       }
       if (!s.ok()) return s;
       break;
     }
-    case Format::kPly: build_ply(cloud, options, with_i, with_c, bytes); break;
+    case Format::kLas: {
+      Status s = detail::build_las(path, cloud, options, bytes);
+      if (!s.ok()) return s;
+      break;
+    }
+    case Format::kPly: build_ply(cloud, options, with_i, with_c, g, bytes); break;
     case Format::kKitti: build_float_binary(cloud, true, bytes); break;
     case Format::kBinXyz: build_float_binary(cloud, false, bytes); break;
-    case Format::kXyz: build_xyz(cloud, with_i, bytes); break;
+    case Format::kXyz: build_xyz(cloud, with_i, g, bytes); break;
     case Format::kUos3d:
     case Format::kPcap:
     case Format::kAuto:

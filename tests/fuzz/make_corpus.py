@@ -32,3 +32,21 @@ h,ch=parse(alph); p=find(ch,b'WORD')[1]; n,rs=struct.unpack_from('<QQ',p,0); raw
 find(ch,b'WORD')[1]=bytearray(struct.pack('<QQ',n,rs)+zlib.compress(bytes(raw),9)); write('alphabet_descriptor_m128.lex3da',build(h,ch))
 h,ch=parse(alph); h[12]=4; write('alphabet_reserved_flag.lex3da',build(h,ch))
 h,ch=parse(ref); h[8]=2; write('model_ref_major_2.lex3dm',build(h,ch))
+# Format 1.5: the tiny model with a GEOR chunk (model.md §2.8) built here from the
+# specification, as a golden file, and a few variants of it.
+def geor(origin=(393925.823061,3689171.943122,3158.8627), unit=1.0, vunit=1.0, epsg=32642,
+         scale=(0.001,0.001,1e-5), offset=(393775.823061,3689071.943122,3107.8627), minor=2, fmt=1, ge=0,
+         strings=(b'WGS 84 / UTM zone 42N',b'metre',b'ALIRT',b'AA2010-CPED'),
+         records=((b'LASF_Projection',2112,0,b'OGC Transformation Record',b'PROJCS["WGS 84 / UTM zone 42N"]\0'),)):
+    p=struct.pack('<5dI6dBBH',*origin,unit,vunit,epsg,*scale,*offset,minor,fmt,ge)
+    for s in strings: p+=struct.pack('<H',len(s))+s
+    p+=struct.pack('<I',len(records))
+    for u,i,e,d,data in records:
+        p+=u.ljust(16,b'\0')+struct.pack('<HB',i,e)+d.ljust(32,b'\0')+struct.pack('<I',len(data))+data
+    return bytearray(p)
+h,ch=parse(model); h[10]=5; ch.insert(len(ch)-1,[b'GEOR',geor()]); g15=build(h,ch)
+open(G+'tiny_model_georef_1.5.lex3dm','wb').write(g15); write('seed_model_georef_1.5.lex3dm',g15)
+h,ch=parse(g15); h[10]=4; write('model_georef_minor_4.lex3dm',build(h,ch))
+h,ch=parse(g15); find(ch,b'GEOR')[1]=geor(unit=0.0); write('model_georef_unit_0.lex3dm',build(h,ch))
+h,ch=parse(g15); p=find(ch,b'GEOR')[1]; struct.pack_into('<I',p,len(p)-len(b'PROJCS["WGS 84 / UTM zone 42N"]\0')-4,1<<30); write('model_georef_record_len.lex3dm',build(h,ch))
+write('trunc_model_georef_200',g15[:200])

@@ -335,7 +335,10 @@ TEST(ReadErrors, Uos3dWithBadPoseFile) {
 }
 
 TEST(ReadErrors, UnknownFormat) {
-  expect_bad("unknown", "cloud.las", std::string("LASF\x01\x02\x03", 7), "cannot tell the format");
+  expect_bad("unknown", "cloud.e57", std::string("ASTM\x01\x02\x03", 7), "cannot tell the format");
+  expect_bad("las_short", "cloud.las", std::string("LASF\x01\x02\x03", 7), "truncated LAS header");
+  expect_bad("las_magic", "cloud.las", std::string("LASX\x01\x02\x03", 7), "LASF");
+  expect_bad("laz", "cloud.laz", std::string("LASF\x01\x02\x03", 7), "LAZ");
 }
 
 // ------------------------------------------------------------------ lists

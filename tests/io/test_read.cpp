@@ -459,7 +459,8 @@ TEST(FormatNames, RoundTripAndAliases) {
   }
   EXPECT_EQ(parse_format("3D"), Format::kUos3d);
   EXPECT_EQ(parse_format("PCD"), Format::kPcd);
-  EXPECT_FALSE(parse_format("las").has_value());
+  EXPECT_EQ(parse_format("las"), Format::kLas);
+  EXPECT_FALSE(parse_format("laz").has_value());
   EXPECT_EQ(format_name(Format::kUos3d), "uos");
 }
 

@@ -336,7 +336,8 @@ TEST(WriteErrors, BadArgumentsAreInvalidArgument) {
   WriteOptions o;
   o.colors = colours_for(3);
   EXPECT_EQ(write_cloud((dir / "a.pcd").string(), cloud, o).code(), ErrorCode::kInvalidArgument);
-  EXPECT_EQ(write_cloud((dir / "a.las").string(), cloud).code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(write_cloud((dir / "a.laz").string(), cloud).code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(write_cloud((dir / "a.e57").string(), cloud).code(), ErrorCode::kInvalidArgument);
   WriteOptions u;
   u.format = Format::kUos3d;
   EXPECT_EQ(write_cloud((dir / "a.3d").string(), cloud, u).code(), ErrorCode::kInvalidArgument);

@@ -59,6 +59,10 @@ struct ModelData {
   /// written as format 1.1 (a RESD chunk) or, by its layer_coding, 1.2 (the sweep coding,
   /// an RESW chunk) or 1.3 (the voxel coding, an RESV chunk); one without as 1.0.
   std::optional<std::vector<std::uint8_t>> residual;
+  /// Where the model's frame sits in a georeferenced frame (formats/model.md §2.8): the
+  /// decoded points' true coordinates are origin + point. A model with one is written as
+  /// format 1.5 (a GEOR chunk); Georeference::representation_error_m is not stored.
+  std::optional<Georeference> georef;
 };
 
 /// Encodes an alphabet file. Throws std::invalid_argument for an invalid `q` or alphabet

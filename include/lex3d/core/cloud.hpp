@@ -47,6 +47,51 @@ struct SensorGeometry {
   [[nodiscard]] std::size_t lasers() const noexcept { return elevation.size(); }
 };
 
+/// One coordinate-reference-system record carried through from a source file untouched
+/// (a LAS GeoTIFF-keys or OGC WKT VLR/EVLR), so that a writer can give it back.
+struct CrsRecord {
+  std::string user_id;                 ///< LAS VLR user id (e.g. "LASF_Projection"), at most 16 bytes
+  std::uint16_t record_id = 0;         ///< LAS VLR record id (34735 GeoKeys, 34736 doubles, 34737 ASCII, 2112 WKT)
+  std::string description;             ///< at most 32 bytes
+  std::vector<std::uint8_t> data;      ///< the record's bytes
+  bool extended = false;               ///< stored as an EVLR (LAS 1.4) in the source
+};
+
+/// Where a cloud's local frame sits in a projected (or any large) coordinate frame.
+/// A point's true coordinates, in metres along the CRS axes, are `origin + point`
+/// (computed in double); in the CRS's own units they are `(origin + point) / unit_m`
+/// for x and y and `(origin.z + point.z) / vertical_unit_m` for z.
+/// Readers of large coordinates (LAS always; PCD/PLY double fields, text with large
+/// values) choose the origin and store float32 positions relative to it.
+struct Georeference {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< metres, CRS axes
+  double unit_m = 1.0;                 ///< metres per CRS unit (0.3048 international foot, 1200/3937 US survey foot)
+  std::string unit_name = "metre";     ///< the CRS's linear unit as named by the source
+  double vertical_unit_m = 1.0;        ///< metres per unit of z (the horizontal unit unless the CRS says otherwise)
+  std::string crs_name;                ///< the CRS's name when the source gives one; empty otherwise
+  std::uint32_t epsg = 0;              ///< EPSG code of the projected CRS when known; 0 otherwise
+  std::vector<CrsRecord> crs_records;  ///< the source's CRS records, byte for byte
+  /// The LAS container a writer gives back (zeros when the source was not LAS):
+  Eigen::Vector3d las_scale = Eigen::Vector3d::Zero();   ///< CRS units a step; 0: not LAS
+  Eigen::Vector3d las_offset = Eigen::Vector3d::Zero();  ///< CRS units
+  std::uint8_t las_version_minor = 0;  ///< 2, 3 or 4 (major is 1)
+  std::uint8_t las_point_format = 0;   ///< point data record format 0..10
+  std::uint16_t las_global_encoding = 0;
+  std::string las_system_id;           ///< at most 32 bytes
+  std::string las_software;            ///< at most 32 bytes
+  /// Largest distance, metres, between a point's true position and origin + its float32 position,
+  /// measured when the file was read (informative; not stored in model files).
+  double representation_error_m = 0.0;
+
+  [[nodiscard]] bool is_las() const noexcept { return las_scale.x() > 0.0; }
+  /// Metres per CRS unit along x, y, z.
+  [[nodiscard]] Eigen::Vector3d units() const noexcept { return {unit_m, unit_m, vertical_unit_m}; }
+  /// True coordinates of a local point in the CRS's units.
+  [[nodiscard]] Eigen::Vector3d to_crs(const Eigen::Vector3f& p) const {
+    return (origin + p.cast<double>()).cwiseQuotient(units());
+  }
+};
+
 /// A point cloud: positions and, when the source has them, intensities.
 struct Cloud {
   /// Point positions in metres.
@@ -77,6 +122,9 @@ struct Cloud {
   std::uint32_t columns = 0;
   /// The sensor's beam layout when the source gives it (raw logs with metadata).
   std::optional<SensorGeometry> geometry;
+  /// Where the local frame sits in a georeferenced (projected) frame, when the source's
+  /// coordinates are large (a LAS file, a UTM cloud): true coordinates are origin + point.
+  std::optional<Georeference> georef;
 
   [[nodiscard]] bool has_rings() const noexcept { return !ring.empty() && ring.size() == points.size(); }
   [[nodiscard]] bool has_columns() const noexcept { return !column.empty() && column.size() == points.size(); }

@@ -32,6 +32,9 @@ enum class Format : std::uint8_t {
   kPcap,     ///< a raw spinning-lidar log: libpcap capture of Ouster (with its metadata JSON) or
              ///< Velodyne (VLP-16, HDL-32E) UDP packets; read_cloud gives its first complete turn,
              ///< read_sensor_log (sensor_log.hpp) every turn
+  kLas,      ///< ASPRS LAS 1.0-1.4 (`.las`, magic "LASF"), point data record formats 0-10: x y z (scale and
+             ///< offset, the CRS's units read into metres about a georeference origin), intensity, RGB as
+             ///< colours; compressed LAS (`.laz`) is refused
 };
 
 /// Canonical lower-case name of a format ("kitti", "binxyz", "pcd", "ply", "xyz", "uos", "auto").
@@ -75,6 +78,12 @@ struct ReadResult {
   /// (PCD `rgb`/`rgba` field, PLY `red green blue` properties); empty otherwise.
   std::vector<std::array<std::uint8_t, 3>> colors;
   std::uint64_t file_bytes = 0;         ///< size of the file read
+  /// Fields the file holds (with a value other than zero) that lex3d does not keep, e.g.
+  /// "classification", "GPS time" (LAS); empty when every field was kept.
+  std::vector<std::string> dropped_fields;
+  /// What the reader noticed and the user should know (one line each), e.g. a LAS
+  /// header whose bounds do not hold its points.
+  std::vector<std::string> notes;
 };
 
 /// Reads a point cloud file. Errors: kIoError when the file cannot be opened or
@@ -86,15 +95,19 @@ struct ReadResult {
 enum class PcdEncoding : std::uint8_t { kAscii, kBinary, kBinaryCompressed };
 
 struct WriteOptions {
-  /// kAuto picks from the extension: .pcd, .ply, .bin (KITTI), .xyz/.txt.
+  /// kAuto picks from the extension: .pcd, .ply, .bin (KITTI), .xyz/.txt, .las.
   Format format = Format::kAuto;
   PcdEncoding pcd_encoding = PcdEncoding::kBinary;
   /// PLY: binary_little_endian when true, ascii otherwise.
   bool ply_binary = true;
   /// Write the intensity field when the cloud has one (PCD/PLY); KITTI always writes 4 floats.
   bool write_intensity = true;
-  /// Optional per-point RGB colour (empty, or one per point); PCD/PLY only.
+  /// Optional per-point RGB colour (empty, or one per point); PCD/PLY/LAS only.
   std::vector<std::array<std::uint8_t, 3>> colors;
+  /// A cloud with a georeference is written in its true coordinates (Georeference::to_crs):
+  /// PCD/PLY with double x y z, text with enough digits, LAS with its scale and offset. The
+  /// float32 binaries (KITTI, x y z) cannot hold them and get the local coordinates.
+  bool true_coordinates = true;
 };
 
 /// Writes `cloud` to `path`: the bytes go to a temporary file in the same

@@ -1,0 +1,627 @@
+// Reader of ASPRS LAS 1.0-1.4 files (point data record formats 0-10) and of the CRS
+// records they carry (GeoTIFF keys, OGC WKT), which give the coordinates' units.
+//
+// Every length read from the file (header size, offset to the points, VLR and EVLR
+// lengths, point count × record length) is checked against the file's size before it is
+// used. Points are read into metres relative to an origin on the file's own grid, so a
+// float32 position keeps the file's resolution; the reader measures the worst error of
+// that representation and refuses a file whose extent is too large for it.
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+
+#include "io/internal.hpp"
+#include "io/las.hpp"
+#include "lex3d/io/io.hpp"
+
+namespace lex3d::io::detail {
+
+namespace las {
+
+namespace {
+
+std::string c_string(const std::uint8_t* p, std::size_t n) {
+  std::size_t len = 0;
+  while (len < n && p[len] != 0) ++len;
+  return std::string(reinterpret_cast<const char*>(p), len);
+}
+
+// ------------------------------------------------------------------------- units
+
+struct Unit {
+  double m;
+  const char* name;
+};
+
+/// EPSG linear units that GeoTIFF keys and WKT authorities name.
+bool epsg_unit(std::uint32_t code, Unit& u) {
+  switch (code) {
+    case 9001: u = {1.0, "metre"}; return true;
+    case 9002: u = {0.3048, "international foot"}; return true;
+    case 9003: u = {1200.0 / 3937.0, "US survey foot"}; return true;
+    case 9005: u = {0.3047972654, "Clarke's foot"}; return true;
+    case 9036: u = {1000.0, "kilometre"}; return true;
+    default: return false;
+  }
+}
+
+// ------------------------------------------------------------------------- WKT
+
+/// A WKT node: KEYWORD[child, child, ...], children quoted strings, numbers/bare words, nodes.
+struct WktNode {
+  std::string keyword;
+  std::vector<std::string> values;  // the leaf children in order (strings unquoted)
+  std::vector<WktNode> nodes;
+};
+
+class WktParser {
+ public:
+  explicit WktParser(std::string_view s) : s_(s) {}
+  bool parse(WktNode& out) { return node(out, 0) && (skip(), p_ == s_.size()); }
+
+ private:
+  void skip() {
+    while (p_ < s_.size() && (s_[p_] == ' ' || s_[p_] == '\n' || s_[p_] == '\r' || s_[p_] == '\t' || s_[p_] == '\0'))
+      ++p_;
+  }
+  bool node(WktNode& n, int depth) {
+    if (depth > 32) return false;
+    skip();
+    const std::size_t b = p_;
+    while (p_ < s_.size() && (std::isalnum(static_cast<unsigned char>(s_[p_])) || s_[p_] == '_')) ++p_;
+    n.keyword = std::string(s_.substr(b, p_ - b));
+    skip();
+    if (n.keyword.empty() || p_ >= s_.size() || (s_[p_] != '[' && s_[p_] != '(')) return false;
+    const char close = s_[p_] == '[' ? ']' : ')';
+    ++p_;
+    for (;;) {
+      skip();
+      if (p_ >= s_.size()) return false;
+      if (s_[p_] == '"') {
+        std::string v;
+        ++p_;
+        for (;;) {
+          if (p_ >= s_.size()) return false;
+          if (s_[p_] == '"') {
+            if (p_ + 1 < s_.size() && s_[p_ + 1] == '"') {  // "" is a quote inside a string
+              v.push_back('"');
+              p_ += 2;
+              continue;
+            }
+            ++p_;
+            break;
+          }
+          v.push_back(s_[p_++]);
+        }
+        n.values.push_back(std::move(v));
+      } else {
+        std::size_t e = p_;
+        while (e < s_.size() && s_[e] != ',' && s_[e] != ']' && s_[e] != ')' && s_[e] != '[' && s_[e] != '(') ++e;
+        if (e < s_.size() && (s_[e] == '[' || s_[e] == '(')) {
+          WktNode child;
+          if (!node(child, depth + 1)) return false;
+          n.nodes.push_back(std::move(child));
+        } else {
+          n.values.emplace_back(trim(s_.substr(p_, e - p_)));
+          p_ = e;
+        }
+      }
+      skip();
+      if (p_ >= s_.size()) return false;
+      if (s_[p_] == ',') {
+        ++p_;
+        continue;
+      }
+      if (s_[p_] == close) {
+        ++p_;
+        return true;
+      }
+      return false;
+    }
+  }
+  std::string_view s_;
+  std::size_t p_ = 0;
+};
+
+const WktNode* child(const WktNode& n, std::initializer_list<const char*> keywords) {
+  for (const WktNode& c : n.nodes)
+    for (const char* k : keywords)
+      if (to_lower(c.keyword) == to_lower(k)) return &c;
+  return nullptr;
+}
+
+/// The unit of a WKT CRS node: its UNIT / LENGTHUNIT child (WKT1), or that of its CS axes (WKT2).
+bool wkt_unit(const WktNode& crs, Unit& u, std::string& name) {
+  const WktNode* unit = child(crs, {"UNIT", "LENGTHUNIT"});
+  if (unit == nullptr) {
+    for (const WktNode& c : crs.nodes)
+      if (to_lower(c.keyword) == "axis")
+        if ((unit = child(c, {"UNIT", "LENGTHUNIT"})) != nullptr) break;
+  }
+  if (unit == nullptr || unit->values.size() < 2) return false;
+  double f = 0.0;
+  const std::string& v = unit->values[1];
+  if (!parse_number(v.data(), v.data() + v.size(), f) || !(f > 0.0) || !std::isfinite(f)) return false;
+  u.m = f;
+  name = unit->values[0];
+  u.name = nullptr;
+  return true;
+}
+
+std::uint32_t wkt_epsg(const WktNode& crs) {
+  const WktNode* a = child(crs, {"AUTHORITY", "ID"});
+  if (a == nullptr || a->values.size() < 2 || to_lower(a->values[0]) != "epsg") return 0;
+  std::uint64_t code = 0;
+  if (!parse_u64(a->values[1], code) || code > 0xFFFFFFFFULL) return 0;
+  return static_cast<std::uint32_t>(code);
+}
+
+bool read_wkt(const std::vector<std::uint8_t>& bytes, CrsInfo& out) {
+  std::size_t len = 0;
+  while (len < bytes.size() && bytes[len] != 0) ++len;
+  WktNode root;
+  WktParser parser(std::string_view(reinterpret_cast<const char*>(bytes.data()), len));
+  if (!parser.parse(root)) return false;
+  const std::string top = to_lower(root.keyword);
+  const WktNode* horizontal = &root;
+  const WktNode* vertical = nullptr;
+  if (top == "compd_cs" || top == "compoundcrs") {
+    horizontal = child(root, {"PROJCS", "PROJCRS", "PROJECTEDCRS", "GEOGCS", "GEOGCRS"});
+    vertical = child(root, {"VERT_CS", "VERTCRS", "VERTICALCRS"});
+    if (!root.values.empty()) out.name = root.values[0];
+  }
+  if (horizontal != nullptr) {
+    const std::string k = to_lower(horizontal->keyword);
+    if (out.name.empty() && !horizontal->values.empty()) out.name = horizontal->values[0];
+    if (out.epsg == 0) out.epsg = wkt_epsg(*horizontal);
+    Unit u{};
+    std::string name;
+    // a geographic CRS's unit is an angle: the coordinates are not lengths
+    if ((k == "projcs" || k == "projcrs" || k == "projectedcrs") && wkt_unit(*horizontal, u, name)) {
+      out.unit_m = u.m;
+      out.unit_name = name;
+    }
+  }
+  if (vertical != nullptr) {
+    Unit u{};
+    std::string name;
+    if (wkt_unit(*vertical, u, name)) {
+      out.vertical_unit_m = u.m;
+      out.vertical_unit_name = name;
+    }
+  }
+  return true;
+}
+
+// ------------------------------------------------------------------------- GeoTIFF keys
+
+std::uint16_t u16_at(const std::vector<std::uint8_t>& b, std::size_t i) {
+  return static_cast<std::uint16_t>(b[2 * i] | (b[2 * i + 1] << 8));
+}
+
+bool read_geokeys(const std::vector<CrsRecord>& records, CrsInfo& out) {
+  const CrsRecord* keys = nullptr;
+  const CrsRecord* doubles = nullptr;
+  const CrsRecord* ascii = nullptr;
+  for (const CrsRecord& r : records) {
+    if (r.user_id != "LASF_Projection") continue;
+    if (r.record_id == 34735) keys = &r;
+    if (r.record_id == 34736) doubles = &r;
+    if (r.record_id == 34737) ascii = &r;
+  }
+  if (keys == nullptr) return false;
+  const std::vector<std::uint8_t>& k = keys->data;
+  const std::size_t words = k.size() / 2;
+  if (words < 4) {
+    out.notes.push_back("GeoTIFF key directory shorter than its 8-byte header");
+    return false;
+  }
+  const std::size_t n = u16_at(k, 3);
+  if (4 + 4 * n > words) {
+    out.notes.push_back("GeoTIFF key directory declares " + std::to_string(n) + " keys but holds " +
+                        std::to_string((words - 4) / 4));
+    return false;
+  }
+  auto ascii_value = [&](std::size_t count, std::size_t offset) -> std::string {
+    if (ascii == nullptr || offset > ascii->data.size() || count > ascii->data.size() - offset) return {};
+    std::string s(reinterpret_cast<const char*>(ascii->data.data() + offset), count);
+    while (!s.empty() && (s.back() == '|' || s.back() == '\0')) s.pop_back();
+    const std::size_t bar = s.find('|');
+    return bar == std::string::npos ? s : s.substr(0, bar);
+  };
+  auto double_value = [&](std::size_t offset, double& v) {
+    if (doubles == nullptr || offset >= doubles->data.size() / 8) return false;
+    std::memcpy(&v, doubles->data.data() + 8 * offset, 8);
+    return std::isfinite(v) && v > 0.0;
+  };
+  std::uint32_t linear = 0, vertical = 0;
+  double linear_size = 0.0;
+  std::string pcs_citation, gt_citation;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint16_t id = u16_at(k, 4 + 4 * i), where = u16_at(k, 5 + 4 * i), count = u16_at(k, 6 + 4 * i),
+                        value = u16_at(k, 7 + 4 * i);
+    switch (id) {
+      case 1026: if (where == 34737) gt_citation = ascii_value(count, value); break;
+      case 3072: if (where == 0 && value != 0 && value != 32767) out.epsg = value; break;
+      case 3073: if (where == 34737) pcs_citation = ascii_value(count, value); break;
+      case 3076: if (where == 0) linear = value; break;
+      case 3077: if (where == 34736) double_value(value, linear_size); break;
+      case 4099: if (where == 0) vertical = value; break;
+      default: break;
+    }
+  }
+  if (out.name.empty()) out.name = !pcs_citation.empty() ? pcs_citation : gt_citation;
+  Unit u{};
+  if (linear != 0 && epsg_unit(linear, u)) {
+    out.unit_m = u.m;
+    out.unit_name = u.name;
+  } else if (linear_size > 0.0) {
+    out.unit_m = linear_size;
+    out.unit_name = "unit of " + std::to_string(linear_size) + " m";
+  } else if (linear != 0 && linear != 32767) {
+    out.notes.push_back("GeoTIFF ProjLinearUnitsGeoKey " + std::to_string(linear) + " is not a unit lex3d knows");
+  }
+  if (vertical != 0 && epsg_unit(vertical, u)) {
+    out.vertical_unit_m = u.m;
+    out.vertical_unit_name = u.name;
+  } else if (vertical != 0 && vertical != 32767) {
+    out.notes.push_back("GeoTIFF VerticalUnitsGeoKey " + std::to_string(vertical) + " is not a unit lex3d knows");
+  }
+  return true;
+}
+
+}  // namespace
+
+CrsInfo describe_crs(const std::vector<CrsRecord>& records, bool prefer_wkt) {
+  CrsInfo geo, wkt;
+  const bool has_geo = read_geokeys(records, geo);
+  bool has_wkt = false;
+  for (const CrsRecord& r : records) {
+    if (r.record_id != 2112) continue;
+    if (read_wkt(r.data, wkt)) {
+      has_wkt = true;
+      break;
+    }
+    wkt.notes.push_back("the OGC WKT record (" + r.user_id + " 2112) does not parse");
+  }
+  // the record the header designates, with what it leaves open filled from the other one
+  const bool wkt_first = (prefer_wkt && has_wkt) || !has_geo;
+  CrsInfo out = wkt_first ? wkt : geo;
+  const CrsInfo& second = wkt_first ? geo : wkt;
+  if (out.name.empty()) out.name = second.name;
+  if (out.epsg == 0) out.epsg = second.epsg;
+  if (out.unit_m == 0.0) {
+    out.unit_m = second.unit_m;
+    out.unit_name = second.unit_name;
+  }
+  if (out.vertical_unit_m == 0.0) {
+    out.vertical_unit_m = second.vertical_unit_m;
+    out.vertical_unit_name = second.vertical_unit_name;
+  }
+  out.notes.insert(out.notes.end(), second.notes.begin(), second.notes.end());
+  return out;
+}
+
+}  // namespace las
+
+namespace {
+
+template <typename T>
+T le(const std::uint8_t* p) {
+  return load<T>(p, kHostBigEndian);
+}
+
+/// A field of a point record lex3d does not keep: where it is and which bits count.
+struct LasField {
+  const char* name;
+  std::uint16_t offset;
+  std::uint16_t size;
+  std::uint8_t mask;  // for one-byte fields; 0xFF otherwise
+};
+
+std::vector<LasField> dropped_fields_of(int format) {
+  std::vector<LasField> f;
+  if (format <= 5) {
+    f = {{"return number / number of returns", 14, 1, 0x3F},
+         {"scan direction / edge of flight line", 14, 1, 0xC0},
+         {"classification", 15, 1, 0x1F},
+         {"classification flags", 15, 1, 0xE0},
+         {"scan angle", 16, 1, 0xFF},
+         {"user data", 17, 1, 0xFF},
+         {"point source id", 18, 2, 0xFF}};
+    if (format == 1 || format >= 3) f.push_back({"GPS time", 20, 8, 0xFF});
+    if (format == 4) f.push_back({"waveform packet", 28, 29, 0xFF});
+    if (format == 5) f.push_back({"waveform packet", 34, 29, 0xFF});
+  } else {
+    f = {{"return number / number of returns", 14, 1, 0xFF},
+         {"classification flags", 15, 1, 0x0F},
+         {"scanner channel", 15, 1, 0x30},
+         {"scan direction / edge of flight line", 15, 1, 0xC0},
+         {"classification", 16, 1, 0xFF},
+         {"user data", 17, 1, 0xFF},
+         {"scan angle", 18, 2, 0xFF},
+         {"point source id", 20, 2, 0xFF},
+         {"GPS time", 22, 8, 0xFF}};
+    if (format == 8 || format == 10) f.push_back({"NIR", 36, 2, 0xFF});
+    if (format == 9) f.push_back({"waveform packet", 30, 29, 0xFF});
+    if (format == 10) f.push_back({"waveform packet", 38, 29, 0xFF});
+  }
+  return f;
+}
+
+/// The largest power of ten (times the grid step) not above half the extent: the origin is
+/// rounded to it so that it reads well and stays on the file's grid.
+std::int64_t round_centre(std::int64_t lo, std::int64_t hi) {
+  const std::int64_t mid = lo + (hi - lo) / 2;
+  std::int64_t p = 1;
+  while (p * 10 <= (hi - lo) / 20 && p < (std::int64_t{1} << 40)) p *= 10;
+  const std::int64_t r = (mid >= 0 ? (mid + p / 2) / p : -((-mid + p / 2) / p)) * p;
+  return r;
+}
+
+}  // namespace
+
+Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size, ReadResult& r) {
+  using namespace las;
+  auto bad = [&](const std::string& what, std::uint64_t off) { return bad_data(msg(path, what), off); };
+  if (size < 4 || std::memcmp(d, "LASF", 4) != 0) return bad("not a LAS file (no \"LASF\" signature)", 0);
+  if (size < kHeader12)
+    return bad("truncated LAS header (" + std::to_string(size) + " of at least 227 bytes)", size);
+  const int major = d[24], minor = d[25];
+  if (major != 1 || minor > 4)
+    return bad("LAS version " + std::to_string(major) + "." + std::to_string(minor) +
+                   " is not supported (this reader reads 1.0-1.4)",
+               24);
+  const std::uint16_t global_encoding = le<std::uint16_t>(d + 6);
+  const std::uint16_t header_size = le<std::uint16_t>(d + 94);
+  const std::uint32_t point_offset = le<std::uint32_t>(d + 96);
+  const std::uint32_t vlr_count = le<std::uint32_t>(d + 100);
+  const std::uint8_t format_byte = d[104];
+  const std::uint16_t record_len = le<std::uint16_t>(d + 105);
+  const std::size_t min_header = minor >= 4 ? kHeader14 : minor == 3 ? kHeader13 : kHeader12;
+  if (header_size < min_header)
+    return bad("header size " + std::to_string(header_size) + " is below the " + std::to_string(min_header) +
+                   " bytes of a LAS 1." + std::to_string(minor) + " header",
+               94);
+  if (header_size > size)
+    return bad("header size " + std::to_string(header_size) + " exceeds the file's " + std::to_string(size) +
+                   " bytes",
+               94);
+  if (point_offset < header_size || point_offset > size)
+    return bad("offset to point data " + std::to_string(point_offset) + " is outside [" +
+                   std::to_string(header_size) + ", " + std::to_string(size) + "] (the header and the file size)",
+               96);
+  if ((format_byte & 0xC0U) != 0)
+    return bad("compressed LAS (LAZ, point format byte " + std::to_string(format_byte) +
+                   ") is not supported: decompress it to .las first",
+               104);
+  const int format = format_byte;
+  if (format > kMaxFormat) return bad("point data record format " + std::to_string(format) + " is not defined (0-10)", 104);
+  if (format >= 6 && minor < 4)
+    return bad("point data record format " + std::to_string(format) + " needs LAS 1.4, the header says 1." +
+                   std::to_string(minor),
+               104);
+  if (record_len < kMinRecord[format])
+    return bad("point record length " + std::to_string(record_len) + " is below the " +
+                   std::to_string(kMinRecord[format]) + " bytes of point format " + std::to_string(format),
+               105);
+  std::uint64_t count = le<std::uint32_t>(d + 107);
+  if (minor >= 4) {
+    const auto count64 = le<std::uint64_t>(d + 247);
+    if (count64 != 0 && count != 0 && count64 != count)
+      return bad("the legacy point count " + std::to_string(count) + " and the 64-bit count " +
+                     std::to_string(count64) + " differ",
+                 247);
+    if (count64 != 0) count = count64;
+  }
+  Eigen::Vector3d scale, offset, hmax, hmin;
+  for (int a = 0; a < 3; ++a) {
+    scale[a] = le<double>(d + 131 + 8 * a);
+    offset[a] = le<double>(d + 155 + 8 * a);
+    hmax[a] = le<double>(d + 179 + 16 * a);
+    hmin[a] = le<double>(d + 187 + 16 * a);
+    if (!std::isfinite(scale[a]) || !(scale[a] > 0.0))
+      return bad(std::string("scale factor of ") + "xyz"[a] + " is " + std::to_string(scale[a]) +
+                     " (must be positive and finite)",
+                 131 + 8 * static_cast<std::uint64_t>(a));
+    if (!std::isfinite(offset[a]) || std::abs(offset[a]) > 1e15)
+      return bad(std::string("offset of ") + "xyz"[a] + " is not a finite coordinate",
+                 155 + 8 * static_cast<std::uint64_t>(a));
+  }
+  const std::uint64_t room = size - point_offset;
+  if (count > room / record_len)
+    return bad("truncated point data: " + std::to_string(room) + " bytes hold " +
+                   std::to_string(room / record_len) + " records of " + std::to_string(record_len) +
+                   " bytes, the header says " + std::to_string(count),
+               size);
+
+  // --- VLRs, between the header and the points
+  Georeference g;
+  std::size_t pos = header_size;
+  const std::uint64_t vlr_room = point_offset - header_size;
+  if (vlr_count > vlr_room / kVlrHeader)
+    return bad(std::to_string(vlr_count) + " VLRs cannot fit in the " + std::to_string(vlr_room) +
+                   " bytes before the point data",
+               100);
+  std::vector<std::string> not_carried;
+  auto take_record = [&](const std::uint8_t* h, const std::uint8_t* payload, std::uint64_t len, bool extended) {
+    const std::string user = c_string(h + 2, 16);
+    const std::uint16_t id = le<std::uint16_t>(h + 18);
+    if (!is_crs_record(user, id)) {
+      not_carried.push_back(printable(user, 16) + " " + std::to_string(id));
+      return;
+    }
+    CrsRecord rec;
+    rec.user_id = user;
+    rec.record_id = id;
+    rec.description = c_string(h + (extended ? 28 : 22), 32);
+    rec.data.assign(payload, payload + len);
+    rec.extended = extended;
+    g.crs_records.push_back(std::move(rec));
+  };
+  for (std::uint32_t i = 0; i < vlr_count; ++i) {
+    if (point_offset - pos < kVlrHeader)
+      return bad("VLR " + std::to_string(i) + " header runs past the start of the point data", pos);
+    const std::uint16_t len = le<std::uint16_t>(d + pos + 20);
+    if (len > point_offset - pos - kVlrHeader)
+      return bad("VLR " + std::to_string(i) + " length " + std::to_string(len) + " runs past the start of the point data (" +
+                     std::to_string(point_offset - pos - kVlrHeader) + " bytes left)",
+                 pos + 20);
+    take_record(d + pos, d + pos + kVlrHeader, len, false);
+    pos += kVlrHeader + len;
+  }
+  // --- EVLRs (1.4), after the points
+  const std::uint64_t points_end = point_offset + count * record_len;
+  if (minor >= 4) {
+    const auto evlr_start = le<std::uint64_t>(d + 235);
+    const std::uint32_t evlr_count = le<std::uint32_t>(d + 243);
+    if (evlr_count > 0) {
+      if (evlr_start < points_end || evlr_start > size)
+        return bad("start of the first EVLR " + std::to_string(evlr_start) + " is outside [" +
+                       std::to_string(points_end) + ", " + std::to_string(size) + "] (the end of the points, the file size)",
+                   235);
+      if (evlr_count > (size - evlr_start) / kEvlrHeader)
+        return bad(std::to_string(evlr_count) + " EVLRs cannot fit in the " + std::to_string(size - evlr_start) +
+                       " bytes after their start",
+                   243);
+      std::uint64_t at = evlr_start;
+      for (std::uint32_t i = 0; i < evlr_count; ++i) {
+        if (size - at < kEvlrHeader) return bad("EVLR " + std::to_string(i) + " header runs past the end of the file", at);
+        const auto len = le<std::uint64_t>(d + at + 20);
+        if (len > size - at - kEvlrHeader)
+          return bad("EVLR " + std::to_string(i) + " length " + std::to_string(len) + " exceeds the " +
+                         std::to_string(size - at - kEvlrHeader) + " bytes left",
+                     at + 20);
+        take_record(d + at, d + at + kEvlrHeader, len, true);
+        at += kEvlrHeader + len;
+      }
+    }
+  }
+
+  // --- the CRS and its units
+  const CrsInfo crs = describe_crs(g.crs_records, (global_encoding & 0x10U) != 0 || format >= 6);
+  g.crs_name = crs.name;
+  g.epsg = crs.epsg;
+  if (crs.unit_m > 0.0) {
+    g.unit_m = crs.unit_m;
+    g.unit_name = crs.unit_name;
+  } else {
+    g.unit_m = 1.0;
+    g.unit_name = g.crs_records.empty() ? "metre (assumed: the file names no CRS)"
+                                        : "metre (assumed: the CRS records name no linear unit)";
+  }
+  g.vertical_unit_m = crs.vertical_unit_m > 0.0 ? crs.vertical_unit_m : g.unit_m;
+  for (const std::string& n : crs.notes) r.notes.push_back(n);
+  if (!not_carried.empty()) {
+    std::string list;
+    for (const auto& s : not_carried) list += (list.empty() ? "" : ", ") + s;
+    r.notes.push_back(std::to_string(not_carried.size()) + " (E)VLRs that do not describe the CRS are not kept: " + list);
+  }
+  g.las_scale = scale;
+  g.las_offset = offset;
+  g.las_version_minor = static_cast<std::uint8_t>(std::max(minor, 2));
+  g.las_point_format = static_cast<std::uint8_t>(format);
+  g.las_global_encoding = global_encoding;
+  g.las_system_id = c_string(d + 26, 32);
+  g.las_software = c_string(d + 58, 32);
+
+  // --- points: integer bounds, origin on the grid, then metres relative to it
+  const std::uint8_t* base = d + point_offset;
+  const auto n = static_cast<std::size_t>(count);
+  std::array<std::int64_t, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t* p = base + i * record_len;
+    for (int a = 0; a < 3; ++a) {
+      const std::int64_t v = le<std::int32_t>(p + 4 * a);
+      if (i == 0 || v < lo[a]) lo[a] = v;
+      if (i == 0 || v > hi[a]) hi[a] = v;
+    }
+  }
+  std::array<std::int64_t, 3> n0{};
+  Eigen::Vector3d units = g.units();
+  for (int a = 0; a < 3; ++a) {
+    n0[a] = round_centre(lo[a], hi[a]);
+    g.origin[a] = (offset[a] + static_cast<double>(n0[a]) * scale[a]) * units[a];
+  }
+  if (n > 0) {  // the header's bounds should hold the points
+    for (int a = 0; a < 3; ++a) {
+      const double pmin = offset[a] + static_cast<double>(lo[a]) * scale[a];
+      const double pmax = offset[a] + static_cast<double>(hi[a]) * scale[a];
+      if (pmin < hmin[a] - scale[a] || pmax > hmax[a] + scale[a]) {
+        r.notes.push_back(std::string("the header's ") + "xyz"[a] + " bounds [" + std::to_string(hmin[a]) + ", " +
+                          std::to_string(hmax[a]) + "] do not hold the points' [" + std::to_string(pmin) + ", " +
+                          std::to_string(pmax) + "]");
+      }
+    }
+  }
+  r.cloud.points.resize(n);
+  r.cloud.intensity.resize(n);
+  const int rgb_at = rgb_offset(format);
+  std::vector<std::array<std::uint16_t, 3>> rgb16;
+  if (rgb_at >= 0) rgb16.resize(n);
+  std::uint16_t rgb_max = 0;
+  const std::vector<LasField> fields = dropped_fields_of(format);
+  std::vector<std::uint8_t> seen(fields.size(), 0);
+  bool extra_seen = false;
+  double worst2 = 0.0;
+  std::array<double, 3> worst_axis{0.0, 0.0, 0.0};
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t* p = base + i * record_len;
+    Eigen::Vector3f q;
+    double e2 = 0.0;
+    for (int a = 0; a < 3; ++a) {
+      const std::int64_t v = le<std::int32_t>(p + 4 * a);
+      const double local = static_cast<double>(v - n0[a]) * scale[a] * units[a];
+      q[a] = static_cast<float>(local);
+      const double e = std::abs(static_cast<double>(q[a]) - local);
+      worst_axis[a] = std::max(worst_axis[a], e);
+      e2 += e * e;
+    }
+    worst2 = std::max(worst2, e2);
+    r.cloud.points[i] = q;
+    r.cloud.intensity[i] = static_cast<float>(le<std::uint16_t>(p + 12));
+    if (rgb_at >= 0) {
+      for (int c = 0; c < 3; ++c) {
+        rgb16[i][static_cast<std::size_t>(c)] = le<std::uint16_t>(p + rgb_at + 2 * c);
+        rgb_max = std::max(rgb_max, rgb16[i][static_cast<std::size_t>(c)]);
+      }
+    }
+    for (std::size_t k = 0; k < fields.size(); ++k) {
+      const LasField& f = fields[k];
+      for (std::uint16_t b = 0; b < f.size; ++b) seen[k] |= static_cast<std::uint8_t>(p[f.offset + b] & f.mask);
+    }
+    if (!extra_seen)
+      for (std::size_t b = kMinRecord[format]; b < record_len; ++b) extra_seen = extra_seen || p[b] != 0;
+  }
+  g.representation_error_m = std::sqrt(worst2);
+  for (int a = 0; a < 3; ++a) {
+    const double half_step = 0.5 * scale[a] * units[a];
+    if (worst_axis[a] >= half_step)
+      return bad(std::string("the points span ") + std::to_string(static_cast<double>(hi[a] - lo[a]) * scale[a]) +
+                     " units along " + "xyz"[a] + ": float32 positions about one origin cannot keep the file's " +
+                     std::to_string(scale[a]) + "-unit resolution (worst error " + std::to_string(worst_axis[a]) +
+                     " m); split the file into smaller tiles",
+                 point_offset);
+  }
+  if (rgb_at >= 0) {
+    // 16-bit colours (the LAS convention) keep their high byte; files that store 8-bit values
+    // in the 16-bit fields keep them as they are
+    const int shift = rgb_max > 255 ? 8 : 0;
+    r.colors.resize(n);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t c = 0; c < 3; ++c) r.colors[i][c] = static_cast<std::uint8_t>(rgb16[i][c] >> shift);
+    if (shift == 8) r.notes.push_back("RGB read as 8-bit colours (the high byte of each 16-bit value)");
+  }
+  for (std::size_t k = 0; k < fields.size(); ++k)
+    if (seen[k] != 0) r.dropped_fields.emplace_back(fields[k].name);
+  if (extra_seen) r.dropped_fields.emplace_back("extra bytes (" + std::to_string(record_len - kMinRecord[format]) + " a record)");
+  r.encoding = "LAS 1." + std::to_string(minor) + ", point format " + std::to_string(format);
+  r.cloud.georef = std::move(g);
+  return {};
+}
+
+}  // namespace lex3d::io::detail

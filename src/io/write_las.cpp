@@ -1,0 +1,212 @@
+// Writer of ASPRS LAS files: LAS 1.2 point format 0 (2 with colours) for a cloud without a
+// LAS georeference; otherwise the source's version and point format (waveform formats
+// without their packets: 4 -> 1, 5 -> 3, 9 -> 6, 10 -> 8), its scale and offset (a new
+// offset when the points would not fit 32-bit steps about it) and its CRS records, in the
+// CRS's units. Fields lex3d does not keep are written as zeros, the return number as 1 of 1.
+// Output is deterministic (no creation date is written).
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+
+#include "io/internal.hpp"
+#include "io/las.hpp"
+#include "lex3d/io/io.hpp"
+
+namespace lex3d::io::detail {
+
+namespace {
+
+class Out {
+ public:
+  std::vector<std::uint8_t> b;
+  template <typename T>
+  void le(T v) {
+    std::uint8_t tmp[sizeof(T)];
+    std::memcpy(tmp, &v, sizeof(T));
+    if (kHostBigEndian) std::reverse(tmp, tmp + sizeof(T));
+    b.insert(b.end(), tmp, tmp + sizeof(T));
+  }
+  void chars(const std::string& s, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) b.push_back(i < s.size() ? static_cast<std::uint8_t>(s[i]) : 0);
+  }
+  void zeros(std::size_t n) { b.insert(b.end(), n, 0); }
+  template <typename T>
+  void put_at(std::size_t at, T v) {
+    std::uint8_t tmp[sizeof(T)];
+    std::memcpy(tmp, &v, sizeof(T));
+    if (kHostBigEndian) std::reverse(tmp, tmp + sizeof(T));
+    std::memcpy(b.data() + at, tmp, sizeof(T));
+  }
+};
+
+/// The largest power of ten not above the float32 spacing of `max_abs` metres: steps that
+/// keep every float32 position to within half a step.
+double step_for(double max_abs) {
+  const double ulp = std::max(static_cast<double>(std::nextafter(static_cast<float>(max_abs), INFINITY)) -
+                                  static_cast<double>(static_cast<float>(max_abs)),
+                              1e-9);
+  return std::pow(10.0, std::floor(std::log10(ulp)));
+}
+
+}  // namespace
+
+Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions& o, std::vector<std::uint8_t>& out) {
+  auto invalid = [&](const std::string& what) { return Status{ErrorCode::kInvalidArgument, msg(path, what)}; };
+  const std::size_t n = cloud.size();
+  const bool with_c = !o.colors.empty();
+  const bool georef = o.true_coordinates && cloud.georef.has_value();
+  Georeference g;
+  if (georef) g = *cloud.georef;
+  else g = Georeference{};  // local coordinates, metres
+
+  int minor = 2;
+  int format = with_c ? 2 : 0;
+  if (g.is_las()) {
+    minor = std::clamp<int>(g.las_version_minor, 2, 4);
+    format = g.las_point_format;
+    if (format == 4) format = 1;
+    if (format == 5) format = 3;
+    if (format == 9) format = 6;
+    if (format == 10) format = 8;
+    if (format > las::kMaxFormat) format = with_c ? 2 : 0;
+    if (format >= 6) minor = 4;
+  }
+  const int rgb_at = las::rgb_offset(format);
+  const std::uint16_t record_len = las::kMinRecord[format];
+
+  // True coordinates (CRS units) of every point, computed in double.
+  const Eigen::Vector3d units = g.units();
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& p : cloud.points) {
+    const Eigen::Vector3d t = (g.origin + p.cast<double>()).cwiseQuotient(units);
+    lo = lo.cwiseMin(t);
+    hi = hi.cwiseMax(t);
+  }
+  if (n == 0) lo = hi = Eigen::Vector3d::Zero();
+  if (!lo.allFinite() || !hi.allFinite()) return invalid("a point is not finite");
+  Eigen::Vector3d scale = g.las_scale, offset = g.las_offset;
+  for (int a = 0; a < 3; ++a) {
+    if (!g.is_las()) {
+      // no LAS source: steps at the float32 resolution of the local coordinates
+      const double max_abs = std::max(std::abs(lo[a] - g.origin[a] / units[a]), std::abs(hi[a] - g.origin[a] / units[a]));
+      scale[a] = step_for(max_abs * units[a]) / units[a];
+      offset[a] = g.origin[a] / units[a];
+    }
+    // the points must fit 32-bit steps about the offset; else centre it, then coarsen
+    auto fits = [&]() {
+      const double a_lo = std::floor((lo[a] - offset[a]) / scale[a]), a_hi = std::ceil((hi[a] - offset[a]) / scale[a]);
+      return a_lo >= -2147483647.0 && a_hi <= 2147483647.0;
+    };
+    if (!fits()) offset[a] = std::round(0.5 * (lo[a] + hi[a]));
+    while (!fits() && scale[a] < 1e6) scale[a] *= 10.0;
+    if (!fits()) return invalid("the points' coordinates do not fit LAS's 32-bit steps");
+  }
+
+  std::vector<const CrsRecord*> vlrs, evlrs;
+  for (const CrsRecord& r : g.crs_records) {
+    if (r.extended && minor >= 4) evlrs.push_back(&r);
+    else if (r.data.size() <= 65535) vlrs.push_back(&r);
+    else return invalid("a CRS record of " + std::to_string(r.data.size()) + " bytes does not fit a LAS 1." +
+                        std::to_string(minor) + " VLR");
+  }
+  const std::size_t header_size = minor >= 4 ? las::kHeader14 : minor == 3 ? las::kHeader13 : las::kHeader12;
+  std::size_t vlr_bytes = 0;
+  for (const CrsRecord* r : vlrs) vlr_bytes += las::kVlrHeader + r->data.size();
+  const std::uint64_t point_offset = header_size + vlr_bytes;
+  if (point_offset > 0xFFFFFFFFULL) return invalid("the CRS records are too large for a LAS header");
+  if (minor < 4 && n > 0xFFFFFFFFULL) return invalid("more than 2^32 points need LAS 1.4");
+
+  Out w;
+  w.b.reserve(point_offset + n * record_len + 1024);
+  w.chars("LASF", 4);
+  w.le<std::uint16_t>(0);  // file source id
+  std::uint16_t ge = g.las_global_encoding & 0x11U;  // GPS time type, WKT; no waveform packets
+  if (format >= 6) ge |= 0x10U;
+  w.le<std::uint16_t>(ge);
+  w.zeros(16);  // project GUID
+  w.b.push_back(1);
+  w.b.push_back(static_cast<std::uint8_t>(minor));
+  w.chars(g.las_system_id.empty() ? std::string("OTHER") : g.las_system_id, 32);
+  w.chars("lex3d", 32);
+  w.le<std::uint16_t>(0);  // creation day and year: not written (deterministic output)
+  w.le<std::uint16_t>(0);
+  w.le<std::uint16_t>(static_cast<std::uint16_t>(header_size));
+  w.le<std::uint32_t>(static_cast<std::uint32_t>(point_offset));
+  w.le<std::uint32_t>(static_cast<std::uint32_t>(vlrs.size()));
+  w.b.push_back(static_cast<std::uint8_t>(format));
+  w.le<std::uint16_t>(record_len);
+  const bool legacy = format < 6 && n <= 0xFFFFFFFFULL;
+  w.le<std::uint32_t>(legacy ? static_cast<std::uint32_t>(n) : 0U);
+  w.le<std::uint32_t>(legacy ? static_cast<std::uint32_t>(n) : 0U);  // all first returns
+  w.zeros(16);
+  for (int a = 0; a < 3; ++a) w.le<double>(scale[a]);
+  for (int a = 0; a < 3; ++a) w.le<double>(offset[a]);
+  const std::size_t bounds_at = w.b.size();
+  w.zeros(48);  // max x, min x, max y, min y, max z, min z: filled below
+  if (minor >= 3) w.le<std::uint64_t>(0);  // waveform data packet record
+  std::size_t evlr_at = 0;
+  if (minor >= 4) {
+    evlr_at = w.b.size();
+    w.le<std::uint64_t>(0);
+    w.le<std::uint32_t>(static_cast<std::uint32_t>(evlrs.size()));
+    w.le<std::uint64_t>(n);
+    w.le<std::uint64_t>(n);  // return 1
+    w.zeros(14 * 8);
+  }
+  for (const CrsRecord* r : vlrs) {
+    w.le<std::uint16_t>(0);
+    w.chars(r->user_id, 16);
+    w.le<std::uint16_t>(r->record_id);
+    w.le<std::uint16_t>(static_cast<std::uint16_t>(r->data.size()));
+    w.chars(r->description, 32);
+    w.b.insert(w.b.end(), r->data.begin(), r->data.end());
+  }
+
+  Eigen::Vector3d qlo = Eigen::Vector3d::Zero(), qhi = Eigen::Vector3d::Zero();
+  const bool with_i = cloud.has_intensity();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d t = (g.origin + cloud.points[i].cast<double>()).cwiseQuotient(units);
+    const std::size_t at = w.b.size();
+    w.zeros(record_len);
+    for (int a = 0; a < 3; ++a) {
+      const double steps = std::round((t[a] - offset[a]) / scale[a]);
+      const auto v = static_cast<std::int32_t>(steps);
+      w.put_at<std::int32_t>(at + 4 * static_cast<std::size_t>(a), v);
+      const double q = offset[a] + static_cast<double>(v) * scale[a];
+      if (i == 0 || q < qlo[a]) qlo[a] = q;
+      if (i == 0 || q > qhi[a]) qhi[a] = q;
+    }
+    if (with_i) {
+      const float in = cloud.intensity[i];
+      const double c = std::isfinite(in) ? std::clamp(std::round(static_cast<double>(in)), 0.0, 65535.0) : 0.0;
+      w.put_at<std::uint16_t>(at + 12, static_cast<std::uint16_t>(c));
+    }
+    w.b[at + 14] = format >= 6 ? 0x11 : 0x09;  // return 1 of 1
+    if (rgb_at >= 0 && with_c)
+      for (std::size_t c = 0; c < 3; ++c)
+        w.put_at<std::uint16_t>(at + static_cast<std::size_t>(rgb_at) + 2 * c,
+                                static_cast<std::uint16_t>(o.colors[i][c] * 257U));
+  }
+  for (int a = 0; a < 3; ++a) {
+    w.put_at<double>(bounds_at + 16 * static_cast<std::size_t>(a), qhi[a]);
+    w.put_at<double>(bounds_at + 16 * static_cast<std::size_t>(a) + 8, qlo[a]);
+  }
+  if (minor >= 4 && !evlrs.empty()) {
+    w.put_at<std::uint64_t>(evlr_at, w.b.size());
+    for (const CrsRecord* r : evlrs) {
+      w.le<std::uint16_t>(0);
+      w.chars(r->user_id, 16);
+      w.le<std::uint16_t>(r->record_id);
+      w.le<std::uint64_t>(r->data.size());
+      w.chars(r->description, 32);
+      w.b.insert(w.b.end(), r->data.begin(), r->data.end());
+    }
+  }
+  out = std::move(w.b);
+  return {};
+}
+
+}  // namespace lex3d::io::detail

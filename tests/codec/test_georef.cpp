@@ -1,0 +1,284 @@
+// The model file's georeference (formats/model.md §2.8): round trip, format version, one
+// corruption test per reader check, truncation; and a georeferenced LAS scan through a
+// residual layer back to its true coordinates within the bound.
+
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <zlib.h>
+
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/eval/metrics.hpp"
+#include "lex3d/io/io.hpp"
+#include "lex3d/residual/residual.hpp"
+#include "support/test_support.hpp"
+
+namespace lex3d::codec {
+namespace {
+
+using Bytes = std::vector<std::uint8_t>;
+
+Georeference sample_georef() {
+  Georeference g;
+  g.origin = Eigen::Vector3d(194032.632, 258842.256, 141.1224);
+  g.unit_m = 0.3048;
+  g.vertical_unit_m = 0.3048;
+  g.unit_name = "international foot";
+  g.crs_name = "NAD_1983_HARN_Lambert_Conformal_Conic";
+  g.epsg = 2994;
+  g.las_scale = Eigen::Vector3d(0.01, 0.01, 0.01);
+  g.las_offset = Eigen::Vector3d(0.0, 0.0, 0.0);
+  g.las_version_minor = 2;
+  g.las_point_format = 3;
+  g.las_global_encoding = 0;
+  g.las_system_id = "PDAL";
+  g.las_software = "PDAL 1.0.0";
+  CrsRecord r;
+  r.user_id = "LASF_Projection";
+  r.record_id = 2112;
+  r.description = "OGC Transformation Record";
+  r.data = {'P', 'R', 'O', 'J', 'C', 'S', '[', ']', 0};
+  g.crs_records.push_back(r);
+  r.record_id = 34735;
+  r.extended = true;
+  r.data = {1, 0, 1, 0, 0, 0, 0, 0};
+  g.crs_records.push_back(r);
+  return g;
+}
+
+ModelData sample_model() {
+  ModelData d;
+  d.input_points = 10;
+  d.alphabet = Alphabet{};
+  d.georef = sample_georef();
+  return d;
+}
+
+std::uint64_t u64_at(const Bytes& b, std::size_t at) {
+  std::uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | b[at + static_cast<std::size_t>(i)];
+  return v;
+}
+
+/// Offset of the GEOR chunk's header.
+std::size_t geor_at(const Bytes& b) {
+  for (std::size_t pos = 20; pos + 12 <= b.size();) {
+    if (std::memcmp(&b[pos], "GEOR", 4) == 0) return pos;
+    pos += 16 + u64_at(b, pos + 4);
+  }
+  return 0;
+}
+
+/// Recomputes the CRC of the chunk at `at`.
+void fix_crc(Bytes& b, std::size_t at) {
+  const std::uint64_t len = u64_at(b, at + 4);
+  const auto k = static_cast<std::uint32_t>(crc32(0, b.data() + at, static_cast<uInt>(12 + len)));
+  for (int i = 0; i < 4; ++i) b[at + 12 + len + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(k >> (8 * i));
+}
+
+void fix_header_crc(Bytes& b) {
+  const auto k = static_cast<std::uint32_t>(crc32(0, b.data(), 16));
+  for (int i = 0; i < 4; ++i) b[16 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(k >> (8 * i));
+}
+
+TEST(Georef, RoundTripIsExactAndUsesMinorVersion5) {
+  const ModelData d = sample_model();
+  const Bytes b = encode_model(d);
+  EXPECT_EQ(b[10] | (b[11] << 8), 5);
+  auto back = decode_model(b);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  ASSERT_TRUE(back.value().georef);
+  const Georeference& g = *back.value().georef;
+  const Georeference& w = *d.georef;
+  EXPECT_EQ(g.origin, w.origin);
+  EXPECT_EQ(g.unit_m, w.unit_m);
+  EXPECT_EQ(g.vertical_unit_m, w.vertical_unit_m);
+  EXPECT_EQ(g.unit_name, w.unit_name);
+  EXPECT_EQ(g.crs_name, w.crs_name);
+  EXPECT_EQ(g.epsg, w.epsg);
+  EXPECT_EQ(g.las_scale, w.las_scale);
+  EXPECT_EQ(g.las_offset, w.las_offset);
+  EXPECT_EQ(g.las_version_minor, w.las_version_minor);
+  EXPECT_EQ(g.las_point_format, w.las_point_format);
+  EXPECT_EQ(g.las_system_id, w.las_system_id);
+  EXPECT_EQ(g.las_software, w.las_software);
+  ASSERT_EQ(g.crs_records.size(), 2U);
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(g.crs_records[i].user_id, w.crs_records[i].user_id);
+    EXPECT_EQ(g.crs_records[i].record_id, w.crs_records[i].record_id);
+    EXPECT_EQ(g.crs_records[i].description, w.crs_records[i].description);
+    EXPECT_EQ(g.crs_records[i].data, w.crs_records[i].data);
+    EXPECT_EQ(g.crs_records[i].extended, w.crs_records[i].extended);
+  }
+  // without a georeference the file keeps its older version and has no GEOR chunk
+  ModelData plain = d;
+  plain.georef.reset();
+  const Bytes p = encode_model(plain);
+  EXPECT_EQ(p[10] | (p[11] << 8), 0);
+  EXPECT_EQ(geor_at(p), 0U);
+  EXPECT_FALSE(decode_model(p).value().georef);
+}
+
+TEST(Georef, EncoderRejectsInvalidGeoreferences) {
+  auto rejects = [](void (*poke)(Georeference&)) {
+    ModelData d = sample_model();
+    poke(*d.georef);
+    EXPECT_THROW((void)encode_model(d), std::invalid_argument);
+  };
+  rejects([](Georeference& g) { g.origin.x() = std::nan(""); });
+  rejects([](Georeference& g) { g.origin.y() = 2e9; });
+  rejects([](Georeference& g) { g.unit_m = 0.0; });
+  rejects([](Georeference& g) { g.vertical_unit_m = 1e5; });
+  rejects([](Georeference& g) { g.las_scale.z() = 0.0; });
+  rejects([](Georeference& g) { g.las_point_format = 11; });
+  rejects([](Georeference& g) { g.crs_records[0].data.assign((1U << 20) + 1, 0); });
+}
+
+/// A payload field overwritten: the reader names the problem.
+void expect_geor_rejected(std::size_t field_offset, const Bytes& value, const std::string& needle) {
+  Bytes b = encode_model(sample_model());
+  const std::size_t at = geor_at(b);
+  ASSERT_GT(at, 0U);
+  std::memcpy(&b[at + 12 + field_offset], value.data(), value.size());
+  fix_crc(b, at);
+  auto r = decode_model(b);
+  ASSERT_FALSE(r.ok()) << needle;
+  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  EXPECT_NE(r.status().message().find(needle), std::string::npos) << r.status().message();
+}
+
+Bytes f64_bytes(double v) {
+  Bytes b(8);
+  std::memcpy(b.data(), &v, 8);
+  return b;
+}
+Bytes u32_bytes(std::uint32_t v) {
+  Bytes b(4);
+  std::memcpy(b.data(), &v, 4);
+  return b;
+}
+
+TEST(GeorefCorrupt, EachFieldIsChecked) {
+  expect_geor_rejected(0, f64_bytes(std::nan("")), "origin");
+  expect_geor_rejected(16, f64_bytes(-5e9), "origin");
+  expect_geor_rejected(24, f64_bytes(0.0), "unit");
+  expect_geor_rejected(32, f64_bytes(std::numeric_limits<double>::infinity()), "unit");
+  expect_geor_rejected(52, f64_bytes(-0.01), "LAS scale");
+  expect_geor_rejected(84, f64_bytes(std::nan("")), "LAS offset");
+  expect_geor_rejected(92, Bytes{7}, "minor version");
+  expect_geor_rejected(93, Bytes{11}, "point format");
+  expect_geor_rejected(96, Bytes{0xFF, 0xFF}, "string");
+  // the record count and a record's length, after the four strings
+  const Georeference g = sample_georef();
+  const std::size_t records =
+      96 + 8 + g.crs_name.size() + g.unit_name.size() + g.las_system_id.size() + g.las_software.size();
+  expect_geor_rejected(records, u32_bytes(100000), "record count");
+  expect_geor_rejected(records + 4 + 51, u32_bytes(0x7FFFFFFF), "record 0 length");
+  expect_geor_rejected(records + 4 + 18, Bytes{2}, "extended flag");
+}
+
+TEST(GeorefCorrupt, NeedsMinorVersion5) {
+  Bytes b = encode_model(sample_model());
+  b[10] = 4;
+  fix_header_crc(b);
+  auto r = decode_model(b);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("needs format version 1.5"), std::string::npos) << r.status().message();
+}
+
+TEST(GeorefCorrupt, TrailingBytesAndTruncatedPayload) {
+  const Bytes good = encode_model(sample_model());
+  const std::size_t at = geor_at(good);
+  const std::uint64_t len = u64_at(good, at + 4);
+  // the payload cut at every length (the chunk reframed, CRC fixed): an error, never a crash
+  for (std::uint64_t n = 0; n < len; ++n) {
+    Bytes b(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(at + 12 + n));
+    for (int i = 0; i < 8; ++i) b[at + 4 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(n >> (8 * i));
+    b.resize(b.size() + 4);
+    fix_crc(b, at);
+    b.insert(b.end(), good.begin() + static_cast<std::ptrdiff_t>(at + 16 + len), good.end());
+    auto r = decode_model(b);
+    EXPECT_FALSE(r.ok()) << "payload of " << n << " bytes";
+  }
+  // and the whole file cut at every byte
+  for (std::size_t n = 0; n < good.size(); ++n) {
+    auto r = decode_model(Bytes(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n)));
+    EXPECT_FALSE(r.ok()) << n;
+  }
+}
+
+TEST(GeorefGolden, Format15FileDecodes) {
+  // tests/codec/golden/tiny_model_georef_1.5.lex3dm, built by tests/fuzz/make_corpus.py from
+  // the specification (model.md §2.8) independently of this encoder: decoded forever
+  auto bytes = io::read_file(std::string(LEX3D_TEST_DATA_DIR) + "/../codec/golden/tiny_model_georef_1.5.lex3dm");
+  ASSERT_TRUE(bytes.ok());
+  auto d = decode_model(bytes.value());
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  ASSERT_TRUE(d.value().georef);
+  const Georeference& g = *d.value().georef;
+  EXPECT_EQ(g.origin, Eigen::Vector3d(393925.823061, 3689171.943122, 3158.8627));
+  EXPECT_EQ(g.unit_m, 1.0);
+  EXPECT_EQ(g.epsg, 32642U);
+  EXPECT_EQ(g.las_scale, Eigen::Vector3d(0.001, 0.001, 1e-5));
+  EXPECT_EQ(g.las_point_format, 1);
+  EXPECT_EQ(g.crs_name, "WGS 84 / UTM zone 42N");
+  EXPECT_EQ(g.las_system_id, "ALIRT");
+  ASSERT_EQ(g.crs_records.size(), 1U);
+  EXPECT_EQ(g.crs_records[0].record_id, 2112);
+  EXPECT_EQ(g.crs_records[0].description, "OGC Transformation Record");
+  // our encoder writes the same GEOR payload for the same georeference
+  ModelData again = d.value();
+  const Bytes ours = encode_model(again, Quantization{});
+  const Bytes& theirs = bytes.value();
+  const std::size_t a = geor_at(ours), b = geor_at(theirs);
+  ASSERT_GT(a, 0U);
+  ASSERT_GT(b, 0U);
+  EXPECT_EQ(Bytes(ours.begin() + static_cast<std::ptrdiff_t>(a), ours.begin() + static_cast<std::ptrdiff_t>(a + 16 + u64_at(ours, a + 4))),
+            Bytes(theirs.begin() + static_cast<std::ptrdiff_t>(b), theirs.begin() + static_cast<std::ptrdiff_t>(b + 16 + u64_at(theirs, b + 4))));
+}
+
+// ------------------------------------------------------------------ end to end on real LAS
+
+TEST(GeorefModel, LasScanComesBackInItsTrueCoordinatesWithinTheBound) {
+  LEX3D_REQUIRE_SHARED("las/autzen_trim.las");
+  auto read = io::read_cloud(test::shared_data("las/autzen_trim.las"));
+  ASSERT_TRUE(read.ok());
+  const Cloud& input = read.value().cloud;
+  ASSERT_TRUE(input.georef);
+  const double E = 0.05;  // metres
+  ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  d.georef = input.georef;
+  d.residual = residual::encode_layer(input, Cloud{}, d.T_cloud_sensor, E);
+  const Bytes file = encode_model(d);
+  auto decoded = decode_model(file);
+  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+  auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok());
+  Cloud out = cloud.value();
+  out.georef = decoded.value().georef;
+  // written as LAS in feet, read back: the true coordinates within E + half the file's step
+  const std::string las = (test::temp_dir("georef_model") / "back.las").string();
+  ASSERT_TRUE(io::write_cloud(las, out).ok());
+  auto back = io::read_cloud(las);
+  ASSERT_TRUE(back.ok());
+  ASSERT_TRUE(back.value().cloud.georef);
+  // both clouds in metres about the input's origin
+  Cloud a = input, b = back.value().cloud;
+  const Eigen::Vector3d shift = b.georef->origin - a.georef->origin;
+  for (auto& p : b.points) p = (p.cast<double>() + shift).cast<float>();
+  const eval::DistanceResult dist = eval::compare_clouds(a, b);
+  const double quantum = 0.5 * std::sqrt(3.0) * 0.01 * 0.3048;  // half a 0.01 ft step on each axis
+  EXPECT_LE(dist.hausdorff, E + quantum + 1e-6);
+  EXPECT_GT(dist.hausdorff, 0.0);
+  // and the file says feet and the same CRS records
+  EXPECT_DOUBLE_EQ(back.value().cloud.georef->unit_m, 0.3048);
+  EXPECT_EQ(back.value().cloud.georef->crs_records.size(), input.georef->crs_records.size());
+}
+
+}  // namespace
+}  // namespace lex3d::codec

@@ -1,0 +1,495 @@
+// LAS reading and writing, georeferenced clouds (a double origin, the CRS's units), and
+// double-precision PCD/PLY/text in projected coordinates.
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "lex3d/io/io.hpp"
+#include "support/test_support.hpp"
+
+namespace lex3d::io {
+namespace {
+
+using test::shared_data;
+using test::temp_dir;
+using Bytes = std::vector<std::uint8_t>;
+
+ReadResult read_ok(const std::string& path) {
+  auto r = read_cloud(path);
+  EXPECT_TRUE(r.ok()) << path << ": " << r.status().to_string();
+  if (!r.ok()) return {};
+  return std::move(r).value();
+}
+
+Bytes file_bytes(const std::string& path) {
+  auto b = read_file(path);
+  EXPECT_TRUE(b.ok());
+  return b.ok() ? b.value() : Bytes{};
+}
+
+void write_bytes(const std::string& path, const Bytes& b) {
+  std::ofstream f(path, std::ios::binary);
+  f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+
+template <typename T>
+T get(const Bytes& b, std::size_t at) {
+  T v;
+  std::memcpy(&v, b.data() + at, sizeof(T));  // the test machine is little-endian
+  return v;
+}
+template <typename T>
+void put(Bytes& b, std::size_t at, T v) {
+  std::memcpy(b.data() + at, &v, sizeof(T));
+}
+
+/// The header's fields a test checks the reader against, read straight from the bytes.
+struct RawHeader {
+  std::uint16_t header_size;
+  std::uint32_t point_offset;
+  std::uint8_t format;
+  std::uint16_t record_len;
+  std::uint64_t count;
+  double scale[3], offset[3], max[3], min[3];
+};
+RawHeader raw_header(const Bytes& b) {
+  RawHeader h{};
+  h.header_size = get<std::uint16_t>(b, 94);
+  h.point_offset = get<std::uint32_t>(b, 96);
+  h.format = b[104];
+  h.record_len = get<std::uint16_t>(b, 105);
+  h.count = get<std::uint32_t>(b, 107);
+  if (b[25] >= 4 && get<std::uint64_t>(b, 247) != 0) h.count = get<std::uint64_t>(b, 247);
+  for (int a = 0; a < 3; ++a) {
+    h.scale[a] = get<double>(b, 131 + 8 * a);
+    h.offset[a] = get<double>(b, 155 + 8 * a);
+    h.max[a] = get<double>(b, 179 + 16 * a);
+    h.min[a] = get<double>(b, 187 + 16 * a);
+  }
+  return h;
+}
+
+/// The true coordinates (CRS units) of the cloud's points: origin + point, per axis unit.
+std::vector<Eigen::Vector3d> true_points(const Cloud& c) {
+  std::vector<Eigen::Vector3d> out;
+  for (const auto& p : c.points) out.push_back(c.georef->to_crs(p));
+  return out;
+}
+
+/// Every point, mapped back to the file's integer grid, is the record's integer exactly,
+/// and the points lie within the header's bounds.
+void expect_matches_records(const std::string& path, const ReadResult& r) {
+  const Bytes b = file_bytes(path);
+  const RawHeader h = raw_header(b);
+  ASSERT_EQ(r.cloud.size(), h.count);
+  ASSERT_TRUE(r.cloud.georef.has_value());
+  const Georeference& g = *r.cloud.georef;
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_DOUBLE_EQ(g.las_scale[a], h.scale[a]);
+    EXPECT_DOUBLE_EQ(g.las_offset[a], h.offset[a]);
+  }
+  EXPECT_EQ(g.las_point_format, h.format);
+  std::size_t mismatches = 0;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (std::size_t i = 0; i < r.cloud.size(); ++i) {
+    const Eigen::Vector3d t = g.to_crs(r.cloud.points[i]);
+    lo = lo.cwiseMin(t);
+    hi = hi.cwiseMax(t);
+    for (int a = 0; a < 3; ++a) {
+      const auto rec = get<std::int32_t>(b, h.point_offset + i * h.record_len + 4 * static_cast<std::size_t>(a));
+      if (std::llround((t[a] - h.offset[a]) / h.scale[a]) != rec) ++mismatches;
+    }
+  }
+  EXPECT_EQ(mismatches, 0U);
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_GE(lo[a], h.min[a] - h.scale[a]) << "axis " << a;
+    EXPECT_LE(hi[a], h.max[a] + h.scale[a]) << "axis " << a;
+    EXPECT_NEAR(lo[a], h.min[a], h.scale[a]) << "axis " << a;  // the header's bounds are tight here
+    EXPECT_NEAR(hi[a], h.max[a], h.scale[a]) << "axis " << a;
+  }
+  // float32 about the origin keeps the file's resolution
+  EXPECT_LT(g.representation_error_m, 0.5 * h.scale[0] * g.unit_m);
+}
+
+bool has_field(const ReadResult& r, const std::string& name) {
+  for (const auto& f : r.dropped_fields)
+    if (f == name) return true;
+  return false;
+}
+
+// ------------------------------------------------------------------ shared files
+
+TEST(LasRead, AutzenIsInInternationalFeet) {
+  LEX3D_REQUIRE_SHARED("las/autzen_trim.las");
+  const std::string path = shared_data("las/autzen_trim.las");
+  const ReadResult r = read_ok(path);
+  EXPECT_EQ(r.format, Format::kLas);
+  EXPECT_EQ(r.cloud.size(), 110000U);
+  ASSERT_TRUE(r.cloud.georef);
+  const Georeference& g = *r.cloud.georef;
+  EXPECT_DOUBLE_EQ(g.unit_m, 0.3048);  // GeoTIFF ProjLinearUnitsGeoKey 9002 and the WKT UNIT agree
+  EXPECT_DOUBLE_EQ(g.vertical_unit_m, 0.3048);
+  EXPECT_NE(g.crs_name.find("Lambert_Conformal_Conic"), std::string::npos) << g.crs_name;
+  EXPECT_EQ(g.crs_records.size(), 5U);  // GeoTIFF keys, doubles, ASCII, two WKT records
+  EXPECT_EQ(g.las_version_minor, 2);
+  EXPECT_EQ(g.las_system_id, "PDAL");
+  expect_matches_records(path, r);
+  // metres: the file spans 1177 ft = 359 m in x
+  const Bounds b = compute_bounds(r.cloud);
+  EXPECT_NEAR(b.max.x() - b.min.x(), (637179.22 - 636001.76) * 0.3048, 0.01);
+  EXPECT_TRUE(has_field(r, "GPS time"));
+  EXPECT_TRUE(has_field(r, "classification"));
+  EXPECT_EQ(r.colors.size(), r.cloud.size());  // PDRF 3 has RGB
+  ASSERT_TRUE(r.cloud.has_intensity());
+}
+
+TEST(LasRead, Autzen14HoldsTheSamePointsAs12) {
+  LEX3D_REQUIRE_SHARED("las/autzen_trim_7.las");
+  LEX3D_REQUIRE_SHARED("las/autzen_trim.las");
+  const std::string path = shared_data("las/autzen_trim_7.las");
+  const ReadResult r14 = read_ok(path);
+  const ReadResult r12 = read_ok(shared_data("las/autzen_trim.las"));
+  ASSERT_TRUE(r14.cloud.georef);
+  EXPECT_EQ(r14.cloud.georef->las_version_minor, 4);
+  EXPECT_EQ(r14.cloud.georef->las_point_format, 7);
+  EXPECT_DOUBLE_EQ(r14.cloud.georef->unit_m, 0.3048);  // from the WKT alone
+  expect_matches_records(path, r14);
+  ASSERT_EQ(r14.cloud.size(), r12.cloud.size());
+  const auto a = true_points(r14.cloud), b = true_points(r12.cloud);
+  double worst = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, (a[i] - b[i]).cwiseAbs().maxCoeff());
+  EXPECT_LT(worst, 1e-6);  // feet
+}
+
+TEST(LasRead, HexbinIsUtmInMetres) {
+  LEX3D_REQUIRE_SHARED("las/hexbin-crop.las");
+  const std::string path = shared_data("las/hexbin-crop.las");
+  const ReadResult r = read_ok(path);
+  EXPECT_EQ(r.cloud.size(), 38367U);
+  ASSERT_TRUE(r.cloud.georef);
+  const Georeference& g = *r.cloud.georef;
+  EXPECT_EQ(g.epsg, 32642U);
+  EXPECT_DOUBLE_EQ(g.unit_m, 1.0);
+  EXPECT_EQ(g.crs_name, "WGS 84 / UTM zone 42N");
+  EXPECT_EQ(g.las_system_id, "ALIRT");
+  expect_matches_records(path, r);
+  // the local coordinates are small: the origin sits within the cloud's box
+  const Bounds b = compute_bounds(r.cloud);
+  EXPECT_LT(b.max.cwiseAbs().maxCoeff(), 300.0F);
+  EXPECT_LT(b.min.cwiseAbs().maxCoeff(), 300.0F);
+  EXPECT_TRUE(r.colors.empty());  // PDRF 1: no RGB
+}
+
+TEST(LasWrite, SharedFilesRoundTripExactly) {
+  for (const char* name : {"las/autzen_trim.las", "las/autzen_trim_7.las", "las/hexbin-crop.las"}) {
+    if (!test::has_shared_data(name)) GTEST_SKIP() << "shared data not available: " << name;
+    const ReadResult r = read_ok(shared_data(name));
+    const std::string out = (temp_dir("las_write") / "back.las").string();
+    WriteOptions wo;
+    wo.colors = r.colors;
+    ASSERT_TRUE(write_cloud(out, r.cloud, wo).ok()) << name;
+    const ReadResult back = read_ok(out);
+    ASSERT_EQ(back.cloud.size(), r.cloud.size()) << name;
+    ASSERT_TRUE(back.cloud.georef);
+    EXPECT_EQ(back.cloud.georef->las_version_minor, r.cloud.georef->las_version_minor);
+    EXPECT_EQ(back.cloud.georef->las_point_format, r.cloud.georef->las_point_format);
+    EXPECT_EQ(back.cloud.georef->las_scale, r.cloud.georef->las_scale);
+    EXPECT_EQ(back.cloud.georef->unit_m, r.cloud.georef->unit_m);
+    // the CRS records, byte for byte
+    ASSERT_EQ(back.cloud.georef->crs_records.size(), r.cloud.georef->crs_records.size());
+    for (std::size_t k = 0; k < r.cloud.georef->crs_records.size(); ++k)
+      EXPECT_EQ(back.cloud.georef->crs_records[k].data, r.cloud.georef->crs_records[k].data);
+    // the same integers at the same scale and offset
+    const Bytes a = file_bytes(shared_data(name)), b = file_bytes(out);
+    const RawHeader ha = raw_header(a), hb = raw_header(b);
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < r.cloud.size(); ++i)
+      for (std::size_t k = 0; k < 14; ++k)  // x y z intensity
+        differ += a[ha.point_offset + i * ha.record_len + k] != b[hb.point_offset + i * hb.record_len + k];
+    EXPECT_EQ(differ, 0U) << name;
+    EXPECT_EQ(back.colors, r.colors) << name;
+    for (int ax = 0; ax < 3; ++ax) {  // the written bounds are the points' (hexbin's header is 0.4 mm loose)
+      EXPECT_NEAR(hb.min[ax], ha.min[ax], ha.scale[ax]) << name;
+      EXPECT_NEAR(hb.max[ax], ha.max[ax], ha.scale[ax]) << name;
+    }
+  }
+}
+
+// ------------------------------------------------------------------ a small fixture made here
+
+/// A small LAS 1.4 format-6 file in UTM with a WKT EVLR: written by the writer from a cloud
+/// whose georeference says so.
+Cloud fixture_cloud() {
+  Cloud c;
+  Georeference g;
+  g.las_scale = Eigen::Vector3d(0.001, 0.001, 0.001);
+  g.las_offset = Eigen::Vector3d(500000.0, 5403000.0, 0.0);
+  g.las_version_minor = 4;
+  g.las_point_format = 6;
+  g.las_global_encoding = 0x10;
+  g.origin = Eigen::Vector3d(500100.0, 5403850.0, 100.0);
+  CrsRecord wkt;
+  wkt.user_id = "LASF_Projection";
+  wkt.record_id = 2112;
+  wkt.extended = true;
+  const std::string text =
+      "PROJCS[\"WGS 84 / UTM zone 33N\",GEOGCS[\"WGS 84\",UNIT[\"degree\",0.0174532925199433]],"
+      "PROJECTION[\"Transverse_Mercator\"],UNIT[\"metre\",1,AUTHORITY[\"EPSG\",\"9001\"]],AUTHORITY[\"EPSG\",\"32633\"]]";
+  wkt.data.assign(text.begin(), text.end());
+  wkt.data.push_back(0);
+  g.crs_records.push_back(wkt);
+  c.georef = g;
+  for (int i = 0; i < 200; ++i) {
+    c.points.emplace_back(static_cast<float>(0.25 * (i % 20)) - 2.5F, static_cast<float>(0.5 * (i / 20)) - 2.0F,
+                          static_cast<float>(0.001 * i));
+    c.intensity.push_back(static_cast<float>(i * 7));
+  }
+  return c;
+}
+
+std::string write_fixture(const std::string& dir, const std::string& name = "fixture.las") {
+  const std::string path = (temp_dir(dir) / name).string();
+  const Status s = write_cloud(path, fixture_cloud(), {});
+  EXPECT_TRUE(s.ok()) << s.to_string();
+  return path;
+}
+
+TEST(LasFixture, Las14Format6WithWktEvlrRoundTrips) {
+  const std::string path = write_fixture("las_fixture");
+  const Bytes b = file_bytes(path);
+  EXPECT_EQ(b[25], 4);
+  EXPECT_EQ(get<std::uint16_t>(b, 94), 375);
+  EXPECT_EQ(get<std::uint32_t>(b, 107), 0U);       // legacy count is 0 for format 6
+  EXPECT_EQ(get<std::uint64_t>(b, 247), 200U);     // the 64-bit count
+  EXPECT_EQ(get<std::uint32_t>(b, 243), 1U);       // one EVLR
+  const ReadResult r = read_ok(path);
+  ASSERT_EQ(r.cloud.size(), 200U);
+  ASSERT_TRUE(r.cloud.georef);
+  EXPECT_EQ(r.cloud.georef->epsg, 32633U);
+  EXPECT_EQ(r.cloud.georef->crs_name, "WGS 84 / UTM zone 33N");
+  ASSERT_EQ(r.cloud.georef->crs_records.size(), 1U);
+  EXPECT_TRUE(r.cloud.georef->crs_records[0].extended);
+  const Cloud c = fixture_cloud();
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const Eigen::Vector3d want = c.georef->to_crs(c.points[i]);
+    const Eigen::Vector3d got = r.cloud.georef->to_crs(r.cloud.points[i]);
+    EXPECT_LE((want - got).cwiseAbs().maxCoeff(), 0.0005 + 1e-9) << i;  // half the 1 mm step
+    EXPECT_EQ(r.cloud.intensity[i], c.intensity[i]);
+  }
+}
+
+TEST(LasFixture, FeetFromGeoKeysAreReadIntoMetres) {
+  Cloud c = fixture_cloud();
+  c.georef->las_version_minor = 2;
+  c.georef->las_point_format = 1;
+  c.georef->las_global_encoding = 0;
+  c.georef->unit_m = 1.0;  // the writer takes the points as they are; the reader applies the keys' unit
+  c.georef->crs_records.clear();
+  CrsRecord keys;
+  keys.user_id = "LASF_Projection";
+  keys.record_id = 34735;
+  const std::vector<std::uint16_t> k = {1, 1, 0, 2, 3072, 0, 1, 2994, 3076, 0, 1, 9002};
+  keys.data.resize(k.size() * 2);
+  std::memcpy(keys.data.data(), k.data(), keys.data.size());
+  c.georef->crs_records.push_back(keys);
+  const auto dir = temp_dir("las_feet");  // (each call empties the directory)
+  const std::string path = (dir / "feet.las").string();
+  ASSERT_TRUE(write_cloud(path, c, {}).ok());
+  const ReadResult r = read_ok(path);
+  ASSERT_TRUE(r.cloud.georef);
+  EXPECT_DOUBLE_EQ(r.cloud.georef->unit_m, 0.3048);
+  EXPECT_EQ(r.cloud.georef->epsg, 2994U);
+  // the same file coordinates, now metres: the cloud's extent shrinks by 0.3048
+  const Bounds a = compute_bounds(c), b = compute_bounds(r.cloud);
+  EXPECT_NEAR(b.max.x() - b.min.x(), (a.max.x() - a.min.x()) * 0.3048, 1e-3);
+  // and written back in feet
+  const std::string again = (dir / "again.las").string();
+  ASSERT_TRUE(write_cloud(again, r.cloud, {}).ok());
+  const Bytes x = file_bytes(path), y = file_bytes(again);
+  const RawHeader hx = raw_header(x), hy = raw_header(y);
+  for (std::size_t i = 0; i < 200; ++i)
+    for (std::size_t k2 = 0; k2 < 12; ++k2)
+      ASSERT_EQ(x[hx.point_offset + i * hx.record_len + k2], y[hy.point_offset + i * hy.record_len + k2]) << i;
+}
+
+TEST(LasFixture, LazIsRefused) {
+  const std::string path = write_fixture("las_laz");
+  Bytes b = file_bytes(path);
+  const std::string laz = (temp_dir("las_laz") / "points.laz").string();
+  write_bytes(laz, b);
+  auto r = read_cloud(laz);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("LAZ"), std::string::npos) << r.status().message();
+  // a compressed point format byte in a file named .las
+  b[104] |= 0x80;
+  const std::string hidden = (temp_dir("las_laz") / "hidden.las").string();
+  write_bytes(hidden, b);
+  r = read_cloud(hidden);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("LAZ"), std::string::npos) << r.status().message();
+  EXPECT_FALSE(write_cloud((temp_dir("las_laz") / "out.laz").string(), fixture_cloud(), {}).ok());
+}
+
+TEST(LasCorrupt, TruncationAtEveryOffsetIsAnError) {
+  const std::string path = write_fixture("las_trunc");
+  const Bytes b = file_bytes(path);
+  const std::string cut = (temp_dir("las_trunc") / "cut.las").string();
+  // every byte of the header, the records' start and the EVLR, and a stride through the points
+  for (std::size_t n = 1; n < b.size(); n += (n < 500 || n > b.size() - 300) ? 1 : 7) {
+    write_bytes(cut, Bytes(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(n)));
+    auto r = read_cloud(cut);
+    ASSERT_FALSE(r.ok()) << "cut at " << n;
+    EXPECT_EQ(r.status().code(), ErrorCode::kBadData) << n;
+    EXPECT_EQ(r.status().message().rfind(cut, 0), 0U) << r.status().message();
+    EXPECT_EQ(r.status().message().find('\n'), std::string::npos);
+  }
+}
+
+TEST(LasCorrupt, EachHeaderFieldIsChecked) {
+  const std::string path = write_fixture("las_fields");
+  const Bytes good = file_bytes(path);
+  const std::string bad = (temp_dir("las_fields") / "bad.las").string();
+  struct Case {
+    const char* what;
+    void (*poke)(Bytes&);
+    const char* expect;
+  };
+  const Case cases[] = {
+      {"signature", [](Bytes& b) { b[0] = 'X'; }, "LASF"},
+      {"version", [](Bytes& b) { b[25] = 9; }, "version"},
+      {"header size", [](Bytes& b) { put<std::uint16_t>(b, 94, 300); }, "header size"},
+      {"header size past the end", [](Bytes& b) { put<std::uint16_t>(b, 94, 65000); }, "header size"},
+      {"offset to points", [](Bytes& b) { put<std::uint32_t>(b, 96, 0xFFFFFF00U); }, "offset to point data"},
+      {"VLR count", [](Bytes& b) { put<std::uint32_t>(b, 100, 1000000U); }, "VLRs"},
+      {"point format", [](Bytes& b) { b[104] = 11; }, "format"},
+      {"record length", [](Bytes& b) { put<std::uint16_t>(b, 105, 20); }, "record length"},
+      {"64-bit count", [](Bytes& b) { put<std::uint64_t>(b, 247, 1ULL << 40); }, "truncated point data"},
+      {"legacy count disagrees", [](Bytes& b) { put<std::uint32_t>(b, 107, 7U); }, "differ"},
+      {"scale zero", [](Bytes& b) { put<double>(b, 139, 0.0); }, "scale"},
+      {"offset NaN", [](Bytes& b) { put<double>(b, 171, std::nan("")); }, "offset"},
+      {"EVLR start", [](Bytes& b) { put<std::uint64_t>(b, 235, 100); }, "EVLR"},
+      {"EVLR count", [](Bytes& b) { put<std::uint32_t>(b, 243, 1000U); }, "EVLR"},
+      {"EVLR length", [](Bytes& b) { put<std::uint64_t>(b, get<std::uint64_t>(b, 235) + 20, 1ULL << 50); }, "EVLR 0 length"},
+  };
+  for (const Case& c : cases) {
+    Bytes b = good;
+    c.poke(b);
+    write_bytes(bad, b);
+    auto r = read_cloud(bad, {Format::kLas});
+    ASSERT_FALSE(r.ok()) << c.what;
+    EXPECT_NE(r.status().message().find(c.expect), std::string::npos) << c.what << ": " << r.status().message();
+    EXPECT_EQ(r.status().message().rfind(bad, 0), 0U) << c.what;
+  }
+}
+
+TEST(LasCorrupt, VlrLengthIsChecked) {
+  Cloud c = fixture_cloud();
+  c.georef->las_version_minor = 2;
+  c.georef->las_point_format = 0;
+  c.georef->crs_records[0].extended = false;  // a VLR in a 1.2 file
+  const std::string path = (temp_dir("las_vlr") / "vlr.las").string();
+  ASSERT_TRUE(write_cloud(path, c, {}).ok());
+  Bytes b = file_bytes(path);
+  ASSERT_EQ(get<std::uint32_t>(b, 100), 1U);
+  put<std::uint16_t>(b, 227 + 20, 60000);  // the VLR's length runs into the points and past them
+  write_bytes(path, b);
+  auto r = read_cloud(path);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("VLR 0 length"), std::string::npos) << r.status().message();
+  // a garbled WKT is reported, not fatal
+  b = file_bytes(path);
+  put<std::uint16_t>(b, 227 + 20, static_cast<std::uint16_t>(c.georef->crs_records[0].data.size()));
+  b[227 + 54] = '@';
+  write_bytes(path, b);
+  const ReadResult ok = read_ok(path);
+  EXPECT_EQ(ok.cloud.size(), 200U);
+  EXPECT_DOUBLE_EQ(ok.cloud.georef->unit_m, 1.0);
+  EXPECT_FALSE(ok.notes.empty());
+}
+
+TEST(LasCorrupt, ExtentBeyondFloat32ResolutionIsRefused) {
+  // 1 µm steps over 1000 km: float32 about one origin cannot keep them
+  Cloud c = fixture_cloud();
+  c.georef->las_scale = Eigen::Vector3d(1e-6, 1e-6, 1e-6);
+  c.georef->las_offset = c.georef->origin;
+  c.points[0].x() = -500000.0F;  // the writer needs 32-bit steps: it coarsens the scale
+  const std::string path = (temp_dir("las_extent") / "wide.las").string();
+  ASSERT_TRUE(write_cloud(path, c, {}).ok());
+  Bytes b = file_bytes(path);
+  // put the fine scale back by hand with integers that span 2^31 steps of 1 µm (2147 m)
+  const RawHeader h = raw_header(b);
+  put<double>(b, 131, 1e-6);
+  put<double>(b, 155, 500000.0);
+  put<std::int32_t>(b, h.point_offset, -2000000000);
+  put<std::int32_t>(b, h.point_offset + h.record_len, 2000000000);
+  write_bytes(path, b);
+  auto r = read_cloud(path);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("float32"), std::string::npos) << r.status().message();
+}
+
+// ------------------------------------------------------------------ doubles in other formats
+
+TEST(Georeference, PcdWithDoubleUtmCoordinates) {
+  const std::string dir = temp_dir("pcd_utm").string();
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 500; ++i)
+    pts.emplace_back(393775.823 + 0.137 * i, 5403850.001 + 0.071 * (i % 37), 3107.8627 + 0.00013 * i);
+  std::string text =
+      "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 500\nHEIGHT 1\n"
+      "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 500\nDATA binary\n";
+  Bytes b(text.begin(), text.end());
+  for (const auto& p : pts)
+    for (int a = 0; a < 3; ++a) {
+      const std::size_t at = b.size();
+      b.resize(at + 8);
+      std::memcpy(b.data() + at, &p[a], 8);
+    }
+  const std::string path = dir + "/utm.pcd";
+  write_bytes(path, b);
+  const ReadResult r = read_ok(path);
+  ASSERT_EQ(r.cloud.size(), 500U);
+  ASSERT_TRUE(r.cloud.georef);
+  const Georeference& g = *r.cloud.georef;
+  EXPECT_EQ(g.origin, g.origin.array().round().matrix());  // a rounded centre
+  double worst = 0.0;
+  for (std::size_t i = 0; i < pts.size(); ++i) worst = std::max(worst, (g.to_crs(r.cloud.points[i]) - pts[i]).norm());
+  EXPECT_LT(worst, 1e-5);  // float32 straight away would lose 0.25 m at 5,403,850 m
+  EXPECT_NEAR(g.representation_error_m, worst, 1e-9);
+  // written back as doubles in true coordinates
+  const std::string out = dir + "/back.pcd";
+  ASSERT_TRUE(write_cloud(out, r.cloud, {}).ok());
+  const ReadResult back = read_ok(out);
+  ASSERT_TRUE(back.cloud.georef);
+  double back_worst = 0.0;
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    back_worst = std::max(back_worst, (back.cloud.georef->to_crs(back.cloud.points[i]) - pts[i]).norm());
+  EXPECT_LT(back_worst, 1e-5);
+  // and a PLY and a text file the same way
+  for (const char* ext : {".ply", ".xyz"}) {
+    const std::string o2 = dir + "/back" + ext;
+    ASSERT_TRUE(write_cloud(o2, r.cloud, {}).ok());
+    const ReadResult b2 = read_ok(o2);
+    ASSERT_TRUE(b2.cloud.georef) << ext;
+    double w2 = 0.0;
+    for (std::size_t i = 0; i < pts.size(); ++i) w2 = std::max(w2, (b2.cloud.georef->to_crs(b2.cloud.points[i]) - pts[i]).norm());
+    EXPECT_LT(w2, 1e-5) << ext;
+  }
+}
+
+TEST(Georeference, SmallCoordinatesStayAsTheyAre) {
+  const std::string path = (temp_dir("xyz_small") / "small.xyz").string();
+  write_bytes(path, Bytes{'1', ' ', '2', ' ', '3', '\n', '4', '.', '5', ' ', '-', '6', ' ', '7', '\n'});
+  const ReadResult r = read_ok(path);
+  ASSERT_EQ(r.cloud.size(), 2U);
+  EXPECT_FALSE(r.cloud.georef);
+  EXPECT_EQ(r.cloud.points[1], Eigen::Vector3f(4.5F, -6.0F, 7.0F));
+}
+
+}  // namespace
+}  // namespace lex3d::io
