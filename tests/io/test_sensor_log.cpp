@@ -286,8 +286,8 @@ void expect_velodyne_turn(const Cloud& c, std::uint32_t lasers) {
   std::printf("[ geometry ] %s turn: %zu points, %u columns, grid residual median %.3g step, max %.3g steps\n",
               c.geometry->sensor.c_str(), c.size(), c.columns, res.median_angle / step, res.max_angle / step);
   // the firing azimuths come from the packets: the regular grid is close, not exact
-  EXPECT_LT(res.median_angle, 0.5 * step);
-  EXPECT_LT(res.max_angle, 3.0 * step);
+  EXPECT_LT(res.median_angle, 0.3 * step);
+  EXPECT_LT(res.max_angle, 1.0 * step);
 }
 
 TEST(SensorLog, Hdl32eCaptureGivesFiveTurns) {
