@@ -62,7 +62,7 @@ struct SensorLog {
   std::vector<std::size_t> no_returns;         ///< per scan
 };
 
-/// True when `path` starts with a libpcap or pcapng magic number.
+/// True when `path` is named `.pcap`/`.pcapng` or starts with a libpcap or pcapng magic number.
 [[nodiscard]] bool is_sensor_log(const std::string& path);
 
 /// Reads every complete turn of a raw lidar log (see the file comment). `options` gives the
