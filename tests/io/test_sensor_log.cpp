@@ -274,6 +274,20 @@ TEST(SensorLog, FragmentedDatagramsAreReassembled) {
   EXPECT_EQ(a.value().scans[0].column, b.value().scans[0].column);
 }
 
+TEST(SensorLog, NestedMetadataLayoutGivesTheSamePoints) {
+  LEX3D_REQUIRE_SHARED("ouster/OS-1-32-G_v2.1.1_1024x10.pcap");
+  const std::string pcap = shared_data("ouster/OS-1-32-G_v2.1.1_1024x10.pcap");
+  auto flat = read_sensor_log(pcap);
+  ReadOptions o;
+  o.metadata_path = std::string(LEX3D_TEST_DATA_DIR) + "/io/ouster_fw3_layout_OS-1-32-G.json";
+  auto nested = read_sensor_log(pcap, o);
+  ASSERT_TRUE(flat.ok()) << flat.status().to_string();
+  ASSERT_TRUE(nested.ok()) << nested.status().to_string();
+  EXPECT_EQ(nested.value().info.sensor, "OS-1-32-G");
+  ASSERT_EQ(nested.value().scans.size(), 1U);
+  EXPECT_EQ(nested.value().scans[0].points, flat.value().scans[0].points);
+}
+
 // ------------------------------------------------------------ Velodyne
 
 void expect_velodyne_turn(const Cloud& c, std::uint32_t lasers) {
