@@ -548,5 +548,33 @@ TEST(OrganisedInput, RingFieldAndZeroRecords) {
   EXPECT_EQ(k.value().no_return_dropped, 1U);
 }
 
+TEST(SensorLogErrors, CorruptAndTruncatedCapturesNeverCrash) {
+  LEX3D_REQUIRE_SHARED("velodyne/vlp16_velodyne_example.pcap");
+  const fs::path dir = temp_dir("sensor_log_sweep");
+  std::uint32_t seed = 12345;
+  auto next = [&seed]() { return seed = seed * 1664525U + 1013904223U; };
+  for (const char* name : {"velodyne/vlp16_velodyne_example.pcap", "ouster/OS-1-32-G_v2.1.1_1024x10.pcap"}) {
+    if (!test::has_shared_data(name)) continue;
+    const std::string orig = slurp(shared_data(name));
+    const std::string p = (dir / "x.pcap").string();
+    ReadOptions o;
+    if (std::string(name).find("ouster") != std::string::npos)
+      o.metadata_path = shared_data("ouster/OS-1-32-G_v2.1.1_1024x10.json");
+    for (int k = 0; k < 60; ++k) {
+      std::string b = orig;
+      if (k % 2 == 0) {
+        b.resize(next() % b.size());
+      } else {
+        for (int j = 0; j < 8; ++j) b[next() % b.size()] = static_cast<char>(next() & 255);
+      }
+      write_bytes(p, b);
+      auto r = read_sensor_log(p, o);  // ok or a one-line error, never a crash
+      if (!r.ok()) {
+        EXPECT_EQ(r.status().message().find('\n'), std::string::npos);
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace lex3d::io
