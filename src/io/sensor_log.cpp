@@ -73,6 +73,8 @@ StatusOr<SensorLog> read_sensor_log_impl(const std::string& path, const ReadOpti
 }  // namespace
 
 bool is_sensor_log(const std::string& path) {
+  const std::string ext = detail::extension_lower(path);
+  if (ext == ".pcap" || ext == ".pcapng") return true;
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (f == nullptr) return false;
   std::uint8_t head[4] = {0};

@@ -247,7 +247,12 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     SensorGeometry g;
     g.columns = columns;
     g.direction = -1;
-    const double start = firings[begin].azimuth_deg;
+    // The grid's column 0: the first firing's azimuth moved by the mean offset of all the
+    // firings of the turn from a grid of 360°/columns steps (least squares for that step).
+    double start = firings[begin].azimuth_deg, mean_offset = 0.0;
+    for (std::size_t i = begin; i < end; ++i)
+      mean_offset += firings[i].azimuth_deg - (start + 360.0 * static_cast<double>(i - begin) / columns);
+    start += mean_offset / static_cast<double>(columns);
     g.azimuth0 = std::remainder(M_PI / 2 - start * M_PI / 180.0, 2.0 * M_PI);
     g.source = "model table";
     g.sensor = model->name;

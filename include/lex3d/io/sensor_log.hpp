@@ -18,7 +18,8 @@
 ///   of all lasers, counted from the start of its turn. A turn is 360° of azimuth starting at
 ///   the log's first firing (so a log of 1.1 turns gives one). The points use each firing's
 ///   own azimuth from the packets (and each laser's firing time within it); the geometry is
-///   the best regular grid (see read_sensor_log), not an exact one.
+///   the best regular grid (columns = the firings of the turn, 360°/columns apart, column 0
+///   placed by least squares over the turn's firings), not an exact one.
 
 #include <cstddef>
 #include <cstdint>
@@ -61,7 +62,7 @@ struct SensorLog {
   std::vector<std::size_t> no_returns;         ///< per scan
 };
 
-/// True when `path` starts with a libpcap or pcapng magic number.
+/// True when `path` is named `.pcap`/`.pcapng` or starts with a libpcap or pcapng magic number.
 [[nodiscard]] bool is_sensor_log(const std::string& path);
 
 /// Reads every complete turn of a raw lidar log (see the file comment). `options` gives the

@@ -105,3 +105,17 @@ write("mixed.xyz", txt.encode())
 txt = "100 0 0\n0 200 0\n0 0 300\n3276.3 0 0\n10 20 30\n"
 write("tiny.3d", txt.encode())
 write("tiny.pose", b"100 200 300\n0 90 0\n")
+
+# ouster_fw3_layout_OS-1-32-G.json: the metadata of ../shared/data/ouster/OS-1-32-G_v2.1.1_1024x10.json
+# (Ouster SDK test data, BSD-3-Clause, Copyright (c) 2018-2026 Ouster, Inc.) rearranged, values
+# unchanged, into the fw 3 nested layout; made once with:
+#   d = json.load(open(src)); n = d["lidar_origin_to_beam_origin_mm"]
+#   json.dump({"beam_intrinsics": {"beam_altitude_angles": d["beam_altitude_angles"],
+#                                  "beam_azimuth_angles": d["beam_azimuth_angles"],
+#                                  "lidar_origin_to_beam_origin_mm": n,
+#                                  "beam_to_lidar_transform": [1,0,0,n, 0,1,0,0, 0,0,1,0, 0,0,0,1]},
+#              "lidar_intrinsics": {"lidar_to_sensor_transform": d["lidar_to_sensor_transform"]},
+#              "lidar_data_format": d["data_format"],
+#              "sensor_info": {"prod_line": d["prod_line"], "prod_sn": d["prod_sn"]},
+#              "config_params": {"udp_profile_lidar": "LEGACY", "lidar_mode": d["lidar_mode"]}},
+#             open(out, "w"), indent=1)
