@@ -201,9 +201,9 @@ std::array<std::vector<std::int64_t>*, 5> table_fields(LaserTable& t) {
   return {&t.elevation, &t.beam_azimuth, &t.column_azimuth, &t.z_offset, &t.radial_offset};
 }
 
-void put_table(RangeEncoder& enc, LaserTable& t) {
+void put_table(RangeEncoder& enc, const LaserTable& t) {
   IntModel m{IntModel::kClasses};
-  for (auto* f : table_fields(t)) {
+  for (const auto* f : {&t.elevation, &t.beam_azimuth, &t.column_azimuth, &t.z_offset, &t.radial_offset}) {
     std::int64_t prev = 0, prev_d = 0;
     for (std::int64_t v : *f) {
       m.put(enc, IntModel::context_of(prev_d), v - prev);
@@ -429,10 +429,17 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
     hist.assign(static_cast<std::size_t>((mx - lo) / kBin) + 8, 0.0);
     for (std::uint32_t i : far) hist[static_cast<std::size_t>((std::atan2(p[i].z() - h, rho[i]) - lo) / kBin)] += 1.0;
   };
-  // The height whose elevations are sharpest: the largest sum of squared bin counts.
+  // The height whose elevations are sharpest: the largest sum of squared bin counts, on at
+  // most 16384 of the points, searched every 5 cm and then every centimetre around the best.
+  const std::vector<std::uint32_t> all_far = far;
+  if (far.size() > 16384) {
+    std::vector<std::uint32_t> sample;
+    const double step = static_cast<double>(far.size()) / 16384.0;
+    for (std::size_t k = 0; k < 16384; ++k) sample.push_back(far[static_cast<std::size_t>(static_cast<double>(k) * step)]);
+    far.swap(sample);
+  }
   double best_h = 0.0, best_sharp = -1.0;
-  for (int k = -30; k <= 30; ++k) {
-    const double h = 0.01 * k;
+  const auto sharpness = [&](double h) {
     std::vector<double> hist;
     double lo = 0;
     histogram(h, hist, lo);
@@ -442,7 +449,12 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       best_sharp = sharp;
       best_h = h;
     }
-  }
+  };
+  for (int k = -6; k <= 6; ++k) sharpness(0.05 * k);
+  const double coarse = best_h;
+  for (int k = -4; k <= 4; ++k)
+    if (k != 0) sharpness(coarse + 0.01 * k);
+  far = all_far;
   std::vector<double> hist;
   double lo = 0;
   histogram(best_h, hist, lo);
@@ -514,11 +526,12 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       }
     }
     for (std::size_t i = 0; i < n; ++i) {
+      // (the nearest line in elevation: the smallest height difference at the point's range)
       const double r = std::max(rho[i], 1e-3);
       std::size_t best = ring[i];
-      double best_d = std::abs(std::atan2(p[i].z() - h[best], r) - std::atan(t[best]));
+      double best_d = std::abs(p[i].z() - h[best] - t[best] * r);
       for (std::size_t l = best > 2 ? best - 2 : 0; l < std::min<std::size_t>(lasers, best + 3); ++l) {
-        const double d = std::abs(std::atan2(p[i].z() - h[l], r) - std::atan(t[l]));
+        const double d = std::abs(p[i].z() - h[l] - t[l] * r);
         if (d < best_d) {
           best_d = d;
           best = l;
@@ -640,56 +653,19 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
 // Encoder
 // ---------------------------------------------------------------------------------------
 
-std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
-                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
-                                      const Pose& T_cloud_sensor, double max_error, double bound, bool thin, double share,
-                                      int threads) {
-  LaserTable table = a.table;
-  if (!storable(table)) return std::nullopt;
+namespace {
+
+std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
+                                     const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
+                                     const Beams& beams, const std::vector<std::uint32_t>& order,
+                                     const std::vector<std::int64_t>& shift, const std::vector<Beams::Beam>& beam_of,
+                                     const std::vector<Eigen::Vector3d>& offset, double max_error, double bound,
+                                     bool thin, double share) {
+  const LaserTable& table = a.table;
   const double qr = 2.0 * share * bound;
   const double qt = std::sqrt(std::max(0.0, 2.0 * (1.0 - share * share))) * bound * 0.99;
   if (!(qt > 0.0)) return std::nullopt;
-  const Beams beams(table, T_cloud_sensor);
-  const Pose T_head_cloud = beams.T_cloud_head.inverse();
   const double e2 = bound * bound;
-
-  // Column by column, lasers in order, then input order.
-  std::vector<std::uint32_t> order(coded.size());
-  std::iota(order.begin(), order.end(), 0U);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
-    const std::uint32_t ix = coded[x], iy = coded[y];
-    if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
-    if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
-    return ix < iy;
-  });
-  // Each column's azimuth shift: the median of its points' azimuths off their beams (a
-  // sensor whose firings do not fall on an even grid), in the table's shift units.
-  std::vector<std::int64_t> shift(coded.size(), 0);  // by position in `order`
-  {
-    std::vector<double> off;
-    std::int64_t last = 0;
-    for (std::size_t at = 0; at < order.size();) {
-      const std::uint32_t column = a.column[coded[order[at]]];
-      std::size_t end = at;
-      off.clear();
-      for (; end < order.size() && a.column[coded[order[end]]] == column; ++end) {
-        const std::uint32_t i = coded[order[end]];
-        const auto b = beams.beam(a.ring[i], column, 0);
-        const Eigen::Vector3d v = T_head_cloud * input[i].cast<double>() - b.o;
-        if (std::hypot(v.x(), v.y()) < 1.0) continue;
-        const double beam = std::atan2(b.u.y(), b.u.x());
-        off.push_back(std::remainder(std::atan2(v.y(), v.x()) - beam, kTwoPi));
-      }
-      std::int64_t s = last;
-      if (!off.empty() && table.shift_unit > 0.0) {
-        std::nth_element(off.begin(), off.begin() + static_cast<std::ptrdiff_t>(off.size() / 2), off.end());
-        s = static_cast<std::int64_t>(std::llround(off[off.size() / 2] / table.shift_unit));
-      }
-      for (std::size_t k = at; k < end; ++k) shift[k] = s;
-      last = s;
-      at = end;
-    }
-  }
 
   // Every point's beam length and corrections, and the point they decode to.
   struct Coded {
@@ -697,39 +673,32 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     Eigen::Vector3f decoded;
   };
   std::vector<Coded> q(coded.size());  // by position in `order`
-  std::vector<std::uint8_t> failed(coded.size(), 0);
-  parallel_for(order.size(), threads, [&](std::size_t j) {
+  for (std::size_t j = 0; j < order.size(); ++j) {
     const std::uint32_t i = coded[order[j]];
     const Eigen::Vector3d truth = input[i].cast<double>();
-    const auto b = beams.beam(a.ring[i], a.column[i], shift[j]);
-    const Eigen::Vector3d v = T_head_cloud * truth - b.o;
+    const Beams::Beam& b = beam_of[j];
+    const Eigen::Vector3d& v = offset[j];
     Coded& c = q[j];
-    if (!quantise(v.dot(b.u), qr, c.k)) {
-      failed[j] = 1;
-      return;
-    }
+    if (!quantise(v.dot(b.u), qr, c.k)) return std::nullopt;
     c.decoded = beams.point(b, c.k, 0, 0, qr, qt);
-    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
-    if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) {
-      failed[j] = 1;
-      return;
-    }
+    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) continue;
+    if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) return std::nullopt;
     c.decoded = beams.point(b, c.k, c.k1, c.k2, qr, qt);
-    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
+    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) continue;
     // rounding at the edge of the bound: the neighbouring steps
     const Coded base = c;
-    for (int dk = -1; dk <= 1; ++dk)
-      for (int d1 = -1; d1 <= 1; ++d1)
-        for (int d2 = -1; d2 <= 1; ++d2) {
+    bool found = false;
+    for (int dk = -1; dk <= 1 && !found; ++dk)
+      for (int d1 = -1; d1 <= 1 && !found; ++d1)
+        for (int d2 = -1; d2 <= 1 && !found; ++d2) {
           const Eigen::Vector3f d = beams.point(b, base.k + dk, base.k1 + d1, base.k2 + d2, qr, qt);
           if ((d.cast<double>() - truth).squaredNorm() <= e2) {
             c = {base.k + dk, base.k1 + d1, base.k2 + d2, d};
-            return;
+            found = true;
           }
         }
-    failed[j] = 1;
-  }, 4096);
-  if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
+    if (!found) return std::nullopt;
+  }
 
   // Thinning: a point that a point decoded before it explains is not coded.
   std::vector<std::uint32_t> kept(order.size());  // positions in `order`
@@ -802,6 +771,74 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
   for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
   return out;
+}
+
+}  // namespace
+
+std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
+                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
+                                      const Pose& T_cloud_sensor, double max_error, double bound, bool thin,
+                                      const std::vector<double>& shares, int threads) {
+  const LaserTable& table = a.table;
+  if (!storable(table)) return std::nullopt;
+  const Beams beams(table, T_cloud_sensor);
+  const Pose T_head_cloud = beams.T_cloud_head.inverse();
+
+  // Column by column, lasers in order, then input order.
+  std::vector<std::uint32_t> order(coded.size());
+  std::iota(order.begin(), order.end(), 0U);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    const std::uint32_t ix = coded[x], iy = coded[y];
+    if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
+    if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
+    return ix < iy;
+  });
+  // Each column's azimuth shift: the median of its points' azimuths off their beams (a
+  // sensor whose firings do not fall on an even grid), in the table's shift units.
+  std::vector<std::int64_t> shift(coded.size(), 0);  // by position in `order`
+  {
+    std::vector<double> off;
+    std::int64_t last = 0;
+    for (std::size_t at = 0; at < order.size();) {
+      const std::uint32_t column = a.column[coded[order[at]]];
+      std::size_t end = at;
+      off.clear();
+      for (; end < order.size() && a.column[coded[order[end]]] == column; ++end) {
+        const std::uint32_t i = coded[order[end]];
+        const auto b = beams.beam(a.ring[i], column, 0);
+        const Eigen::Vector3d v = T_head_cloud * input[i].cast<double>() - b.o;
+        if (std::hypot(v.x(), v.y()) < 1.0) continue;
+        const double beam = std::atan2(b.u.y(), b.u.x());
+        off.push_back(std::remainder(std::atan2(v.y(), v.x()) - beam, kTwoPi));
+      }
+      std::int64_t s = last;
+      if (!off.empty() && table.shift_unit > 0.0) {
+        std::nth_element(off.begin(), off.begin() + static_cast<std::ptrdiff_t>(off.size() / 2), off.end());
+        s = static_cast<std::int64_t>(std::llround(off[off.size() / 2] / table.shift_unit));
+      }
+      for (std::size_t k = at; k < end; ++k) shift[k] = s;
+      last = s;
+      at = end;
+    }
+  }
+  // Every point's beam and its offset from the beam's origin (head frame).
+  std::vector<Beams::Beam> beam_of(order.size());
+  std::vector<Eigen::Vector3d> offset(order.size());
+  parallel_for(order.size(), threads, [&](std::size_t j) {
+    const std::uint32_t i = coded[order[j]];
+    beam_of[j] = beams.beam(a.ring[i], a.column[i], shift[j]);
+    offset[j] = T_head_cloud * input[i].cast<double>() - beam_of[j].o;
+  }, 4096);
+
+  std::vector<std::optional<LaserLayer>> tries(shares.size());
+  parallel_for(shares.size(), threads, [&](std::size_t t) {
+    tries[t] = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin,
+                          shares[t]);
+  }, 1);
+  std::optional<LaserLayer> best;
+  for (auto& t : tries)
+    if (t && (!best || t->stream.size() < best->stream.size())) best = std::move(t);
+  return best;
 }
 
 // ---------------------------------------------------------------------------------------

@@ -62,13 +62,14 @@ struct LaserLayer {
 constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 8 + 96;
 
 /// Codes the input points `coded` with the table of `a` for error bound `bound` (E'),
-/// continuing `head` (which holds the keep mask). nullopt when a point cannot be coded
+/// continuing `head` (which holds the keep mask), once for each range-step share in
+/// `shares` (the range step is 2·share·E', the rest of the budget goes to corrections
+/// across the beams), and returns the smallest. nullopt when a point cannot be coded
 /// within the bound (float32 resolution) or the table's values are out of the stored range.
-/// `share`: the range step's share of 2E' (the rest goes to tangential corrections).
 [[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                                     const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
                                                     const Pose& T_cloud_sensor, double max_error, double bound,
-                                                    bool thin, double share, int threads);
+                                                    bool thin, const std::vector<double>& shares, int threads);
 
 /// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
 /// bytes from there to the payload's end) after the keep mask was read from `dec`.

@@ -55,9 +55,13 @@ constexpr std::uint32_t kCodingVoxel = 2;
 constexpr std::uint64_t kVoxelExtraBytes = 28;  // origin 3 f64, depth u32, after the RESD header fields
 constexpr std::uint32_t kCodingLaser = 3;
 /// Shares of 2E' the sensor-geometry coding tries for its range step (encoder only): the
-/// largest suits a table that reproduces the points exactly (read from a sensor's metadata),
-/// the smaller ones leave room for corrections across the beams of an estimated table.
+/// largest for a table that reproduces the points (read from a sensor's metadata), the
+/// smaller two for an estimated table, which leave room for corrections across the beams.
 constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
+/// A coding whose trial window costs this many times the sensor-geometry coding's bits a
+/// point is not coded in full (encoder only). Measured, spherical trial / sensor-geometry
+/// in full at 14 mm: OS-0-128 1.4, OS-1-32 1.6, HDL-32E 1.5; KITTI 1.02, where both are coded.
+constexpr double kLaserSkipRatio = 1.25;
 /// What a payload of a coding adds to its stream besides the fields every coding has.
 constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
   return coding == kCodingSweep   ? kSweepPrefixBytes + kSweepExtraBytes
@@ -651,14 +655,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<detail::LaserAssignment> lasers_of;
   if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true);
   if (lasers_of) {
-    constexpr std::size_t kShares = std::size(kLaserShares);
-    std::array<std::optional<detail::LaserLayer>, kShares> tries;
-    parallel_for(kShares, threads, [&](std::size_t k) {
-      tries[k] = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, max_error, check_error, options.thin,
-                                     kLaserShares[k], 1);
-    }, 1);
-    for (auto& t : tries)
-      if (t && (!laser || t->stream.size() < laser->stream.size())) laser = std::move(t);
+    // A table read from the sensor reproduces the beams: the whole budget along them.
+    const bool exact = lasers_of->fit_rms < 1e-3 * max_error;
+    const std::vector<double> shares =
+        exact ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
+    laser = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, max_error, check_error,
+                                options.thin, shares, threads);
   }
   const bool others = !laser || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
@@ -699,9 +701,17 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::size_t head_bytes = RangeEncoder(head).finish().size();
       const double spherical_window_bits =
           8.0 * static_cast<double>(trial[best] - std::min(trial[best], head_bytes)) / static_cast<double>(kOrderTrialPoints);
-      const bool full_voxel = try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits;
+      // The sensor-geometry coding, already coded in full, rules out a coding whose trial
+      // costs kLaserSkipRatio times its bits or more.
+      const double laser_bits =
+          laser ? 8.0 * static_cast<double>(laser->stream.size() - std::min(laser->stream.size(), head_bytes)) /
+                      static_cast<double>(coded.size())
+                : std::numeric_limits<double>::infinity();
+      const bool full_voxel = try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits &&
+                              voxel_window_bits < kLaserSkipRatio * laser_bits;
       // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
-      const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
+      const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits) &&
+                                  spherical_window_bits < kLaserSkipRatio * laser_bits;
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical)
           streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
@@ -709,7 +719,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
           voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
-      if (!voxel && !full_spherical)
+      if (!voxel && !full_spherical && !laser)
         streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
     } else {
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
@@ -730,7 +740,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
                     extra_bytes(ways[best].sweep ? kCodingSweep : 0) + streams[best].size());
   const bool sweep = !use_voxel && ways[best].sweep;
-  const std::size_t others_bytes = !others ? std::numeric_limits<std::size_t>::max()
+  const bool coded_others = use_voxel || !streams[best].empty();
+  const std::size_t others_bytes = !others || !coded_others ? std::numeric_limits<std::size_t>::max()
                                    : use_voxel ? extra_bytes(kCodingVoxel) + voxel->stream.size()
                                                : extra_bytes(sweep ? kCodingSweep : 0) + streams[best].size();
   if (laser && extra_bytes(kCodingLaser) + laser->stream.size() < others_bytes) {
