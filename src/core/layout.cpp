@@ -66,7 +66,7 @@ std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f
     }
   // Row by row: neighbours alike, and so are points a row apart in azimuth, not in elevation.
   if (!found && neighbours_alike >= 0.8)
-    for (std::uint32_t rows = 2; rows <= 1024 && !found; ++rows) {
+    for (std::uint32_t rows = 1024; rows >= 2 && !found; --rows) {  // the shortest row that fits
       if (n % rows != 0) continue;
       const std::size_t w = n / rows;
       if (w < 16 || w > (1U << 20)) continue;

@@ -199,6 +199,17 @@ run(0 decompress.voxel decompress "${WORK}/nc_v.lex3dm" -o "${WORK}/nc_v.ply" --
 expect_match(decompress.voxel "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.00[0-9]*|0\\.020*[,}]|[0-9.]+e-)")
 run(0 compress.spherical compress "${NC}" -o "${WORK}/nc_s.lex3dm" --max-error 0.02 --layer-coding spherical --json)
 expect_match(compress.spherical "${LAST_OUT}" "\"coding\":\"(previous-point|sweep)\"")
+# The sensor-geometry coding, forced on the KITTI sample (its lasers estimated from the
+# points): a format 1.4 file whose decoded cloud meets the bound.
+run(0 compress.laser compress "${KITTI}" -o "${WORK}/k_l.lex3dm" --max-error 0.02 --layer-coding laser --json)
+expect_match(compress.laser "${LAST_OUT}" "\"coding\":\"sensor-geometry\"")
+expect_match(compress.laser "${LAST_OUT}" "\"laser_table\":{\"source\":\"estimated")
+run(0 info.laser info "${WORK}/k_l.lex3dm")
+expect_match(info.laser "${LAST_OUT}" "format 1\\.4")
+expect_match(info.laser "${LAST_OUT}" "RESL")
+expect_match(info.laser "${LAST_OUT}" "laser table")
+run(0 decompress.laser decompress "${WORK}/k_l.lex3dm" -o "${WORK}/k_l.bin" --reference "${KITTI}" --json)
+expect_match(decompress.laser "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.00[0-9]*|0\\.020*[,}]|[0-9.]+e-)")
 run(1 compress.bad_coding compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0.02 --layer-coding octree)
 run(1 compress.voxel_keep_all compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0.02 --layer-coding voxel --keep-all-points)
 run(1 compress.bad_error compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0)
