@@ -27,6 +27,7 @@ struct LaserTable {
   /// Unit of the per-column azimuth shifts, radians (the grid's step / 64).
   double shift_unit = 0.0;
   std::int32_t direction = 1;
+  std::uint32_t predictor = 0;  ///< beam lengths predicted by 0: the left neighbour; 1: the median edge detector
   double azimuth0 = 0.0;
   Pose T_sensor_head = Pose::Identity();
 
@@ -59,7 +60,7 @@ struct LaserLayer {
 };
 
 /// Size of `fields` in a payload.
-constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 8 + 96;
+constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 4 + 8 + 96;
 
 /// Codes the input points `coded` with the table of `a` for error bound `bound` (E'),
 /// continuing `head` (which holds the keep mask), once for each range-step share in

@@ -59,9 +59,9 @@ constexpr std::uint32_t kCodingLaser = 3;
 /// smaller two for an estimated table, which leave room for corrections across the beams.
 constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
 /// A coding whose trial window costs this many times the sensor-geometry coding's bits a
-/// point is not coded in full (encoder only). Measured, spherical trial / sensor-geometry
-/// in full at 14 mm: OS-0-128 1.4, OS-1-32 1.6, HDL-32E 1.5; KITTI 1.02, where both are coded.
-constexpr double kLaserSkipRatio = 1.25;
+/// point is not coded in full (encoder only). At 1.25, a HDL-32E cloud at 40 mm skipped a
+/// spherical coding 5 % smaller than the sensor-geometry one.
+constexpr double kLaserSkipRatio = 1.6;
 /// What a payload of a coding adds to its stream besides the fields every coding has.
 constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
   return coding == kCodingSweep   ? kSweepPrefixBytes + kSweepExtraBytes

@@ -210,7 +210,7 @@ TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
   for (std::size_t n = 0; n < good.size(); n += (n < 200 ? 1 : 97)) {
     const Bytes cut(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n));
     const auto d = residual::decode_layer(cut, Cloud{}, Pose::Identity(), scan.size());
-    if (n < 172) EXPECT_FALSE(d.ok()) << n;
+    if (n < 176) EXPECT_FALSE(d.ok()) << n;
     if (d.ok()) EXPECT_LE(d.value().size(), scan.size());
   }
   auto poke = [](Bytes b, std::size_t at, const void* v, std::size_t n) {
@@ -229,9 +229,10 @@ TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
   EXPECT_FALSE(residual::decode_layer(poke(good, 64, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok());
   for (const double unit : {-1.0, 0.5, std::nan("")})
     EXPECT_FALSE(residual::decode_layer(poke(good, 48, &unit, 8), Cloud{}, Pose::Identity(), scan.size()).ok()) << unit;
+  EXPECT_FALSE(residual::decode_layer(poke(good, 68, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok()) << "predictor";
   const double not_rigid = 2.0;
-  EXPECT_FALSE(residual::decode_layer(poke(good, 76, &not_rigid, 8), Cloud{}, Pose::Identity(), scan.size()).ok());
-  for (std::size_t at = 172; at < good.size(); at += 37) {
+  EXPECT_FALSE(residual::decode_layer(poke(good, 80, &not_rigid, 8), Cloud{}, Pose::Identity(), scan.size()).ok());
+  for (std::size_t at = 176; at < good.size(); at += 37) {
     Bytes b = good;
     b[at] ^= 0x5A;
     const auto d = residual::decode_layer(b, Cloud{}, Pose::Identity(), scan.size());
