@@ -58,9 +58,8 @@ constexpr std::uint32_t kCodingLaser = 3;
 /// largest for a table that reproduces the points (read from a sensor's metadata), the
 /// smaller two for an estimated table, which leave room for corrections across the beams.
 constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
-/// A coding whose trial window costs this many times the sensor-geometry coding's bits a
-/// point is not coded in full (encoder only). At 1.25, a HDL-32E cloud at 40 mm skipped a
-/// spherical coding 5 % smaller than the sensor-geometry one.
+/// The voxel coding is not coded in full when its trial window costs this many times the
+/// sensor-geometry coding's bits a point (encoder only).
 constexpr double kLaserSkipRatio = 1.6;
 /// What a payload of a coding adds to its stream besides the fields every coding has.
 constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
@@ -701,8 +700,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::size_t head_bytes = RangeEncoder(head).finish().size();
       const double spherical_window_bits =
           8.0 * static_cast<double>(trial[best] - std::min(trial[best], head_bytes)) / static_cast<double>(kOrderTrialPoints);
-      // The sensor-geometry coding, already coded in full, rules out a coding whose trial
-      // costs kLaserSkipRatio times its bits or more.
+      // The sensor-geometry coding, already coded in full, rules out a voxel coding whose
+      // trial costs kLaserSkipRatio times its bits or more.
       const double laser_bits =
           laser ? 8.0 * static_cast<double>(laser->stream.size() - std::min(laser->stream.size(), head_bytes)) /
                       static_cast<double>(coded.size())
@@ -710,8 +709,10 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const bool full_voxel = try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits &&
                               voxel_window_bits < kLaserSkipRatio * laser_bits;
       // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
-      const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits) &&
-                                  spherical_window_bits < kLaserSkipRatio * laser_bits;
+      // (The spherical trial does not rule it out against the sensor-geometry coding: on a
+      // HDL-32E cloud stored firing by firing its window cost 1.6 times the sensor-geometry
+      // coding's bits while in full it came out 5 % smaller.)
+      const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical)
           streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
@@ -719,7 +720,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
           voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
-      if (!voxel && !full_spherical && !laser)
+      if (!voxel && !full_spherical)
         streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
     } else {
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
