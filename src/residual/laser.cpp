@@ -33,8 +33,6 @@ constexpr std::int64_t kMaxAngleUnits = 105414357;   // ceil(2π / 2^-24)
 constexpr std::int64_t kMaxLengthUnits = 64 * 65536;
 /// A left neighbour further than this many columns back does not predict.
 constexpr std::uint32_t kMaxColumnGap = 4;
-/// Largest |value| quantised, in steps.
-constexpr double kMaxSteps = 1073741824.0;  // 2^30
 
 /// The table as doubles, with the per-laser trigonometry the beams need.
 struct Beams {
@@ -91,13 +89,6 @@ struct Beams {
     return (T_cloud_head * p).cast<float>();
   }
 };
-
-bool quantise(double v, double step, std::int64_t& k) {
-  const double x = std::round(v / step);
-  if (!(std::abs(x) <= kMaxSteps)) return false;
-  k = static_cast<std::int64_t>(x);
-  return true;
-}
 
 /// The models and predictor state shared by encoder and decoder (formats/model.md §2.8.3).
 class PointCoder {

@@ -10,6 +10,7 @@
 // on every platform.
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -166,5 +167,16 @@ class IntModel {
   std::vector<Context> ctx_;
   std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1> mantissa_{};
 };
+
+/// Largest |value| the layers quantise, in steps.
+constexpr double kMaxSteps = 1073741824.0;  // 2^30
+
+/// `k` = v / step rounded to the nearest integer; false when |k| would exceed kMaxSteps.
+inline bool quantise(double v, double step, std::int64_t& k) {
+  const double x = std::round(v / step);
+  if (!(std::abs(x) <= kMaxSteps)) return false;
+  k = static_cast<std::int64_t>(x);
+  return true;
+}
 
 }  // namespace lex3d::residual::detail

@@ -99,8 +99,7 @@ constexpr double kMaxAzimuthStep = 0.05;
 constexpr double kMinCosElevation = 1.0 / 64.0;
 /// Points of the window on which the two coding orders are compared (encoder only).
 constexpr std::size_t kOrderTrialPoints = 8192;
-/// Largest |residual| coded, in steps.
-constexpr double kMaxSteps = 1073741824.0;  // 2^30
+using detail::kMaxSteps;
 /// A decoder accepts at most this many coded points per payload byte (each point costs
 /// at least four binary decisions of >= 0.011 bits).
 constexpr std::uint64_t kMaxPointsPerByte = 200;
@@ -265,12 +264,7 @@ Eigen::Vector3f to_cloud_frame(const Pose& T_cloud_sensor, const Eigen::Vector3d
   return (T_cloud_sensor * p_sensor).cast<float>();
 }
 
-bool quantise(double v, double step, std::int64_t& k) {
-  const double x = std::round(v / step);
-  if (!(std::abs(x) <= kMaxSteps)) return false;
-  k = static_cast<std::int64_t>(x);
-  return true;
-}
+using detail::quantise;
 
 /// The models of one coded-point stream: each spherical residual is conditioned on the
 /// classes of two residuals the decoder already has (formats/model.md §2.5.3). (Three,
@@ -741,6 +735,27 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
                     extra_bytes(ways[best].sweep ? kCodingSweep : 0) + streams[best].size());
   const bool sweep = !use_voxel && ways[best].sweep;
+  const auto fill_stats = [&](std::size_t residual, std::size_t escapes, bool is_sweep, bool is_voxel, bool is_laser,
+                              std::size_t bytes) {
+    if (!stats) return;
+    *stats = LayerStats{};
+    stats->max_error = max_error;
+    stats->word_points = n_w;
+    stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
+    stats->explained_points = n_in - coded.size();
+    stats->residual_points = residual;
+    stats->escaped_points = escapes;
+    stats->sweep = is_sweep;
+    stats->voxel = is_voxel;
+    stats->laser = is_laser;
+    stats->bytes = bytes;
+    if (lasers_of) {
+      stats->laser_table_source = lasers_of->source;
+      stats->laser_table_rms = lasers_of->fit_rms;
+      stats->lasers = lasers_of->table.lasers();
+      stats->columns = lasers_of->table.columns;
+    }
+  };
   const bool coded_others = use_voxel || !streams[best].empty();
   const std::size_t others_bytes = !others || !coded_others ? std::numeric_limits<std::size_t>::max()
                                    : use_voxel ? extra_bytes(kCodingVoxel) + voxel->stream.size()
@@ -756,22 +771,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     put_u64(out, laser->coded);
     out.insert(out.end(), laser->fields.begin(), laser->fields.end());
     out.insert(out.end(), laser->stream.begin(), laser->stream.end());
-    if (stats) {
-      *stats = LayerStats{};
-      stats->max_error = max_error;
-      stats->word_points = n_w;
-      stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
-      stats->explained_points = n_in - coded.size();
-      stats->residual_points = laser->coded;
-      stats->laser = true;
-      stats->bytes = out.size();
-    }
-    if (stats) {
-      stats->laser_table_source = lasers_of->source;
-      stats->laser_table_rms = lasers_of->fit_rms;
-      stats->lasers = lasers_of->table.lasers();
-      stats->columns = lasers_of->table.columns;
-    }
+    fill_stats(laser->coded, 0, false, false, true, out.size());
     return out;
   }
   const std::vector<std::uint8_t>& stream = use_voxel ? voxel->stream : streams[best];
@@ -794,24 +794,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     codec::bytes::put_u32(out, static_cast<std::uint32_t>(voxel->depth));
   }
   out.insert(out.end(), stream.begin(), stream.end());
-  if (stats) {
-    *stats = LayerStats{};
-    stats->max_error = max_error;
-    stats->word_points = n_w;
-    stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
-    stats->explained_points = n_in - coded.size();
-    stats->residual_points = use_voxel ? voxel->voxels : counts[best];
-    stats->escaped_points = use_voxel ? 0 : escaped[best];
-    stats->sweep = sweep;
-    stats->voxel = use_voxel;
-    stats->bytes = out.size();
-    if (lasers_of) {
-      stats->laser_table_source = lasers_of->source;
-      stats->laser_table_rms = lasers_of->fit_rms;
-      stats->lasers = lasers_of->table.lasers();
-      stats->columns = lasers_of->table.columns;
-    }
-  }
+  fill_stats(use_voxel ? voxel->voxels : counts[best], use_voxel ? 0 : escaped[best], sweep, use_voxel, false, out.size());
   return out;
 }
 

@@ -17,6 +17,7 @@
 #include "lex3d/eval/metrics.hpp"
 #include "lex3d/io/io.hpp"
 #include "lex3d/residual/residual.hpp"
+#include "residual/residual_test_util.hpp"
 #include "support/test_support.hpp"
 #include "test_config.hpp"
 
@@ -24,6 +25,7 @@ namespace lex3d {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
+using namespace residual_test;  // NOLINT: the shared helpers of the layer's tests
 
 double hausdorff(const Cloud& a, const Cloud& b) { return eval::compare_clouds(a, b).hausdorff; }
 
@@ -159,28 +161,7 @@ TEST(ResidualLaser, ACloudOfNoLidarKeepsTheBound) {
   expect_layer_bound(layer, c, Pose::Identity(), 0.02);
 }
 
-Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor) {
-  for (std::size_t at = 20; at + 12 <= file.size();) {
-    std::uint64_t len = 0;
-    for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(file[at + 4 + i]) << (8 * i);
-    if (std::memcmp(file.data() + at, from, 4) == 0) {
-      std::memcpy(file.data() + at, to, 4);
-      const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data() + at, static_cast<uInt>(12 + len)));
-      for (int i = 0; i < 4; ++i) file[at + 12 + len + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-    }
-    at += 12 + len + 4;
-  }
-  file[10] = minor;
-  const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data(), 16));
-  for (int i = 0; i < 4; ++i) file[16 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-  return file;
-}
 
-void expect_rejected(const Bytes& file, const std::string& needle) {
-  const auto d = codec::decode_model(file);
-  ASSERT_FALSE(d.ok()) << "expected a failure naming " << needle;
-  EXPECT_NE(d.status().message().find(needle), std::string::npos) << d.status().to_string();
-}
 
 TEST(ResidualLaser, ModelFileVersionRules) {
   const Cloud scan = organised_scan(16, 256);
@@ -284,31 +265,8 @@ TEST(ResidualLaser, RealScans) {
 // Golden file of format 1.4
 // ---------------------------------------------------------------------------------------
 
-std::string golden_path(const std::string& name) {
-  return std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/" + name;
-}
 constexpr double kGoldenMaxError = 0.01;
 
-void write_xyz(const std::string& path, const Cloud& c) {
-  std::ofstream out(path);
-  char line[128];
-  for (const auto& p : c.points) {
-    std::snprintf(line, sizeof line, "%.9g %.9g %.9g\n", static_cast<double>(p.x()), static_cast<double>(p.y()),
-                  static_cast<double>(p.z()));
-    out << line;
-  }
-}
-Cloud read_xyz(const std::string& path) {
-  std::ifstream in(path);
-  Cloud c;
-  float x = 0, y = 0, z = 0;
-  while (in >> x >> y >> z) c.points.emplace_back(x, y, z);
-  return c;
-}
-Bytes read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return Bytes(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
 
 // Files of an existing format version must never change: add new ones instead.
 TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile) {

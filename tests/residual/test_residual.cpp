@@ -23,6 +23,7 @@
 #include "lex3d/residual/residual.hpp"
 #include "residual/range_coder.hpp"
 #include "residual/voxel.hpp"
+#include "residual/residual_test_util.hpp"
 #include "support/test_support.hpp"
 #include "test_config.hpp"
 
@@ -30,6 +31,7 @@ namespace lex3d {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
+using namespace residual_test;  // NOLINT: the shared helpers of the layer's tests
 using residual::detail::BitModel;
 using residual::detail::IntModel;
 using residual::detail::RangeDecoder;
@@ -338,23 +340,6 @@ TEST(ResidualSweep, TiltedLinesTakeTheSweepCodingAndKeepTheBound) {
   EXPECT_FALSE(ring_st.sweep);
 }
 
-/// Rewrites chunk `from` of a model file as `to` (its CRC recomputed) and sets the minor version.
-Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor) {
-  for (std::size_t at = 20; at + 12 <= file.size();) {
-    std::uint64_t len = 0;
-    for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(file[at + 4 + i]) << (8 * i);
-    if (std::memcmp(file.data() + at, from, 4) == 0) {
-      std::memcpy(file.data() + at, to, 4);
-      const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data() + at, static_cast<uInt>(12 + len)));
-      for (int i = 0; i < 4; ++i) file[at + 12 + len + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-    }
-    at += 12 + len + 4;
-  }
-  file[10] = minor;
-  const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data(), 16));
-  for (int i = 0; i < 4; ++i) file[16 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-  return file;
-}
 
 /// Model file `file` decodes, and its cloud meets bound `e` both ways against `input`.
 void expect_bound(const Bytes& file, const Cloud& input, double e) {
@@ -366,12 +351,6 @@ void expect_bound(const Bytes& file, const Cloud& input, double e) {
   EXPECT_LE(hausdorff(cloud.value(), input), e) << "decoded to input";
 }
 
-/// Decoding model file `file` fails, and the message names `needle`.
-void expect_rejected(const Bytes& file, const std::string& needle) {
-  const auto d = codec::decode_model(file);
-  ASSERT_FALSE(d.ok()) << "expected a failure naming " << needle;
-  EXPECT_NE(d.status().message().find(needle), std::string::npos) << d.status().to_string();
-}
 
 TEST(ResidualSweep, ModelFileVersionRules) {
   const Cloud scan = tilting_scan();
@@ -747,9 +726,6 @@ TEST(ResidualVoxel, RealCloudsWhereVoxelsWin) {
 // recorded with it (float32 values printed to round-trip) must come back bit for bit.
 // ---------------------------------------------------------------------------------------
 
-std::string golden_path(const std::string& name) {
-  return std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/" + name;
-}
 
 /// The generator of the golden file (only DISABLED_WriteGoldenFile calls it).
 codec::ModelData golden_residual_model(Cloud& input) {
@@ -787,26 +763,6 @@ codec::ModelData golden_residual_model(Cloud& input) {
 constexpr double kGoldenMaxError = 0.01;
 constexpr std::size_t kVoxelGoldenPoints = 2880;  // the input points of tiny_residual_voxel_1.3
 
-void write_xyz(const std::string& path, const Cloud& c) {
-  std::ofstream out(path);
-  char line[128];
-  for (const auto& p : c.points) {
-    std::snprintf(line, sizeof line, "%.9g %.9g %.9g\n", static_cast<double>(p.x()), static_cast<double>(p.y()),
-                  static_cast<double>(p.z()));
-    out << line;
-  }
-}
-Cloud read_xyz(const std::string& path) {
-  std::ifstream in(path);
-  Cloud c;
-  float x = 0, y = 0, z = 0;
-  while (in >> x >> y >> z) c.points.emplace_back(x, y, z);
-  return c;
-}
-Bytes read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return Bytes(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
 
 /// Writes `d` (with its layer) as golden file `stem`.lex3dm, with the input and the
 /// decoded cloud as `stem`.input.xyz / .decoded.xyz.
