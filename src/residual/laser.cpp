@@ -607,6 +607,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     } else if (a.ring.empty()) {
       if (!estimate_rings(p, a.ring, lasers)) return std::nullopt;
       a.source = "estimated from the points (lasers by elevation, columns by azimuth)";
+      a.from_elevations = true;
     } else if (a.column.empty()) {
       a.source = "estimated from the input's lasers (columns by azimuth)";
     } else {

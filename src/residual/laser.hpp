@@ -41,6 +41,7 @@ struct LaserAssignment {
   std::vector<std::uint32_t> column;   ///< per input point
   std::string source;                  ///< "sensor metadata", "rings and columns of the input", "estimated"
   double fit_rms = 0.0;                ///< RMS distance of the points from their beams, metres
+  bool from_elevations = false;        ///< lasers estimated from the points' elevations alone
 };
 
 /// The laser table and every point's laser and column: from the cloud's geometry, rings and
