@@ -663,9 +663,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
                                      const Beams& beams, const std::vector<std::uint32_t>& order,
                                      const std::vector<std::int64_t>& shift, const std::vector<Beams::Beam>& beam_of,
                                      const std::vector<Eigen::Vector3d>& offset, double max_error, double bound,
-                                     bool thin, double share, std::uint32_t predictor) {
-  LaserTable table = a.table;
-  table.predictor = predictor;
+                                     bool thin, double share, const std::vector<std::uint32_t>& predictors) {
   const double qr = 2.0 * share * bound;
   const double qt = std::sqrt(std::max(0.0, 2.0 * (1.0 - share * share))) * bound * 0.99;
   if (!(qt > 0.0)) return std::nullopt;
@@ -717,65 +715,72 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     }
   }
 
-  LaserLayer out;
-  out.range_step = qr;
-  out.coded = kept.size();
-  RangeEncoder enc = head;
-  put_table(enc, table);
-  PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor == 1);
-  const auto ring_at = [&](std::size_t k) { return a.ring[coded[order[kept[k]]]]; };
-  const auto column_at = [&](std::size_t k) { return a.column[coded[order[kept[k]]]]; };
-  std::size_t at = 0;
-  std::int64_t prev_column = -1;
-  std::uint64_t remaining = kept.size();
-  while (at < kept.size()) {
-    const std::uint32_t column = column_at(at);
-    std::size_t end = at;
-    while (end < kept.size() && column_at(end) == column) ++end;
-    const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
-    pc.column_delta.put(enc, pc.column_ctx(), dc);
-    const std::int64_t s = shift[kept[at]];
-    pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
-    pc.set_shift(s);
-    pc.start_column(column, dc);
-    std::size_t j = at;
-    for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
-      const bool occ = j < end && ring_at(j) == l;
-      enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
-      if (!occ) continue;
-      pc.occupied(l);
-      for (;;) {
-        const Coded& c = q[kept[j]];
-        const auto pred = pc.predict(l);
-        const std::int64_t res = c.k - pred.k;
-        pc.range.put(enc, pred.ctx, res);
-        pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
-        pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
-        pc.update(l, c.k, res, c.k1, c.k2);
-        ++j;
-        --remaining;
-        if (remaining == 0) break;
-        const bool more = j < end && ring_at(j) == l;
-        enc.put(pc.more[0], more);
-        if (!more) break;
+  // The stream, once for each predictor; the smallest is kept.
+  std::optional<LaserLayer> best;
+  for (const std::uint32_t predictor : predictors) {
+    LaserTable table = a.table;
+    table.predictor = predictor;
+    LaserLayer out;
+    out.range_step = qr;
+    out.coded = kept.size();
+    RangeEncoder enc = head;
+    put_table(enc, table);
+    PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor == 1);
+    const auto ring_at = [&](std::size_t k) { return a.ring[coded[order[kept[k]]]]; };
+    const auto column_at = [&](std::size_t k) { return a.column[coded[order[kept[k]]]]; };
+    std::size_t at = 0;
+    std::int64_t prev_column = -1;
+    std::uint64_t remaining = kept.size();
+    while (at < kept.size()) {
+      const std::uint32_t column = column_at(at);
+      std::size_t end = at;
+      while (end < kept.size() && column_at(end) == column) ++end;
+      const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
+      pc.column_delta.put(enc, pc.column_ctx(), dc);
+      const std::int64_t s = shift[kept[at]];
+      pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
+      pc.set_shift(s);
+      pc.start_column(column, dc);
+      std::size_t j = at;
+      for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
+        const bool occ = j < end && ring_at(j) == l;
+        enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
+        if (!occ) continue;
+        pc.occupied(l);
+        for (;;) {
+          const Coded& c = q[kept[j]];
+          const auto pred = pc.predict(l);
+          const std::int64_t res = c.k - pred.k;
+          pc.range.put(enc, pred.ctx, res);
+          pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
+          pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
+          pc.update(l, c.k, res, c.k1, c.k2);
+          ++j;
+          --remaining;
+          if (remaining == 0) break;
+          const bool more = j < end && ring_at(j) == l;
+          enc.put(pc.more[0], more);
+          if (!more) break;
+        }
       }
+      prev_column = column;
+      at = end;
     }
-    prev_column = column;
-    at = end;
-  }
-  out.stream = enc.finish();
+    out.stream = enc.finish();
 
-  codec::bytes::put_f64(out.fields, qt);
-  codec::bytes::put_f64(out.fields, table.shift_unit);
-  codec::bytes::put_u32(out.fields, table.lasers());
-  codec::bytes::put_u32(out.fields, table.columns);
-  codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
-  codec::bytes::put_u32(out.fields, table.predictor);
-  codec::bytes::put_f64(out.fields, table.azimuth0);
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
-  for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
-  return out;
+    codec::bytes::put_f64(out.fields, qt);
+    codec::bytes::put_f64(out.fields, table.shift_unit);
+    codec::bytes::put_u32(out.fields, table.lasers());
+    codec::bytes::put_u32(out.fields, table.columns);
+    codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
+    codec::bytes::put_u32(out.fields, table.predictor);
+    codec::bytes::put_f64(out.fields, table.azimuth0);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
+    for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
+    if (!best || out.stream.size() < best->stream.size()) best = std::move(out);
+  }
+  return best;
 }
 
 }  // namespace
@@ -838,10 +843,10 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   // Each share with the left-neighbour predictor, the first also with the median edge
   // detector (which codes 32-beam Ouster scans ~6 % smaller, 128-beam and Velodyne scans
   // 4-8 % larger).
-  std::vector<std::optional<LaserLayer>> tries(shares.size() + 1);
+  std::vector<std::optional<LaserLayer>> tries(shares.size());
   parallel_for(tries.size(), threads, [&](std::size_t t) {
-    tries[t] = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin,
-                          shares[t < shares.size() ? t : 0], t == shares.size() ? 1U : 0U);
+    tries[t] = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin, shares[t],
+                          t == 0 ? std::vector<std::uint32_t>{0, 1} : std::vector<std::uint32_t>{0});
   }, 1);
   std::optional<LaserLayer> best;
   for (auto& t : tries)
