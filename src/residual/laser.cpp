@@ -90,6 +90,53 @@ struct Beams {
   }
 };
 
+/// Signed integers as IntModel codes them (zero flag, sign, Elias-gamma exponent, mantissa),
+/// except that the sign is conditioned on a sign context and the mantissa bits on the
+/// context's first class too (beam lengths: their magnitude's low bits still follow how
+/// rough the neighbourhood is).
+class RangeModel {
+ public:
+  static constexpr int kClasses = IntModel::kClasses;
+  static constexpr int kMaxExponent = IntModel::kMaxExponent;
+  RangeModel() : ctx_(kClasses * kClasses), mant_(kClasses) {}
+  void put(RangeEncoder& enc, int ctx, int sign_ctx, std::int64_t v) {
+    Context& m = ctx_[static_cast<std::size_t>(ctx)];
+    enc.put(m.zero, v != 0);
+    if (v == 0) return;
+    enc.put(m.sign[sign_ctx], v < 0);
+    const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
+    int e = 0;
+    while ((mag >> (e + 1)) != 0) ++e;
+    for (int j = 0; j < e; ++j) enc.put(m.exponent[static_cast<std::size_t>(j)], true);
+    if (e < kMaxExponent) enc.put(m.exponent[static_cast<std::size_t>(e)], false);
+    auto& mant = mant_[static_cast<std::size_t>(ctx / kClasses)];
+    for (int j = e - 1; j >= 0; --j)
+      enc.put(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)], ((mag >> j) & 1U) != 0);
+  }
+  std::int64_t get(RangeDecoder& dec, int ctx, int sign_ctx) {
+    Context& m = ctx_[static_cast<std::size_t>(ctx)];
+    if (!dec.get(m.zero)) return 0;
+    const bool negative = dec.get(m.sign[sign_ctx]);
+    int e = 0;
+    while (e < kMaxExponent && dec.get(m.exponent[static_cast<std::size_t>(e)])) ++e;
+    auto& mant = mant_[static_cast<std::size_t>(ctx / kClasses)];
+    std::uint64_t mag = 1;
+    for (int j = e - 1; j >= 0; --j)
+      mag = (mag << 1) | (dec.get(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)]) ? 1U : 0U);
+    const auto v = static_cast<std::int64_t>(mag);
+    return negative ? -v : v;
+  }
+
+ private:
+  struct Context {
+    BitModel zero;
+    BitModel sign[3];
+    std::array<BitModel, kMaxExponent + 1> exponent{};
+  };
+  std::vector<Context> ctx_;
+  std::vector<std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1>> mant_;
+};
+
 /// The models and predictor state shared by encoder and decoder (formats/model.md §2.8.3).
 class PointCoder {
  public:
@@ -179,7 +226,9 @@ class PointCoder {
   BitModel more[2];
   IntModel column_delta{kClasses};
   IntModel column_shift{kClasses};
-  IntModel range{kClasses * kClasses};
+  RangeModel range;
+  /// The sign context of laser l's next residual: its last residual's sign (0, +, -).
+  int sign_ctx(std::uint32_t l) const { return last_res_[l] == 0 ? 0 : last_res_[l] > 0 ? 1 : 2; }
   IntModel tangential1{kClasses * kClasses}, tangential2{kClasses * kClasses};
 
  private:
@@ -751,7 +800,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
           const Coded& c = q[kept[j]];
           const auto pred = pc.predict(l);
           const std::int64_t res = c.k - pred.k;
-          pc.range.put(enc, pred.ctx, res);
+          pc.range.put(enc, pred.ctx, pc.sign_ctx(l), res);
           pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
           pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
           pc.update(l, c.k, res, c.k1, c.k2);
@@ -942,7 +991,7 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
       const auto b = beams.beam(l, c, shift);
       for (;;) {
         const auto pred = pc.predict(l);
-        const std::int64_t res = pc.range.get(dec, pred.ctx);
+        const std::int64_t res = pc.range.get(dec, pred.ctx, pc.sign_ctx(l));
         const std::int64_t k1 = pc.tangential1.get(dec, pc.k1_ctx(l));
         const std::int64_t k2 = pc.tangential2.get(dec, pc.k2_ctx(l, k1));
         const std::int64_t k = pred.k + res;
