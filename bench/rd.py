@@ -38,6 +38,7 @@ decompress's decode + reconstruct); *_wall_ms are the process wall times.
 import argparse
 import glob
 import json
+import math
 import os
 import re
 import shutil
@@ -67,19 +68,35 @@ MAP_STEP = 3     # this many scans apart (3 s),
 MAP_COUNT = 3    # maps, spread over the walk
 
 
-# Sets read from DATA by a glob, one line each: name, glob, lex3d --format (or None), spinning
-# lidar (G-PCC predictive + angular runs on it). A set whose first file lex3d cannot read
-# (lex3d_convert fails) is skipped with a note, so sets for inputs lex3d does not read yet can
-# stand here.
+# Sets read from DATA by globs, one line each: name, glob (or tuple of globs), lex3d --format
+# (or None), spinning lidar (G-PCC predictive + angular runs on it), and where G-PCC's laser
+# table comes from: None (estimated from the points, bench/laser_table.py), "ouster" (the
+# metadata JSON beside the capture) or a published sensor table (LASER_TABLES). A set whose
+# first file lex3d cannot read (lex3d_convert fails) is skipped with a note.
+# Raw logs (.pcap) hold one scan a complete turn: `lex3d convert` writes each turn as an
+# organised PCD, whose points (lex3d_convert, no-returns dropped) are the reference and the
+# baseline codecs' input; lex3d compresses the capture itself (its sensor geometry from the
+# log / metadata) and is measured on the same turn.
 GLOB_SETS = [
-    ("hdl32e", "velodyne/hdl32e_*.pcd", None, True),
-    ("ouster", "ouster/*.pcap", None, True),
-    ("vlp16", "velodyne/vlp16_*.pcap", None, True),
-    ("las", "las/*.las", None, False),
+    ("hdl32e", "velodyne/hdl32e_*.pcd", None, True, None),
+    ("hdl32e_pcap", "velodyne/hdl32e_*.pcap", None, True, "hdl32e"),
+    ("ouster", "ouster/*.pcap", None, True, "ouster"),
+    ("vlp16", "velodyne/vlp16_*.pcap", None, True, "vlp16"),
+    ("las", ("las/hexbin-crop.las", "las/autzen_trim.las"), None, False, None),
 ]
-SPINNING = {"balm", "kitti00", "newer_college"} | {n for n, _, _, sp in GLOB_SETS if sp}
-OPTIONAL = {n for n, _, _, _ in GLOB_SETS}
-DEFAULT_SETS = ["balm", "kitti00", "newer_college", "indoor", "balm_map"] + [n for n, _, _, _ in GLOB_SETS]
+SPINNING = {"balm", "kitti00", "newer_college"} | {g[0] for g in GLOB_SETS if g[3]}
+OPTIONAL = {g[0] for g in GLOB_SETS}
+TABLE_SOURCE = {g[0]: g[4] for g in GLOB_SETS}
+DEFAULT_SETS = ["balm", "kitti00", "newer_college", "indoor", "balm_map"] + [g[0] for g in GLOB_SETS]
+# Published nominal laser tables (elevation degrees, vertical offset mm): VLP-16 (Velodyne's
+# manual: -15 ... +15 degrees in 2 degree steps, interleaved), HDL-32E (bench/laser_table.py's:
+# -30.67 ... +10.67 degrees in 4/3 degree steps). No vertical offsets: lex3d's Velodyne reader
+# puts every beam's origin at the sensor origin (the VLP-16 manual's per-laser vertical
+# corrections of up to 11.2 mm would leave that much fit residual on its points).
+LASER_TABLES = {
+    "vlp16": ([-15, 1, -13, 3, -11, 5, -9, 7, -7, 9, -5, 11, -3, 13, -1, 15], [0.0] * 16),
+    "hdl32e": ([-30.67 + i * 4.0 / 3.0 for i in range(32)], [0.0] * 32),
+}
 
 
 def env_list(name, default, kind=float):
@@ -110,9 +127,86 @@ def datasets(data, all_scans):
         starts = range(0, len(balm) - span + 1, max(1, (len(balm) - span) // (MAP_COUNT - 1)))
         out["balm_map"] = ([(("map", [s + MAP_STEP * k for k in range(MAP_SCANS)]), None, None)
                             for s in list(starts)[:MAP_COUNT]], None)
-    for name, pattern, fmt, _ in GLOB_SETS:
-        out[name] = ([(s, fmt, None) for s in sorted(glob.glob(os.path.join(data, pattern)))], None)
+    for name, pattern, fmt, _, _ in GLOB_SETS:
+        files = []
+        for p in ([pattern] if isinstance(pattern, str) else pattern):
+            files += sorted(glob.glob(os.path.join(data, p)))
+        out[name] = ([(s, fmt, None) for s in files], None)
     return out
+
+
+def ouster_metadata(pcap):
+    """The metadata JSON beside an Ouster capture, found as lex3d finds it: <stem>.json, else the
+    stem cut at its last '_', repeatedly."""
+    stem = os.path.splitext(pcap)[0]
+    while True:
+        if os.path.isfile(stem + ".json"):
+            return stem + ".json"
+        d, b = os.path.split(stem)
+        if "_" not in b:
+            return None
+        stem = os.path.join(d, b.rsplit("_", 1)[0])
+
+
+def given_table(xyz, tan_t, z0_m, phi, source):
+    """A laser table given by metadata or a published table, in laser_table.fit's layout; the fit
+    residual (z minus the nearest cone at the point's range) is measured on the points, and
+    phi_per_turn (None: from the points, as laser_table.fit) is the given firings a turn."""
+    import numpy as np
+    import laser_table
+    order = np.argsort(tan_t)
+    tan_t, z0 = np.asarray(tan_t, dtype=np.float64)[order], np.asarray(z0_m, dtype=np.float64)[order]
+    if phi is None:
+        phi = laser_table.fit(xyz)["phi_per_turn"]
+        phi = [int(np.median(phi))] * len(tan_t)
+    r = np.hypot(xyz[:, 0], xyz[:, 1])
+    ok = r > 1e-3
+    r, z = r[ok], xyz[ok, 2]
+    lab = laser_table.assign(r, z, tan_t, z0)
+    res = z - (tan_t[lab] * r + z0[lab])
+    counts = np.bincount(lab, minlength=len(tan_t))
+    return {
+        "lasers": int(len(tan_t)), "tan_theta": [float(v) for v in tan_t], "z0_m": [float(v) for v in z0],
+        "phi_per_turn": [int(v) for v in phi], "source": source,
+        "theta_deg_min": float(np.degrees(np.arctan(tan_t.min()))),
+        "theta_deg_max": float(np.degrees(np.arctan(tan_t.max()))),
+        "fit_rms_mm": float(1000 * np.sqrt(np.mean(res ** 2))),
+        "fit_p95_mm": float(1000 * np.quantile(np.abs(res), 0.95)),
+        "points": int(len(r)), "empty_lasers": int((counts == 0).sum()),
+    }
+
+
+def ouster_table(xyz, meta_path):
+    """The exact laser table of an Ouster sensor from its metadata: beam i is the cone
+    z = tan(alt_i) (r_xy - n) + z_beam, r_xy = horizontal range in the sensor frame, n the lidar
+    origin to beam origin distance, z_beam the beam origin's height in the sensor frame
+    (lidar_to_sensor_transform, plus beam_to_lidar_transform's height where the metadata has
+    one); one firing a column, columns_per_frame a turn."""
+    import numpy as np
+    with open(meta_path) as f:
+        m = json.load(f)
+    bi = m.get("beam_intrinsics", m)
+    alt = np.radians(np.asarray(bi["beam_altitude_angles"], dtype=np.float64))
+    n_mm = float(bi.get("lidar_origin_to_beam_origin_mm", 0.0))
+    beam_z_mm = 0.0
+    if "beam_to_lidar_transform" in bi:
+        t = bi["beam_to_lidar_transform"]
+        n_mm, beam_z_mm = float(t[3]), float(t[11])
+    l2s = m.get("lidar_intrinsics", m)["lidar_to_sensor_transform"]
+    z_mm = float(l2s[11]) + float(l2s[10]) * beam_z_mm
+    fmt = m.get("lidar_data_format", m.get("data_format", {}))
+    cols = int(fmt.get("columns_per_frame", 0)) or int(str(m.get("lidar_mode", "1024x10")).split("x")[0])
+    tan_t = np.tan(alt)
+    return given_table(xyz, tan_t, (z_mm - n_mm * tan_t) / 1000.0, [cols] * len(alt),
+                       f"metadata:{os.path.basename(meta_path)}")
+
+
+def numbered(path, index, count):
+    """lex3d's name for output `index` of `count` (one file a turn of a raw log): stem_000.ext."""
+    if count <= 1:
+        return path
+    stem, ext = os.path.splitext(path)
+    return f"{stem}_{index:03d}{ext}"
 
 
 def spread(items, n):
@@ -246,7 +340,8 @@ class Bench:
             coverage_2cm=m["coverage_2cm"], coverage_5cm=m["coverage_5cm"],
             outliers_2cm=m["outliers_2cm"], outliers_5cm=m["outliers_5cm"])
         row.update(extra or {})
-        for k in ("max_error_m", "words_used", "instances"):
+        for k in ("max_error_m", "words_used", "instances", "lex3d_points", "layer_coding", "lex3d_laser_table",
+                  "lex3d_laser_fit_rms_m"):
             if k in enc:
                 row[k] = enc[k]
         if "max_error_m" in row and row["hausdorff_m"] > row["max_error_m"] * 1.0001 + 1e-6:
@@ -303,7 +398,21 @@ class Bench:
             self.case(base, "octomap", f"r={r:g}", r, [self.octomap, "encode", ref, stream, "--resolution", r],
                       [self.octomap, "decode", stream, decoded], stream, decoded, ref, parse_enc, parse_dec)
 
-    def gpcc(self, base, ref, w, spinning):
+    def laser_table(self, ref, scan, source):
+        import laser_table
+        xyz = laser_table.read_ply_xyz(ref)
+        if source == "ouster":
+            meta = ouster_metadata(scan)
+            if meta is None:
+                raise ValueError(f"{scan}: no metadata JSON beside it")
+            return ouster_table(xyz, meta)
+        if source in LASER_TABLES:
+            deg, z_mm = LASER_TABLES[source]
+            tan_t = [math.tan(math.radians(d)) for d in deg]
+            return given_table(xyz, tan_t, [v / 1000.0 for v in z_mm], None, f"published:{source}")
+        return laser_table.fit(xyz)
+
+    def gpcc(self, base, ref, w, spinning, scan=None, table_source=None):
         """G-PCC (tmc3): octree geometry, lossy by positionQuantizationScale, on integer mm; and,
         on spinning-lidar scans, predictive geometry with angular coding and the scan's laser
         table (bench/laser_table.py). Geometry only (no attribute coded), trisoup off."""
@@ -321,22 +430,38 @@ class Bench:
             write_ply_xyz(decoded, laser_table.read_ply_xyz(raw))
 
         common = ["--srcUnit=1", "--srcUnitLength=1", "--disableAttributeCoding=1"]
+        # tmc3 turns a float input into its integer unit by truncating toward zero (measured: on
+        # a 1 mm unit the error per axis is -0.5 mm on average for x > 0 and +0.5 mm for x < 0,
+        # RMSE 1 mm instead of 0.5 mm). Its input is the reference moved half a unit away from
+        # zero on every axis, so that the truncation rounds to the nearest unit; the decoded
+        # cloud is still measured against the reference itself.
+        xyz_ref = laser_table.read_ply_xyz(ref)
+        shifted = {}
+
+        def tmc3_input(unit_m):
+            if unit_m not in shifted:
+                path = os.path.join(w, f"g_in_{len(shifted)}.ply")
+                write_ply_xyz(path, xyz_ref + np.sign(xyz_ref) * (unit_m / 2.0))
+                shifted[unit_m] = path
+            return shifted[unit_m]
+
         dec_cmd = [self.tmc3, "--mode=1", f"--compressedStreamPath={stream}", f"--reconstructedDataPath={raw}",
                    "--outputBinaryPly=1", "--outputUnitLength=1"]
         for step in env_list("RD_GPCC_OCTREE_MM", GPCC_OCTREE_STEP_MM, float):
-            enc = [self.tmc3, "--mode=0", f"--uncompressedDataPath={ref}", f"--compressedStreamPath={stream}",
-                   "--inputScale=1000", f"--positionQuantizationScale={1.0 / step:.10g}", "--trisoupNodeSizeLog2=0",
+            enc = [self.tmc3, "--mode=0", f"--uncompressedDataPath={tmc3_input(0.001)}",
+                   f"--compressedStreamPath={stream}", "--inputScale=1000", f"--positionQuantizationScale={1.0 / step:.10g}", "--trisoupNodeSizeLog2=0",
                    "--mergeDuplicatedPoints=1"] + common
             self.case(base, "gpcc-octree", f"step={step:g}mm", step, enc, dec_cmd, stream, decoded, ref, parse, parse,
                       post=post)
         if not spinning:
             return
-        t = laser_table.fit(laser_table.read_ply_xyz(ref))
+        t = self.laser_table(ref, scan, table_source)
         print(f"  laser table ({t['source']}): {t['lasers']} lasers, {t['theta_deg_min']:.2f} to "
               f"{t['theta_deg_max']:.2f} deg, fit residual RMS {t['fit_rms_mm']:.2f} mm, 95 % "
               f"{t['fit_p95_mm']:.2f} mm, azimuth steps per turn {min(t['phi_per_turn'])}-{max(t['phi_per_turn'])}",
               flush=True)
-        table = {"lasers": t["lasers"], "laser_fit_rms_mm": t["fit_rms_mm"], "laser_fit_p95_mm": t["fit_p95_mm"]}
+        table = {"lasers": t["lasers"], "laser_fit_rms_mm": t["fit_rms_mm"], "laser_fit_p95_mm": t["fit_p95_mm"],
+                 "laser_table_source": t["source"].split(":")[0]}
 
         def pred_args(unit_m, r_log2, a_log2, residual):
             speed = max(1, round(2 ** (a_log2 + 12) / max(t["phi_per_turn"])))
@@ -357,24 +482,30 @@ class Bench:
         runs += [(f"res={u:g}mm", u / 1000.0, 0, 12, True, u)
                  for u in env_list("RD_GPCC_PRED_RES_MM", GPCC_PRED_RES_MM, float)]
         for setting, unit, r, a, residual, order in runs:
-            enc = [self.tmc3, "--mode=0", f"--uncompressedDataPath={ref}", f"--compressedStreamPath={stream}"] + \
-                pred_args(unit, r, a, residual)
+            enc = [self.tmc3, "--mode=0", f"--uncompressedDataPath={tmc3_input(unit)}",
+                   f"--compressedStreamPath={stream}"] + pred_args(unit, r, a, residual)
             self.case(base, "gpcc-pred", setting, order, enc, dec_cmd, stream, decoded, ref, parse, parse,
                       post=post, extra=table)
 
-    def lex3d_codec(self, base, scan, fmt, pose_args, ref, w, alphabet, n_scans):
+    def lex3d_codec(self, base, scan, fmt, pose_args, ref, w, alphabet, n_scans, turn=0, turns=1):
         def parse_dec(out, err):
             t = last_json(out).get("timings_ms", {})
             return {"ms": t.get("decode", 0.0) + t.get("reconstruct", 0.0)}
 
         fmt_args = ["--format", fmt] if fmt else []
-        stream, decoded = os.path.join(w, "l.lex3dm"), os.path.join(w, "l.ply")
+        # A raw log of several turns gives one model file a turn (l_000.lex3dm, ...): this scan's
+        # is measured. A georeferenced input (LAS) decodes to true coordinates in PLY; the
+        # float32 .bin holds the local frame the reference PLY is in.
+        out_path = os.path.join(w, "l.lex3dm")
+        stream = numbered(out_path, turn, turns)
+        decoded = os.path.join(w, "l.bin" if scan.lower().endswith(".las") else "l.ply")
         # lex3d: words alone (alphabet learned on the scan, embedded), then the residual layer
         # alone (the default with --max-error). lex3d-seq: the dataset's shared alphabet, words
         # alone and, with a bound, --words auto (words + layer where that file is smaller), its
         # bytes shared by the scans of the run.
-        own_e = [None] + (env_list("RD_LEX3D_E", LEX3D_E) if self.has_max_error else [])
-        seq_e = [None] + (env_list("RD_LEX3D_SEQ_E", LEX3D_SEQ_E) if self.has_max_error else [])
+        words = [None] if os.environ.get("RD_LEX3D_WORDS", "1") != "0" else []
+        own_e = words + (env_list("RD_LEX3D_E", LEX3D_E) if self.has_max_error else [])
+        seq_e = words + (env_list("RD_LEX3D_SEQ_E", LEX3D_SEQ_E) if self.has_max_error else [])
         for mode, es in (("lex3d", own_e), ("lex3d-seq", seq_e)):
             if mode == "lex3d-seq" and alphabet is None:
                 continue
@@ -386,14 +517,21 @@ class Bench:
 
                 def parse_enc(out, err, e=e):
                     j = last_json(out)
-                    r = {"ms": j["time_ms"], "instances": j["files"][0].get("instances")}
+                    f = j["files"][turn]
+                    # time_ms covers the whole command: every turn of a raw log, shared out here
+                    r = {"ms": j["time_ms"] / turns, "instances": f.get("instances"), "lex3d_points": f.get("points")}
                     if e is not None:
+                        res = f.get("residual", {})
                         r["max_error_m"] = e
-                        r["words_used"] = j["files"][0].get("residual", {}).get("words_used")
+                        r["words_used"] = res.get("words_used")
+                        r["layer_coding"] = res.get("coding")
+                        if "laser_table" in res:
+                            r["lex3d_laser_table"] = res["laser_table"].get("source")
+                            r["lex3d_laser_fit_rms_m"] = res["laser_table"].get("fit_rms_m")
                     return r
 
                 self.case(base, mode, "words" if e is None else f"E={e:g}", 0.0 if e is None else e,
-                          [self.lex3d, "compress", scan, "-o", stream, "--json"] + fmt_args + pose_args + a_args + e_args,
+                          [self.lex3d, "compress", scan, "-o", out_path, "--json"] + fmt_args + pose_args + a_args + e_args,
                           [self.lex3d, "decompress", stream, "-o", decoded, "--json"] + a_args,
                           stream, decoded, ref, parse_enc, parse_dec,
                           extra_bytes=(alphabet["bytes"] / n_scans) if mode == "lex3d-seq" else 0.0)
@@ -451,12 +589,28 @@ class Bench:
                 print(f"[{name}] skipped: lex3d does not read {os.path.basename(scans[0][0])} yet "
                       f"({err.strip().splitlines()[-1] if err.strip() else 'exit ' + str(rc)})", flush=True)
                 return
-        alphabet = self.learn(name, scans, poses, w)
+        # one entry a scan: (file, format, pose line, file the reference is read from, turn, turns)
+        entries = []
+        for scan, fmt, li in scans:
+            if not scan.lower().endswith(".pcap"):
+                entries.append((scan, fmt, li, scan, 0, 1))
+                continue
+            pcd = os.path.join(w, os.path.splitext(os.path.basename(scan))[0] + ".pcd")
+            rc, out, err, _, _ = self.runner.run([self.lex3d, "convert", scan, pcd])
+            turns = len([l for l in out.split("\n") if " -> " in l])
+            if rc != 0 or turns == 0:
+                print(f"  FAILED lex3d convert {scan}: {err.strip()[-300:]}", flush=True)
+                self.failures += 1
+                continue
+            print(f"  {os.path.basename(scan)}: {turns} turn(s)", flush=True)
+            entries += [(scan, fmt, li, numbered(pcd, k, turns), k, turns) for k in range(turns)]
+        alphabet = self.learn(name, scans, poses, w) if (
+            os.environ.get("RD_LEX3D_WORDS", "1") != "0" or not self.has_max_error) else None
         pose_lines = open(poses).read().split("\n") if poses else None
-        for n, (scan, fmt, li) in enumerate(scans, 1):
+        for n, (scan, fmt, li, src, turn, turns) in enumerate(entries, 1):
             t0 = time.perf_counter()
             ref = os.path.join(w, "ref.ply")
-            cmd = [self.convert, scan, ref] + (["--format", fmt] if fmt else [])
+            cmd = [self.convert, src, ref] + (["--format", fmt] if fmt and src == scan else [])
             rc, out, err, _, _ = self.runner.run(cmd)
             if rc != 0:
                 print(f"  FAILED converting {scan}: {err.strip()}", flush=True)
@@ -469,15 +623,16 @@ class Bench:
                 with open(p, "w") as f:
                     f.write(pose_lines[li] + "\n")
                 pose_args = ["--poses", p]
-            base = {"dataset": name, "scan": os.path.basename(scan), "points": points}
+            label = os.path.basename(scan) + (f"#{turn}" if turns > 1 else "")
+            base = {"dataset": name, "scan": label, "points": points}
             self.draco(base, ref, w)
             self.pcl_octree(base, ref, w)
             self.octomap_codec(base, ref, w)
             if self.tmc3:
-                self.gpcc(base, ref, w, name in SPINNING)
-            self.lex3d_codec(base, scan, fmt, pose_args, ref, w, alphabet, len(scans))
+                self.gpcc(base, ref, w, name in SPINNING, scan, TABLE_SOURCE.get(name))
+            self.lex3d_codec(base, scan, fmt, pose_args, ref, w, alphabet, len(entries), turn, turns)
             el = time.perf_counter() - t_start
-            print(f"  [{name} {n}/{len(scans)}] {os.path.basename(scan)}: {points} points, "
+            print(f"  [{name} {n}/{len(entries)}] {label}: {points} points, "
                   f"{time.perf_counter() - t0:.0f} s (elapsed {int(el // 60)}:{int(el % 60):02d})", flush=True)
 
 

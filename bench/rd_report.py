@@ -128,10 +128,26 @@ def tables(summary, alphabets, targets, rows):
         fits = [r for r in rows if r["dataset"] == ds and r.get("laser_fit_rms_mm") is not None]
         if fits:
             per_scan = {r["scan"]: r for r in fits}.values()
-            lines.append(f"G-PCC predictive laser tables (bench/laser_table.py, one a scan): "
+            srcs = sorted({r.get("laser_table_source", "estimated") for r in per_scan})
+            lines.append(f"G-PCC predictive laser tables ({', '.join(srcs)}; one a scan): "
                          f"{median([r['lasers'] for r in per_scan]):g} lasers (median), fit residual RMS "
                          f"{median([r['laser_fit_rms_mm'] for r in per_scan]):.2f} mm, 95th percentile "
                          f"{median([r['laser_fit_p95_mm'] for r in per_scan]):.2f} mm (medians over the scans).")
+            lines.append("")
+        picked = {}
+        for r in rows:
+            if r["dataset"] == ds and r.get("layer_coding") and "error" not in r:
+                key = (r["codec"], r["layer_coding"], r.get("lex3d_laser_table") or "")
+                picked[key] = picked.get(key, 0) + 1
+        if picked:
+            lines.append("lex3d residual-layer coding chosen (runs): " + "; ".join(
+                f"{c} {lc}{' (table ' + t + ')' if t else ''} ×{k}" for (c, lc, t), k in sorted(picked.items())) + ".")
+            lines.append("")
+        off = [r for r in rows if r["dataset"] == ds and r.get("lex3d_points") is not None and "error" not in r
+               and r["lex3d_points"] != r["points"]]
+        if off:
+            lines.append(f"NOTE: {len(off)} lex3d runs read a different point count than the reference "
+                         f"(e.g. {off[0]['scan']}: {off[0]['lex3d_points']} vs {off[0]['points']}).")
             lines.append("")
         lines.append("| codec | setting | bits/pt | D1 PSNR dB | RMSE mm | Hausdorff m | ≤2 cm % | ≤5 cm % | "
                      "enc ms | dec ms | peak MB |")
