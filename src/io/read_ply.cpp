@@ -227,7 +227,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   }
   if (vi == elements.size()) return bad_data(msg(path, "header has no 'vertex' element"));
   const PlyElement& vertex = elements[vi];
-  int ix = -1, iy = -1, iz = -1, ii = -1, ir = -1, ig = -1, ib = -1;
+  int ix = -1, iy = -1, iz = -1, ii = -1, ir = -1, ig = -1, ib = -1, il = -1;
   for (std::size_t k = 0; k < vertex.props.size(); ++k) {
     const PlyProperty& p = vertex.props[k];
     const int kk = static_cast<int>(k);
@@ -239,6 +239,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     else if (ir < 0 && name_is(p.name, {"red", "diffuse_red"})) ir = kk;
     else if (ig < 0 && name_is(p.name, {"green", "diffuse_green"})) ig = kk;
     else if (ib < 0 && name_is(p.name, {"blue", "diffuse_blue"})) ib = kk;
+    else if (il < 0 && name_is(p.name, {"ring", "laser_id", "ring_id"})) il = kk;
   }
   if (ix < 0 || iy < 0 || iz < 0) {
     return bad_data(msg(path, std::string("vertex element has no '") +
@@ -251,6 +252,16 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                     vertex.props[static_cast<std::size_t>(iy)].type == Scalar::kF64 ||
                     vertex.props[static_cast<std::size_t>(iz)].type == Scalar::kF64;
   Builder out(r, ii >= 0, color, wide);
+  // A ring (laser) property gives each point's laser (not with double coordinates).
+  const bool rings = il >= 0 && !wide;
+  out.set_layout(rings, false, false);
+  auto ring_of = [&](std::uint64_t item, double value, std::uint16_t& ring) -> Status {
+    if (!(value >= 0.0 && value <= 65535.0) || value != std::floor(value))
+      return bad_data(msg(path, "vertex " + std::to_string(item) + ": " + vertex.props[static_cast<std::size_t>(il)].name +
+                                    " value is not a laser index in [0, 65535]"));
+    ring = static_cast<std::uint16_t>(value);
+    return {};
+  };
   const std::size_t nprops = vertex.props.size();
 
   // ---------------- ascii
@@ -308,6 +319,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
       double w[3] = {0.0, 0.0, 0.0};
       double c[3] = {0.0, 0.0, 0.0};
+      double lv = 0.0;
       for (std::size_t k = 0; k < nprops; ++k) {
         const PlyProperty& p = vertex.props[k];
         if (!tc.next(b, e)) {
@@ -337,11 +349,17 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (color && kk == ir) ok = parse_number(b, e, c[0]);
         else if (color && kk == ig) ok = parse_number(b, e, c[1]);
         else if (color && kk == ib) ok = parse_number(b, e, c[2]);
+        else if (rings && kk == il) ok = parse_number(b, e, lv);
         else ok = is_number(b, e);
         if (!ok) return not_number();
       }
+      std::uint16_t ring = 0;
+      if (rings) {
+        Status rs = ring_of(item, lv, ring);
+        if (!rs.ok()) return rs;
+      }
       if (wide) out.add_wide(w[0], w[1], w[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
-      else out.add(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
+      else out.add_at(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])}, ring, 0);
     }
     return out.finish();
   }
@@ -429,11 +447,17 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
           c[static_cast<std::size_t>(ch)] = to_u8(load_scalar(p + offsets[u], vertex.props[u].type, swap));
         }
       }
+      std::uint16_t ring = 0;
+      if (rings) {
+        const auto u = static_cast<std::size_t>(il);
+        Status rs = ring_of(item, load_scalar(p + offsets[u], vertex.props[u].type, swap), ring);
+        if (!rs.ok()) return rs;
+      }
       if (wide)
         out.add_wide(load_scalar(p + offsets[static_cast<std::size_t>(ix)], sx, swap),
                      load_scalar(p + offsets[static_cast<std::size_t>(iy)], sy, swap),
                      load_scalar(p + offsets[static_cast<std::size_t>(iz)], sz, swap), in, c);
-      else out.add(x, y, z, in, c);
+      else out.add_at(x, y, z, in, c, ring, 0);
     }
     return out.finish();
   }
@@ -441,6 +465,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
     double w[3] = {0.0, 0.0, 0.0};
     double c[3] = {0.0, 0.0, 0.0};
+    double lv = 0.0;
     for (std::size_t k = 0; k < nprops; ++k) {
       const PlyProperty& p = vertex.props[k];
       const int kk = static_cast<int>(k);
@@ -457,6 +482,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       else if (color && kk == ir) ok = bc.scalar(p.type, c[0]);
       else if (color && kk == ig) ok = bc.scalar(p.type, c[1]);
       else if (color && kk == ib) ok = bc.scalar(p.type, c[2]);
+      else if (rings && kk == il) ok = bc.scalar(p.type, lv);
       else ok = bc.skip(scalar_size(p.type));
       if (!ok) {
         return bad_data(msg(path, "truncated binary data: vertex " + std::to_string(item) + " of " +
@@ -464,8 +490,13 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                         bc.offset());
       }
     }
+    std::uint16_t ring = 0;
+    if (rings) {
+      Status rs = ring_of(item, lv, ring);
+      if (!rs.ok()) return rs;
+    }
     if (wide) out.add_wide(w[0], w[1], w[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
-    else out.add(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
+    else out.add_at(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])}, ring, 0);
   }
   return out.finish();
 }

@@ -536,6 +536,32 @@ TEST(OrganisedInput, RingFieldAndZeroRecords) {
               "VERSION 0.7\nFIELDS x y z ring\nSIZE 4 4 4 2\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 1\nHEIGHT 1\n"
               "POINTS 1\nDATA ascii\n1 2 3 -1\n");
   EXPECT_FALSE(read_cloud(pcd).ok());
+  // a PLY ring property, ascii and binary (with and without a list property)
+  const std::string ply = (dir / "ring.ply").string();
+  write_bytes(ply,
+              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+              "property ushort ring\nend_header\n1 2 3 7\n4 5 6 0\nnan 1 1 2\n");
+  auto pa = read_cloud(ply);
+  ASSERT_TRUE(pa.ok()) << pa.status().to_string();
+  EXPECT_EQ(pa.value().cloud.ring, (std::vector<std::uint16_t>{7, 0}));
+  std::string bply = "ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                     "property float z\nproperty uchar laser_id\nend_header\n";
+  for (const float v : {1.0F, 2.0F, 3.0F}) bply.append(reinterpret_cast<const char*>(&v), 4);
+  bply.push_back(static_cast<char>(5));
+  for (const float v : {4.0F, 5.0F, 6.0F}) bply.append(reinterpret_cast<const char*>(&v), 4);
+  bply.push_back(static_cast<char>(9));
+  write_bytes(ply, bply);
+  auto pb = read_cloud(ply);
+  ASSERT_TRUE(pb.ok()) << pb.status().to_string();
+  EXPECT_EQ(pb.value().cloud.ring, (std::vector<std::uint16_t>{5, 9}));
+  std::string lply = "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                     "property float z\nproperty list uchar int idx\nproperty int ring\nend_header\n";
+  for (const float v : {1.0F, 2.0F, 3.0F}) lply.append(reinterpret_cast<const char*>(&v), 4);
+  lply.push_back(static_cast<char>(0));
+  const std::int32_t bad_ring = -3;
+  lply.append(reinterpret_cast<const char*>(&bad_ring), 4);
+  write_bytes(ply, lply);
+  EXPECT_FALSE(read_cloud(ply).ok()) << "a negative ring";
   // a KITTI .bin with exact (0, 0, 0) records: no-returns, dropped and counted
   std::string bin;
   for (const float v : {1.0F, 2.0F, 3.0F, 0.5F, 0.0F, 0.0F, 0.0F, 0.0F, 4.0F, 0.0F, 0.0F, 0.25F})
