@@ -262,6 +262,19 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     ring = static_cast<std::uint16_t>(value);
     return {};
   };
+  // A vertex parsed one property at a time (ascii, or binary with list properties).
+  auto add_vertex = [&](std::uint64_t item, const float (&v)[4], const double (&w)[3], const double (&c)[3],
+                        double lv) -> Status {
+    std::uint16_t ring = 0;
+    if (rings) {
+      Status rs = ring_of(item, lv, ring);
+      if (!rs.ok()) return rs;
+    }
+    const Rgb rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])};
+    if (wide) out.add_wide(w[0], w[1], w[2], v[3], rgb);
+    else out.add_at(v[0], v[1], v[2], v[3], rgb, ring, 0);
+    return {};
+  };
   const std::size_t nprops = vertex.props.size();
 
   // ---------------- ascii
@@ -353,13 +366,8 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else ok = is_number(b, e);
         if (!ok) return not_number();
       }
-      std::uint16_t ring = 0;
-      if (rings) {
-        Status rs = ring_of(item, lv, ring);
-        if (!rs.ok()) return rs;
-      }
-      if (wide) out.add_wide(w[0], w[1], w[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
-      else out.add_at(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])}, ring, 0);
+      Status added = add_vertex(item, v, w, c, lv);
+      if (!added.ok()) return added;
     }
     return out.finish();
   }
@@ -490,13 +498,8 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                         bc.offset());
       }
     }
-    std::uint16_t ring = 0;
-    if (rings) {
-      Status rs = ring_of(item, lv, ring);
-      if (!rs.ok()) return rs;
-    }
-    if (wide) out.add_wide(w[0], w[1], w[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])});
-    else out.add_at(v[0], v[1], v[2], v[3], Rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])}, ring, 0);
+    Status added = add_vertex(item, v, w, c, lv);
+    if (!added.ok()) return added;
   }
   return out.finish();
 }
