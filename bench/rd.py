@@ -135,6 +135,24 @@ def datasets(data, all_scans):
     return out
 
 
+def resampled_sets(root):
+    """Sets made by bench/resample_sets.sh: ROOT/<sensor>/*.bin, re-sampled from real scans with
+    the sensor's vendor laser table (ROOT/<sensor>/table.json, which G-PCC's angular coding is
+    given as the exact table). name -> (scans, None); registered as spinning, optional sets."""
+    out = {}
+    if not root:
+        return out
+    for d in sorted(glob.glob(os.path.join(root, "*", "table.json"))):
+        sensor = os.path.basename(os.path.dirname(d))
+        name = "rs_" + sensor
+        files = sorted(glob.glob(os.path.join(os.path.dirname(d), "*.bin")))
+        out[name] = ([(s, None, None) for s in files], None)
+        SPINNING.add(name)
+        OPTIONAL.add(name)
+        TABLE_SOURCE[name] = "file:" + d
+    return out
+
+
 def ouster_metadata(pcap):
     """The metadata JSON beside an Ouster capture, found as lex3d finds it: <stem>.json, else the
     stem cut at its last '_', repeatedly."""
@@ -406,6 +424,13 @@ class Bench:
             if meta is None:
                 raise ValueError(f"{scan}: no metadata JSON beside it")
             return ouster_table(xyz, meta)
+        if source and source.startswith("file:"):
+            with open(source[5:]) as f:
+                spec = json.load(f)
+            lasers = spec["lasers"]
+            tan_t = [math.tan(math.radians(l["elevation_deg"])) for l in lasers]
+            return given_table(xyz, tan_t, [l.get("z_offset", 0.0) for l in lasers], [int(spec["columns"])] * len(lasers),
+                               "published:" + spec["sensor"])
         if source in LASER_TABLES:
             deg, z_mm = LASER_TABLES[source]
             tan_t = [math.tan(math.radians(d)) for d in deg]
@@ -646,10 +671,12 @@ def main():
     ap.add_argument("--lex3d", help="the lex3d binary (default BUILD/lex3d)")
     ap.add_argument("--tmc3", help="MPEG G-PCC's tmc3 binary (TMC13); G-PCC is skipped without it")
     ap.add_argument("--scans", type=int, help="at most this many scans a dataset, evenly spaced")
+    ap.add_argument("--resampled", help="sets made by bench/resample_sets.sh (datasets rs_<sensor>)")
     ap.add_argument("datasets", nargs="*", default=DEFAULT_SETS)
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     all_sets = datasets(args.data, args.all_scans)
+    all_sets.update(resampled_sets(args.resampled))
     for d in args.datasets:
         if d not in all_sets:
             sys.exit(f"rd.py: unknown dataset {d} (known: {', '.join(all_sets)})")

@@ -22,6 +22,8 @@
 #   --out DIR    results (default out/rd/<datasets joined by ->)
 #   --keep       keep the temporary files (reference PLYs, last decoded clouds)
 #   --lex3d BIN  the lex3d binary to measure (default BUILD_DIR/lex3d)
+#   --resampled DIR  also offer the sets bench/resample_sets.sh wrote to DIR, as datasets
+#              rs_<sensor> (other lidars' beam layouts, G-PCC given their exact laser tables)
 # Needs: draco_encoder/draco_decoder (Debian package draco), /usr/bin/time, /usr/bin/python3
 # with matplotlib — all installed by scripts/setup.sh. See bench/README-rd.md.
 set -euo pipefail
@@ -37,7 +39,8 @@ while [ $# -gt 0 ]; do
     --scans) [ $# -ge 2 ] || { echo "rd.sh: --scans needs a number" >&2; exit 1; }; flags+=(--scans "$2"); shift ;;
     --out) [ $# -ge 2 ] || { echo "rd.sh: --out needs a directory" >&2; exit 1; }; OUT="$2"; shift ;;
     --lex3d) [ $# -ge 2 ] || { echo "rd.sh: --lex3d needs a binary" >&2; exit 1; }; LEX3D="$2"; shift ;;
-    -h|--help) sed -n '2,26p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --resampled) [ $# -ge 2 ] || { echo "rd.sh: --resampled needs a directory" >&2; exit 1; }; flags+=(--resampled "$2"); shift ;;
+    -h|--help) sed -n '2,28p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     -*) echo "rd.sh: unknown option $1" >&2; exit 1 ;;
     *) pos+=("$1") ;;
   esac

@@ -647,11 +647,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<detail::LaserLayer> laser;
   std::optional<detail::LaserAssignment> lasers_of;
   if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true);
-  // Lasers guessed from elevations alone whose beams miss the points by more than E on
-  // average leave the corrections most of the bits (KITTI's HDL-64E, whose beams start from
-  // different points: ~6 cm): the coding is not tried, unless asked for alone.
-  if (lasers_of && lasers_of->from_elevations && lasers_of->fit_rms > max_error && (options.spherical || options.voxel))
-    lasers_of.reset();
   if (lasers_of) {
     // A table read from the sensor reproduces the beams: the whole budget along them.
     const bool exact = lasers_of->fit_rms < 1e-3 * max_error;
