@@ -186,7 +186,8 @@ void run_compress(const CompressOptions& o) {
       Stopwatch code_sw;
       d.input_points = cloud.size();
       auto coded = coder.code(cloud, d.model, threads);
-      throw_if_error(coded.status());
+      // The one failure: no layer fits the bit budget.
+      if (!coded.ok()) throw CliError(2, coded.status().to_string() + "; try a larger --target-bpp or --words on");
       out.coded = std::move(coded).value();
       if (!out.coded.words) d.model.instances.clear();
       out.code_ms = code_sw.elapsed_ms();

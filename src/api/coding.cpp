@@ -139,7 +139,7 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
   }
   if (!best)
     return bad_data("no residual layer fits " + std::to_string(options_.target_bpp) + " bits per point (even at a " +
-                    std::to_string(residual::kMaxMaxError) + " m error); try a larger target or words on");
+                    std::to_string(residual::kMaxMaxError) + " m error)");
   return std::move(*best);
 }
 
