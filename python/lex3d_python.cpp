@@ -130,8 +130,6 @@ py::bytes compress(const py::object& points, const py::object& intensity, std::o
   o.seed = seed;
   o.threads = threads;
   o.validate();
-  if (!o.alphabet.empty() && !o.uses_words())
-    throw py::value_error("words 'off' uses no alphabet: drop alphabet=");
   std::optional<lex3d::StatusOr<lex3d::CompressResult>> r;
   {
     py::gil_scoped_release unlocked;

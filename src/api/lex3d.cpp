@@ -37,6 +37,8 @@ void CompressOptions::validate() const {
   p.model.threads = threads;
   p.max_iterations = max_iterations;
   p.validate();
+  if (!alphabet.empty() && !uses_words())
+    throw std::invalid_argument("words off uses no alphabet: drop the alphabet, or set words on or auto");
 }
 
 StatusOr<CompressResult> compress(const Cloud& cloud, const CompressOptions& options) {

@@ -92,6 +92,8 @@ def test_learned_alphabet_is_reused_and_needed_to_decode(small):
     assert back.shape[0] > 0
     with pytest.raises(ValueError, match="alphabet"):
         lex3d.compress(small, alphabet=b"not an alphabet")
+    with pytest.raises(ValueError, match="words off uses no alphabet"):
+        lex3d.compress(small, alphabet=alphabet, max_error=0.01)  # a layer: words off by default
 
 
 def test_empty_scan_round_trips_to_an_empty_scan():
