@@ -28,8 +28,11 @@ target_link_libraries(lex3d_library
   PUBLIC Eigen3::Eigen
   PRIVATE ZLIB::ZLIB liblzf::liblzf octomap PkgConfig::libpcap nlohmann_json::nlohmann_json lex3d_pcl
           Threads::Threads)
-# Every module symbol must resolve inside the library or its dependencies.
-target_link_options(lex3d_library PRIVATE -Wl,--no-undefined)
+# Every module symbol must resolve inside the library or its dependencies (a sanitizer's
+# runtime is linked by the executable instead).
+if(NOT LEX3D_SANITIZE)
+  target_link_options(lex3d_library PRIVATE -Wl,--no-undefined)
+endif()
 
 install(TARGETS lex3d_library EXPORT lex3dTargets
   LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
