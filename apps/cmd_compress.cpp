@@ -12,6 +12,7 @@
 #include "allocator.hpp"
 #include "cli_common.hpp"
 #include "json.hpp"
+#include "lex3d/api/coding.hpp"
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
@@ -43,14 +44,6 @@ struct CompressOptions {
   ModelOptions model;
 };
 
-/// How one scan was coded.
-struct Coded {
-  std::vector<std::uint8_t> bytes;
-  bool words = true;                    ///< instances of the alphabet used
-  std::optional<double> max_error;      ///< the residual layer's bound, when there is one
-  residual::LayerStats layer;
-};
-
 /// Parses --max-error: "none" or metres within the residual layer's range.
 std::optional<double> parse_max_error(const std::string& text) {
   if (text == "none") return std::nullopt;
@@ -60,51 +53,6 @@ std::optional<double> parse_max_error(const std::string& text) {
     throw CliError(1, "--max-error must be \"none\" or metres in [" + std::to_string(residual::kMinMaxError) + ", " +
                           std::to_string(residual::kMaxMaxError) + "], got \"" + text + "\"");
   return v;
-}
-
-/// Codes one scan: words only, or words and/or a residual layer of bound E (fixed, or
-/// the smallest meeting a bit budget), keeping the smallest file among the allowed forms.
-Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Alphabet* decoder_alphabet,
-                std::optional<double> max_error, double target_bpp, const std::string& words_mode,
-                const residual::LayerOptions& layer_options, const codec::Quantization& q) {
-  if (!max_error && target_bpp <= 0.0) return {codec::encode_model(words_data, q), true, std::nullopt, {}};
-  std::vector<bool> forms;  // with words?
-  if (words_mode != "off") forms.push_back(true);
-  if (words_mode != "on") forms.push_back(false);
-  std::optional<Coded> best;
-  for (const bool with_words : forms) {
-    codec::ModelData d = words_data;
-    Alphabet empty;
-    if (!with_words) {
-      d.model.instances.clear();
-      // A layer-only file embeds an empty alphabet (a few dozen bytes), or keeps referencing
-      // the shared alphabet file (as a sequence file's models must).
-      if (!d.alphabet_hash) d.alphabet = empty;
-    }
-    const Alphabet& alphabet = with_words ? *decoder_alphabet : empty;
-    const Cloud placed = residual::decoder_word_cloud(d, alphabet, q);
-    auto code = [&](double e, residual::LayerStats* st) {
-      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st, layer_options);
-      return codec::encode_model(d, q);
-    };
-    Coded c;
-    c.words = with_words;
-    c.max_error = max_error;
-    if (!max_error) {
-      const auto budget = static_cast<std::size_t>(target_bpp * static_cast<double>(cloud.size()) / 8.0);
-      c.max_error = residual::fit_max_error([&](double e) { return code(e, nullptr).size(); }, budget);
-      if (!c.max_error) continue;
-    }
-    c.bytes = code(*c.max_error, &c.layer);
-    const bool better = !best || (max_error ? c.bytes.size() < best->bytes.size()
-                                            : (*c.max_error < *best->max_error ||
-                                               (*c.max_error == *best->max_error && c.bytes.size() < best->bytes.size())));
-    if (better) best = std::move(c);
-  }
-  if (!best)
-    throw CliError(2, "no residual layer fits " + std::to_string(target_bpp) + " bits per point (even at a " +
-                          std::to_string(residual::kMaxMaxError) + " m error); try a larger --target-bpp or --words on");
-  return std::move(*best);
 }
 
 void run_compress(const CompressOptions& o) {
@@ -166,32 +114,25 @@ void run_compress(const CompressOptions& o) {
   ModelSet set;
   if (learning) set = build_models(clouds, p, nullptr, learnt_names);
   else if (reuse) set.alphabet = reuse->alphabet;
-  const Alphabet& alphabet = set.alphabet;
-  codec::Quantization quantization = o.quantization;
-  {
-    const codec::Quantization derived = codec::quantization_for_word_radius(alphabet.word_radius);
-    if (quantization.translation_m == 0.0) quantization.translation_m = derived.translation_m;
-    if (quantization.rotation_rad == 0.0) quantization.rotation_rad = derived.rotation_rad;
-  }
-  std::vector<std::uint8_t> alphabet_file;
-  if (reuse) {
-    alphabet_file = std::move(reuse->bytes);
-  } else if (!o.save_alphabet.empty() || o.one_file) {
-    alphabet_file = codec::encode_alphabet(alphabet, quantization);
-  }
-  // The alphabet exactly as a decoder will see it, for the residual layer's reconstruction.
-  std::optional<Alphabet> decoder_alphabet;
-  if (layered && use_words) {
-    if (reuse) {
-      decoder_alphabet = reuse->alphabet;
-    } else {
-      auto a = codec::decode_alphabet(codec::encode_alphabet(alphabet, quantization));
-      throw_if_error(a.status());
-      decoder_alphabet = std::move(a).value();
-    }
-  }
-  const bool embed = alphabet_file.empty();
-  const std::uint64_t hash = embed ? 0 : codec::alphabet_hash(alphabet_file);
+  // The coding choices, the instance steps, the alphabet as a decoder sees it and whether
+  // it is embedded or referenced: the library's ScanCoder, shared with lex3d::compress.
+  CodingOptions coding;
+  coding.max_error = max_error;
+  coding.target_bpp = o.target_bpp;
+  coding.words = o.words == "on" ? WordsMode::kOn : o.words == "off" ? WordsMode::kOff
+                 : o.words == "auto" ? WordsMode::kAuto : WordsMode::kDefault;
+  coding.keep_all_points = o.keep_all_points;
+  coding.layer_coding = o.layer_coding == "spherical" ? LayerCoding::kSpherical
+                        : o.layer_coding == "voxel"   ? LayerCoding::kVoxel
+                        : o.layer_coding == "laser"   ? LayerCoding::kLaser
+                                                      : LayerCoding::kAuto;
+  coding.quantization = o.quantization;
+  coding.threads = mp.threads;
+  const ScanCoder coder(std::move(set.alphabet), coding, !o.save_alphabet.empty() || o.one_file,
+                        reuse ? std::move(reuse->bytes) : std::vector<std::uint8_t>{});
+  const Alphabet& alphabet = coder.alphabet();
+  const std::vector<std::uint8_t>& alphabet_file = coder.alphabet_file();
+  const bool embed = coder.embeds_alphabet();
 
   std::uint64_t total_bytes = 0, total_points = 0;
   Json j;
@@ -202,19 +143,13 @@ void run_compress(const CompressOptions& o) {
                 layered ? "  max error   coded pts" : "");
   bool any_words = false;
   codec::SequenceData sequence;
-  residual::LayerOptions layer_options;
-  layer_options.thin = !o.keep_all_points;
-  layer_options.spherical = o.layer_coding == "auto" || o.layer_coding == "spherical";
-  layer_options.voxel = o.layer_coding == "auto" || o.layer_coding == "voxel";
-  layer_options.laser = o.layer_coding == "auto" || o.layer_coding == "laser";
-  layer_options.threads = mp.threads;
   // One scan from its file (or the learnt scans) to its coded bytes: run for several scans
   // at once when there are threads to spare, each scan then on one thread (its stages are
   // partly serial: two scans side by side keep both cores busy). The files do not depend on
   // the thread count; they are written, and reported, in scan order.
   struct Outcome {
-    codec::ModelData d;
-    Coded coded;
+    codec::ModelData d;  // the scan's point count and instances, for the report
+    CodedScan coded;
     std::size_t features = 0;
     bool modelled = false;  // an alphabet reused: stage times below
     FeatureTimings feature_ms;
@@ -226,10 +161,6 @@ void run_compress(const CompressOptions& o) {
   auto produce = [&](std::size_t i, int threads) {
     Outcome out;
     try {
-      ModelParams params = p.model;
-      params.threads = threads;
-      residual::LayerOptions layer = layer_options;
-      layer.threads = threads;
       Cloud streamed;
       codec::ModelData& d = out.d;
       const bool learnt = learnt_as[i] >= 0;
@@ -242,23 +173,22 @@ void run_compress(const CompressOptions& o) {
         streamed = loader.load(i);
         out.read_ms = read_sw.elapsed_ms();
         if (use_words) {
-          const PreparedScan ps = prepare_scan(streamed, params, alphabet.word_radius);
-          d.model = encode_scan(ps, alphabet, p.prune, params, &out.encode_ms);
-          out.features = ps.features.size();
+          ScanModelStats stats;
+          d.model = coder.model_scan(streamed, p, threads, &stats);
+          out.features = stats.features;
           out.modelled = true;
-          out.feature_ms = ps.timings;
-          out.neighbourhoods_ms = ps.prepare_ms - ps.timings.total_ms();
+          out.feature_ms = stats.feature_ms;
+          out.neighbourhoods_ms = stats.neighbourhoods_ms;
+          out.encode_ms = stats.encode_ms;
         }
       }
       const Cloud& cloud = learnt ? clouds[static_cast<std::size_t>(learnt_as[i])] : streamed;
       Stopwatch code_sw;
       d.input_points = cloud.size();
-      d.T_cloud_sensor = cloud.T_cloud_sensor;
-      d.georef = cloud.georef;  // true coordinates: origin + point (formats/model.md §2.8)
-      if (embed) d.alphabet = alphabet;
-      else d.alphabet_hash = hash;
-      out.coded = code_scan(cloud, d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
-                            words_mode, layer, quantization);
+      auto coded = coder.code(cloud, d.model, threads);
+      // The one failure: no layer fits the bit budget.
+      if (!coded.ok()) throw CliError(2, coded.status().to_string() + "; try a larger --target-bpp or --words on");
+      out.coded = std::move(coded).value();
       if (!out.coded.words) d.model.instances.clear();
       out.code_ms = code_sw.elapsed_ms();
     } catch (...) {
@@ -271,7 +201,7 @@ void run_compress(const CompressOptions& o) {
     if (r.error) std::rethrow_exception(r.error);
     read_ms += r.read_ms;
     const codec::ModelData& d = r.d;
-    const Coded& coded = r.coded;
+    const CodedScan& coded = r.coded;
     any_words = any_words || coded.words;
     const std::vector<std::uint8_t>& bytes = coded.bytes;
     Stopwatch write_sw;

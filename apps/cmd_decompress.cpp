@@ -13,6 +13,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/eval/metrics.hpp"
+#include "lex3d/lex3d.hpp"
 #include "lex3d/residual/residual.hpp"
 
 namespace lex3d::cli {
@@ -96,31 +97,30 @@ void run_decompress(const DecompressOptions& o) {
     if (!a.ok()) throw CliError(2, a.status().to_string());
     alphabet_file = std::move(a).value();
   }
-  auto decoded = codec::decode_model(bytes.value(), o.alphabet.empty() ? nullptr : &alphabet_file);
+  // The same decoding as lex3d::decompress (lex3d/lex3d.hpp).
+  auto decoded = lex3d::decompress(bytes.value(), o.alphabet.empty() ? nullptr : &alphabet_file);
   if (!decoded.ok()) {
     // A model that references an alphabet decoded without one is a usage error (1).
     const auto& st = decoded.status();
     throw CliError(st.code() == ErrorCode::kInvalidArgument ? 1 : 2, o.input + ": " + st.to_string());
   }
-  const codec::ModelData& d = decoded.value();
-  const double decode_ms = sw.lap_ms();
-  auto decoded_cloud = residual::decode_cloud(d);
-  if (!decoded_cloud.ok()) throw CliError(2, o.input + ": " + decoded_cloud.status().to_string());
-  Cloud cloud = std::move(decoded_cloud).value();
-  cloud.georef = d.georef;  // written in true coordinates where the output format can hold them
-  const double reconstruct_ms = sw.lap_ms();
+  const DecompressResult& d = decoded.value();
+  const double decode_ms = d.decode_ms;
+  const double reconstruct_ms = d.reconstruct_ms;
+  Cloud cloud = std::move(decoded.value().cloud);  // georeferenced: written in true coordinates where the format can
+  sw.lap_ms();
   if (!o.output.empty()) {
     throw_if_error(io::write_cloud(o.output, cloud));
     const std::string ext = std::filesystem::path(o.output).extension().string();
-    if (d.georef && (ext == ".bin" || ext == ".BIN"))
+    if (cloud.georef && (ext == ".bin" || ext == ".BIN"))
       std::fprintf(stderr, "note: %s holds float32 coordinates relative to the georeference origin (%.3f, %.3f, %.3f) m; "
                            "write .las, .pcd, .ply or .xyz for the true coordinates\n",
-                   o.output.c_str(), d.georef->origin.x(), d.georef->origin.y(), d.georef->origin.z());
+                   o.output.c_str(), cloud.georef->origin.x(), cloud.georef->origin.y(), cloud.georef->origin.z());
   }
   io::OctomapStats oct;
   if (!o.octomap.empty()) {
     auto r = io::write_octomap(o.octomap, cloud,
-                               o.free_space == "cast" ? std::optional<Eigen::Vector3d>(d.T_cloud_sensor.translation())
+                               o.free_space == "cast" ? std::optional<Eigen::Vector3d>(cloud.T_cloud_sensor.translation())
                                                       : std::nullopt,
                                o.resolution);
     throw_if_error(r.status());
@@ -135,9 +135,9 @@ void run_decompress(const DecompressOptions& o) {
   if (compare) {
     Cloud ref = load_cloud(o.reference, parse_format_option(o.reference_format)).cloud;
     // compare in the model's local frame: a reference read about another origin (or none) is moved to it
-    if (d.georef || ref.georef) {
+    if (cloud.georef || ref.georef) {
       const Eigen::Vector3d to_model = (ref.georef ? ref.georef->origin : Eigen::Vector3d::Zero()) -
-                                       (d.georef ? d.georef->origin : Eigen::Vector3d::Zero());
+                                       (cloud.georef ? cloud.georef->origin : Eigen::Vector3d::Zero());
       if (!to_model.isZero()) {
         for (auto& p : ref.points) p = (p.cast<double>() + to_model).cast<float>();
         ref.T_cloud_sensor.translation() += to_model;
@@ -145,7 +145,7 @@ void run_decompress(const DecompressOptions& o) {
     }
     // A reference without a viewpoint of its own (a PLY or .bin in the model's frame, say a
     // world-frame scan compressed with --input-frame world) is seen from the model's sensor.
-    if (ref.T_cloud_sensor.matrix() == Pose::Identity().matrix()) ref.T_cloud_sensor = d.T_cloud_sensor;
+    if (ref.T_cloud_sensor.matrix() == Pose::Identity().matrix()) ref.T_cloud_sensor = cloud.T_cloud_sensor;
     dist = eval::compare_clouds(ref, cloud);
     const auto res = estimate_angular_resolution(ref);
     eval::RangeSigma sigma;
@@ -160,9 +160,9 @@ void run_decompress(const DecompressOptions& o) {
     j.begin_object();
     j.value("model", o.input).value("model_bytes", static_cast<std::uint64_t>(bytes.value().size()));
     j.value("input_points", d.input_points).value("bits_per_point", bpp);
-    j.value("instances", d.model.instances.size()).value("words", d.alphabet->size());
+    j.value("instances", d.instances).value("words", d.alphabet_words);
     j.value("points", cloud.size());
-    j.value("residual_layer", d.residual.has_value());
+    j.value("residual_layer", d.residual_layer);
     if (!o.output.empty()) j.value("output", o.output);
     if (!o.octomap.empty())
       j.begin_object("octomap")
@@ -188,8 +188,8 @@ void run_decompress(const DecompressOptions& o) {
     return;
   }
   std::printf("%s: %zu bytes, %llu input points = %.3f bits per point; %zu instances of %zu words\n", o.input.c_str(),
-              bytes.value().size(), static_cast<unsigned long long>(d.input_points), bpp, d.model.instances.size(),
-              d.alphabet->size());
+              bytes.value().size(), static_cast<unsigned long long>(d.input_points), bpp, d.instances,
+              d.alphabet_words);
   std::printf("reconstruction: %zu points (decode %.1f ms, reconstruct %.1f ms)\n", cloud.size(), decode_ms, reconstruct_ms);
   if (!o.output.empty()) std::printf("wrote %s\n", o.output.c_str());
   if (!o.octomap.empty())

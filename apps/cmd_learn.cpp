@@ -9,7 +9,9 @@
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
+#include "lex3d/lex3d.hpp"
 #include "model_report.hpp"
+#include "progress.hpp"
 
 namespace lex3d::cli {
 
@@ -32,8 +34,19 @@ void run_learn(const LearnOptions& o) {
   LearnParams p = o.scan_set.learn_params(o.model.params());
   p.patience = o.patience;
   p.prune = !o.no_prune;
-  const LearnResult r = learn_with_progress(clouds, p);
-  throw_if_error(io::write_file_atomic(o.output, codec::encode_alphabet(r.alphabet)));
+  // The same learning and file as lex3d::learn_alphabet (lex3d/lex3d.hpp), with a progress bar.
+  AlphabetOptions ao;
+  static_cast<LearnParams&>(ao) = p;
+  ProgressBar bar("learning");
+  ao.progress = [&](const LearnProgress& pr) {
+    char detail[96];
+    std::snprintf(detail, sizeof detail, "BIC %.6g, %zu words", pr.bic, pr.alphabet_size);
+    bar.update(pr.iteration, pr.max_iterations, detail);
+  };
+  const AlphabetResult learnt = lex3d::learn_alphabet(clouds, ao);
+  bar.finish();
+  const LearnResult& r = learnt.learning;
+  throw_if_error(io::write_file_atomic(o.output, learnt.bytes));
   std::size_t instances = 0, points = 0;
   for (const auto& m : r.models) instances += m.instances.size();
   for (const auto& c : clouds) points += c.size();

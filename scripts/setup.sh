@@ -16,6 +16,7 @@ PACKAGES=(
   python3 python3-numpy python3-scipy
   draco time python3-matplotlib
   libpcap-dev nlohmann-json3-dev
+  python3-dev pybind11-dev python3-pytest
 )
 missing=()
 for p in "${PACKAGES[@]}"; do
@@ -30,3 +31,10 @@ fi
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release
 cmake --build "$BUILD_DIR" -j2
 echo "setup: built $BUILD_DIR/lex3d"
+# Install the library, headers, CMake package, pkg-config file, the command and the Python
+# module under /usr/local: Debian's own place for locally built software, searched by the
+# compiler, the linker (after ldconfig), CMake's find_package and /usr/bin/python3
+# (/usr/local/lib/python3.X/dist-packages), without touching the packaged /usr tree or pip.
+$SUDO cmake --install "$BUILD_DIR" > /dev/null
+$SUDO ldconfig
+echo "setup: installed lex3d $(/usr/bin/python3 -c 'import lex3d; print(lex3d.__version__)') into /usr/local (import lex3d works)"

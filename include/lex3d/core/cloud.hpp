@@ -3,7 +3,7 @@
 /// The one point cloud type that flows through lex3d: contiguous arrays of
 /// positions (metres, sensor or world frame as the producer documents) with
 /// optional per-point intensity. Conversions to and from pcl::PointCloud live
-/// in the io module, so that PCL headers stay out of here.
+/// in lex3d/core/pcl_conversions.hpp (header-only), so that PCL headers stay out of here.
 
 #include <cstddef>
 #include <cstdint>

@@ -1,0 +1,138 @@
+"""The Python module: round trips of a real sample scan, the same bytes as the `lex3d`
+command, determinism, and ValueError for bad arrays and bad data. Run by ctest
+(python.tests), which sets PYTHONPATH to the built module, LEX3D_CLI and LEX3D_SAMPLES."""
+
+import os
+import pathlib
+import subprocess
+import tempfile
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import lex3d
+
+SAMPLES = pathlib.Path(os.environ.get("LEX3D_SAMPLES", pathlib.Path(__file__).parents[2] / "samples"))
+CLI = os.environ.get("LEX3D_CLI")
+
+
+def read_bin(path, columns):
+    """A .bin of float32 records (4 columns: KITTI x y z intensity; 3: x y z) as lex3d's
+    reader gives it: points and intensity (or None), without the (0, 0, 0) no-return
+    records and non-finite points."""
+    raw = np.fromfile(path, dtype="<f4").reshape(-1, columns)
+    keep = np.isfinite(raw[:, :3]).all(axis=1) & (raw[:, :3] != 0).any(axis=1)
+    return raw[keep, :3], (raw[keep, 3] if columns == 4 else None)
+
+
+@pytest.fixture(scope="module")
+def kitti():
+    return read_bin(SAMPLES / "kitti00_000000.bin", 4)
+
+
+@pytest.fixture(scope="module")
+def small():
+    return read_bin(SAMPLES / "newer_college_00.bin", 3)[0]
+
+
+def test_version_is_the_projects():
+    assert lex3d.__version__.count(".") == 2
+    assert all(part.isdigit() for part in lex3d.__version__.split("."))
+
+
+def test_round_trip_of_a_real_scan_meets_the_bound_both_ways(kitti):
+    points, _ = kitti
+    assert len(points) > 100_000
+    data = lex3d.compress(points, max_error=0.03)
+    assert isinstance(data, bytes)
+    assert 8 * len(data) / len(points) < 32
+    back = lex3d.decompress(data)
+    assert back.dtype == np.float32 and back.ndim == 2 and back.shape[1] == 3
+    d_in, _ = cKDTree(back).query(points)
+    d_out, _ = cKDTree(points).query(back)
+    assert d_in.max() <= 0.03 * (1 + 1e-6)
+    assert d_out.max() <= 0.03 * (1 + 1e-6)
+
+
+@pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
+@pytest.mark.parametrize("args", [["--max-error", "0.014"], ["--target-bpp", "5"], ["--iterations", "60"]])
+def test_same_bytes_as_the_command(args):
+    scan = SAMPLES / "newer_college_00.bin"
+    points, _ = read_bin(scan, 3)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = pathlib.Path(tmp) / "out.lex3dm"
+        subprocess.run([CLI, "compress", str(scan), "-o", str(out), *args], check=True, capture_output=True)
+        expected = out.read_bytes()
+    kwargs = {"max_error": 0.014} if args[0] == "--max-error" else \
+             {"target_bpp": 5.0} if args[0] == "--target-bpp" else {"iterations": 60}
+    assert lex3d.compress(points, **kwargs) == expected
+    assert lex3d.compress(points.astype(np.float64), **kwargs) == expected
+
+
+def test_intensity_is_reported_not_dropped_silently(kitti):
+    points, intensity = kitti
+    with pytest.warns(UserWarning, match=f"intensity is not stored in model files: {len(points)} values dropped"):
+        lex3d.compress(points, intensity, max_error=0.05)
+
+
+def test_deterministic_across_runs_and_threads(small):
+    a = lex3d.compress(small, max_error=0.01, threads=1)
+    assert a == lex3d.compress(small, max_error=0.01, threads=1)
+    assert a == lex3d.compress(small, max_error=0.01, threads=2)
+    assert a == lex3d.compress(np.ascontiguousarray(small[::-1][::-1]), max_error=0.01)
+
+
+def test_learned_alphabet_is_reused_and_needed_to_decode(small):
+    alphabet = lex3d.learn_alphabet([small], iterations=40)
+    data = lex3d.compress(small, alphabet=alphabet)
+    with pytest.raises(ValueError, match="alphabet"):
+        lex3d.decompress(data)
+    back = lex3d.decompress(data, alphabet=alphabet)
+    assert back.shape[0] > 0
+    with pytest.raises(ValueError, match="alphabet"):
+        lex3d.compress(small, alphabet=b"not an alphabet")
+    with pytest.raises(ValueError, match="words off uses no alphabet"):
+        lex3d.compress(small, alphabet=alphabet, max_error=0.01)  # a layer: words off by default
+
+
+def test_empty_scan_round_trips_to_an_empty_scan():
+    back = lex3d.decompress(lex3d.compress(np.zeros((0, 3), np.float32), max_error=0.01))
+    assert back.shape == (0, 3)
+
+
+@pytest.mark.parametrize("bad, message", [
+    (np.zeros((10, 4), np.float32), r"shape \(N, 3\), got \(10, 4\)"),
+    (np.zeros((3,), np.float32), r"shape \(N, 3\), got \(3,\)"),
+    (np.zeros((2, 3, 1), np.float32), r"shape \(N, 3\), got \(2, 3, 1\)"),
+    (np.zeros((10, 3), np.int32), r"float32 or float64, got int32"),
+    (np.zeros((10, 3), np.float16), r"float32 or float64, got float16"),
+    (np.array([[0, 0, 1], [np.nan, 1, 2]], np.float32), r"row 1 is not finite"),
+    (np.array([[0, 0, 1], [1, np.inf, 2]]), r"row 1 is not finite"),
+    ([[0.0, 0.0, 1.0]], r"numpy array of shape \(N, 3\), got <class 'list'>"),
+])
+def test_bad_arrays_raise_value_error_naming_what_is_wrong(bad, message):
+    with pytest.raises(ValueError, match=message):
+        lex3d.compress(bad, max_error=0.01)
+
+
+def test_bad_intensity_and_options_raise_value_error(small):
+    with pytest.raises(ValueError, match=r"intensity must have shape"):
+        lex3d.compress(small, np.zeros(3, np.float32), max_error=0.01)
+    with pytest.raises(ValueError, match="max_error"):
+        lex3d.compress(small, max_error=50.0)
+    with pytest.raises(ValueError, match="words"):
+        lex3d.compress(small, words="maybe")
+    with pytest.raises(ValueError, match="clouds\\[1\\]"):
+        lex3d.learn_alphabet([small, np.zeros((4, 2), np.float32)])
+
+
+def test_corrupt_and_truncated_files_raise_value_error(small):
+    data = lex3d.compress(small, max_error=0.02)
+    for n in (0, 3, len(data) // 2, len(data) - 1):
+        with pytest.raises(ValueError):
+            lex3d.decompress(data[:n])
+    flipped = bytearray(data)
+    flipped[len(data) // 2] ^= 0x40
+    with pytest.raises(ValueError):
+        lex3d.decompress(bytes(flipped))
