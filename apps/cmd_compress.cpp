@@ -15,6 +15,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
+#include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "model_report.hpp"
 #include "progress.hpp"
@@ -39,6 +40,8 @@ struct CompressOptions {
   /// (codec::quantization_for_word_radius).
   codec::Quantization quantization{0.0, 0.0, 0.0005};
   bool json = false;
+  double intensity_error = 0.0;  ///< 0: intensities kept losslessly
+  bool drop_attributes = false;
   ScanSetOptions scan_set;
   ModelOptions model;
 };
@@ -49,7 +52,19 @@ struct Coded {
   bool words = true;                    ///< instances of the alphabet used
   std::optional<double> max_error;      ///< the residual layer's bound, when there is one
   residual::LayerStats layer;
+  std::vector<residual::AttributeField> attributes;  ///< fields kept (an ATTR chunk)
+  std::vector<std::string> dropped;                  ///< fields the input has and the file does not keep
 };
+
+/// The per-point fields `cloud` has, by name.
+std::vector<std::string> fields_of(const Cloud& cloud) {
+  std::vector<std::string> f;
+  if (cloud.has_rings()) f.emplace_back("ring");
+  if (cloud.has_intensity()) f.emplace_back("intensity");
+  if (cloud.has_time()) f.emplace_back("time");
+  if (cloud.has_rgb()) f.emplace_back("rgb");
+  return f;
+}
 
 /// Parses --max-error: "none" or metres within the residual layer's range.
 std::optional<double> parse_max_error(const std::string& text) {
@@ -66,8 +81,13 @@ std::optional<double> parse_max_error(const std::string& text) {
 /// the smallest meeting a bit budget), keeping the smallest file among the allowed forms.
 Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Alphabet* decoder_alphabet,
                 std::optional<double> max_error, double target_bpp, const std::string& words_mode,
-                const residual::LayerOptions& layer_options, const codec::Quantization& q) {
-  if (!max_error && target_bpp <= 0.0) return {codec::encode_model(words_data, q), true, std::nullopt, {}};
+                const residual::LayerOptions& layer_options, const codec::Quantization& q,
+                const residual::AttributeOptions* attributes, const std::string& name) {
+  if (!max_error && target_bpp <= 0.0) {
+    Coded c{codec::encode_model(words_data, q), true, std::nullopt, {}, {}, {}};
+    c.dropped = fields_of(cloud);  // words alone: the decoded points stand for no input point
+    return c;
+  }
   std::vector<bool> forms;  // with words?
   if (words_mode != "off") forms.push_back(true);
   if (words_mode != "on") forms.push_back(false);
@@ -83,8 +103,22 @@ Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Al
     }
     const Alphabet& alphabet = with_words ? *decoder_alphabet : empty;
     const Cloud placed = residual::decoder_word_cloud(d, alphabet, q);
-    auto code = [&](double e, residual::LayerStats* st) {
-      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st, layer_options);
+    auto code = [&](double e, residual::LayerStats* st, std::vector<residual::AttributeField>* kept) {
+      residual::LayerOptions lo = layer_options;
+      lo.track_sources = st != nullptr && attributes != nullptr;
+      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st, lo);
+      d.attributes.reset();
+      if (lo.track_sources) {
+        std::vector<std::uint8_t> payload;
+        try {
+          payload = residual::encode_attributes(cloud, st->sources, *attributes, kept);
+        } catch (const std::invalid_argument& e) {  // the scan's attributes are bad data
+          throw CliError(2, name + ": " + e.what());
+        }
+        if (!payload.empty()) d.attributes = std::move(payload);
+        st->sources.clear();
+        st->sources.shrink_to_fit();
+      }
       return codec::encode_model(d, q);
     };
     Coded c;
@@ -92,10 +126,13 @@ Coded code_scan(const Cloud& cloud, const codec::ModelData& words_data, const Al
     c.max_error = max_error;
     if (!max_error) {
       const auto budget = static_cast<std::size_t>(target_bpp * static_cast<double>(cloud.size()) / 8.0);
-      c.max_error = residual::fit_max_error([&](double e) { return code(e, nullptr).size(); }, budget);
+      c.max_error = residual::fit_max_error([&](double e) { return code(e, nullptr, nullptr).size(); }, budget);
       if (!c.max_error) continue;
     }
-    c.bytes = code(*c.max_error, &c.layer);
+    c.bytes = code(*c.max_error, &c.layer, &c.attributes);
+    for (const std::string& f : fields_of(cloud))
+      if (std::none_of(c.attributes.begin(), c.attributes.end(), [&](const auto& a) { return a.name == f; }))
+        c.dropped.push_back(f);
     const bool better = !best || (max_error ? c.bytes.size() < best->bytes.size()
                                             : (*c.max_error < *best->max_error ||
                                                (*c.max_error == *best->max_error && c.bytes.size() < best->bytes.size())));
@@ -257,8 +294,11 @@ void run_compress(const CompressOptions& o) {
       d.georef = cloud.georef;  // true coordinates: origin + point (formats/model.md §2.8)
       if (embed) d.alphabet = alphabet;
       else d.alphabet_hash = hash;
+      residual::AttributeOptions attribute_options;
+      attribute_options.intensity_error = o.intensity_error;
       out.coded = code_scan(cloud, d, decoder_alphabet ? &*decoder_alphabet : nullptr, max_error, o.target_bpp,
-                            words_mode, layer, quantization);
+                            words_mode, layer, quantization, o.drop_attributes ? nullptr : &attribute_options,
+                            loader.name(i));
       if (!out.coded.words) d.model.instances.clear();
       out.code_ms = code_sw.elapsed_ms();
     } catch (...) {
@@ -328,12 +368,35 @@ void run_compress(const CompressOptions& o) {
               .end_object();
         j.end_object();
       }
+      j.begin_array("attributes");
+      for (const auto& a : coded.attributes)
+        j.begin_object()
+            .value("name", a.name)
+            .value("representation", a.representation)
+            .value("lossless", a.max_error == 0.0)
+            .value("max_error", a.max_error)
+            .value("bytes", static_cast<std::uint64_t>(a.bytes))
+            .value("bits_per_point", d.input_points ? 8.0 * static_cast<double>(a.bytes) / static_cast<double>(d.input_points) : 0.0)
+            .end_object();
+      j.end_array();
+      j.begin_array("attributes_dropped");
+      for (const auto& f : coded.dropped) j.value({}, f);
+      j.end_array();
       j.end_object();
     } else {
       std::printf("%-32s %9llu %9zu %10zu %10.3f", shown.c_str(), static_cast<unsigned long long>(d.input_points),
                   d.model.instances.size(), bytes.size(), bpp);
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
+      for (const auto& a : coded.attributes)
+        std::printf("  kept %-10s %8zu bytes %7.3f bits/pt  %s\n", a.name.c_str(), a.bytes,
+                    d.input_points ? 8.0 * static_cast<double>(a.bytes) / static_cast<double>(d.input_points) : 0.0,
+                    a.representation.c_str());
+      for (const auto& f : coded.dropped)
+        std::printf("  dropped %s (%s)\n", f.c_str(),
+                    o.drop_attributes ? "--drop-attributes"
+                    : coded.max_error ? "not coded"
+                                      : "words alone: give --max-error to keep attributes");
     }
     bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), loader.name(i));
   };
@@ -434,6 +497,13 @@ void register_compress(CLI::App& app) {
                   "§2.5-2.8)")
       ->check(CLI::IsMember({"auto", "spherical", "voxel", "laser"}))
       ->capture_default_str();
+  sub->add_option("--intensity-error", o->intensity_error,
+                  "Largest intensity error kept in the model file, in the intensity's own units; 0 keeps the "
+                  "intensities losslessly (formats/model.md §2.10)")
+      ->check(CLI::Range(0.0, 1e9))
+      ->capture_default_str();
+  sub->add_flag("--drop-attributes", o->drop_attributes,
+                "Keep positions only: no intensity, ring, time or colour (they are listed as dropped)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);
   o->model.add_to(*sub);
