@@ -230,15 +230,20 @@ TEST(Attributes, CorruptOrTruncatedPayloadsAreRejectedWithoutCrashing) {
     t.attributes = Bytes(payload.begin(), payload.begin() + static_cast<std::ptrdiff_t>(len));
     auto r = residual::decode_cloud(t);
     EXPECT_FALSE(r.ok()) << "truncated at " << len;
-    if (!r.ok()) EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    if (!r.ok()) {
+      EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    }
   }
   // every byte flipped: an error, or (inside a stream) a cloud of the same size
   for (std::size_t at = 0; at < payload.size(); ++at) {
     codec::ModelData t = m.value();
     (*t.attributes)[at] ^= 0x5A;
     auto r = residual::decode_cloud(t);
-    if (r.ok()) EXPECT_EQ(r.value().size(), base.value().size());
-    else EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    if (r.ok()) {
+      EXPECT_EQ(r.value().size(), base.value().size());
+    } else {
+      EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    }
   }
   // the point count
   codec::ModelData wrong = m.value();
