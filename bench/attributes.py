@@ -54,16 +54,16 @@ def integer_step(values):
 
 
 def write_ply(path, xyz_mm, props):
-    """Binary PLY: int32 x y z, then each (name, ply type, array)."""
+    """Binary PLY: float x y z (integer millimetres), then each (name, ply type, array)."""
     types = {"uchar": "u1", "ushort": "<u2"}
-    dt = [("x", "<i4"), ("y", "<i4"), ("z", "<i4")] + [(n, types[t]) for n, t, _ in props]
+    dt = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")] + [(n, types[t]) for n, t, _ in props]
     arr = np.zeros(len(xyz_mm), dtype=dt)
     for a, name in enumerate("xyz"):
         arr[name] = xyz_mm[:, a]
     for n, _, v in props:
         arr[n] = v
     head = "ply\nformat binary_little_endian 1.0\nelement vertex %d\n" % len(arr)
-    head += "property int x\nproperty int y\nproperty int z\n"
+    head += "property float x\nproperty float y\nproperty float z\n"
     head += "".join("property %s %s\n" % (t, n) for n, t, _ in props)
     head += "end_header\n"
     with open(path, "wb") as f:
@@ -114,7 +114,7 @@ def gpcc_cost(tmc3, w, xyz_mm, k):
     stream = os.path.join(w, "g.bin")
     rec = os.path.join(w, "g_rec.ply")
     out = run([tmc3, "--mode=0", "--uncompressedDataPath=" + p, "--compressedStreamPath=" + stream,
-               "--positionQuantizationScale=1", "--mergeDuplicatedPoints=0", "--trisoupNodeSizeLog2=0",
+               "--positionQuantizationScale=1", "--mergeDuplicatedPoints=0", "--neighbourAvailBoundaryLog2=8",
                "--reconstructedDataPath=" + rec,
                "--bitdepth=16", "--transformType=1", "--qp=4", "--attribute=reflectance"])
     m = re.search(r"reflectance[^\n]*?(\d+) B", out)
