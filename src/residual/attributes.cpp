@@ -36,7 +36,7 @@ enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
 constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2;
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
-constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 40;
+constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
 constexpr int kBuckets = 16, kActivity = 4;
 constexpr std::uint32_t kMaxLasersInHistory = 65536;
@@ -401,7 +401,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
       return bad_data("attribute field " + name + " base is not finite", at + 16);
     if (!(std::isfinite(f.max_error) && f.max_error >= 0.0 && f.max_error <= 1e9))
       return bad_data("attribute field " + name + " max_error is out of range", at + 24);
-    const std::uint64_t span_cap = f.kind == kRing ? 65535 : f.kind == kRgb ? 255 : kMaxSpan;
+    const std::uint64_t span_cap = f.kind == kRing ? 65535 : f.kind == kRgb ? 255 : f.repr == kFloatBits ? 0xFFFFFFFFULL : kMaxSpan;
     if (f.span > span_cap) return bad_data("attribute field " + name + " span " + std::to_string(f.span) + " is too large", at + 40);
     if (f.kmin < -static_cast<std::int64_t>(kMaxSpan) * 4096 || f.kmin > static_cast<std::int64_t>(kMaxSpan) * 4096 ||
         ((f.kind == kRing || f.kind == kRgb) && f.kmin != 0))
