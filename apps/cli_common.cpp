@@ -46,10 +46,8 @@ io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
   if (!res.dropped_fields.empty()) {
     std::string list;
     for (const auto& f : res.dropped_fields) list += (list.empty() ? "" : ", ") + f;
-    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z and intensity): %s\n", path.c_str(), list.c_str());
+    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z, intensity, ring, time and colour): %s\n", path.c_str(), list.c_str());
   }
-  if (!res.colors.empty())
-    std::fprintf(stderr, "note: %s: RGB colours are read but not coded in lex3d model files\n", path.c_str());
   for (const auto& n : res.notes) std::fprintf(stderr, "note: %s: %s\n", path.c_str(), n.c_str());
   return std::move(r).value();
 }

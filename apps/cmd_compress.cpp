@@ -16,6 +16,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
+#include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "model_report.hpp"
 #include "progress.hpp"
@@ -40,6 +41,8 @@ struct CompressOptions {
   /// (codec::quantization_for_word_radius).
   codec::Quantization quantization{0.0, 0.0, 0.0005};
   bool json = false;
+  double intensity_error = 0.0;  ///< 0: intensities kept losslessly
+  bool drop_attributes = false;
   ScanSetOptions scan_set;
   ModelOptions model;
 };
@@ -128,6 +131,8 @@ void run_compress(const CompressOptions& o) {
                                                       : LayerCoding::kAuto;
   coding.quantization = o.quantization;
   coding.threads = mp.threads;
+  coding.keep_attributes = !o.drop_attributes;
+  coding.attributes.intensity_error = o.intensity_error;
   const ScanCoder coder(std::move(set.alphabet), coding, !o.save_alphabet.empty() || o.one_file,
                         reuse ? std::move(reuse->bytes) : std::vector<std::uint8_t>{});
   const Alphabet& alphabet = coder.alphabet();
@@ -186,8 +191,13 @@ void run_compress(const CompressOptions& o) {
       Stopwatch code_sw;
       d.input_points = cloud.size();
       auto coded = coder.code(cloud, d.model, threads);
-      // The one failure: no layer fits the bit budget.
-      if (!coded.ok()) throw CliError(2, coded.status().to_string() + "; try a larger --target-bpp or --words on");
+      // The failures: no layer fits the bit budget; an attribute that cannot be coded.
+      if (!coded.ok()) {
+        const std::string m = coded.status().to_string();
+        if (o.target_bpp > 0.0 && m.find("bits per point") != std::string::npos)
+          throw CliError(2, m + "; try a larger --target-bpp or --words on");
+        throw CliError(2, loader.name(i) + ": " + m);
+      }
       out.coded = std::move(coded).value();
       if (!out.coded.words) d.model.instances.clear();
       out.code_ms = code_sw.elapsed_ms();
@@ -258,12 +268,35 @@ void run_compress(const CompressOptions& o) {
               .end_object();
         j.end_object();
       }
+      j.begin_array("attributes");
+      for (const auto& a : coded.attributes)
+        j.begin_object()
+            .value("name", a.name)
+            .value("representation", a.representation)
+            .value("lossless", a.max_error == 0.0)
+            .value("max_error", a.max_error)
+            .value("bytes", static_cast<std::uint64_t>(a.bytes))
+            .value("bits_per_point", d.input_points ? 8.0 * static_cast<double>(a.bytes) / static_cast<double>(d.input_points) : 0.0)
+            .end_object();
+      j.end_array();
+      j.begin_array("attributes_dropped");
+      for (const auto& f : coded.dropped) j.value({}, f);
+      j.end_array();
       j.end_object();
     } else {
       std::printf("%-32s %9llu %9zu %10zu %10.3f", shown.c_str(), static_cast<unsigned long long>(d.input_points),
                   d.model.instances.size(), bytes.size(), bpp);
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
+      for (const auto& a : coded.attributes)
+        std::printf("  kept %-10s %8zu bytes %7.3f bits/pt  %s\n", a.name.c_str(), a.bytes,
+                    d.input_points ? 8.0 * static_cast<double>(a.bytes) / static_cast<double>(d.input_points) : 0.0,
+                    a.representation.c_str());
+      for (const auto& f : coded.dropped)
+        std::printf("  dropped %s (%s)\n", f.c_str(),
+                    o.drop_attributes ? "--drop-attributes"
+                    : coded.max_error ? "not coded"
+                                      : "words alone: give --max-error to keep attributes");
     }
     bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), loader.name(i));
   };
@@ -364,6 +397,13 @@ void register_compress(CLI::App& app) {
                   "§2.5-2.8)")
       ->check(CLI::IsMember({"auto", "spherical", "voxel", "laser"}))
       ->capture_default_str();
+  sub->add_option("--intensity-error", o->intensity_error,
+                  "Largest intensity error kept in the model file, in the intensity's own units; 0 keeps the "
+                  "intensities losslessly (formats/model.md §2.10)")
+      ->check(CLI::Range(0.0, 1e9))
+      ->capture_default_str();
+  sub->add_flag("--drop-attributes", o->drop_attributes,
+                "Keep positions only: no intensity, ring, time or colour (they are listed as dropped)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);
   o->model.add_to(*sub);

@@ -12,6 +12,7 @@
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/io/sensor_log.hpp"
+#include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "lex3d/range/range_image.hpp"
 
@@ -159,6 +160,15 @@ bool info_lex3d_file(const InfoOptions& o) {
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
       }
+  // The point attributes (an ATTR chunk): their fields, read from the descriptors.
+  std::vector<residual::AttributeField> attributes;
+  if (fi.kind == "model")
+    for (const auto& c : fi.chunks)
+      if (c.type == "ATTR" && c.crc_ok) {
+        const auto* at = b.data() + c.offset + 12;
+        auto f = residual::inspect_attributes(std::vector<std::uint8_t>(at, at + c.length));
+        if (f.ok()) attributes = f.value();
+      }
   const auto& translation_step = fi.translation_step_m;
   const auto& rotation_step = fi.rotation_step_rad;
   const auto& word_radius = fi.word_radius_m;
@@ -197,6 +207,13 @@ bool info_lex3d_file(const InfoOptions& o) {
           .value("columns", static_cast<std::uint64_t>(layer->columns));
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
+    if (fi.kind == "model") {
+      j.begin_array("attributes");
+      for (const auto& a : attributes)
+        j.begin_object().value("name", a.name).value("representation", a.representation)
+            .value("lossless", a.max_error == 0.0).value("bytes", static_cast<std::uint64_t>(a.bytes)).end_object();
+      j.end_array();
+    }
     if (!decode_error.empty()) j.value("error", decode_error);
     j.end_object();
     std::cout << j.str() << "\n";
@@ -229,6 +246,13 @@ bool info_lex3d_file(const InfoOptions& o) {
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);
     if (words) std::printf("words          %zu (%zu points)\n", words, word_points);
     if (georef) print_georef(*georef, false);
+    if (fi.kind == "model") {
+      std::printf("fields         x y z");
+      for (const auto& a : attributes) std::printf(" %s", a.name.c_str());
+      std::printf("\n");
+      for (const auto& a : attributes)
+        std::printf("  %-12s %s, %zu bytes\n", a.name.c_str(), a.representation.c_str(), a.bytes);
+    }
     if (word_radius)
       std::printf("word radius    %.4g m (points %.4g m apart, stored in steps of %.4g m)\n", *word_radius, *point_spacing,
                   *word_point_step);

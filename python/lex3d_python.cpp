@@ -139,12 +139,14 @@ py::bytes compress(const py::object& points, const py::object& intensity, std::o
   const lex3d::CompressResult& c = r->value();
   // Never drop an attribute silently.
   for (const auto& a : c.dropped_attributes)
-    PyErr_WarnEx(PyExc_UserWarning, (a + " is not stored in model files: " + std::to_string(c.input_points) +
-                                     " values dropped").c_str(), 1);
+    if (PyErr_WarnEx(PyExc_UserWarning, (a + " is not kept in this model file (attributes need a residual layer: "
+                                         "give max_error or target_bpp): " + std::to_string(c.input_points) +
+                                         " values dropped").c_str(), 1) != 0)
+      throw py::error_already_set();
   return to_bytes(c.bytes);
 }
 
-py::array_t<float> decompress(const py::bytes& data, const std::optional<py::bytes>& alphabet) {
+py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alphabet, bool attributes) {
   const std::vector<std::uint8_t> bytes = to_vector(data);
   std::vector<std::uint8_t> alphabet_file;
   if (alphabet) alphabet_file = to_vector(*alphabet);
@@ -159,7 +161,21 @@ py::array_t<float> decompress(const py::bytes& data, const std::optional<py::byt
   auto w = out.mutable_unchecked<2>();
   for (std::size_t i = 0; i < cloud.size(); ++i)
     for (py::ssize_t k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = cloud.points[i][k];
-  return out;
+  if (!attributes) return std::move(out);
+  // The per-point fields the file keeps (formats/model.md §2.10), by name.
+  const auto n = static_cast<py::ssize_t>(cloud.size());
+  py::dict fields;
+  if (cloud.has_intensity()) fields["intensity"] = py::array_t<float>(n, cloud.intensity.data());
+  if (cloud.has_rings()) fields["ring"] = py::array_t<std::uint16_t>(n, cloud.ring.data());
+  if (cloud.has_time()) fields["time"] = py::array_t<double>(n, cloud.time.data());
+  if (cloud.has_rgb()) {
+    py::array_t<std::uint8_t> rgb({n, py::ssize_t{3}});
+    auto c = rgb.mutable_unchecked<2>();
+    for (py::ssize_t i = 0; i < n; ++i)
+      for (py::ssize_t k = 0; k < 3; ++k) c(i, k) = cloud.rgb[static_cast<std::size_t>(i)][static_cast<std::size_t>(k)];
+    fields["rgb"] = rgb;
+  }
+  return py::make_tuple(out, fields);
 }
 
 py::bytes learn_alphabet(const py::list& clouds, double word_radius, int iterations, int patience,
@@ -213,10 +229,14 @@ alphabet: an alphabet file (bytes, from learn_alphabet) to reuse; the model then
 word_radius: metres, 0 derives it from the scan. iterations, seed: the learner's.
 threads: worker threads, [1, 64]; the bytes do not depend on it.
 Raises ValueError for a bad array or option, or an alphabet that does not decode.)");
-  m.def("decompress", &decompress, py::arg("data"), py::arg("alphabet") = py::none(),
+  m.def("decompress", &decompress, py::arg("data"), py::arg("alphabet") = py::none(), py::kw_only(),
+        py::arg("attributes") = false,
         R"(Decodes a model file (bytes) into an (M, 3) float32 array of points (metres).
 
 alphabet: the alphabet file (bytes) the model references, if it references one.
+attributes: also return the per-point fields the file keeps, as (points, fields) with fields a
+dict of (M,) arrays by name: "intensity" (float32), "ring" (uint16), "time" (float64, seconds)
+and "rgb" ((M, 3) uint8).
 Raises ValueError for a malformed, truncated or corrupt file (the message names the byte offset)
 or a missing or mismatched alphabet.)");
   m.def("learn_alphabet", &learn_alphabet, py::arg("clouds"), py::kw_only(), py::arg("word_radius") = 0.0,

@@ -66,8 +66,10 @@ struct CompressResult {
   bool words = false;                    ///< the file holds word instances
   std::optional<double> max_error;       ///< the residual layer's bound, metres, when there is one
   residual::LayerStats layer;            ///< what coding the layer did
-  /// Per-point attributes of the input that model files do not hold (e.g. "intensity"),
-  /// reported rather than dropped silently.
+  /// Per-point attributes kept in the file (formats/model.md §2.10) and how.
+  std::vector<residual::AttributeField> attributes;
+  /// Per-point attributes of the input the file does not keep (e.g. "intensity" with no
+  /// residual layer, or with keep_attributes off), reported rather than dropped silently.
   std::vector<std::string> dropped_attributes;
   [[nodiscard]] double bits_per_point() const noexcept {
     return input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;

@@ -1,5 +1,6 @@
 #include "lex3d/api/coding.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -26,6 +27,16 @@ void CodingOptions::validate() const {
   if (!step_ok(quantization.translation_m) || !step_ok(quantization.rotation_rad))
     throw std::invalid_argument("quantization steps must be 0 (derived) or in [1e-6, 0.1]");
   if (threads < 1 || threads > 64) throw std::invalid_argument("threads must be in [1, 64], got " + std::to_string(threads));
+  attributes.validate();
+}
+
+std::vector<std::string> attribute_fields(const Cloud& cloud) {
+  std::vector<std::string> f;
+  if (cloud.has_rings()) f.emplace_back("ring");
+  if (cloud.has_intensity()) f.emplace_back("intensity");
+  if (cloud.has_time()) f.emplace_back("time");
+  if (cloud.has_rgb()) f.emplace_back("rgb");
+  return f;
 }
 
 WordsMode CodingOptions::words_mode() const noexcept {
@@ -97,8 +108,10 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
     CodedScan c;
     c.bytes = codec::encode_model(words_data, q);
     c.instances = model.instances.size();
+    c.dropped = attribute_fields(cloud);  // words alone: the decoded points stand for no input point
     return c;
   }
+  const residual::AttributeOptions* attributes = options_.keep_attributes ? &options_.attributes : nullptr;
   residual::LayerOptions layer_options = options_.layer_options();
   layer_options.threads = threads;
   const WordsMode mode = options_.words_mode();
@@ -122,6 +135,18 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
       d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st, layer_options);
       return codec::encode_model(d, q);
     };
+    // The final bound's layer also says which input point each decoded point stands for:
+    // their attributes go into the file (formats/model.md §2.10).
+    auto encode_with_attributes = [&](double e, residual::LayerStats& st, std::vector<residual::AttributeField>& kept) {
+      residual::LayerOptions lo = layer_options;
+      lo.track_sources = true;
+      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, &st, lo);
+      std::vector<std::uint8_t> payload = residual::encode_attributes(cloud, st.sources, *attributes, &kept);
+      if (!payload.empty()) d.attributes = std::move(payload);
+      st.sources.clear();
+      st.sources.shrink_to_fit();
+      return codec::encode_model(d, q);
+    };
     CodedScan c;
     c.words = with_words;
     c.max_error = max_error;
@@ -131,7 +156,14 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
       c.max_error = residual::fit_max_error([&](double e) { return encode(e, nullptr).size(); }, budget);
       if (!c.max_error) continue;
     }
-    c.bytes = encode(*c.max_error, &c.layer);
+    try {
+      c.bytes = attributes ? encode_with_attributes(*c.max_error, c.layer, c.attributes) : encode(*c.max_error, &c.layer);
+    } catch (const std::invalid_argument& e) {  // the scan's attributes are bad data
+      return bad_data(e.what());
+    }
+    for (const std::string& f : attribute_fields(cloud))
+      if (std::none_of(c.attributes.begin(), c.attributes.end(), [&](const auto& a) { return a.name == f; }))
+        c.dropped.push_back(f);
     const bool better = !best || (max_error ? c.bytes.size() < best->bytes.size()
                                             : (*c.max_error < *best->max_error ||
                                                (*c.max_error == *best->max_error && c.bytes.size() < best->bytes.size())));

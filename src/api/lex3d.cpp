@@ -51,7 +51,6 @@ StatusOr<CompressResult> compress(const Cloud& cloud, const CompressOptions& opt
   p.seed = options.seed;
   CompressResult r;
   r.input_points = cloud.size();
-  if (cloud.has_intensity()) r.dropped_attributes.emplace_back("intensity");
   const bool words = options.uses_words();
   std::optional<ScanCoder> coder;
   Model model;
@@ -80,6 +79,8 @@ StatusOr<CompressResult> compress(const Cloud& cloud, const CompressOptions& opt
   r.max_error = c.max_error;
   r.layer = c.layer;
   r.instances = c.instances;
+  r.attributes = std::move(c.attributes);
+  r.dropped_attributes = std::move(c.dropped);
   return r;
 }
 

@@ -46,6 +46,9 @@ constexpr std::uint32_t kLayerCodings = 4;
 constexpr char kGeorType[] = "GEOR";
 constexpr std::uint16_t kGeorMinor = 5;
 constexpr std::uint64_t kGeorFixedBytes = 96;
+/// The point attributes chunk and the first minor version that has it (model.md §2.10).
+constexpr char kAttrType[] = "ATTR";
+constexpr std::uint16_t kAttrMinor = 6;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -939,6 +942,8 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
                                     std::to_string(data.model.instances[i].word) + ", the alphabet has " +
                                     std::to_string(data.alphabet->size()) + " words");
 
+  if (data.attributes && data.attributes->empty())
+    throw std::invalid_argument("lex3d::codec::encode_model: an empty attribute chunk (use nullopt for none)");
   if (data.residual && data.residual->empty())
     throw std::invalid_argument("lex3d::codec::encode_model: an empty residual layer (use nullopt for none)");
 
@@ -950,7 +955,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   const LayerChunk& layer_chunk = kLayerChunks[coding];
   std::vector<std::uint8_t> out;
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced,
-             data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor);
+             data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
@@ -971,6 +976,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   put_chunk(out, "INST", inst_payload(data.model, q));
   if (data.residual) put_chunk(out, layer_chunk.type, *data.residual);
   if (data.georef) put_chunk(out, kGeorType, geor_payload(*data.georef));
+  if (data.attributes) put_chunk(out, kAttrType, *data.attributes);
   put_chunk(out, "IEND", {});
   return out;
 }
@@ -1015,12 +1021,23 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     return ctx.error("chunk 'GEOR' needs format version 1." + std::to_string(kGeorMinor) + ", the header says 1." +
                          std::to_string(h.minor),
                      10);
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", kGeorType, "IEND"};
+  const bool has_attr = has_chunk(d, bytes.size(), kAttrType);
+  if (has_attr && h.minor < kAttrMinor)
+    return ctx.error("chunk 'ATTR' needs format version 1." + std::to_string(kAttrMinor) + ", the header says 1." +
+                         std::to_string(h.minor),
+                     10);
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", kGeorType, kAttrType, "IEND"};
   std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
   if (has_residual) sequence.insert(sequence.begin() + 3, layer_chunk->type);
   if (has_geor) sequence.insert(sequence.end() - 1, kGeorType);
+  if (has_attr) sequence.insert(sequence.end() - 1, kAttrType);
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
     if (c.is(kGeorType)) return read_geor(c, ctx, out.georef.emplace());
+    if (c.is(kAttrType)) {
+      if (c.length == 0) return ctx.error("chunk 'ATTR' is empty", c.offset + 4);
+      out.attributes.emplace(c.payload, c.payload + c.length);
+      return {};
+    }
     switch (index) {
       case 0: return read_mhdr(c, ctx, mhdr);
       case 1: {

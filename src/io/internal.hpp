@@ -277,7 +277,12 @@ class Builder {
     r_.cloud.points.emplace_back(x, y, z);
     if (intensity_) r_.cloud.intensity.push_back(i);
     if (color_) r_.colors.push_back(c);
+    if (time_) r_.cloud.time.push_back(next_time_);
   }
+
+  /// Records each point's time (Cloud::time): the value given to next_time before its add.
+  void set_time(bool on) { time_ = on; }
+  void next_time(double t) { next_time_ = t; }
 
   /// Records each point's laser (`rings`) and column (`columns`) from add_at; with
   /// `organised`, NaN/Inf and exact (0, 0, 0) points are the sensor's no-returns (counted in
@@ -310,6 +315,7 @@ class Builder {
     wide_points_.emplace_back(x, y, z);
     if (intensity_) r_.cloud.intensity.push_back(i);
     if (color_) r_.colors.push_back(c);
+    if (time_) r_.cloud.time.push_back(next_time_);
   }
 
   [[nodiscard]] bool wide() const { return wide_; }
@@ -318,6 +324,8 @@ class Builder {
   Status finish();
 
  private:
+  bool time_ = false;
+  double next_time_ = 0.0;
   ReadResult& r_;
   bool intensity_;
   bool color_;

@@ -74,11 +74,13 @@ Status Builder::finish() {
       r_.cloud.points[kept] = p;
       if (intensity_) r_.cloud.intensity[kept] = r_.cloud.intensity[i];
       if (color_) r_.colors[kept] = r_.colors[i];
+      if (time_) r_.cloud.time[kept] = r_.cloud.time[i];
       ++kept;
     }
     r_.cloud.points.resize(kept);
     if (intensity_) r_.cloud.intensity.resize(kept);
     if (color_) r_.colors.resize(kept);
+    if (time_) r_.cloud.time.resize(kept);
     return {};
   }
   r_.cloud.points.resize(n);
@@ -230,7 +232,12 @@ StatusOr<std::vector<std::uint8_t>> read_file(const std::string& path, std::uint
 
 StatusOr<ReadResult> read_cloud(const std::string& path, const ReadOptions& options) {
   try {
-    return read_cloud_impl(path, options);
+    auto r = read_cloud_impl(path, options);
+    // colours travel with the cloud (Cloud::rgb) as well as in ReadResult::colors
+    if (r.ok() && r.value().cloud.rgb.empty() && !r.value().colors.empty() &&
+        r.value().colors.size() == r.value().cloud.size())
+      r.value().cloud.rgb = r.value().colors;
+    return r;
   } catch (const std::bad_alloc&) {
     return io_error(msg(path, "out of memory reading the point cloud"));
   } catch (const std::length_error&) {

@@ -250,6 +250,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   const PcdField* fi = find({"intensity"});
   const PcdField* fr = find({"ring", "laser_id", "ring_id"});
   const PcdField* fc = find({"rgb", "rgba"});
+  const PcdField* ft = find({"time", "t", "timestamp"});
   if (fc != nullptr && fc->size != 4) fc = nullptr;  // only packed 32-bit colours
 
   r.encoding = encoding;
@@ -258,6 +259,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   // double coordinates may be georeferenced (Builder::finish)
   const bool wide = fx->scalar == Scalar::kF64 || fy->scalar == Scalar::kF64 || fz->scalar == Scalar::kF64;
   Builder out(r, fi != nullptr, fc != nullptr, wide);
+  out.set_time(ft != nullptr);
   // An organised cloud (HEIGHT > 1): rows are lasers, columns azimuth steps, NaN or (0, 0, 0)
   // pixels no-returns; a ring field gives each point's laser.
   const bool organised = height > 1 && height <= 0xFFFF && width <= 0xFFFFFFFFULL;
@@ -297,7 +299,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       const std::string_view t = trim(dl);
       if (t.empty()) continue;
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
-      double ring_value = 0.0;
+      double ring_value = 0.0, time_value = 0.0;
       double w[3] = {0.0, 0.0, 0.0};
       std::uint32_t rgb_bits = 0;
       std::size_t k = 0;
@@ -323,6 +325,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (col == fz->token) slot = &v[2];
         else if (fi != nullptr && col == fi->token) slot = &v[3];
         else if (fr != nullptr && col == fr->token) return parse_number(b, e, ring_value);
+        else if (ft != nullptr && col == ft->token) return parse_number(b, e, time_value);
         return slot != nullptr ? parse_number(b, e, *slot) : is_number(b, e);
       });
       const std::uint64_t line_no = first_line + data_lines.line_no() - 1;
@@ -336,6 +339,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       std::uint16_t ring = 0;
       Status rs = ring_of(done, ring_value, ring);
       if (!rs.ok()) return rs;
+      out.next_time(time_value);
       if (wide) out.add_wide(w[0], w[1], w[2], v[3], unpack_rgb(rgb_bits));
       else out.add_at(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits), ring, static_cast<std::uint32_t>(done % row_width));
       ++done;
@@ -421,7 +425,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     return a;
   };
   const PcdAccess ax = access(fx), ay = access(fy), az = access(fz), ai = access(fi), ac = access(fc),
-                  ar = access(fr);
+                  ar = access(fr), at = access(ft);
   out.reserve(static_cast<std::size_t>(points));
   const bool swap = kHostBigEndian;
   for (std::uint64_t i = 0; i < points; ++i) {
@@ -434,6 +438,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     std::uint16_t ring = 0;
     Status rs = ring_of(i, fr != nullptr ? load_scalar(block + ar.base + i * ar.stride, fr->scalar, swap) : 0.0, ring);
     if (!rs.ok()) return rs;
+    if (ft != nullptr) out.next_time(load_scalar(block + at.base + i * at.stride, ft->scalar, swap));
     if (wide)
       out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
                    load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),

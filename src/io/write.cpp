@@ -394,7 +394,15 @@ Status write_file_atomic(const std::string& path, const std::vector<std::uint8_t
   return write_atomic(path, bytes.data(), bytes.size());
 }
 
-Status write_cloud(const std::string& path, const Cloud& cloud, const WriteOptions& options) {
+Status write_cloud(const std::string& path, const Cloud& cloud, const WriteOptions& options_in) {
+  // the cloud's own colours when the caller gives none
+  const bool own_colors = options_in.colors.empty() && cloud.has_rgb();
+  WriteOptions with_rgb;
+  if (own_colors) {
+    with_rgb = options_in;
+    with_rgb.colors = cloud.rgb;
+  }
+  const WriteOptions& options = own_colors ? with_rgb : options_in;
   try {
     return write_cloud_impl(path, cloud, options);
   } catch (const std::bad_alloc&) {

@@ -782,6 +782,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     LaserLayer out;
     out.range_step = qr;
     out.coded = kept.size();
+    out.sources.resize(kept.size());
+    for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[kept[k]]];
     RangeEncoder enc = head;
     put_table(enc, table);
     PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor == 1);

@@ -58,6 +58,7 @@ struct LaserLayer {
   std::vector<std::uint8_t> stream;  ///< the keep mask (as `head` holds it), the table, the points
   double range_step = 0.0;
   std::uint64_t coded = 0;           ///< points coded (after thinning)
+  std::vector<std::uint32_t> sources;  ///< the input point of each coded point, in stream order
 };
 
 /// Size of `fields` in a payload.

@@ -11,6 +11,7 @@
 // as a Cartesian offset instead ("escaped").
 
 #include "lex3d/residual/residual.hpp"
+#include "lex3d/residual/attributes.hpp"
 
 #include <algorithm>
 #include <array>
@@ -300,7 +301,8 @@ struct PointModels {
 std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                       const std::vector<Spherical>& spherical, const std::vector<std::uint32_t>& order,
                                       const Pose& T_cloud_sensor, const Pose& T_sensor_cloud, double q, double bound,
-                                      std::size_t& escaped, std::size_t& coded_count, bool thin, double sweep_cell) {
+                                      std::size_t& escaped, std::size_t& coded_count, bool thin, double sweep_cell,
+                                      std::vector<std::uint32_t>* sources = nullptr) {
   const bool sweep = sweep_cell > 0.0;
   AngularMemory memory(sweep_cell);
   PointModels m;
@@ -317,6 +319,7 @@ std::vector<std::uint8_t> code_points(RangeEncoder enc, const std::vector<Eigen:
     const Eigen::Vector3d truth_cloud = input[idx].cast<double>();
     if (thin && seen.any_within(truth_cloud)) continue;
     ++coded_count;
+    if (sources) sources->push_back(idx);
     const Eigen::Vector3d p = T_sensor_cloud * truth_cloud;
     const Spherical& t = spherical[idx];
     // Spherical attempt: range first (the angle steps depend on it), then elevation, azimuth.
@@ -630,9 +633,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     ways.push_back({true, true});
     ways.push_back({false, true});
   }
-  auto code = [&](const std::vector<std::uint32_t>& order, bool sweep, std::size_t& escaped, std::size_t& count) {
+  std::vector<std::vector<std::uint32_t>> way_sources(ways.size());
+  auto code = [&](const std::vector<std::uint32_t>& order, bool sweep, std::size_t& escaped, std::size_t& count,
+                  std::vector<std::uint32_t>* sources = nullptr) {
+    if (sources) sources->clear();
     return code_points(head, input.points, spherical, order, T_cloud_sensor, T_sensor_cloud, q, check_error, escaped, count, thin,
-                       sweep ? sweep_cell : 0.0);
+                       sweep ? sweep_cell : 0.0, sources);
   };
   std::vector<std::vector<std::uint8_t>> streams(ways.size());
   std::vector<std::size_t> escaped(ways.size(), 0), counts(ways.size(), 0);
@@ -709,17 +715,17 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical)
-          streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
+          streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
         else
           voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
       if (!voxel && !full_spherical)
-        streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
+        streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
     } else {
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
         if (w == ways.size()) voxel = voxel_layer(head, input.points, coded, check_error);
-        else streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w]);
+        else streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w], &way_sources[w]);
       }, 1);
       for (std::size_t w = 1; w < ways.size(); ++w)
         if (streams[w].size() < streams[best].size()) best = w;
@@ -729,7 +735,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // beat both: it is coded in full after all.
   if (others && options.spherical && laser && voxel && streams[best].empty() &&
       extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size())
-    streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best]);
+    streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
   const bool use_voxel =
       voxel && (streams[best].empty() ||  // (no spherical stream: `spherical` off, or skipped)
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
@@ -756,6 +762,32 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       stats->columns = lasers_of->table.columns;
     }
   };
+  // The input point each decoded point stands for (LayerStats::sources).
+  const auto fill_sources = [&](const std::vector<std::uint8_t>& payload, const std::vector<std::uint32_t>* coded_sources) {
+    if (!stats || !options.track_sources) return;
+    auto decoded = decode_layer(payload, words, T_cloud_sensor, n_in);
+    if (!decoded.ok()) throw std::logic_error("residual layer does not decode: " + decoded.status().to_string());
+    const Cloud& d = decoded.value();
+    const std::size_t kept_n = stats->kept_word_points;
+    if (coded_sources && coded_sources->size() != d.size() - kept_n)
+      throw std::logic_error("residual layer: coded points and their sources differ in number");
+    PointBallGrid grid(max_error, n_in);
+    for (const auto& p : input.points) grid.insert(p);
+    std::vector<std::uint32_t>& out_sources = stats->sources;
+    out_sources.assign(d.size(), 0);
+    std::vector<std::uint8_t> missing(d.size(), 0);
+    parallel_for(d.size(), threads, [&](std::size_t j) {
+      if (j >= kept_n && coded_sources) {
+        out_sources[j] = (*coded_sources)[j - kept_n];
+        return;
+      }
+      const std::uint32_t i = grid.nearest_within(d.points[j].cast<double>());
+      if (i == PointBallGrid::kNoPoint) missing[j] = 1;
+      else out_sources[j] = i;
+    }, 4096);
+    if (std::any_of(missing.begin(), missing.end(), [](std::uint8_t m) { return m != 0; }))
+      throw std::logic_error("residual layer: a decoded point has no input point within the bound");
+  };
   const bool coded_others = use_voxel || !streams[best].empty();
   const std::size_t others_bytes = !others || !coded_others ? std::numeric_limits<std::size_t>::max()
                                    : use_voxel ? extra_bytes(kCodingVoxel) + voxel->stream.size()
@@ -772,6 +804,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     out.insert(out.end(), laser->fields.begin(), laser->fields.end());
     out.insert(out.end(), laser->stream.begin(), laser->stream.end());
     fill_stats(laser->coded, 0, false, false, true, out.size());
+    fill_sources(out, &laser->sources);
     return out;
   }
   const std::vector<std::uint8_t>& stream = use_voxel ? voxel->stream : streams[best];
@@ -795,6 +828,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   }
   out.insert(out.end(), stream.begin(), stream.end());
   fill_stats(use_voxel ? voxel->voxels : counts[best], use_voxel ? 0 : escaped[best], sweep, use_voxel, false, out.size());
+  fill_sources(out, use_voxel ? nullptr : &way_sources[best]);
   return out;
 }
 
@@ -952,8 +986,13 @@ std::optional<double> fit_max_error(const std::function<std::size_t(double)>& si
 
 StatusOr<Cloud> decode_cloud(const codec::ModelData& data) {
   Cloud words = word_cloud(data);
-  if (!data.residual) return words;
-  return decode_layer(*data.residual, words, data.T_cloud_sensor, data.input_points);
+  StatusOr<Cloud> decoded = data.residual ? decode_layer(*data.residual, words, data.T_cloud_sensor, data.input_points)
+                                          : StatusOr<Cloud>(std::move(words));
+  if (!decoded.ok() || !data.attributes) return decoded;
+  Cloud cloud = std::move(decoded).value();
+  if (Status s = decode_attributes(*data.attributes, cloud); !s.ok())
+    return Status(s.code(), "ATTR chunk: " + s.message(), s.offset());
+  return cloud;
 }
 
 }  // namespace lex3d::residual

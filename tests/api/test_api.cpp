@@ -61,14 +61,17 @@ TEST(Api, LayeredRoundTripOfARealScanMeetsTheBoundBothWays) {
   EXPECT_FALSE(c.value().words);  // with a layer, words are off by default
   EXPECT_EQ(c.value().input_points, cloud.size());
   EXPECT_LT(c.value().bits_per_point(), 32.0);
-  ASSERT_EQ(c.value().dropped_attributes.size(), 1U);  // the KITTI intensity is reported, not coded
-  EXPECT_EQ(c.value().dropped_attributes[0], "intensity");
+  EXPECT_TRUE(c.value().dropped_attributes.empty());  // the KITTI intensity is kept
+  ASSERT_EQ(c.value().attributes.size(), 1U);
+  EXPECT_EQ(c.value().attributes[0].name, "intensity");
+  EXPECT_EQ(c.value().attributes[0].max_error, 0.0);
   auto d = lex3d::decompress(c.value().bytes);
   ASSERT_TRUE(d.ok()) << d.status().to_string();
   EXPECT_TRUE(d.value().residual_layer);
   EXPECT_EQ(d.value().input_points, cloud.size());
   const auto dist = lex3d::eval::compare_clouds(cloud, d.value().cloud);
   EXPECT_LE(dist.hausdorff, 0.03 * (1 + 1e-6));
+  EXPECT_TRUE(d.value().cloud.has_intensity());
 }
 
 TEST(Api, SameBytesAsTheCommandWithALayerAndWithWords) {

@@ -332,6 +332,26 @@ endif()
 file(WRITE "${WORK}/short.las" "LASF")
 run(2 las.short info "${WORK}/short.las")
 expect_match(las.short "${LAST_ERR}" "short.las: truncated LAS header")
+# --- point attributes (formats/model.md §2.10): kept, listed, written back, never dropped silently ---
+run(0 attr.compress compress "${KITTI}" -o "${WORK}/k_attr.lex3dm" --max-error 0.05 --words off --json)
+expect_match(attr.compress "${LAST_OUT}" "\"attributes\":\\[\\{\"name\":\"intensity\"")
+expect_match(attr.compress_lossless "${LAST_OUT}" "\"lossless\":true")
+run(0 attr.info info "${WORK}/k_attr.lex3dm")
+expect_match(attr.info "${LAST_OUT}" "format 1\\.6")
+expect_match(attr.info_fields "${LAST_OUT}" "fields +x y z intensity")
+run(0 attr.decompress decompress "${WORK}/k_attr.lex3dm" -o "${WORK}/k_attr.pcd")
+file(READ "${WORK}/k_attr.pcd" pcd_head LIMIT 200)
+expect_match(attr.pcd "${pcd_head}" "FIELDS x y z intensity")
+run(0 attr.drop compress "${KITTI}" -o "${WORK}/k_noattr.lex3dm" --max-error 0.05 --words off --drop-attributes)
+expect_match(attr.drop "${LAST_OUT}" "dropped intensity")
+# a corrupt attribute chunk (a byte of its CRC flipped): bad data, exit 2, no output
+execute_process(COMMAND /usr/bin/python3 -c "import sys; d=bytearray(open(sys.argv[1],'rb').read()); d[-20]^=0x55; open(sys.argv[2],'wb').write(d)"
+                "${WORK}/k_attr.lex3dm" "${WORK}/k_attr_bad.lex3dm")
+run(2 attr.corrupt decompress "${WORK}/k_attr_bad.lex3dm" -o "${WORK}/k_attr_bad.pcd")
+if(EXISTS "${WORK}/k_attr_bad.pcd")
+  message(SEND_ERROR "[attr.corrupt] a partial output was left")
+endif()
+
 # --- raw lidar logs: a capture that is not one, an Ouster capture without metadata ---
 file(WRITE "${WORK}/fake.pcap" "this is not a packet capture\n")
 run(2 pcap.not_a_capture compress "${WORK}/fake.pcap" -o "${WORK}/fake.lex3dm" --max-error 0.02)

@@ -70,10 +70,17 @@ def test_same_bytes_as_the_command(args):
     assert lex3d.compress(points.astype(np.float64), **kwargs) == expected
 
 
-def test_intensity_is_reported_not_dropped_silently(kitti):
+def test_intensity_is_kept_with_a_layer_and_reported_without(kitti):
     points, intensity = kitti
-    with pytest.warns(UserWarning, match=f"intensity is not stored in model files: {len(points)} values dropped"):
-        lex3d.compress(points, intensity, max_error=0.05)
+    data = lex3d.compress(points, intensity, max_error=0.05)
+    back, fields = lex3d.decompress(data, attributes=True)
+    assert set(fields) == {"intensity"}
+    assert fields["intensity"].shape == (back.shape[0],)
+    # every decoded intensity is one the scan has (lossless), and they vary as the scan's do
+    assert np.isin(fields["intensity"], intensity).all()
+    assert len(np.unique(fields["intensity"])) > 10
+    with pytest.warns(UserWarning, match=f"intensity is not kept in this model file .*: {len(points)} values dropped"):
+        lex3d.compress(points[:20000], intensity[:20000], iterations=5)
 
 
 def test_deterministic_across_runs_and_threads(small):

@@ -8,11 +8,13 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/status.hpp"
 #include "lex3d/model/model.hpp"
+#include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
 
 namespace lex3d {
@@ -54,6 +56,10 @@ struct CodingOptions {
   codec::Quantization quantization{0.0, 0.0, 0.0005};
   /// Worker threads, [1, 64]; the bytes do not depend on it.
   int threads = 2;
+  /// Per-point attributes (intensity, ring, time, colour) kept with a residual layer
+  /// (formats/model.md §2.10): which, and how (intensity lossless by default).
+  bool keep_attributes = true;
+  residual::AttributeOptions attributes;
 
   /// Throws std::invalid_argument naming the option and its allowed values.
   void validate() const;
@@ -74,7 +80,12 @@ struct CodedScan {
   std::optional<double> max_error;   ///< the residual layer's bound, metres, when it has one
   residual::LayerStats layer;        ///< what coding the layer did (zeros without one)
   std::size_t instances = 0;         ///< instances in the file
+  std::vector<residual::AttributeField> attributes;  ///< fields kept (an ATTR chunk)
+  std::vector<std::string> dropped;                  ///< fields the input has and the file does not keep
 };
+
+/// The per-point fields `cloud` has, by name ("ring", "intensity", "time", "rgb").
+[[nodiscard]] std::vector<std::string> attribute_fields(const Cloud& cloud);
 
 /// What modelling a scan with a known alphabet did.
 struct ScanModelStats {
@@ -100,7 +111,8 @@ class ScanCoder {
 
   /// Codes `cloud` with `model` (its instances of the alphabet; ignored without words):
   /// words only, or words and/or a residual layer, keeping the smallest allowed form.
-  /// kBadData when no layer fits options.target_bpp.
+  /// kBadData when no layer fits options.target_bpp, or for an attribute the scan has
+  /// that cannot be coded (a non-finite value; the message names the field).
   [[nodiscard]] StatusOr<CodedScan> code(const Cloud& cloud, const Model& model, int threads) const;
 
   /// Models `cloud` with the alphabet (prepare_scan, then encode_scan, pruned when

@@ -63,6 +63,10 @@ struct ModelData {
   /// decoded points' true coordinates are origin + point. A model with one is written as
   /// format 1.5 (a GEOR chunk); Georeference::representation_error_m is not stored.
   std::optional<Georeference> georef;
+  /// The point attributes of the decoded points (formats/model.md §2.10;
+  /// lex3d/residual/attributes.hpp codes and decodes it), or nullopt. A model with one is
+  /// written as format 1.6 (an ATTR chunk).
+  std::optional<std::vector<std::uint8_t>> attributes;
 };
 
 /// Encodes an alphabet file. Throws std::invalid_argument for an invalid `q` or alphabet

@@ -5,6 +5,7 @@
 /// optional per-point intensity. Conversions to and from pcl::PointCloud live
 /// in lex3d/core/pcl_conversions.hpp (header-only), so that PCL headers stay out of here.
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -92,7 +93,8 @@ struct Georeference {
   }
 };
 
-/// A point cloud: positions and, when the source has them, intensities.
+/// A point cloud: positions and, when the source has them, per-point attributes
+/// (intensity, laser, column, time, colour), each either empty or one a point.
 struct Cloud {
   /// Point positions in metres.
   std::vector<Eigen::Vector3f> points;
@@ -120,6 +122,13 @@ struct Cloud {
   /// not counted as points); 0 × 0 for an unorganised one.
   std::uint32_t rows = 0;
   std::uint32_t columns = 0;
+  /// Time of each point, seconds, when the source records it (a PCD/PLY `time`, `t` or
+  /// `timestamp` field, LAS GPS time, a raw log's firing time); empty otherwise, else
+  /// points.size(). The epoch is the source's (LAS: GPS time; raw logs: the sensor's clock).
+  std::vector<double> time;
+  /// RGB colour of each point when the source has one (PCD `rgb`/`rgba`, PLY `red green
+  /// blue`, LAS formats with colour, scaled to 8 bits); empty otherwise, else points.size().
+  std::vector<std::array<std::uint8_t, 3>> rgb;
   /// The sensor's beam layout when the source gives it (raw logs with metadata).
   std::optional<SensorGeometry> geometry;
   /// Where the local frame sits in a georeferenced (projected) frame, when the source's
@@ -128,6 +137,8 @@ struct Cloud {
 
   [[nodiscard]] bool has_rings() const noexcept { return !ring.empty() && ring.size() == points.size(); }
   [[nodiscard]] bool has_columns() const noexcept { return !column.empty() && column.size() == points.size(); }
+  [[nodiscard]] bool has_time() const noexcept { return !time.empty() && time.size() == points.size(); }
+  [[nodiscard]] bool has_rgb() const noexcept { return !rgb.empty() && rgb.size() == points.size(); }
 
   [[nodiscard]] std::size_t size() const noexcept { return points.size(); }
   [[nodiscard]] bool empty() const noexcept { return points.empty(); }

@@ -55,6 +55,9 @@ struct LayerOptions {
   bool laser = true;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
+  /// Fill LayerStats::sources (the input point each decoded point stands for, which the
+  /// attribute chunk needs); off, it stays empty.
+  bool track_sources = false;
 };
 
 /// What encoding a residual layer did.
@@ -74,6 +77,11 @@ struct LayerStats {
   std::string laser_table_source;
   double laser_table_rms = 0.0;
   std::uint32_t lasers = 0, columns = 0;  ///< the table's lasers and columns a turn
+  /// With LayerOptions::track_sources: for each decoded point (kept word points, then
+  /// coded points, in the decoded order) the input point it stands for: a coded point's
+  /// own input point; for a kept word point or a voxel centre the input point nearest
+  /// to it (ties: the lowest index).
+  std::vector<std::uint32_t> sources;
 };
 
 /// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5,

@@ -1,0 +1,64 @@
+#pragma once
+/// \file
+/// Point attributes of a model file (formats/model.md §2.10, the `ATTR` chunk): the
+/// intensity, laser (ring), time and colour of every decoded point, range coded in the
+/// decoded order with the residual layer's range coder.
+///
+/// A decoded point takes the attributes of the input point it stands for (`sources`):
+/// a point coded by the residual layer, the input point it was quantised from; a kept
+/// word point or a voxel centre, the input point nearest to it (ties: the lowest index).
+/// Intensity is lossless by default: its values are coded as integers times a step
+/// derived from the data (KITTI's 0.01, a sensor's integer counts), or, when no step
+/// reproduces every value exactly, as their float32 bit patterns.
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lex3d/core/cloud.hpp"
+#include "lex3d/core/status.hpp"
+
+namespace lex3d::residual {
+
+/// Which attributes the encoder keeps (those the input has), and how.
+struct AttributeOptions {
+  bool intensity = true;  ///< keep Cloud::intensity
+  bool time = true;       ///< keep Cloud::time
+  bool ring = true;       ///< keep Cloud::ring
+  bool rgb = true;        ///< keep Cloud::rgb
+  /// Largest intensity error, in the intensity's units; 0: lossless. [0, 1e9].
+  double intensity_error = 0.0;
+  /// Largest time error, seconds, when the times have no exact step; (0, 1].
+  double time_error = 0.5e-9;
+  void validate() const;
+};
+
+/// One coded field, as `lex3d info` and `compress` report it.
+struct AttributeField {
+  std::string name;            ///< "intensity", "time", "ring", "rgb"
+  std::string representation;  ///< e.g. "step 0.01", "float32 bits", "step 1e-09 from 1.2e9"
+  double step = 0.0;           ///< quantisation step (0 for float32 bits)
+  double max_error = 0.0;      ///< 0: lossless
+  std::size_t bytes = 0;       ///< stored bytes of the field (descriptor and stream)
+  std::uint8_t method = 0;     ///< 0: context tree; 1: previous value; 2: linear
+};
+
+/// Encodes the `ATTR` payload for the decoded points: `sources[j]` is the input point
+/// decoded point j stands for. Fields kept: those of `options` the input has. Throws
+/// std::invalid_argument naming the field for a non-finite value, a field whose size is
+/// neither 0 nor the point count, or a source index beyond the input. An empty result
+/// (no field to keep) means no chunk.
+[[nodiscard]] std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
+                                                          const AttributeOptions& options = {},
+                                                          std::vector<AttributeField>* fields = nullptr);
+
+/// The fields of an `ATTR` payload (descriptors only; the streams are not decoded).
+[[nodiscard]] StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::uint8_t>& payload);
+
+/// Decodes an `ATTR` payload onto `decoded` (the decoded cloud, whose size the payload
+/// must match): sets its intensity, time, ring and rgb as the payload holds them.
+/// kBadData with the payload offset on a malformed or truncated payload.
+[[nodiscard]] Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded);
+
+}  // namespace lex3d::residual

@@ -1,0 +1,519 @@
+// Point attributes of a model file (formats/model.md §2.10, the ATTR chunk).
+//
+// Every field is a sequence of non-negative integers u (one a decoded point, or three for
+// colour) coded in the decoded order, each field with its own range-coded stream:
+//  - method 0 (context tree): u's bits, most significant first, each under a bit model of
+//    the bits above it and a context of the previous value and its last change;
+//  - method 1 (previous value): u minus the previous value, an integer model;
+//  - method 2 (linear): u minus (2·previous − the one before), an integer model.
+// "Previous" is the last value of the same laser when the chunk also holds the ring
+// field (coded first), else the last value in the decoded order. The encoder codes each
+// field every way that applies and keeps the smallest.
+
+#include "lex3d/residual/attributes.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <iomanip>
+#include <sstream>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "codec/bytes.hpp"
+#include "residual/range_coder.hpp"
+
+namespace lex3d::residual {
+namespace {
+
+using detail::BitModel;
+using detail::IntModel;
+using detail::RangeDecoder;
+using detail::RangeEncoder;
+
+enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
+enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
+constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2;
+constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
+constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
+constexpr std::uint64_t kTreeMaxSpan = 255;
+constexpr int kBuckets = 16, kActivity = 4;
+constexpr std::uint32_t kMaxLasersInHistory = 65536;
+
+const char* kind_name(std::uint8_t k) {
+  switch (k) {
+    case kRing: return "ring";
+    case kIntensity: return "intensity";
+    case kTime: return "time";
+    case kRgb: return "rgb";
+    default: return "unknown";
+  }
+}
+
+// The float32 bit pattern as an integer that orders like the value (−0 below +0).
+std::int64_t float_key(float v) {
+  std::uint32_t b = 0;
+  std::memcpy(&b, &v, 4);
+  return (b & 0x80000000U) ? -static_cast<std::int64_t>(b & 0x7FFFFFFFU) - 1 : static_cast<std::int64_t>(b);
+}
+float key_float(std::int64_t k) {
+  const std::uint32_t b = k >= 0 ? static_cast<std::uint32_t>(k) : (0x80000000U | static_cast<std::uint32_t>(-(k + 1)));
+  float v = 0.0F;
+  std::memcpy(&v, &b, 4);
+  return v;
+}
+
+/// How a field's values map to integers: value = T(base + (kmin + u)·step), T the field's type.
+struct Quant {
+  std::uint8_t repr = kQuantised;
+  double step = 1.0, base = 0.0, max_error = 0.0;
+  std::int64_t kmin = 0;  // (kept in `base` when stored: base + kmin·step is exact for the steps tried)
+};
+
+/// Per-laser history of the previous two values of a channel.
+struct History {
+  std::vector<std::int64_t> last, last2;
+  std::vector<std::uint8_t> seen;
+  explicit History(std::size_t lasers) : last(lasers, 0), last2(lasers, 0), seen(lasers, 0) {}
+  void push(std::size_t l, std::int64_t u) {
+    last2[l] = seen[l] ? last[l] : u;
+    last[l] = u;
+    seen[l] = 1;
+  }
+};
+
+/// The models of one channel for one method.
+struct ChannelCoder {
+  std::uint8_t method;
+  std::uint64_t span;
+  int bits = 0;
+  std::vector<BitModel> tree;  // [context][node]
+  IntModel ints{IntModel::kClasses * IntModel::kClasses};
+  std::int64_t last_residual = 0;
+  ChannelCoder(std::uint8_t m, std::uint64_t s) : method(m), span(s) {
+    if (method == kMethodTree) {
+      while ((std::uint64_t{1} << bits) <= span) ++bits;
+      tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
+    }
+  }
+  [[nodiscard]] int tree_context(std::int64_t prev, std::int64_t prev2) const {
+    const std::uint64_t n = span + 1;
+    const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * kBuckets / n);
+    const std::uint64_t change = static_cast<std::uint64_t>(prev > prev2 ? prev - prev2 : prev2 - prev) * 32 / n;
+    const int act = change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
+    return bucket * kActivity + act;
+  }
+  [[nodiscard]] std::int64_t prediction(std::int64_t prev, std::int64_t prev2) const {
+    return method == kMethodLinear ? 2 * prev - prev2 : prev;
+  }
+  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2) {
+    if (method == kMethodTree) {
+      const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
+      std::size_t node = 1;
+      for (int j = bits - 1; j >= 0; --j) {
+        const bool bit = ((static_cast<std::uint64_t>(u) >> j) & 1U) != 0;
+        enc.put(tree[base + node], bit);
+        node = 2 * node + (bit ? 1 : 0);
+      }
+      return;
+    }
+    const std::int64_t r = u - prediction(prev, prev2);
+    ints.put(enc, IntModel::context_of(last_residual, prev - prev2), r);
+    last_residual = r;
+  }
+  /// Decodes one value; false when it falls outside [0, span].
+  bool get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t& u) {
+    if (method == kMethodTree) {
+      const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
+      std::size_t node = 1;
+      for (int j = 0; j < bits; ++j) node = 2 * node + (dec.get(tree[base + node]) ? 1 : 0);
+      u = static_cast<std::int64_t>(node - (std::size_t{1} << bits));
+    } else {
+      const std::int64_t r = ints.get(dec, IntModel::context_of(last_residual, prev - prev2));
+      last_residual = r;
+      u = prediction(prev, prev2) + r;
+    }
+    return u >= 0 && static_cast<std::uint64_t>(u) <= span;
+  }
+};
+
+/// Codes `channels` channels of values u[c][j] with `method`, laser of point j `laser[j]`
+/// (all 0 without rings).
+std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t>>& u, std::uint64_t span,
+                                      std::uint8_t method, const std::vector<std::uint16_t>& laser, std::size_t lasers) {
+  RangeEncoder enc;
+  for (const auto& ch : u) {
+    ChannelCoder coder(method, span);
+    History h(lasers);
+    for (std::size_t j = 0; j < ch.size(); ++j) {
+      const std::size_t l = laser.empty() ? 0 : laser[j];
+      const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
+      coder.put(enc, ch[j], prev, prev2);
+      h.push(l, ch[j]);
+    }
+  }
+  return enc.finish();
+}
+
+/// Finds how to represent `values` (float32 when `is_f32`) as integers.
+Quant quantise_field(const std::vector<double>& values, bool is_f32, double max_error, bool allow_float_bits,
+                     double fallback_error, const char* name) {
+  std::vector<double> distinct(values);
+  std::sort(distinct.begin(), distinct.end());
+  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+  Quant q;
+  if (distinct.empty()) return q;
+  const double lo = distinct.front(), hi = distinct.back();
+  const auto to_type = [&](double v) { return is_f32 ? static_cast<double>(static_cast<float>(v)) : v; };
+  const auto fits = [&](double step, double base, double bound) {
+    if (!((hi - base) / step < static_cast<double>(kMaxSpan) && (lo - base) / step > -static_cast<double>(kMaxSpan)))
+      return false;
+    for (const double v : distinct) {
+      const double k = std::nearbyint((v - base) / step);
+      const double back = to_type(base + k * step);
+      if (bound == 0.0 ? back != v : !(std::abs(back - v) <= bound)) return false;
+    }
+    return true;
+  };
+  if (max_error > 0.0) {
+    double step = 2.0 * max_error;
+    for (int attempt = 0; attempt < 16; ++attempt, step *= 0.9)
+      if (fits(step, 0.0, max_error)) {
+        q.step = step;
+        q.max_error = max_error;
+        return q;
+      }
+    throw std::invalid_argument(std::string(name) + ": a bound of " + std::to_string(max_error) +
+                                " is below the resolution of its values");
+  }
+  // Exact steps: powers of ten, then powers of two, largest first; from 0 (intensities, counts)
+  // and from the smallest value (times).
+  std::vector<double> steps;
+  for (int e = 0; e <= 9; ++e) steps.push_back(std::pow(10.0, -e));
+  for (int e = 1; e <= 24; ++e) steps.push_back(std::ldexp(1.0, -e));
+  std::stable_sort(steps.begin(), steps.end(), std::greater<>());
+  for (const double base : {0.0, lo})
+    for (const double step : steps)
+      if (fits(step, base, 0.0)) {
+        q.step = step;
+        q.base = base;
+        return q;
+      }
+  if (allow_float_bits) {
+    q.repr = kFloatBits;
+    q.step = 0.0;
+    return q;
+  }
+  // No exact step (double times): within fallback_error.
+  const double step = 2.0 * fallback_error;
+  if (!fits(step, lo, fallback_error * 1.000001))
+    throw std::invalid_argument(std::string(name) + ": values span too wide a range to code within " +
+                                std::to_string(fallback_error));
+  q.step = step;
+  q.base = lo;
+  q.max_error = fallback_error;
+  return q;
+}
+
+struct FieldOut {
+  std::uint8_t kind;
+  std::uint8_t repr;
+  std::uint8_t channels;
+  double step, base, max_error;
+  std::uint64_t span;
+  std::int64_t kmin = 0;
+  std::vector<std::vector<std::int64_t>> u;
+};
+
+void check_size(std::size_t have, std::size_t points, const char* name) {
+  if (have != 0 && have != points)
+    throw std::invalid_argument("attribute " + std::string(name) + " has " + std::to_string(have) + " values for " +
+                                std::to_string(points) + " points");
+}
+
+}  // namespace
+
+void AttributeOptions::validate() const {
+  if (!(intensity_error >= 0.0 && intensity_error <= 1e9))
+    throw std::invalid_argument("intensity_error " + std::to_string(intensity_error) + " is outside [0, 1e9]");
+  if (!(time_error > 0.0 && time_error <= 1.0))
+    throw std::invalid_argument("time_error " + std::to_string(time_error) + " is outside (0, 1]");
+}
+
+std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
+                                            const AttributeOptions& options, std::vector<AttributeField>* fields_out) {
+  options.validate();
+  const std::size_t n_in = input.size(), n = sources.size();
+  check_size(input.intensity.size(), n_in, "intensity");
+  check_size(input.time.size(), n_in, "time");
+  check_size(input.ring.size(), n_in, "ring");
+  check_size(input.rgb.size(), n_in, "rgb");
+  for (std::size_t j = 0; j < n; ++j)
+    if (sources[j] >= n_in)
+      throw std::invalid_argument("attribute source " + std::to_string(sources[j]) + " of decoded point " +
+                                  std::to_string(j) + " is beyond the " + std::to_string(n_in) + " input points");
+  for (std::size_t i = 0; i < input.intensity.size(); ++i)
+    if (!std::isfinite(input.intensity[i]))
+      throw std::invalid_argument("attribute intensity of point " + std::to_string(i) + " is not finite");
+  for (std::size_t i = 0; i < input.time.size(); ++i)
+    if (!std::isfinite(input.time[i]))
+      throw std::invalid_argument("attribute time of point " + std::to_string(i) + " is not finite");
+  if (fields_out) fields_out->clear();
+
+  std::vector<FieldOut> fields;
+  std::vector<std::uint16_t> laser;  // per decoded point, when the ring field is kept
+  std::size_t lasers = 1;
+  if (options.ring && input.has_rings()) {
+    FieldOut f{kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+    f.u.assign(1, std::vector<std::int64_t>(n));
+    laser.resize(n);
+    for (std::size_t j = 0; j < n; ++j) {
+      laser[j] = input.ring[sources[j]];
+      f.u[0][j] = laser[j];
+      f.span = std::max<std::uint64_t>(f.span, laser[j]);
+    }
+    lasers = static_cast<std::size_t>(f.span) + 1;
+    fields.push_back(std::move(f));
+  }
+  const auto scalar = [&](std::uint8_t kind, const std::vector<double>& all, bool is_f32, double bound, bool bits,
+                          double fallback) {
+    std::vector<double> vals(n);
+    for (std::size_t j = 0; j < n; ++j) vals[j] = all[sources[j]];
+    const Quant q = quantise_field(vals, is_f32, bound, bits, fallback, kind_name(kind));
+    FieldOut f{kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
+    f.u.assign(1, std::vector<std::int64_t>(n));
+    std::int64_t kmin = std::numeric_limits<std::int64_t>::max(), kmax = std::numeric_limits<std::int64_t>::min();
+    for (std::size_t j = 0; j < n; ++j) {
+      const std::int64_t k = q.repr == kFloatBits ? float_key(static_cast<float>(vals[j]))
+                                                  : static_cast<std::int64_t>(std::nearbyint((vals[j] - q.base) / q.step));
+      f.u[0][j] = k;
+      kmin = std::min(kmin, k);
+      kmax = std::max(kmax, k);
+    }
+    if (n == 0) kmin = kmax = 0;
+    // Stored: kmin and u = k − kmin; a value decodes as T(base + (kmin + u)·step).
+    f.kmin = kmin;
+    for (auto& k : f.u[0]) k -= kmin;
+    f.span = static_cast<std::uint64_t>(kmax - kmin);
+    fields.push_back(std::move(f));
+  };
+  if (options.intensity && input.has_intensity()) {
+    const std::vector<double> all(input.intensity.begin(), input.intensity.end());
+    scalar(kIntensity, all, true, options.intensity_error, true, 0.0);
+  }
+  if (options.time && input.has_time()) scalar(kTime, input.time, false, 0.0, false, options.time_error);
+  if (options.rgb && input.has_rgb()) {
+    FieldOut f{kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}};
+    f.u.assign(3, std::vector<std::int64_t>(n));
+    for (std::size_t j = 0; j < n; ++j)
+      for (int c = 0; c < 3; ++c) f.u[static_cast<std::size_t>(c)][j] = input.rgb[sources[j]][static_cast<std::size_t>(c)];
+    fields.push_back(std::move(f));
+  }
+  if (fields.empty()) return {};
+
+  std::vector<std::uint8_t> out;
+  codec::bytes::put_u64(out, n);
+  out.push_back(static_cast<std::uint8_t>(fields.size()));
+  for (const FieldOut& f : fields) {
+    // Ring: its own history is the decoded order; the others follow their laser.
+    const std::vector<std::uint16_t>& by = f.kind == kRing ? std::vector<std::uint16_t>{} : laser;
+    const std::size_t hl = f.kind == kRing ? 1 : lasers;
+    std::vector<std::uint8_t> best;
+    std::uint8_t best_method = 0;
+    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear}) {
+      if (m == kMethodTree && f.span > kTreeMaxSpan) continue;
+      if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
+      std::vector<std::uint8_t> s = code_values(f.u, f.span, m, by, hl);
+      if (best.empty() || s.size() < best.size()) {
+        best = std::move(s);
+        best_method = m;
+      }
+    }
+    const std::size_t at = out.size();
+    out.push_back(f.kind);
+    out.push_back(f.repr);
+    out.push_back(best_method);
+    out.push_back(f.channels);
+    codec::bytes::put_u32(out, 0);
+    codec::bytes::put_f64(out, f.step);
+    codec::bytes::put_f64(out, f.base);
+    codec::bytes::put_f64(out, f.max_error);
+    codec::bytes::put_u64(out, static_cast<std::uint64_t>(f.kmin));
+    codec::bytes::put_u64(out, f.span);
+    codec::bytes::put_u64(out, best.size());
+    out.insert(out.end(), best.begin(), best.end());
+    if (fields_out) {
+      AttributeField info;
+      info.name = kind_name(f.kind);
+      info.step = f.step;
+      info.max_error = f.max_error;
+      info.method = best_method;
+      info.bytes = out.size() - at;
+      fields_out->push_back(info);
+    }
+  }
+  if (fields_out) {
+    auto described = inspect_attributes(out);
+    if (described.ok())
+      for (std::size_t i = 0; i < fields_out->size(); ++i) (*fields_out)[i].representation = described.value()[i].representation;
+  }
+  return out;
+}
+
+namespace {
+
+struct Descriptor {
+  std::uint8_t kind, repr, method, channels;
+  double step, base, max_error;
+  std::int64_t kmin;
+  std::uint64_t span, stream_bytes, offset, stream_offset;
+};
+
+StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_t>& p) {
+  if (p.size() < 9) return bad_data("attribute chunk is " + std::to_string(p.size()) + " bytes, at least 9 expected", 0);
+  const std::uint8_t count = p[8];
+  if (count == 0 || count > 4) return bad_data("attribute chunk field count " + std::to_string(count) + " is not in 1..4", 8);
+  std::vector<Descriptor> out;
+  std::uint64_t at = 9;
+  std::uint8_t previous_kind = 0;
+  for (int i = 0; i < count; ++i) {
+    if (p.size() - at < kDescriptorBytes)
+      return bad_data("attribute field " + std::to_string(i) + " is truncated", at);
+    const std::uint8_t* d = p.data() + at;
+    Descriptor f{d[0], d[1], d[2], d[3], codec::bytes::ld_f64(d + 8), codec::bytes::ld_f64(d + 16),
+                 codec::bytes::ld_f64(d + 24), static_cast<std::int64_t>(codec::bytes::ld_u64(d + 32)),
+                 codec::bytes::ld_u64(d + 40), codec::bytes::ld_u64(d + 48), at, at + kDescriptorBytes};
+    const std::string name = kind_name(f.kind);
+    if (f.kind < kRing || f.kind > kRgb) return bad_data("attribute field kind " + std::to_string(f.kind) + " is unknown", at);
+    if (f.kind <= previous_kind)
+      return bad_data("attribute field " + name + " is out of order or repeated", at);
+    previous_kind = f.kind;
+    if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
+    if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
+      return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
+    if (f.method > kMethodLinear) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
+    if (f.channels != (f.kind == kRgb ? 3 : 1))
+      return bad_data("attribute field " + name + " has " + std::to_string(f.channels) + " channels", at + 3);
+    if (f.repr == kQuantised && !(std::isfinite(f.step) && f.step > 0.0 && f.step <= 1e9))
+      return bad_data("attribute field " + name + " step is not in (0, 1e9]", at + 8);
+    if (!(std::isfinite(f.base) && std::abs(f.base) <= 1e18))
+      return bad_data("attribute field " + name + " base is not finite", at + 16);
+    if (!(std::isfinite(f.max_error) && f.max_error >= 0.0 && f.max_error <= 1e9))
+      return bad_data("attribute field " + name + " max_error is out of range", at + 24);
+    const std::uint64_t span_cap = f.kind == kRing ? 65535 : f.kind == kRgb ? 255 : f.repr == kFloatBits ? 0xFFFFFFFFULL : kMaxSpan;
+    if (f.span > span_cap) return bad_data("attribute field " + name + " span " + std::to_string(f.span) + " is too large", at + 40);
+    if (f.kmin < -static_cast<std::int64_t>(kMaxSpan) * 4096 || f.kmin > static_cast<std::int64_t>(kMaxSpan) * 4096 ||
+        ((f.kind == kRing || f.kind == kRgb) && f.kmin != 0))
+      return bad_data("attribute field " + name + " kmin " + std::to_string(f.kmin) + " is out of range", at + 32);
+    if (f.method == kMethodTree && f.span > kTreeMaxSpan)
+      return bad_data("attribute field " + name + " uses the context tree with a span above 255", at + 2);
+    if (f.repr == kFloatBits && (f.base != 0.0 || f.kmin < -2147483648LL || f.kmin + static_cast<std::int64_t>(f.span) > 2147483647LL))
+      return bad_data("attribute field " + name + " float keys are out of range", at + 32);
+    if (f.stream_bytes > p.size() - f.stream_offset)
+      return bad_data("attribute field " + name + " stream of " + std::to_string(f.stream_bytes) +
+                          " bytes is longer than the chunk", at + 48);
+    out.push_back(f);
+    at = f.stream_offset + f.stream_bytes;
+  }
+  if (at != p.size()) return bad_data("attribute chunk has " + std::to_string(p.size() - at) + " bytes after its last field", at);
+  return out;
+}
+
+}  // namespace
+
+StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::uint8_t>& payload) {
+  auto d = read_descriptors(payload);
+  if (!d.ok()) return d.status();
+  std::vector<AttributeField> out;
+  for (const Descriptor& f : d.value()) {
+    AttributeField a;
+    a.name = kind_name(f.kind);
+    a.step = f.repr == kFloatBits ? 0.0 : f.step;
+    a.max_error = f.max_error;
+    a.method = f.method;
+    a.bytes = kDescriptorBytes + f.stream_bytes;
+    std::ostringstream s;
+    s << std::setprecision(6);
+    if (f.repr == kFloatBits) s << "float32 bit patterns, lossless";
+    else if (f.kind == kRing || f.kind == kRgb) s << "integers, lossless";
+    else {
+      s << "step " << f.step;
+      if (f.base != 0.0) s << " from " << std::setprecision(17) << f.base << std::setprecision(6);
+      if (f.max_error > 0.0) s << ", within " << f.max_error;
+      else s << ", lossless";
+    }
+    a.representation = s.str();
+    out.push_back(a);
+  }
+  return out;
+}
+
+Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded) {
+  auto desc = read_descriptors(payload);
+  if (!desc.ok()) return desc.status();
+  const std::uint64_t n = codec::bytes::ld_u64(payload.data());
+  if (n != decoded.size())
+    return bad_data("attribute chunk holds " + std::to_string(n) + " points but " + std::to_string(decoded.size()) +
+                        " were decoded",
+                    0);
+  std::vector<std::uint16_t> laser;
+  std::size_t lasers = 1;
+  for (const Descriptor& f : desc.value()) {
+    const std::string name = kind_name(f.kind);
+    // Every value costs at least ~1/2^12 bit in the stream: bound the points by the bytes.
+    if (n > (f.stream_bytes + 16) * 4096 * 8)
+      return bad_data("attribute field " + name + " stream is too short for " + std::to_string(n) + " points", f.offset + 48);
+    RangeDecoder dec(payload.data() + f.stream_offset, static_cast<std::size_t>(f.stream_bytes));
+    std::vector<std::vector<std::int64_t>> u(f.channels, std::vector<std::int64_t>(n));
+    const bool own = f.kind == kRing;
+    const std::size_t hl = own ? 1 : lasers;
+    for (auto& ch : u) {
+      ChannelCoder coder(f.method, f.span);
+      History h(hl);
+      for (std::size_t j = 0; j < n; ++j) {
+        const std::size_t l = own || laser.empty() ? 0 : laser[j];
+        const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
+        std::int64_t v = 0;
+        if (!coder.get(dec, prev, prev2, v))
+          return bad_data("attribute field " + name + " value of point " + std::to_string(j) + " is outside its span",
+                          f.stream_offset);
+        ch[j] = v;
+        h.push(l, v);
+      }
+    }
+    if (dec.overrun() > 8)
+      return bad_data("attribute field " + name + " stream ends " + std::to_string(dec.overrun()) + " bytes early",
+                      f.stream_offset + f.stream_bytes);
+    switch (f.kind) {
+      case kRing:
+        laser.assign(u[0].begin(), u[0].end());
+        decoded.ring = laser;
+        lasers = static_cast<std::size_t>(f.span) + 1;
+        break;
+      case kIntensity:
+        decoded.intensity.resize(n);
+        for (std::size_t j = 0; j < n; ++j)
+          decoded.intensity[j] = f.repr == kFloatBits ? key_float(f.kmin + u[0][j])
+                                                      : static_cast<float>(f.base + static_cast<double>(f.kmin + u[0][j]) * f.step);
+        for (std::size_t j = 0; j < n; ++j)
+          if (!std::isfinite(decoded.intensity[j]))
+            return bad_data("attribute field intensity of point " + std::to_string(j) + " decodes to a non-finite value",
+                            f.stream_offset);
+        break;
+      case kTime:
+        decoded.time.resize(n);
+        for (std::size_t j = 0; j < n; ++j) decoded.time[j] = f.base + static_cast<double>(f.kmin + u[0][j]) * f.step;
+        break;
+      case kRgb:
+        decoded.rgb.resize(n);
+        for (std::size_t j = 0; j < n; ++j)
+          for (std::size_t c = 0; c < 3; ++c) decoded.rgb[j][c] = static_cast<std::uint8_t>(u[c][j]);
+        break;
+      default: break;
+    }
+  }
+  return {};
+}
+
+}  // namespace lex3d::residual

@@ -1,0 +1,318 @@
+// Point attributes in model files (formats/model.md §2.10): round trips of each field,
+// lossless equality where the chunk promises it, bounds where it does not, bad input,
+// corrupt and truncated chunks, determinism, and a real KITTI scan.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/io/io.hpp"
+#include "lex3d/residual/attributes.hpp"
+#include "lex3d/residual/residual.hpp"
+#include "test_config.hpp"
+
+namespace lex3d {
+namespace {
+
+using Bytes = std::vector<std::uint8_t>;
+
+/// A spinning-lidar-like scan: `lasers` rings of `columns` points around a room, with
+/// intensities in 0.01 steps, times in microseconds within the turn, ring and colour.
+Cloud synthetic_scan(int lasers, int columns, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> jitter(-0.02, 0.02);
+  std::uniform_int_distribution<int> noise(-3, 3);
+  Cloud c;
+  for (int col = 0; col < columns; ++col)
+    for (int l = 0; l < lasers; ++l) {
+      const double az = 2.0 * M_PI * col / columns;
+      const double el = (-15.0 + 30.0 * l / std::max(1, lasers - 1)) * M_PI / 180.0;
+      const double r = 8.0 + 3.0 * std::sin(3.0 * az) + jitter(rng);
+      c.points.emplace_back(static_cast<float>(r * std::cos(el) * std::cos(az)),
+                            static_cast<float>(r * std::cos(el) * std::sin(az)), static_cast<float>(r * std::sin(el)));
+      const int k = std::clamp(40 + static_cast<int>(20 * std::sin(az * 5.0)) + noise(rng), 0, 99);
+      c.intensity.push_back(static_cast<float>(k * 0.01));
+      c.time.push_back(1.5e9 + 1e-6 * (col * 50 + l));
+      c.ring.push_back(static_cast<std::uint16_t>(l));
+      c.rgb.push_back({static_cast<std::uint8_t>(k * 2), static_cast<std::uint8_t>(255 - k), static_cast<std::uint8_t>(l * 8)});
+    }
+  return c;
+}
+
+struct Coded {
+  Bytes file;
+  std::vector<std::uint32_t> sources;
+  std::vector<residual::AttributeField> fields;
+};
+
+/// A layer-only model of `input` with bound `e`, attributes kept as `ao`.
+Coded code(const Cloud& input, double e, const residual::AttributeOptions& ao = {}, bool thin = false) {
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  residual::LayerOptions lo;
+  lo.thin = thin;
+  lo.track_sources = true;
+  lo.laser = false;
+  residual::LayerStats st;
+  const Cloud words = residual::decoder_word_cloud(d, *d.alphabet);
+  d.residual = residual::encode_layer(input, words, d.T_cloud_sensor, e, &st, lo);
+  Coded c;
+  c.sources = st.sources;
+  auto attrs = residual::encode_attributes(input, st.sources, ao, &c.fields);
+  if (!attrs.empty()) d.attributes = std::move(attrs);
+  c.file = codec::encode_model(d);
+  return c;
+}
+
+StatusOr<Cloud> decode(const Bytes& file) {
+  auto d = codec::decode_model(file);
+  if (!d.ok()) return d.status();
+  return residual::decode_cloud(d.value());
+}
+
+TEST(Attributes, EveryFieldRoundTripsLosslessly) {
+  const Cloud in = synthetic_scan(16, 360, 1);
+  const Coded c = code(in, 0.01);
+  ASSERT_EQ(c.fields.size(), 4U);
+  auto info = codec::inspect(c.file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info.value().minor, 6);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  const Cloud& d = out.value();
+  // thinning off, every point coded by the layer: one decoded point an input point
+  ASSERT_EQ(d.size(), in.size());
+  ASSERT_EQ(c.sources.size(), d.size());
+  ASSERT_TRUE(d.has_intensity() && d.has_time() && d.has_rings() && d.has_rgb());
+  std::vector<int> seen(in.size(), 0);
+  for (std::size_t j = 0; j < d.size(); ++j) {
+    const std::uint32_t i = c.sources[j];
+    ++seen[i];
+    EXPECT_EQ(d.intensity[j], in.intensity[i]) << j;
+    EXPECT_EQ(d.time[j], in.time[i]) << j;
+    EXPECT_EQ(d.ring[j], in.ring[i]) << j;
+    EXPECT_EQ(d.rgb[j], in.rgb[i]) << j;
+    EXPECT_LE((d.points[j] - in.points[i]).norm(), 0.01F);
+  }
+  for (const int s : seen) EXPECT_EQ(s, 1);  // a permutation of the input
+  // the intensity's step was found in the data
+  EXPECT_NEAR(c.fields[1].step, 0.01, 1e-12);
+  EXPECT_EQ(c.fields[1].name, "intensity");
+}
+
+TEST(Attributes, FloatIntensitiesWithoutAStepKeepTheirBits) {
+  Cloud in = synthetic_scan(8, 200, 2);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.0F, 1000.0F);
+  for (auto& v : in.intensity) v = u(rng);
+  in.intensity[5] = -0.0F;
+  in.intensity[6] = -17.25F;
+  in.time.clear();
+  in.rgb.clear();
+  const Coded c = code(in, 0.01);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  for (std::size_t j = 0; j < out.value().size(); ++j) {
+    const float a = out.value().intensity[j], b = in.intensity[c.sources[j]];
+    EXPECT_EQ(std::memcmp(&a, &b, 4), 0) << j;
+  }
+}
+
+TEST(Attributes, BoundedIntensityStaysWithinItsBound) {
+  Cloud in = synthetic_scan(8, 300, 4);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0F, 255.0F);
+  for (auto& v : in.intensity) v = u(rng);
+  residual::AttributeOptions ao;
+  ao.intensity_error = 0.5;
+  const Coded bounded = code(in, 0.01, ao);
+  const Coded lossless = code(in, 0.01);
+  auto out = decode(bounded.file);
+  ASSERT_TRUE(out.ok());
+  for (std::size_t j = 0; j < out.value().size(); ++j)
+    EXPECT_LE(std::abs(out.value().intensity[j] - in.intensity[bounded.sources[j]]), 0.5F);
+  EXPECT_LT(bounded.file.size(), lossless.file.size());
+}
+
+TEST(Attributes, ThinnedLayerAttachesEachDecodedPointToAnInputPointWithinTheBound) {
+  const Cloud in = synthetic_scan(16, 720, 6);
+  const double e = 0.05;
+  const Coded c = code(in, e, {}, true);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok());
+  const Cloud& d = out.value();
+  EXPECT_LT(d.size(), in.size());
+  for (std::size_t j = 0; j < d.size(); ++j) {
+    const std::uint32_t i = c.sources[j];
+    EXPECT_LE((d.points[j] - in.points[i]).cast<double>().norm(), e);
+    EXPECT_EQ(d.intensity[j], in.intensity[i]);
+    EXPECT_EQ(d.ring[j], in.ring[i]);
+  }
+}
+
+TEST(Attributes, DeterministicBytes) {
+  const Cloud in = synthetic_scan(16, 360, 7);
+  EXPECT_EQ(code(in, 0.02).file, code(in, 0.02).file);
+}
+
+TEST(Attributes, BadInputNamesTheField) {
+  Cloud in = synthetic_scan(4, 50, 8);
+  std::vector<std::uint32_t> src(in.size());
+  for (std::size_t i = 0; i < src.size(); ++i) src[i] = static_cast<std::uint32_t>(i);
+  auto expect_throw = [&](const Cloud& c, const std::string& needle) {
+    try {
+      (void)residual::encode_attributes(c, src);
+      ADD_FAILURE() << "no error for " << needle;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    }
+  };
+  Cloud nan = in;
+  nan.intensity[3] = std::numeric_limits<float>::quiet_NaN();
+  expect_throw(nan, "intensity");
+  Cloud inf = in;
+  inf.time[7] = std::numeric_limits<double>::infinity();
+  expect_throw(inf, "time");
+  Cloud short_rgb = in;
+  short_rgb.rgb.pop_back();
+  expect_throw(short_rgb, "rgb");
+  Cloud short_ring = in;
+  short_ring.ring.resize(3);
+  expect_throw(short_ring, "ring");
+  std::vector<std::uint32_t> far = src;
+  far[0] = static_cast<std::uint32_t>(in.size());
+  EXPECT_THROW((void)residual::encode_attributes(in, far), std::invalid_argument);
+}
+
+TEST(Attributes, NoFieldsMeansNoChunkAndAnOlderVersion) {
+  Cloud in = synthetic_scan(8, 100, 9);
+  in.intensity.clear();
+  in.time.clear();
+  in.ring.clear();
+  in.rgb.clear();
+  const Coded c = code(in, 0.02);
+  auto info = codec::inspect(c.file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_LT(info.value().minor, 6);
+}
+
+/// The ATTR chunk's payload within a model file, and its offset.
+std::pair<std::size_t, std::size_t> attr_payload(const Bytes& file) {
+  auto info = codec::inspect(file);
+  for (const auto& ch : info.value().chunks)
+    if (ch.type == "ATTR") return {static_cast<std::size_t>(ch.offset) + 12, static_cast<std::size_t>(ch.length)};
+  return {0, 0};
+}
+
+TEST(Attributes, CorruptOrTruncatedPayloadsAreRejectedWithoutCrashing) {
+  const Cloud in = synthetic_scan(8, 120, 10);
+  const Coded c = code(in, 0.02);
+  auto m = codec::decode_model(c.file);
+  ASSERT_TRUE(m.ok());
+  const Bytes payload = *m.value().attributes;
+  auto base = residual::decode_cloud(m.value());
+  ASSERT_TRUE(base.ok());
+  // every truncation fails
+  for (std::size_t len = 0; len < payload.size(); ++len) {
+    codec::ModelData t = m.value();
+    t.attributes = Bytes(payload.begin(), payload.begin() + static_cast<std::ptrdiff_t>(len));
+    auto r = residual::decode_cloud(t);
+    EXPECT_FALSE(r.ok()) << "truncated at " << len;
+    if (!r.ok()) {
+      EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    }
+  }
+  // every byte flipped: an error, or (inside a stream) a cloud of the same size
+  for (std::size_t at = 0; at < payload.size(); ++at) {
+    codec::ModelData t = m.value();
+    (*t.attributes)[at] ^= 0x5A;
+    auto r = residual::decode_cloud(t);
+    if (r.ok()) {
+      EXPECT_EQ(r.value().size(), base.value().size());
+    } else {
+      EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    }
+  }
+  // the point count
+  codec::ModelData wrong = m.value();
+  (*wrong.attributes)[0] ^= 1;
+  auto r = residual::decode_cloud(wrong);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("points"), std::string::npos);
+}
+
+TEST(Attributes, ChunkNeedsFormatOneSix) {
+  const Cloud in = synthetic_scan(8, 60, 11);
+  Bytes file = code(in, 0.02).file;
+  ASSERT_GE(file.size(), 20U);
+  file[10] = 5;  // minor 5; the header CRC must follow
+  auto fixed = file;
+  // recompute the header crc (bytes 0..15) with zlib's polynomial, as the container does
+  std::uint32_t crc = 0xFFFFFFFFU;
+  for (int i = 0; i < 16; ++i) {
+    crc ^= fixed[static_cast<std::size_t>(i)];
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320U & (0U - (crc & 1U)));
+  }
+  crc ^= 0xFFFFFFFFU;
+  for (int b = 0; b < 4; ++b) fixed[16 + static_cast<std::size_t>(b)] = static_cast<std::uint8_t>(crc >> (8 * b));
+  auto d = codec::decode_model(fixed);
+  ASSERT_FALSE(d.ok());
+  EXPECT_NE(d.status().message().find("ATTR"), std::string::npos) << d.status().to_string();
+}
+
+TEST(Attributes, GoldenFileDecodes) {
+  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/attributes_1_6.lex3dm";
+  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) {
+    ASSERT_TRUE(io::write_file_atomic(path, code(synthetic_scan(8, 64, 12), 0.02).file).ok());
+  }
+  ASSERT_TRUE(std::filesystem::exists(path)) << path;
+  auto bytes = io::read_file(path);
+  ASSERT_TRUE(bytes.ok());
+  auto out = decode(bytes.value());
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  // the golden file was made from synthetic_scan(8, 64, 12) at 0.02 m without thinning
+  const Cloud in = synthetic_scan(8, 64, 12);
+  ASSERT_EQ(out.value().size(), in.size());
+  EXPECT_TRUE(out.value().has_intensity() && out.value().has_time() && out.value().has_rings() && out.value().has_rgb());
+  // no thinning: the decoded points are a permutation of the input, attributes and all
+  auto a = out.value().intensity, b = in.intensity;
+  std::sort(a.begin(), a.end());
+  std::sort(b.begin(), b.end());
+  EXPECT_EQ(a, b);
+  auto ta = out.value().time, tb = in.time;
+  std::sort(ta.begin(), ta.end());
+  std::sort(tb.begin(), tb.end());
+  EXPECT_EQ(ta, tb);
+}
+
+TEST(Attributes, KittiIntensityIsLosslessAndCostsFewBits) {
+  const std::string path = std::string(LEX3D_SHARED_DATA_DIR) + "/kitti00/000000.bin";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no KITTI data";
+  auto r = io::read_cloud(path);
+  ASSERT_TRUE(r.ok());
+  const Cloud& in = r.value().cloud;
+  ASSERT_TRUE(in.has_intensity());
+  const Coded c = code(in, 0.02, {}, true);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  for (std::size_t j = 0; j < out.value().size(); ++j) ASSERT_EQ(out.value().intensity[j], in.intensity[c.sources[j]]);
+  ASSERT_EQ(c.fields.size(), 1U);
+  const double bpp = 8.0 * static_cast<double>(c.fields[0].bytes) / static_cast<double>(out.value().size());
+  std::printf("KITTI 000000 intensity: %.3f bits a decoded point (%zu points)\n", bpp, out.value().size());
+  EXPECT_LT(bpp, 8.0);  // below a byte a point (raw: 32 bits)
+}
+
+}  // namespace
+}  // namespace lex3d
