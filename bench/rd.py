@@ -307,6 +307,8 @@ class Bench:
         help_text = subprocess.run([self.lex3d, "compress", "--help"], stdout=subprocess.PIPE,
                                    stderr=subprocess.STDOUT, text=True).stdout
         self.has_max_error = "--max-error" in help_text
+        # geometry against geometry: the other codecs here code positions only
+        self.geometry_only = ["--drop-attributes"] if "--drop-attributes" in help_text else []
         self.failures = 0
 
     def close(self):
@@ -556,7 +558,7 @@ class Bench:
                     return r
 
                 self.case(base, mode, "words" if e is None else f"E={e:g}", 0.0 if e is None else e,
-                          [self.lex3d, "compress", scan, "-o", out_path, "--json"] + fmt_args + pose_args + a_args + e_args,
+                          [self.lex3d, "compress", scan, "-o", out_path, "--json"] + fmt_args + pose_args + a_args + e_args + self.geometry_only,
                           [self.lex3d, "decompress", stream, "-o", decoded, "--json"] + a_args,
                           stream, decoded, ref, parse_enc, parse_dec,
                           extra_bytes=(alphabet["bytes"] / n_scans) if mode == "lex3d-seq" else 0.0)
