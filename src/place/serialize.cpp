@@ -793,6 +793,9 @@ StatusOr<ParsedIndex> parse_index(const std::uint8_t* p, std::size_t len, std::u
   const std::uint64_t ws_at = at + 24 + static_cast<std::uint64_t>(x.scans) * kEntryBytes + x.names_length;
   if (ld64(x.word_start) != 0 || ld64(x.word_start + 8 * static_cast<std::size_t>(x.word_slots)) != x.postings)
     return bad_data("place database: PIDX word starts do not cover the postings", ws_at);
+  for (std::uint32_t w = 0; w < x.word_slots; ++w)
+    if (ld64(x.word_start + 8 * static_cast<std::size_t>(w) + 8) < ld64(x.word_start + 8 * static_cast<std::size_t>(w)))
+      return bad_data("place database: PIDX word starts decrease", ws_at + 8 * (static_cast<std::uint64_t>(w) + 1));
   std::vector<std::uint64_t> sums(x.scans, 0);
   const std::uint64_t post_at = ws_at + 8 * (static_cast<std::uint64_t>(x.word_slots) + 1);
   for (std::uint32_t w = 0; w < x.word_slots; ++w) {
@@ -853,12 +856,13 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
   if (std::memcmp(bytes, kMagic, 8) != 0) return bad_data("not a lex3d place database (bad magic)", 0);
   const std::uint16_t major = ld16(bytes + 8), minor = ld16(bytes + 10);
   const std::uint32_t flags = ld32(bytes + 12), hcrc = ld32(bytes + 16);
-  if (crc(bytes, 16) != hcrc) return bad_data("place database: header CRC mismatch", 16);
+  // The version first: a newer major version may lay out its header differently.
   if (major > kMajor)
     return bad_data("place database: format version " + std::to_string(major) + "." + std::to_string(minor) +
                         " is newer than this lex3d reads (1.0 and 2.x); use a newer lex3d",
                     8);
   if (major != 1 && major != 2) return bad_data("place database: unsupported major version " + std::to_string(major), 8);
+  if (crc(bytes, 16) != hcrc) return bad_data("place database: header CRC mismatch", 16);
   if (flags != 0) return bad_data("place database: reserved header flag set", 12);
   PlaceDatabase db;
   db.bytes_ = file;
