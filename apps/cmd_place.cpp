@@ -301,7 +301,13 @@ WriteStats append_db(const std::string& path, const PlaceDatabase& db, const Pla
     throw_if_error(f.value()->write_at(p.offset, p.bytes.data(), p.bytes.size()));
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
-  add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st);
+  try {
+    add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st);
+  } catch (...) {
+    // Nothing was committed: take back what was written after the committed end.
+    (void)f.value()->truncate(w.start());
+    throw;
+  }
   const auto [idx, commit] = w.finish();
   put(idx);
   throw_if_error(f.value()->truncate(end));  // drops what an unfinished add left after the committed end
@@ -395,22 +401,28 @@ void run_query(const PlaceOptions& o) {
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
   p.max_distance = std::max(0.0, o.max_distance);
+  auto cpu_ms = [] { return 1000.0 * static_cast<double>(std::clock()) / CLOCKS_PER_SEC; };
   for (std::size_t qi = 0; qi < inputs.size(); ++qi) {
     Stopwatch sw;
+    const double c0 = cpu_ms();
     const PlaceScan scan = describe(inputs.load(qi), inputs.name(qi), db.alphabet(), db.storage());
     const double prep = sw.elapsed_ms();
+    const double c1 = cpu_ms();
     PlaceQueryResult r;
     try {
       r = db.query(scan, p);
     } catch (const PlaceDataError& e) {
       throw CliError(2, o.db + ": " + e.status().to_string());
     }
+    const double c2 = cpu_ms();
     const std::size_t k = std::min<std::size_t>(r.matches.size(), static_cast<std::size_t>(o.top));
     if (o.json) {
       Json j;
       j.begin_object().value("query", scan.name).value("accepted", r.accepted);
       j.value("prepare_ms", prep).value("retrieval_ms", r.retrieval_ms).value("verification_ms", r.verification_ms);
-      j.value("decode_ms", r.decode_ms).value("database_open_ms", open_ms).value("database_scans", db.size());
+      j.value("decode_ms", r.decode_ms).value("decoded", r.decoded).value("database_open_ms", open_ms).value("database_scans", db.size());
+      // Process CPU time (all threads) of the two stages: what the wall times are on an idle machine.
+      j.value("prepare_cpu_ms", c1 - c0).value("query_cpu_ms", c2 - c1);
       j.begin_array("matches");
       for (std::size_t i = 0; i < k; ++i) {
         const PlaceMatch& m = r.matches[i];

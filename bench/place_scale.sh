@@ -6,10 +6,14 @@
 # candidates' entries + geometric check), recall of the true revisits, and bytes a scan;
 # then a projection to 1e5 and 1e6 entries from the measured per-entry costs.
 #
-# Protocol: the base database holds the balm scans of the first 40 s (files 000000-000078,
+# Protocol: the base database holds the balm scans of the first 30 s (files 000000-000058,
 # built with `place build`, alphabet learned on 5 of them); the queries are the scans from
-# 60 s on (000120-000176), so every query is at least 20 s after any base scan. A query is a
-# true revisit when a base scan's sensor lies within 4 m (planar). Larger databases add
+# 50 s on (000100-000176), so every query is at least 20 s after any base scan. A query is a
+# true revisit when a base scan's sensor lies within 8 m (planar; balm has no pair of these
+# within 4 m); queries reject transforms that put the sensors more than 8 m apart
+# (--max-distance 8, as `place eval --radius 8`). An accepted match is right when its
+# transform is within 1 m and 5 degrees of the ground truth (from the poses) and its sensor
+# within 8 m; the median pose error of right matches is printed. Larger databases add
 # perturbed copies of the base entries (lex3d_place_scale_db: a random rigid motion of the
 # scan frame - any rotation, +-20 m, +-2 m - and 3 % dropout of word instances, features and
 # coarse-image pixels); the base entries, and so the true revisits, are kept unmodified. A
@@ -34,8 +38,8 @@ base=(); queries=(); : > "$out/base_poses.txt"; : > "$out/query_poses.txt"
 for i in "${!frames[@]}"; do
   f="${frames[$i]}"; n=$((10#${f%.bin}))
   pose="$(sed -n "$((i + 1))p" "$data/poses.txt")"
-  if [ "$n" -lt 80 ]; then base+=("$data/$f"); echo "$pose" >> "$out/base_poses.txt"; fi
-  if [ "$n" -ge 120 ]; then queries+=("$data/$f"); echo "$pose" >> "$out/query_poses.txt"; fi
+  if [ "$n" -lt 60 ]; then base+=("$data/$f"); echo "$pose" >> "$out/base_poses.txt"; fi
+  if [ "$n" -ge 100 ]; then queries+=("$data/$f"); echo "$pose" >> "$out/query_poses.txt"; fi
 done
 echo "base scans: ${#base[@]}, queries: ${#queries[@]}"
 t0=$(date +%s.%N)
@@ -49,10 +53,10 @@ for n in "${sizes[@]}"; do
   mk=$(echo "$(date +%s.%N) - $t0" | bc)
   # All queries in one process (one database load), JSON Lines; peak memory by time -v.
   /usr/bin/time -v "$build/lex3d" place query "$out/db$n.lex3dp" "${queries[@]}" --poses "$out/query_poses.txt" \
-    --json --top 1 --threads 1 > "$out/q$n.jsonl" 2> "$out/time$n.txt"
+    --json --top 1 --threads 1 --max-distance 8 > "$out/q$n.jsonl" 2> "$out/time$n.txt"
   # The whole process for 10 scans.
   /usr/bin/time -v "$build/lex3d" place query "$out/db$n.lex3dp" "${queries[@]:0:10}" --poses "$out/query10_poses.txt" \
-    --json --top 1 --threads 1 > /dev/null 2> "$out/time10_$n.txt"
+    --json --top 1 --threads 1 --max-distance 8 > /dev/null 2> "$out/time10_$n.txt"
   /usr/bin/python3 - "$n" "$out" "$mk" "$data/poses.txt" <<'PY'
 import json, math, sys, os, re
 n, out, mk, poses_path = int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), sys.argv[4]
@@ -75,18 +79,31 @@ def secs(s):
 def pct(v, p):
     v = sorted(v); k = (len(v) - 1) * p; f = math.floor(k); c = min(f + 1, len(v) - 1)
     return v[f] + (v[c] - v[f]) * (k - f)
+import numpy as np
+T = {}
+for l in open(f"{out}/sensors{n}.txt"):
+    p = l.split()
+    M = np.eye(4); M[:3, :] = np.array(list(map(float, p[4:16]))).reshape(3, 4); T[p[0]] = M
+Tq = {}
+for i, f in enumerate(frames):
+    M = np.eye(4); M[:3, :] = np.array(poses[i]).reshape(3, 4); Tq[f[:-4]] = M
 base_names = [k for k in ent if "~" not in k]
 pos = tp_base = tp_any = fp = 0
+et, er = [], []
 for q in qs:
     qp = qpos[q["query"]]
-    is_pos = any(dist(qp, ent[b]) <= 4.0 for b in base_names)
+    is_pos = any(dist(qp, ent[b]) <= 8.0 for b in base_names)
     pos += is_pos
     m = q["matches"][0] if q["matches"] else None
     if m and m["accepted"]:
-        right = dist(qp, ent[m["scan"]]) <= 4.0
+        Tm = np.eye(4); Tm[:3, :] = np.array(m["T_match_query"]).reshape(3, 4)
+        D = np.linalg.inv(np.linalg.inv(T[m["scan"]]) @ Tq[q["query"]]) @ Tm
+        te = np.linalg.norm(D[:3, 3]); re = math.degrees(math.acos(max(-1, min(1, (np.trace(D[:3, :3]) - 1) / 2))))
+        right = dist(qp, ent[m["scan"]]) <= 8.0 and te <= 1.0 and re <= 5.0
         if right and is_pos:
             tp_any += 1
             tp_base += "~" not in m["scan"]
+            et.append(te); er.append(re)
         elif not right:
             fp += 1
 size = os.path.getsize(f"{out}/db{n}.lex3dp")
@@ -100,10 +117,15 @@ print(f"  peak memory, {len(qs)} queries in one process: {rss_kb/1024:.0f} MB (=
 print(f"  whole process, 10 queries: {wall10:.2f} s, peak {rss10/1024:.0f} MB")
 for k in ("prepare_ms", "retrieval_ms", "decode_ms", "verification_ms"):
     v = col(k); print(f"  {k:16s} median {pct(v,0.5):8.1f}  p95 {pct(v,0.95):8.1f}")
+for k in ("prepare_cpu_ms", "query_cpu_ms"):
+    v = col(k); print(f"  {k:16s} median {pct(v,0.5):8.1f}  p95 {pct(v,0.95):8.1f}   (process CPU time)")
 v = [a + b for a, b in zip(col("retrieval_ms"), col("verification_ms"))]
 print(f"  {'query (ret+ver)':16s} median {pct(v,0.5):8.1f}  p95 {pct(v,0.95):8.1f}   (1 thread; verification includes decode)")
-print(f"  true revisits (base scan within 4 m): {pos}; found: {tp_base} as the unmodified scan, {tp_any} as any right place "
-      f"(recall {tp_any/max(pos,1):.3f}); accepted wrong places: {fp}")
+print(f"  true revisits (base scan within 8 m): {pos}; found: {tp_base} as the unmodified scan, {tp_any} as any right place "
+      f"(recall {tp_any/max(pos,1):.3f}); accepted wrong: {fp}; median pose error of right matches "
+      f"{np.median(et) if et else float('nan'):.3f} m, {np.median(er) if er else float('nan'):.2f} deg")
+cpu10 = float(timev(f"{out}/time10_{n}.txt", "User time")) + float(timev(f"{out}/time10_{n}.txt", "System time"))
+print(f"  whole process, 10 queries: CPU {cpu10:.2f} s (user + system)")
 with open(f"{out}/summary.txt", "a") as s:
     s.write(f"{n} {size} {qs[0]['database_open_ms']} {rss_kb} {pct(col('retrieval_ms'),0.5)} {pct(col('verification_ms'),0.5)} {pct(col('prepare_ms'),0.5)}\n")
 PY

@@ -1,8 +1,8 @@
 // Makes a large place database from a small one for bench/place_scale.sh: the base scans
 // unmodified, then perturbed copies of them (a random rigid motion of the scan's frame and a
 // few percent dropout of its word instances, features and coarse-image pixels) until N
-// entries. Writes the database one entry at a time (PlaceFileWriter) and, per entry, its name
-// and the world position of its sensor (for judging matches).
+// entries. Writes the database one entry at a time (PlaceFileWriter) and, per entry, its name,
+// the world position of its sensor and its T_world_cloud (for judging matches).
 // Usage: lex3d_place_scale_db BASE.lex3dp N SEED DROPOUT OUT.lex3dp OUT_sensors.txt
 
 #include <cmath>
@@ -104,8 +104,14 @@ int main(int argc, char** argv) {
   auto note = [&](const lex3d::PlaceScan& s) {
     const Eigen::Vector3d p = (s.T_world_cloud * s.coarse.T_cloud_sensor).translation();
     char buf[256];
-    std::snprintf(buf, sizeof buf, "%s %.4f %.4f %.4f\n", s.name.c_str(), p.x(), p.y(), p.z());
+    std::snprintf(buf, sizeof buf, "%s %.4f %.4f %.4f", s.name.c_str(), p.x(), p.y(), p.z());
     sensors += buf;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) {
+        std::snprintf(buf, sizeof buf, " %.9g", s.T_world_cloud.matrix()(r, c));
+        sensors += buf;
+      }
+    sensors += "\n";
   };
   put(w.begin());
   for (std::size_t i = 0; i < n; ++i) {

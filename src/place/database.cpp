@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <list>
 #include <mutex>
+#include <unordered_map>
 #include <stdexcept>
 #include <string>
 
@@ -39,9 +41,49 @@ struct PlaceDatabase::NormCache {
   std::vector<double> norm2;
 };
 
+// Recently decoded stored scans, least recently used first out.
+struct PlaceDatabase::DecodedCache {
+  std::mutex mutex;
+  std::size_t capacity = 32;
+  std::list<std::pair<std::size_t, std::shared_ptr<const PlaceScan>>> lru;  // most recent first
+  std::unordered_map<std::size_t, decltype(lru)::iterator> where;
+};
+
 PlaceDatabase::PlaceDatabase(PlaceStorageParams storage)
-    : storage_(storage), norm_cache_(std::make_shared<NormCache>()) {
+    : storage_(storage), norm_cache_(std::make_shared<NormCache>()), decoded_cache_(std::make_shared<DecodedCache>()) {
   storage_.validate();
+}
+
+void PlaceDatabase::set_decoded_cache(std::size_t scans) {
+  auto c = std::make_shared<DecodedCache>();
+  c->capacity = scans;
+  decoded_cache_ = std::move(c);
+}
+
+StatusOr<std::shared_ptr<const PlaceScan>> PlaceDatabase::decoded(std::size_t i, double& decode_ms) const {
+  DecodedCache& c = *decoded_cache_;
+  {
+    std::lock_guard<std::mutex> lock(c.mutex);
+    const auto it = c.where.find(i);
+    if (it != c.where.end()) {
+      c.lru.splice(c.lru.begin(), c.lru, it->second);
+      return it->second->second;
+    }
+  }
+  Stopwatch sw;
+  auto x = read_scan(i);
+  decode_ms = sw.elapsed_ms();
+  if (!x.ok()) return x.status();
+  auto s = std::make_shared<const PlaceScan>(std::move(x).value());
+  std::lock_guard<std::mutex> lock(c.mutex);
+  if (c.capacity == 0 || c.where.count(i) != 0) return s;
+  c.lru.emplace_front(i, s);
+  c.where[i] = c.lru.begin();
+  while (c.lru.size() > c.capacity) {
+    c.where.erase(c.lru.back().first);
+    c.lru.pop_back();
+  }
+  return s;
 }
 
 std::size_t PlaceDatabase::add(PlaceScan scan) {
@@ -154,7 +196,7 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   r.retrieval_ms = sw.lap_ms();
   r.matches.resize(cands.size());
   // Candidates' entries are decoded here (stored ones) and kept for the dense step.
-  std::vector<PlaceScan> decoded(cands.size());
+  std::vector<std::shared_ptr<const PlaceScan>> held(cands.size());
   std::vector<const PlaceScan*> cand(cands.size(), nullptr);
   std::vector<Status> errors(cands.size());
   std::vector<double> decode_ms(cands.size(), 0.0);
@@ -165,15 +207,13 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
       [&](std::size_t i) {
         const std::size_t s = cands[i].first;
         if (s < index_.scans) {
-          Stopwatch d;
-          auto x = read_scan(s);
-          decode_ms[i] = d.elapsed_ms();
+          auto x = decoded(s, decode_ms[i]);
           if (!x.ok()) {
             errors[i] = x.status();
             return;
           }
-          decoded[i] = std::move(x).value();
-          cand[i] = &decoded[i];
+          held[i] = std::move(x).value();
+          cand[i] = held[i].get();
         } else {
           cand[i] = &added_[s - index_.scans];
         }
@@ -185,7 +225,10 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
       1);
   for (const auto& e : errors)
     if (!e.ok()) throw PlaceDataError(e);
-  for (const double d : decode_ms) r.decode_ms += d;
+  for (const double d : decode_ms) {
+    r.decode_ms += d;
+    r.decoded += d > 0.0 ? 1 : 0;
+  }
   auto by_index = [&](std::size_t s) -> const PlaceScan& {
     for (std::size_t i = 0; i < cands.size(); ++i)
       if (cands[i].first == s) return *cand[i];
