@@ -291,30 +291,28 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
 // Appends the inputs' scans to a 2.x database in place: new SCAN chunks and a new index after
 // the committed end, synced, then the other commit record, synced. A crash before the commit
 // record is written leaves the committed database as it was (formats/place_db.md §5).
-WriteStats append_db(const std::string& path, const PlaceDatabase& db, const PlaceInputs& inputs) {
+WriteStats append_db(io::PositionalFile& file, const PlaceDatabase& db, const PlaceInputs& inputs) {
   PlaceFileWriter w(db);
-  auto f = io::PositionalFile::open_existing(path);
-  if (!f.ok()) throw CliError(3, f.status().to_string());
   WriteStats st;
   std::uint64_t end = w.start();
   auto put = [&](const PlaceFileWriter::Piece& p) {
-    throw_if_error(f.value()->write_at(p.offset, p.bytes.data(), p.bytes.size()));
+    throw_if_error(file.write_at(p.offset, p.bytes.data(), p.bytes.size()));
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
   try {
     add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st);
   } catch (...) {
     // Nothing was committed: take back what was written after the committed end.
-    (void)f.value()->truncate(w.start());
+    (void)file.truncate(w.start());
     throw;
   }
   const auto [idx, commit] = w.finish();
   put(idx);
-  throw_if_error(f.value()->truncate(end));  // drops what an unfinished add left after the committed end
-  throw_if_error(f.value()->sync());
+  throw_if_error(file.truncate(end));  // drops what an unfinished add left after the committed end
+  throw_if_error(file.sync());
   put(commit);
-  throw_if_error(f.value()->sync());
-  throw_if_error(f.value()->close());
+  throw_if_error(file.sync());
+  throw_if_error(file.close());
   st.scans = w.size();
   st.bytes = end;
   return st;
@@ -354,12 +352,15 @@ void run_build(const PlaceOptions& o) {
 void run_add(const PlaceOptions& o) {
   check_output_path(o.db, o.inputs);
   const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
+  // Locked before it is read: a second `place add` on the same file waits for nothing and fails.
+  auto file = io::PositionalFile::open_existing(o.db);
+  if (!file.ok()) throw CliError(3, file.status().to_string());
   const PlaceDatabase db = read_db(o.db);
   const PlaceFileInfo& fi = db.file_info();
   // In place when the format allows it (2.x) and earlier indexes left behind by appends
   // are under a quarter of the file; otherwise a compact new file replaces it.
   if (fi.major >= 2 && fi.dead_bytes * 4 <= fi.committed_bytes) {
-    print_write(o, append_db(o.db, db, inputs), db.alphabet().size(), "appended");
+    print_write(o, append_db(*file.value(), db, inputs), db.alphabet().size(), "appended");
     return;
   }
   if (fi.major < 2)

@@ -3,6 +3,7 @@
 #include "lex3d/io/mapped_file.hpp"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -59,6 +60,12 @@ MappedFile::~MappedFile() {
 StatusOr<std::unique_ptr<PositionalFile>> PositionalFile::open_existing(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0) return fail(path, "cannot open for writing", errno);
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(fd);
+    if (err == EWOULDBLOCK) return io_error(path + ": another process is writing it");
+    return fail(path, "cannot lock", err);
+  }
   std::unique_ptr<PositionalFile> f(new PositionalFile());
   f->fd_ = fd;
   f->path_ = path;

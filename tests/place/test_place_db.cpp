@@ -15,6 +15,7 @@
 
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/io/io.hpp"
+#include "lex3d/io/mapped_file.hpp"
 #include "lex3d/place/place.hpp"
 #include "place/internal.hpp"
 #include "support/test_support.hpp"
@@ -434,6 +435,41 @@ TEST(PlaceFile, Version1IsReadAndUpgraded) {
     bad[i] ^= 0x01;
     EXPECT_FALSE(PlaceDatabase::load(bad).ok()) << "flip at byte " << i << " accepted";
   }
+}
+
+// The file path a `place add` takes: mapped for reading, appended through a locked writer,
+// reopened; a second writer is refused while the first holds the file.
+TEST(PlaceFile, AppendThroughTheFileAndASecondWriterIsRefused) {
+  const Alphabet a = tiny_alphabet(kWords);
+  const std::string path = (test::temp_dir("place_file") / "db.lex3dp").string();
+  ASSERT_TRUE(io::write_file_atomic(path, write_file(5, a)).ok());
+  auto writer = io::PositionalFile::open_existing(path);
+  ASSERT_TRUE(writer.ok()) << writer.status().to_string();
+  auto second = io::PositionalFile::open_existing(path);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), ErrorCode::kIoError);
+  EXPECT_NE(second.status().message().find("another process"), std::string::npos) << second.status().message();
+  {
+    auto mapped = io::MappedFile::open(path);
+    ASSERT_TRUE(mapped.ok());
+    SharedBytes b{mapped.value()->data(), mapped.value()->size(), mapped.value()};
+    auto db = PlaceDatabase::open(b);
+    ASSERT_TRUE(db.ok()) << db.status().to_string();
+    PlaceFileWriter w(db.value());
+    auto put = [&](const PlaceFileWriter::Piece& p) { ASSERT_TRUE(writer.value()->write_at(p.offset, p.bytes.data(), p.bytes.size()).ok()); };
+    put(w.add(synthetic_scan(5, kWords)));
+    const auto [idx, commit] = w.finish();
+    put(idx);
+    ASSERT_TRUE(writer.value()->sync().ok());
+    put(commit);
+    ASSERT_TRUE(writer.value()->close().ok());
+  }
+  auto mapped = io::MappedFile::open(path);
+  ASSERT_TRUE(mapped.ok());
+  auto db = PlaceDatabase::open({mapped.value()->data(), mapped.value()->size(), mapped.value()});
+  ASSERT_TRUE(db.ok()) << db.status().to_string();
+  expect_same_retrieval(in_memory(0, 6, a), db.value(), queries());
+  EXPECT_TRUE(io::PositionalFile::open_existing(path).ok()) << "the lock goes with the writer";
 }
 
 // Balm: a query on the opened file verifies the same candidates, with the same scores

@@ -37,7 +37,8 @@ class MappedFile {
 /// kIoError naming the file.
 class PositionalFile {
  public:
-  /// Opens an existing file for reading and writing (never creates it).
+  /// Opens an existing file for reading and writing (never creates it), holding an
+  /// exclusive advisory lock (flock) until closed: a second writer gets kIoError.
   [[nodiscard]] static StatusOr<std::unique_ptr<PositionalFile>> open_existing(const std::string& path);
   /// Creates a new file (fails when `path` exists).
   [[nodiscard]] static StatusOr<std::unique_ptr<PositionalFile>> create_new(const std::string& path);
