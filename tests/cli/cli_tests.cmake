@@ -372,6 +372,11 @@ endif()
 run(0 place.query_after_add place query "${PDB}" "${NC}" --json --top 3)
 expect_match(place.query_after_add "${LAST_OUT}" "\"database_scans\":3")
 run(1 place.add_self place add "${PDB}" "${PDB}")
+# A sequence file: one JSON line a scan it holds, and appended scan by scan.
+run(0 place.seq_compress compress "${NC}" "${KITTI}" -o "${WORK}/two.lex3dq" --one-file --alphabet "${WORK}/nc.lex3da"
+    --max-error 0.05 --words on)
+run(0 place.query_sequence place query "${PDB}" "${WORK}/two.lex3dq" --json --top 1)
+expect_match(place.query_sequence "${LAST_OUT}" "^{\"query\":\"two_000\"[^\n]*}\n{\"query\":\"two_001\"[^\n]*}\n$")
 run(0 place.upgrade place upgrade "${PDB}" "${WORK}/places2.lex3dp" --json)
 expect_match(place.upgrade "${LAST_OUT}" "\"scans\":3")
 run(1 place.upgrade_onto_input place upgrade "${PDB}" "${PDB}")
