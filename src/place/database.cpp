@@ -1,8 +1,12 @@
-// The place database: scans, the inverted index word id -> scans, tf-idf retrieval and
-// verified queries.
+// The place database: scans (stored ones read when needed, added ones in memory), the
+// inverted index word id -> scans, tf-idf retrieval and verified queries.
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <list>
+#include <mutex>
+#include <unordered_map>
 #include <stdexcept>
 #include <string>
 
@@ -12,59 +16,170 @@
 
 namespace lex3d {
 
-PlaceDatabase::PlaceDatabase(PlaceStorageParams storage) : storage_(storage) { storage_.validate(); }
+namespace {
+
+std::uint32_t ld32(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
+}
+std::uint64_t ld64(const std::uint8_t* p) { return ld32(p) | static_cast<std::uint64_t>(ld32(p + 4)) << 32; }
+double ldf64(const std::uint8_t* p) {
+  const std::uint64_t v = ld64(p);
+  double d = 0;
+  std::memcpy(&d, &v, 8);
+  return d;
+}
+constexpr std::size_t kEntryBytes = 36;  // formats/place_db.md §3.4
+
+}  // namespace
+
+// Squared tf-idf norms of every scan once scans were added in memory (idf depends on N);
+// computed at the first retrieval after an add.
+struct PlaceDatabase::NormCache {
+  std::mutex mutex;
+  bool valid = false;
+  std::vector<double> norm2;
+};
+
+// Recently decoded stored scans, least recently used first out.
+struct PlaceDatabase::DecodedCache {
+  std::mutex mutex;
+  std::size_t capacity = 32;
+  std::list<std::pair<std::size_t, std::shared_ptr<const PlaceScan>>> lru;  // most recent first
+  std::unordered_map<std::size_t, decltype(lru)::iterator> where;
+};
+
+PlaceDatabase::PlaceDatabase(PlaceStorageParams storage)
+    : storage_(storage), norm_cache_(std::make_shared<NormCache>()), decoded_cache_(std::make_shared<DecodedCache>()) {
+  storage_.validate();
+}
+
+void PlaceDatabase::set_decoded_cache(std::size_t scans) {
+  auto c = std::make_shared<DecodedCache>();
+  c->capacity = scans;
+  decoded_cache_ = std::move(c);
+}
+
+StatusOr<std::shared_ptr<const PlaceScan>> PlaceDatabase::decoded(std::size_t i, double& decode_ms) const {
+  DecodedCache& c = *decoded_cache_;
+  {
+    std::lock_guard<std::mutex> lock(c.mutex);
+    const auto it = c.where.find(i);
+    if (it != c.where.end()) {
+      c.lru.splice(c.lru.begin(), c.lru, it->second);
+      return it->second->second;
+    }
+  }
+  Stopwatch sw;
+  auto x = read_scan(i);
+  decode_ms = sw.elapsed_ms();
+  if (!x.ok()) return x.status();
+  auto s = std::make_shared<const PlaceScan>(std::move(x).value());
+  std::lock_guard<std::mutex> lock(c.mutex);
+  if (c.capacity == 0 || c.where.count(i) != 0) return s;
+  c.lru.emplace_front(i, s);
+  c.where[i] = c.lru.begin();
+  while (c.lru.size() > c.capacity) {
+    c.where.erase(c.lru.back().first);
+    c.lru.pop_back();
+  }
+  return s;
+}
 
 std::size_t PlaceDatabase::add(PlaceScan scan) {
-  if (!scans_.empty() && !scan.features.empty() && !scans_.front().features.empty() &&
-      scan.descriptor_dim != scans_.front().descriptor_dim)
+  if (!scan.features.empty() && descriptor_dim_ != 0 && scan.descriptor_dim != descriptor_dim_ &&
+      (index_.scans > 0 || !added_.empty()))
     throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' has descriptors of " +
                                 std::to_string(scan.descriptor_dim) + " values, the database " +
-                                std::to_string(scans_.front().descriptor_dim));
+                                std::to_string(descriptor_dim_));
   if (scan.descriptor_bits != storage_.descriptor_bits)
     throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' was quantised to " +
                                 std::to_string(scan.descriptor_bits) + " bits, the database uses " +
                                 std::to_string(storage_.descriptor_bits));
-  const auto index = static_cast<std::uint32_t>(scans_.size());
+  if (!scan.features.empty()) descriptor_dim_ = scan.descriptor_dim;
+  const auto index = static_cast<std::uint32_t>(size());
   std::uint32_t total = 0;
   for (const auto& [word, count] : scan.words) {
-    if (word >= inverted_.size()) inverted_.resize(static_cast<std::size_t>(word) + 1);
-    inverted_[word].push_back({index, count});
+    if (word >= added_inverted_.size()) added_inverted_.resize(static_cast<std::size_t>(word) + 1);
+    added_inverted_[word].push_back({index, count});
     total += count;
   }
-  scan_word_total_.push_back(total);
-  scans_.push_back(std::move(scan));
+  added_total_.push_back(total);
+  added_.push_back(std::move(scan));
+  norm_cache_ = std::make_shared<NormCache>();  // idf changed; copies keep their own cache
   return index;
+}
+
+const std::vector<double>& PlaceDatabase::norms() const {
+  NormCache& c = *norm_cache_;
+  std::lock_guard<std::mutex> lock(c.mutex);
+  if (c.valid) return c.norm2;
+  const std::size_t n = size();
+  const std::size_t words = std::max<std::size_t>(index_.word_slots, added_inverted_.size());
+  c.norm2.assign(n, 0.0);
+  for (std::size_t w = 0; w < words; ++w) {
+    const std::size_t ns = stored_postings(static_cast<std::uint32_t>(w));
+    const std::size_t na = w < added_inverted_.size() ? added_inverted_[w].size() : 0;
+    if (ns + na == 0) continue;
+    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(ns + na));
+    if (ns > 0) {
+      const std::uint64_t a = ld64(index_.word_start + 8 * w);
+      for (std::uint64_t k = a; k < a + ns; ++k) {
+        const std::uint32_t s = ld32(index_.postings + 8 * k);
+        const double v = static_cast<double>(ld32(index_.postings + 8 * k + 4)) / static_cast<double>(word_total(s)) * idf;
+        c.norm2[s] += v * v;
+      }
+    }
+    if (na > 0)
+      for (const auto& p : added_inverted_[w]) {
+        const double v = static_cast<double>(p.count) / static_cast<double>(word_total(p.scan)) * idf;
+        c.norm2[p.scan] += v * v;
+      }
+  }
+  c.valid = true;
+  return c.norm2;
 }
 
 std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceScan& query, std::size_t k) const {
   std::vector<std::pair<std::size_t, double>> out;
-  const std::size_t n = scans_.size();
+  const std::size_t n = size();
   if (n == 0 || k == 0) return out;
-  std::vector<double> idf(inverted_.size(), 0.0);
-  for (std::size_t w = 0; w < inverted_.size(); ++w)
-    if (!inverted_[w].empty()) idf[w] = std::log(1.0 + static_cast<double>(n) / static_cast<double>(inverted_[w].size()));
-  // Database vectors' norms (tf = count / instances of the scan).
-  std::vector<double> norm2(n, 0.0);
-  for (std::size_t w = 0; w < inverted_.size(); ++w)
-    for (const auto& p : inverted_[w]) {
-      const double v = static_cast<double>(p.count) / static_cast<double>(scan_word_total_[p.scan]) * idf[w];
-      norm2[p.scan] += v * v;
-    }
   double qtotal = 0.0;
   for (const auto& wc : query.words) qtotal += wc.second;
   if (qtotal <= 0.0) return out;
   std::vector<double> dot(n, 0.0);
   double qnorm2 = 0.0;
   for (const auto& [word, count] : query.words) {
-    if (word >= inverted_.size() || inverted_[word].empty()) continue;
-    const double qv = static_cast<double>(count) / qtotal * idf[word];
+    const std::size_t ns = stored_postings(word);
+    const std::size_t na = word < added_inverted_.size() ? added_inverted_[word].size() : 0;
+    if (ns + na == 0) continue;
+    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(ns + na));
+    const double qv = static_cast<double>(count) / qtotal * idf;
     qnorm2 += qv * qv;
-    for (const auto& p : inverted_[word])
-      dot[p.scan] += qv * static_cast<double>(p.count) / static_cast<double>(scan_word_total_[p.scan]) * idf[word];
+    if (ns > 0) {
+      const std::uint8_t* p = index_.postings + 8 * ld64(index_.word_start + 8 * static_cast<std::size_t>(word));
+      for (std::size_t j = 0; j < ns; ++j, p += 8) {
+        const std::uint32_t s = ld32(p);
+        dot[s] += qv * static_cast<double>(ld32(p + 4)) / static_cast<double>(ld32(index_.entries + s * kEntryBytes + 16)) * idf;
+      }
+    }
+    if (na > 0)
+      for (const auto& p : added_inverted_[word])
+        dot[p.scan] += qv * static_cast<double>(p.count) / static_cast<double>(word_total(p.scan)) * idf;
   }
   if (qnorm2 <= 0.0) return out;
-  for (std::size_t i = 0; i < n; ++i)
-    if (dot[i] > 0.0 && norm2[i] > 0.0) out.emplace_back(i, dot[i] / std::sqrt(norm2[i] * qnorm2));
+  if (added_.empty()) {
+    // The norms stored with the index (computed for this N).
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!(dot[i] > 0.0)) continue;
+      const double n2 = ldf64(index_.entries + i * kEntryBytes + 28);
+      if (n2 > 0.0) out.emplace_back(i, dot[i] / std::sqrt(n2 * qnorm2));
+    }
+  } else {
+    const std::vector<double>& norm2 = norms();
+    for (std::size_t i = 0; i < n; ++i)
+      if (dot[i] > 0.0 && norm2[i] > 0.0) out.emplace_back(i, dot[i] / std::sqrt(norm2[i] * qnorm2));
+  }
   const std::size_t keep = std::min(k, out.size());
   std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(keep), out.end(),
                     [](const auto& a, const auto& b) { return a.second != b.second ? a.second > b.second : a.first < b.first; });
@@ -80,18 +195,45 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   r.retrieved = cands.size();
   r.retrieval_ms = sw.lap_ms();
   r.matches.resize(cands.size());
-  // Feature transforms of every candidate, then dense alignment of the best few.
+  // Candidates' entries are decoded here (stored ones) and kept for the dense step.
+  std::vector<std::shared_ptr<const PlaceScan>> held(cands.size());
+  std::vector<const PlaceScan*> cand(cands.size(), nullptr);
+  std::vector<Status> errors(cands.size());
+  std::vector<double> decode_ms(cands.size(), 0.0);
   PlaceParams coarse = params;
   coarse.dense_iterations = 0;
   parallel_for(
       cands.size(), params.threads,
       [&](std::size_t i) {
-        PlaceMatch m = match_scans(query, scans_[cands[i].first], coarse);
-        m.scan = cands[i].first;
+        const std::size_t s = cands[i].first;
+        if (s < index_.scans) {
+          auto x = decoded(s, decode_ms[i]);
+          if (!x.ok()) {
+            errors[i] = x.status();
+            return;
+          }
+          held[i] = std::move(x).value();
+          cand[i] = held[i].get();
+        } else {
+          cand[i] = &added_[s - index_.scans];
+        }
+        PlaceMatch m = match_scans(query, *cand[i], coarse);
+        m.scan = s;
         m.retrieval_similarity = cands[i].second;
         r.matches[i] = std::move(m);
       },
       1);
+  for (const auto& e : errors)
+    if (!e.ok()) throw PlaceDataError(e);
+  for (const double d : decode_ms) {
+    r.decode_ms += d;
+    r.decoded += d > 0.0 ? 1 : 0;
+  }
+  auto by_index = [&](std::size_t s) -> const PlaceScan& {
+    for (std::size_t i = 0; i < cands.size(); ++i)
+      if (cands[i].first == s) return *cand[i];
+    throw std::logic_error("PlaceDatabase::query: candidate not found");
+  };
   auto order = [](const PlaceMatch& a, const PlaceMatch& b) {
     if (a.valid != b.valid) return a.valid;
     if (a.score != b.score) return a.score > b.score;
@@ -101,7 +243,7 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   if (params.dense_iterations > 0) {
     const std::size_t nd = std::min(r.matches.size(), static_cast<std::size_t>(params.dense_candidates));
     parallel_for(
-        nd, params.threads, [&](std::size_t i) { refine_match(query, scans_[r.matches[i].scan], r.matches[i], params); },
+        nd, params.threads, [&](std::size_t i) { refine_match(query, by_index(r.matches[i].scan), r.matches[i], params); },
         1);
     // Densely aligned candidates first: their scores are not comparable with the others'.
     std::stable_sort(r.matches.begin(), r.matches.end(), [&](const PlaceMatch& a, const PlaceMatch& b) {

@@ -7,6 +7,8 @@
 #include <cctype>
 #include <cstring>
 #include <limits>
+#include <memory>
+#include <stdexcept>
 #include <string>
 
 #include "lex3d/codec/codec.hpp"
@@ -18,8 +20,12 @@ namespace lex3d {
 namespace {
 
 constexpr char kMagic[8] = {'L', 'E', 'X', '3', 'D', 'P', 'D', 'B'};
-constexpr std::uint16_t kMajor = 1;
+constexpr std::uint16_t kMajor = 2;  // written; 1.0 is read too
 constexpr std::uint16_t kMinor = 0;
+constexpr std::size_t kSlotBytes = 28;
+constexpr std::size_t kSlotsEnd = 20 + 2 * kSlotBytes;  // first chunk of a 2.x file
+constexpr std::size_t kEntryBytes = 36;
+constexpr std::uint32_t kMaxWordSlots = 1u << 24;
 constexpr std::size_t kHeaderBytes = 20;
 constexpr std::size_t kPhdrBytes = 32;
 constexpr std::uint32_t kMaxScans = 1u << 24;
@@ -368,138 +374,632 @@ std::size_t stored_bytes(const PlaceScan& scan) {
   return 16 + detail::encode_scan_payload(scan, 0.02).size();
 }
 
-std::vector<std::uint8_t> PlaceDatabase::save() const {
-  std::vector<std::uint8_t> out(kMagic, kMagic + 8);
+SharedBytes SharedBytes::copy_of(const std::vector<std::uint8_t>& bytes) {
+  auto v = std::make_shared<const std::vector<std::uint8_t>>(bytes);
+  SharedBytes b;
+  b.data = v->data();
+  b.size = v->size();
+  b.owner = v;
+  return b;
+}
+
+namespace {
+
+std::uint32_t ld32(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
+}
+std::uint64_t ld64(const std::uint8_t* p) { return ld32(p) | static_cast<std::uint64_t>(ld32(p + 4)) << 32; }
+std::uint16_t ld16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | p[1] << 8); }
+double ldf64(const std::uint8_t* p) {
+  const std::uint64_t v = ld64(p);
+  double d = 0;
+  std::memcpy(&d, &v, 8);
+  return d;
+}
+
+std::vector<std::uint8_t> chunk_bytes(const char type[4], const std::vector<std::uint8_t>& payload) {
+  std::vector<std::uint8_t> out;
+  out.reserve(payload.size() + 16);
+  put_chunk(out, type, payload);
+  return out;
+}
+
+// A chunk at `pos` of the first `limit` bytes: its type letters, its length against the
+// bytes left, its CRC.
+struct ChunkView {
+  std::string type;
+  const std::uint8_t* payload = nullptr;
+  std::size_t length = 0;
+  std::uint64_t at = 0;  // offset of the chunk (its type)
+};
+
+StatusOr<ChunkView> read_chunk(const std::uint8_t* bytes, std::uint64_t limit, std::uint64_t pos) {
+  if (pos > limit || limit - pos < 16) return bad_data("place database: truncated chunk", std::min(pos, limit));
+  char type[5] = {0, 0, 0, 0, 0};
+  std::memcpy(type, bytes + pos, 4);
+  for (int i = 0; i < 4; ++i)
+    if (!std::isalpha(static_cast<unsigned char>(type[i]))) return bad_data("place database: chunk type is not 4 letters", pos);
+  const std::uint64_t len = ld64(bytes + pos + 4);
+  if (len > limit - pos - 16)
+    return bad_data("place database: chunk '" + std::string(type) + "' length " + std::to_string(len) + " exceeds the file",
+                    pos + 4);
+  const auto plen = static_cast<std::size_t>(len);
+  if (crc(bytes + pos, 12 + plen) != ld32(bytes + pos + 12 + plen))
+    return bad_data("place database: CRC mismatch in chunk '" + std::string(type) + "'", pos + 12 + plen);
+  return ChunkView{type, bytes + pos + 12, plen, pos};
+}
+
+std::vector<std::uint8_t> phdr_payload(const PlaceStorageParams& st, int dim, bool has_alphabet, std::uint32_t count) {
+  Writer p;
+  p.u32(count);
+  p.u16(static_cast<std::uint16_t>(dim));
+  p.u8(static_cast<std::uint8_t>(st.descriptor_bits));
+  p.u8(has_alphabet ? 1 : 0);
+  p.u32(static_cast<std::uint32_t>(st.max_features));
+  p.f64(st.coarse_azimuth_deg);
+  p.u16(static_cast<std::uint16_t>(st.coarse_row_factor));
+  p.u16(0);
+  p.f64(st.range_step);
+  return std::move(p.b);
+}
+
+struct Phdr {
+  std::uint32_t scan_count = 0;
+  std::uint16_t descriptor_dim = 0;
+  bool has_alphabet = false;
+  PlaceStorageParams storage;
+};
+
+StatusOr<Phdr> parse_phdr(const ChunkView& c) {
+  if (c.type != "PHDR") return bad_data("place database: first chunk is '" + c.type + "', not PHDR", c.at);
+  if (c.length != kPhdrBytes)
+    return bad_data("place database: PHDR has " + std::to_string(c.length) + " bytes, not 32", c.at + 4);
+  Reader r(c.payload, c.length, c.at + 12);
+  Phdr h;
+  std::uint8_t bits = 0, alph = 0;
+  std::uint32_t maxf = 0;
+  std::uint16_t rowf = 0, reserved = 0;
+  r.u32(h.scan_count);
+  r.u16(h.descriptor_dim);
+  r.u8(bits);
+  r.u8(alph);
+  r.u32(maxf);
+  r.f64(h.storage.coarse_azimuth_deg);
+  r.u16(rowf);
+  r.u16(reserved);
+  r.f64(h.storage.range_step);
+  h.storage.max_features = static_cast<int>(std::min<std::uint32_t>(maxf, 1u << 30));
+  h.storage.descriptor_bits = bits;
+  h.storage.coarse_row_factor = rowf;
+  if (h.scan_count > kMaxScans || h.descriptor_dim > kMaxDim || alph > 1 || reserved != 0)
+    return bad_data("place database: PHDR field out of range", c.at + 12);
+  try {
+    h.storage.validate();
+  } catch (const std::invalid_argument& e) {
+    return bad_data(std::string("place database: PHDR: ") + e.what(), c.at + 12);
+  }
+  h.has_alphabet = alph == 1;
+  return h;
+}
+
+// The PIDX payload (formats/place_db.md §3.4) of entries given as parallel arrays; the
+// norms are computed here, as retrieval computes them.
+std::vector<std::uint8_t> encode_index(const std::vector<std::uint64_t>& offsets, const std::vector<std::uint64_t>& lengths,
+                                       const std::vector<std::string>& names, const std::vector<std::uint32_t>& totals,
+                                       const std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>& inverted) {
+  const std::size_t n = names.size();
+  std::vector<double> norm2(n, 0.0);
+  std::uint64_t postings = 0;
+  for (std::size_t w = 0; w < inverted.size(); ++w) {
+    postings += inverted[w].size();
+    if (inverted[w].empty()) continue;
+    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(inverted[w].size()));
+    for (const auto& [s, c] : inverted[w]) {
+      const double v = static_cast<double>(c) / static_cast<double>(totals[s]) * idf;
+      norm2[s] += v * v;
+    }
+  }
+  std::uint64_t names_length = 0;
+  for (const auto& s : names) names_length += s.size();
+  Writer w;
+  w.b.reserve(24 + n * kEntryBytes + names_length + 8 * (inverted.size() + 1) + 8 * postings);
+  w.u32(static_cast<std::uint32_t>(n));
+  w.u32(static_cast<std::uint32_t>(inverted.size()));
+  w.u64(postings);
+  w.u64(names_length);
+  std::uint64_t name_at = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    w.u64(offsets[i]);
+    w.u64(lengths[i]);
+    w.u32(totals[i]);
+    w.u32(static_cast<std::uint32_t>(name_at));
+    w.u16(static_cast<std::uint16_t>(names[i].size()));
+    w.u16(0);
+    w.f64(norm2[i]);
+    name_at += names[i].size();
+  }
+  for (const auto& s : names) w.bytes(reinterpret_cast<const std::uint8_t*>(s.data()), s.size());
+  std::uint64_t start = 0;
+  w.u64(0);
+  for (const auto& list : inverted) {
+    start += list.size();
+    w.u64(start);
+  }
+  for (const auto& list : inverted)
+    for (const auto& [s, c] : list) {
+      w.u32(s);
+      w.u32(c);
+    }
+  return std::move(w.b);
+}
+
+std::vector<std::uint8_t> commit_slot(std::uint64_t seq, std::uint64_t end, std::uint64_t index_offset) {
+  Writer w;
+  w.u64(seq);
+  w.u64(end);
+  w.u64(index_offset);
+  w.u32(crc(w.b.data(), 24));
+  return std::move(w.b);
+}
+
+std::uint64_t slot_offset(std::uint64_t seq) { return 20 + kSlotBytes * (seq % 2); }
+
+}  // namespace
+
+std::string PlaceDatabase::name(std::size_t i) const {
+  if (i < index_.scans) {
+    const std::uint8_t* e = index_.entries + i * kEntryBytes;
+    return {reinterpret_cast<const char*>(index_.names + ld32(e + 20)), ld16(e + 24)};
+  }
+  return added_.at(i - index_.scans).name;
+}
+
+std::uint32_t PlaceDatabase::word_total(std::size_t i) const {
+  return i < index_.scans ? ld32(index_.entries + i * kEntryBytes + 16) : added_total_[i - index_.scans];
+}
+
+std::size_t PlaceDatabase::stored_postings(std::uint32_t word) const {
+  if (word >= index_.word_slots) return 0;
+  const std::uint8_t* p = index_.word_start + 8 * static_cast<std::size_t>(word);
+  return static_cast<std::size_t>(ld64(p + 8) - ld64(p));
+}
+
+StatusOr<std::pair<const std::uint8_t*, std::size_t>> PlaceDatabase::stored_chunk(std::size_t i) const {
+  if (i >= index_.scans) throw std::out_of_range("PlaceDatabase::stored_chunk: no stored scan " + std::to_string(i));
+  const std::uint8_t* e = index_.entries + i * kEntryBytes;
+  const std::uint64_t at = ld64(e), len = ld64(e + 8);
+  // open() checked that the chunk lies inside the committed bytes.
+  const std::uint8_t* c = bytes_.data + at;
+  if (std::memcmp(c, "SCAN", 4) != 0 || ld64(c + 4) != len)
+    return bad_data("place database: the index names scan " + std::to_string(i) + " at a byte that is not its SCAN chunk", at);
+  if (crc(c, 12 + static_cast<std::size_t>(len)) != ld32(c + 12 + len))
+    return bad_data("place database: CRC mismatch in the SCAN chunk of scan " + std::to_string(i), at + 12 + len);
+  return std::make_pair(c, static_cast<std::size_t>(16 + len));
+}
+
+StatusOr<PlaceScan> PlaceDatabase::read_scan(std::size_t i) const {
+  if (i >= size()) throw std::out_of_range("PlaceDatabase::scan: no scan " + std::to_string(i));
+  if (i >= index_.scans) return added_[i - index_.scans];
+  auto c = stored_chunk(i);
+  if (!c.ok()) return c.status();
+  DbHeader h;
+  h.descriptor_dim = static_cast<std::uint16_t>(descriptor_dim_);
+  h.descriptor_bits = static_cast<std::uint8_t>(storage_.descriptor_bits);
+  h.storage = storage_;
+  const std::uint64_t at = static_cast<std::uint64_t>(c.value().first - bytes_.data);
+  return decode_scan(c.value().first + 12, c.value().second - 16, at + 12, h, alphabet_.size(), has_alphabet_);
+}
+
+PlaceScan PlaceDatabase::scan(std::size_t i) const {
+  auto s = read_scan(i);
+  if (!s.ok()) throw PlaceDataError(s.status());
+  return std::move(s).value();
+}
+
+// --- writing ---
+
+PlaceFileWriter::PlaceFileWriter(const PlaceStorageParams& storage, const Alphabet* alphabet, int descriptor_dim)
+    : storage_(storage), alphabet_(alphabet), descriptor_dim_(descriptor_dim) {
+  storage_.validate();
+  if (descriptor_dim < 0 || descriptor_dim > static_cast<int>(kMaxDim))
+    throw std::invalid_argument("PlaceFileWriter: descriptor_dim must be in [0, 4096]");
+  if (alphabet != nullptr && descriptor_dim != 0 && alphabet->descriptor_dim != descriptor_dim)
+    throw std::invalid_argument("PlaceFileWriter: the alphabet's descriptors differ from descriptor_dim");
+}
+
+PlaceFileWriter::PlaceFileWriter(const PlaceDatabase& db)
+    : storage_(db.storage()), descriptor_dim_(db.descriptor_dim()) {
+  if (db.file_info().major < 2 || !db.added_.empty())
+    throw std::invalid_argument("PlaceFileWriter: appending needs a database opened from a 2.x file, with no scans added in memory");
+  start_ = end_ = db.file_info().committed_bytes;
+  sequence_ = db.file_info().commit_sequence + 1;
+  const auto& ix = db.index_;
+  for (std::size_t i = 0; i < ix.scans; ++i) {
+    const std::uint8_t* e = ix.entries + i * kEntryBytes;
+    offsets_.push_back(ld64(e));
+    lengths_.push_back(ld64(e + 8));
+    totals_.push_back(ld32(e + 16));
+    names_.push_back(db.name(i));
+  }
+  inverted_.resize(ix.word_slots);
+  for (std::uint32_t w = 0; w < ix.word_slots; ++w) {
+    const std::uint64_t a = ld64(ix.word_start + 8 * static_cast<std::size_t>(w));
+    const std::uint64_t b = ld64(ix.word_start + 8 * static_cast<std::size_t>(w) + 8);
+    inverted_[w].reserve(static_cast<std::size_t>(b - a));
+    for (std::uint64_t k = a; k < b; ++k)
+      inverted_[w].emplace_back(ld32(ix.postings + 8 * k), ld32(ix.postings + 8 * k + 4));
+  }
+}
+
+PlaceFileWriter::Piece PlaceFileWriter::begin() {
+  Piece p;
+  p.offset = end_;
+  if (end_ != 0) return p;  // appending
+  p.bytes.assign(kMagic, kMagic + 8);
   Writer h;
   h.u16(kMajor);
   h.u16(kMinor);
   h.u32(0);
-  out.insert(out.end(), h.b.begin(), h.b.end());
-  const std::uint32_t hc = crc(out.data(), 16);
-  for (int i = 0; i < 4; ++i) out.push_back(static_cast<std::uint8_t>(hc >> (8 * i)));
-  int dim = 0;
-  for (const auto& s : scans_)
-    if (!s.features.empty()) dim = s.descriptor_dim;
+  p.bytes.insert(p.bytes.end(), h.b.begin(), h.b.end());
+  const std::uint32_t hc = crc(p.bytes.data(), 16);
+  for (int i = 0; i < 4; ++i) p.bytes.push_back(static_cast<std::uint8_t>(hc >> (8 * i)));
+  p.bytes.resize(kSlotsEnd, 0);  // two empty commit records
+  put_chunk(p.bytes, "PHDR", phdr_payload(storage_, descriptor_dim_, alphabet_ != nullptr, 0));
+  if (alphabet_ != nullptr) put_chunk(p.bytes, "ALPH", codec::encode_alphabet(*alphabet_));
+  end_ = start_ = p.bytes.size();
+  return p;
+}
+
+void PlaceFileWriter::index(std::uint64_t chunk_offset, std::uint64_t payload_length, const std::string& name,
+                            const std::vector<std::pair<std::uint32_t, std::uint32_t>>& words) {
+  if (names_.size() >= kMaxScans) throw std::invalid_argument("PlaceFileWriter: more than 2^24 scans");
+  const auto index = static_cast<std::uint32_t>(names_.size());
+  std::uint32_t total = 0;
+  for (const auto& [word, count] : words) {
+    if (word >= kMaxWordSlots) throw std::invalid_argument("PlaceFileWriter: word id beyond 2^24");
+    if (word >= inverted_.size()) inverted_.resize(static_cast<std::size_t>(word) + 1);
+    inverted_[word].emplace_back(index, count);
+    total += count;
+  }
+  offsets_.push_back(chunk_offset);
+  lengths_.push_back(payload_length);
+  names_.push_back(name.substr(0, kMaxName));
+  totals_.push_back(total);
+}
+
+PlaceFileWriter::Piece PlaceFileWriter::add(const PlaceScan& scan) {
+  if (end_ == 0) throw std::logic_error("PlaceFileWriter::add before begin");
+  if (!scan.features.empty() && scan.descriptor_dim != descriptor_dim_)
+    throw std::invalid_argument("PlaceFileWriter::add: scan '" + scan.name + "' has descriptors of " +
+                                std::to_string(scan.descriptor_dim) + " values, the database " +
+                                std::to_string(descriptor_dim_));
+  if (scan.descriptor_bits != storage_.descriptor_bits)
+    throw std::invalid_argument("PlaceFileWriter::add: scan '" + scan.name + "' was quantised to " +
+                                std::to_string(scan.descriptor_bits) + " bits, the database uses " +
+                                std::to_string(storage_.descriptor_bits));
+  for (std::size_t i = 1; i < scan.words.size(); ++i)
+    if (scan.words[i].first <= scan.words[i - 1].first)
+      throw std::invalid_argument("PlaceFileWriter::add: scan '" + scan.name + "' has unsorted word ids");
+  Piece p;
+  p.offset = end_;
+  const auto payload = detail::encode_scan_payload(scan, storage_.range_step);
+  put_chunk(p.bytes, "SCAN", payload);
+  index(end_, payload.size(), scan.name, scan.words);
+  end_ += p.bytes.size();
+  return p;
+}
+
+StatusOr<PlaceFileWriter::Piece> PlaceFileWriter::copy(const PlaceDatabase& db, std::size_t i) {
+  if (end_ == 0) throw std::logic_error("PlaceFileWriter::copy before begin");
+  auto c = db.stored_chunk(i);
+  if (!c.ok()) return c.status();
+  // The words come from the decoded entry (they are what the index must say).
+  auto s = db.read_scan(i);
+  if (!s.ok()) return s.status();
+  Piece p;
+  p.offset = end_;
+  p.bytes.assign(c.value().first, c.value().first + c.value().second);
+  index(end_, c.value().second - 16, s.value().name, s.value().words);
+  end_ += p.bytes.size();
+  return p;
+}
+
+std::pair<PlaceFileWriter::Piece, PlaceFileWriter::Piece> PlaceFileWriter::finish() {
+  if (end_ == 0) throw std::logic_error("PlaceFileWriter::finish before begin");
+  Piece idx;
+  idx.offset = end_;
+  idx.bytes = chunk_bytes("PIDX", encode_index(offsets_, lengths_, names_, totals_, inverted_));
+  const std::uint64_t end = end_ + idx.bytes.size();
+  Piece commit;
+  commit.offset = slot_offset(sequence_);
+  commit.bytes = commit_slot(sequence_, end, idx.offset);
+  return {std::move(idx), std::move(commit)};
+}
+
+std::vector<std::uint8_t> PlaceDatabase::save() const {
+  int dim = descriptor_dim_;
   if (dim == 0 && has_alphabet_) dim = alphabet_.descriptor_dim;
-  Writer p;
-  p.u32(static_cast<std::uint32_t>(scans_.size()));
-  p.u16(static_cast<std::uint16_t>(dim));
-  p.u8(static_cast<std::uint8_t>(storage_.descriptor_bits));
-  p.u8(has_alphabet_ ? 1 : 0);
-  p.u32(static_cast<std::uint32_t>(storage_.max_features));
-  p.f64(storage_.coarse_azimuth_deg);
-  p.u16(static_cast<std::uint16_t>(storage_.coarse_row_factor));
-  p.u16(0);
-  p.f64(storage_.range_step);
-  put_chunk(out, "PHDR", p.b);
-  if (has_alphabet_) put_chunk(out, "ALPH", codec::encode_alphabet(alphabet_));
-  for (const auto& s : scans_) put_chunk(out, "SCAN", detail::encode_scan_payload(s, storage_.range_step));
-  put_chunk(out, "PEND", {});
+  PlaceFileWriter w(storage_, has_alphabet_ ? &alphabet_ : nullptr, dim);
+  std::vector<std::uint8_t> out;
+  auto put = [&](const PlaceFileWriter::Piece& p) {
+    if (out.size() < p.offset + p.bytes.size()) out.resize(static_cast<std::size_t>(p.offset + p.bytes.size()));
+    std::memcpy(out.data() + p.offset, p.bytes.data(), p.bytes.size());
+  };
+  put(w.begin());
+  for (std::size_t i = 0; i < index_.scans; ++i) {
+    auto p = w.copy(*this, i);
+    if (!p.ok()) throw PlaceDataError(p.status());
+    put(p.value());
+  }
+  for (const auto& s : added_) put(w.add(s));
+  const auto [idx, commit] = w.finish();
+  put(idx);
+  put(commit);
   return out;
 }
 
-StatusOr<PlaceDatabase> PlaceDatabase::load(const std::vector<std::uint8_t>& bytes) {
-  if (bytes.size() < kHeaderBytes) return bad_data("place database: file too short for its header", bytes.size());
-  if (std::memcmp(bytes.data(), kMagic, 8) != 0) return bad_data("not a lex3d place database (bad magic)", 0);
-  Reader hr(bytes.data() + 8, 12, 8);
-  std::uint16_t major = 0, minor = 0;
-  std::uint32_t flags = 0, hcrc = 0;
-  hr.u16(major);
-  hr.u16(minor);
-  hr.u32(flags);
-  hr.u32(hcrc);
-  if (major != kMajor) return bad_data("place database: unsupported major version " + std::to_string(major), 8);
-  if (crc(bytes.data(), 16) != hcrc) return bad_data("place database: header CRC mismatch", 16);
-  if (flags != 0) return bad_data("place database: reserved header flag set", 12);
-  DbHeader h;
-  bool has_alphabet_flag = false;
-  PlaceDatabase db;
-  std::size_t pos = kHeaderBytes;
-  int stage = 0;  // 0 expect PHDR, 1 expect ALPH/SCAN/PEND, 2 done
-  std::size_t scans_seen = 0;
-  while (true) {
-    if (bytes.size() - pos < 16) return bad_data("place database: truncated chunk (no end chunk)", pos);
-    char type[5] = {0, 0, 0, 0, 0};
-    std::memcpy(type, bytes.data() + pos, 4);
-    Reader lr(bytes.data() + pos + 4, 8, pos + 4);
-    std::uint64_t len = 0;
-    lr.u64(len);
-    for (int i = 0; i < 4; ++i)
-      if (!std::isalpha(static_cast<unsigned char>(type[i])))
-        return bad_data("place database: chunk type is not 4 letters", pos);
-    if (len > bytes.size() - pos - 16)
-      return bad_data("place database: chunk '" + std::string(type) + "' length " + std::to_string(len) +
-                          " exceeds the file",
-                      pos + 4);
-    const auto plen = static_cast<std::size_t>(len);
-    const std::uint8_t* payload = bytes.data() + pos + 12;
-    Reader cr(payload + plen, 4, pos + 12 + plen);
-    std::uint32_t ccrc = 0;
-    cr.u32(ccrc);
-    if (crc(bytes.data() + pos, 12 + plen) != ccrc)
-      return bad_data("place database: CRC mismatch in chunk '" + std::string(type) + "'", pos + 12 + plen);
-    const std::string t(type);
-    const std::uint64_t at = pos + 12;
-    if (stage == 0) {
-      if (t != "PHDR") return bad_data("place database: first chunk is '" + t + "', not PHDR", pos);
-      if (plen != kPhdrBytes) return bad_data("place database: PHDR has " + std::to_string(plen) + " bytes, not 32", pos + 4);
-      Reader r(payload, plen, at);
-      std::uint8_t alph = 0;
-      std::uint32_t maxf = 0;
-      std::uint16_t rowf = 0, reserved = 0;
-      r.u32(h.scan_count);
-      r.u16(h.descriptor_dim);
-      r.u8(h.descriptor_bits);
-      r.u8(alph);
-      r.u32(maxf);
-      r.f64(h.storage.coarse_azimuth_deg);
-      r.u16(rowf);
-      r.u16(reserved);
-      r.f64(h.storage.range_step);
-      h.storage.max_features = static_cast<int>(std::min<std::uint32_t>(maxf, 1u << 30));
-      h.storage.descriptor_bits = h.descriptor_bits;
-      h.storage.coarse_row_factor = rowf;
-      if (h.scan_count > kMaxScans || h.descriptor_dim > kMaxDim || alph > 1 || reserved != 0)
-        return bad_data("place database: PHDR field out of range", at);
-      try {
-        h.storage.validate();
-      } catch (const std::invalid_argument& e) {
-        return bad_data(std::string("place database: PHDR: ") + e.what(), at);
-      }
-      has_alphabet_flag = alph == 1;
-      db = PlaceDatabase(h.storage);
-      stage = 1;
-    } else if (t == "ALPH") {
-      if (!has_alphabet_flag || db.has_alphabet() || scans_seen > 0)
-        return bad_data("place database: unexpected ALPH chunk", pos);
-      auto a = codec::decode_alphabet(std::vector<std::uint8_t>(payload, payload + plen));
-      if (!a.ok()) return bad_data("place database: ALPH: " + a.status().message(), at + a.status().offset().value_or(0));
-      if (h.descriptor_dim != 0 && a.value().descriptor_dim != h.descriptor_dim)
-        return bad_data("place database: the alphabet's descriptor size differs from PHDR's", at);
-      db.set_alphabet(std::move(a).value());
-    } else if (t == "SCAN") {
-      if (has_alphabet_flag && !db.has_alphabet()) return bad_data("place database: SCAN before the ALPH chunk", pos);
-      if (scans_seen >= h.scan_count) return bad_data("place database: more SCAN chunks than PHDR's scan count", pos);
-      auto s = decode_scan(payload, plen, at, h, db.alphabet().size(), db.has_alphabet());
-      if (!s.ok()) return s.status();
-      db.add(std::move(s).value());
-      ++scans_seen;
-    } else if (t == "PEND") {
-      if (plen != 0) return bad_data("place database: PEND chunk is not empty", pos + 4);
-      if (has_alphabet_flag && !db.has_alphabet()) return bad_data("place database: ALPH chunk missing", pos);
-      if (scans_seen != h.scan_count)
-        return bad_data("place database: " + std::to_string(scans_seen) + " SCAN chunks, PHDR says " +
-                            std::to_string(h.scan_count),
-                        pos);
-      pos += 16;
-      if (pos != bytes.size()) return bad_data("place database: bytes after the end chunk", pos);
-      return db;
-    } else if (std::isupper(static_cast<unsigned char>(type[0]))) {
-      return bad_data("place database: unknown required chunk '" + t + "'", pos);
-    }
-    // Unknown optional chunks are skipped (their CRC was checked).
-    pos += 16 + plen;
+// --- reading ---
+
+namespace {
+
+struct ParsedIndex {
+  std::uint32_t scans = 0, word_slots = 0;
+  std::uint64_t postings = 0, names_length = 0;
+  const std::uint8_t* entries = nullptr;
+  const std::uint8_t* names = nullptr;
+  const std::uint8_t* word_start = nullptr;
+  const std::uint8_t* postings_at = nullptr;
+};
+
+// Checks a PIDX payload: sizes, entries inside [first, last) without overlap, names inside
+// the name bytes, word starts non-decreasing, postings (scan < N, increasing within a word,
+// count >= 1) summing to each entry's word total, word ids below the alphabet size.
+StatusOr<ParsedIndex> parse_index(const std::uint8_t* p, std::size_t len, std::uint64_t at, std::uint64_t first,
+                                  std::uint64_t last, std::size_t alphabet_words, bool has_alphabet) {
+  if (len < 24) return bad_data("place database: PIDX too short", at);
+  ParsedIndex x;
+  x.scans = ld32(p);
+  x.word_slots = ld32(p + 4);
+  x.postings = ld64(p + 8);
+  x.names_length = ld64(p + 16);
+  if (x.scans > kMaxScans) return bad_data("place database: PIDX scan count " + std::to_string(x.scans) + " too large", at);
+  if (x.word_slots > kMaxWordSlots || (has_alphabet && x.word_slots > alphabet_words))
+    return bad_data("place database: PIDX word count " + std::to_string(x.word_slots) + " out of range", at + 4);
+  // Sizes in 64 bits from values already bounded: no overflow.
+  const std::uint64_t left = len - 24;
+  const std::uint64_t fixed = static_cast<std::uint64_t>(x.scans) * kEntryBytes + 8 * (static_cast<std::uint64_t>(x.word_slots) + 1);
+  if (fixed > left || x.names_length > left - fixed || x.postings > (left - fixed - x.names_length) / 8 ||
+      fixed + x.names_length + 8 * x.postings != left)
+    return bad_data("place database: PIDX sizes do not add up to its length", at + 8);
+  x.entries = p + 24;
+  x.names = x.entries + static_cast<std::size_t>(x.scans) * kEntryBytes;
+  x.word_start = x.names + x.names_length;
+  x.postings_at = x.word_start + 8 * (static_cast<std::size_t>(x.word_slots) + 1);
+  std::uint64_t prev_end = first;
+  for (std::uint32_t i = 0; i < x.scans; ++i) {
+    const std::uint8_t* e = x.entries + static_cast<std::size_t>(i) * kEntryBytes;
+    const std::uint64_t e_at = at + 24 + static_cast<std::uint64_t>(i) * kEntryBytes;
+    const std::uint64_t off = ld64(e), plen = ld64(e + 8);
+    if (off < prev_end || off > last || plen > last - off || last - off - plen < 16)
+      return bad_data("place database: PIDX entry " + std::to_string(i) + " points outside the scan chunks", e_at);
+    prev_end = off + 16 + plen;
+    const std::uint64_t name_at = ld32(e + 20), name_len = ld16(e + 24);
+    if (name_at > x.names_length || name_len > x.names_length - name_at || name_len > kMaxName || ld16(e + 26) != 0)
+      return bad_data("place database: PIDX entry " + std::to_string(i) + " has a bad name", e_at + 20);
+    const double n2 = ldf64(e + 28);
+    if (!std::isfinite(n2) || n2 < 0.0) return bad_data("place database: PIDX entry " + std::to_string(i) + " has a bad norm", e_at + 28);
   }
+  const std::uint64_t ws_at = at + 24 + static_cast<std::uint64_t>(x.scans) * kEntryBytes + x.names_length;
+  if (ld64(x.word_start) != 0 || ld64(x.word_start + 8 * static_cast<std::size_t>(x.word_slots)) != x.postings)
+    return bad_data("place database: PIDX word starts do not cover the postings", ws_at);
+  for (std::uint32_t w = 0; w < x.word_slots; ++w)
+    if (ld64(x.word_start + 8 * static_cast<std::size_t>(w) + 8) < ld64(x.word_start + 8 * static_cast<std::size_t>(w)))
+      return bad_data("place database: PIDX word starts decrease", ws_at + 8 * (static_cast<std::uint64_t>(w) + 1));
+  std::vector<std::uint64_t> sums(x.scans, 0);
+  const std::uint64_t post_at = ws_at + 8 * (static_cast<std::uint64_t>(x.word_slots) + 1);
+  for (std::uint32_t w = 0; w < x.word_slots; ++w) {
+    const std::uint64_t a = ld64(x.word_start + 8 * static_cast<std::size_t>(w));
+    const std::uint64_t b = ld64(x.word_start + 8 * static_cast<std::size_t>(w) + 8);
+    if (b < a || b > x.postings) return bad_data("place database: PIDX word starts decrease", ws_at + 8 * (w + 1));
+    for (std::uint64_t k = a; k < b; ++k) {
+      const std::uint32_t s = ld32(x.postings_at + 8 * k), c = ld32(x.postings_at + 8 * k + 4);
+      if (s >= x.scans || c == 0 || (k > a && s <= ld32(x.postings_at + 8 * (k - 1))))
+        return bad_data("place database: PIDX posting is out of range, unsorted or zero", post_at + 8 * k);
+      sums[s] += c;
+    }
+  }
+  for (std::uint32_t i = 0; i < x.scans; ++i)
+    if (static_cast<std::uint32_t>(sums[i]) != ld32(x.entries + static_cast<std::size_t>(i) * kEntryBytes + 16))
+      return bad_data("place database: PIDX word total of scan " + std::to_string(i) + " differs from its postings",
+                      at + 24 + static_cast<std::uint64_t>(i) * kEntryBytes + 16);
+  return x;
+}
+
+// The name and words of a 1.0 SCAN payload (the rest is checked when the scan is read).
+Status scan_words(const std::uint8_t* p, std::size_t n, std::uint64_t base, std::size_t alphabet_words, bool has_alphabet,
+                  std::string& name, std::vector<std::pair<std::uint32_t, std::uint32_t>>& words) {
+  Reader r(p, n, base);
+  std::uint16_t name_len = 0;
+  if (!r.u16(name_len)) return bad_data("place database: SCAN chunk truncated in the name", r.offset());
+  if (name_len > kMaxName) return bad_data("place database: scan name too long", r.offset() - 2);
+  const std::uint8_t* nm = r.take(name_len);
+  if (nm == nullptr || r.take(1 + 192) == nullptr) return bad_data("place database: SCAN chunk truncated", r.offset());
+  name.assign(reinterpret_cast<const char*>(nm), name_len);
+  std::uint32_t nw = 0;
+  if (!r.u32(nw)) return bad_data("place database: SCAN chunk truncated in the word count", r.offset());
+  if (static_cast<std::uint64_t>(nw) * 8 > r.left())
+    return bad_data("place database: word count " + std::to_string(nw) + " does not fit the chunk", r.offset() - 4);
+  words.clear();
+  words.reserve(nw);
+  for (std::uint32_t i = 0; i < nw; ++i) {
+    std::uint32_t word = 0, count = 0;
+    r.u32(word);
+    r.u32(count);
+    if ((i > 0 && word <= words.back().first) || count == 0 || (has_alphabet && word >= alphabet_words) || word >= kMaxWordSlots)
+      return bad_data("place database: bad word entry (unsorted, zero count or unknown word)", r.offset() - 8);
+    words.emplace_back(word, count);
+  }
+  return {};
+}
+
+}  // namespace
+
+StatusOr<PlaceDatabase> PlaceDatabase::load(const std::vector<std::uint8_t>& bytes) {
+  return open(SharedBytes::copy_of(bytes));
+}
+
+StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
+  const std::uint8_t* bytes = file.data;
+  const std::uint64_t size = file.size;
+  if (size < kHeaderBytes) return bad_data("place database: file too short for its header", size);
+  if (std::memcmp(bytes, kMagic, 8) != 0) return bad_data("not a lex3d place database (bad magic)", 0);
+  const std::uint16_t major = ld16(bytes + 8), minor = ld16(bytes + 10);
+  const std::uint32_t flags = ld32(bytes + 12), hcrc = ld32(bytes + 16);
+  // The version first: a newer major version may lay out its header differently.
+  if (major > kMajor)
+    return bad_data("place database: format version " + std::to_string(major) + "." + std::to_string(minor) +
+                        " is newer than this lex3d reads (1.0 and 2.x); use a newer lex3d",
+                    8);
+  if (major != 1 && major != 2) return bad_data("place database: unsupported major version " + std::to_string(major), 8);
+  if (crc(bytes, 16) != hcrc) return bad_data("place database: header CRC mismatch", 16);
+  if (flags != 0) return bad_data("place database: reserved header flag set", 12);
+  PlaceDatabase db;
+  db.bytes_ = file;
+  db.info_.major = major;
+  db.info_.minor = minor;
+  Phdr h;
+  std::uint64_t pos = 0;
+  std::uint64_t limit = size;
+  std::uint64_t index_at = 0;
+  if (major == 2) {
+    if (size < kSlotsEnd) return bad_data("place database: file too short for its commit records", size);
+    // The valid commit record with the highest sequence number is in force.
+    std::uint64_t seq = 0;
+    for (int k = 0; k < 2; ++k) {
+      const std::uint8_t* s = bytes + 20 + kSlotBytes * static_cast<std::size_t>(k);
+      if (crc(s, 24) != ld32(s + 24) || ld64(s) == 0 || slot_offset(ld64(s)) != 20 + kSlotBytes * static_cast<std::size_t>(k))
+        continue;
+      if (ld64(s) > seq) {
+        seq = ld64(s);
+        limit = ld64(s + 8);
+        index_at = ld64(s + 16);
+      }
+    }
+    if (seq == 0) return bad_data("place database: no valid commit record (bytes 20-75)", 20);
+    if (limit > size)
+      return bad_data("place database: truncated: the committed database ends at byte " + std::to_string(limit) +
+                          ", the file at byte " + std::to_string(size),
+                      size);
+    db.info_.commit_sequence = seq;
+    db.info_.committed_bytes = limit;
+    db.info_.ignored_tail_bytes = size - limit;
+    pos = kSlotsEnd;
+  } else {
+    pos = kHeaderBytes;
+  }
+  auto ph = read_chunk(bytes, limit, pos);
+  if (!ph.ok()) return ph.status();
+  auto hp = parse_phdr(ph.value());
+  if (!hp.ok()) return hp.status();
+  h = hp.value();
+  if (major == 2 && h.scan_count != 0) return bad_data("place database: PHDR scan_count must be 0 in format 2", ph.value().at + 12);
+  db.storage_ = h.storage;
+  db.descriptor_dim_ = h.descriptor_dim;
+  pos += 16 + ph.value().length;
+  if (h.has_alphabet) {
+    auto ac = read_chunk(bytes, limit, pos);
+    if (!ac.ok()) return ac.status();
+    if (ac.value().type != "ALPH") return bad_data("place database: ALPH chunk missing after PHDR", pos);
+    auto a = codec::decode_alphabet(std::vector<std::uint8_t>(ac.value().payload, ac.value().payload + ac.value().length));
+    if (!a.ok()) return bad_data("place database: ALPH: " + a.status().message(), pos + 12 + a.status().offset().value_or(0));
+    if (h.descriptor_dim != 0 && a.value().descriptor_dim != h.descriptor_dim)
+      return bad_data("place database: the alphabet's descriptor size differs from PHDR's", pos + 12);
+    db.set_alphabet(std::move(a).value());
+    pos += 16 + ac.value().length;
+  }
+  const std::uint64_t first = pos;
+  const std::uint8_t* index_payload = nullptr;
+  std::size_t index_length = 0;
+  std::uint64_t index_payload_at = 0;
+  if (major == 2) {
+    if (index_at < first) return bad_data("place database: the commit record's index offset is before the scans", 20);
+    auto ic = read_chunk(bytes, limit, index_at);
+    if (!ic.ok()) return ic.status();
+    if (ic.value().type != "PIDX") return bad_data("place database: the commit record does not point at a PIDX chunk", index_at);
+    if (index_at + 16 + ic.value().length != limit)
+      return bad_data("place database: the PIDX chunk does not end the committed database", index_at + 4);
+    index_payload = ic.value().payload;
+    index_length = ic.value().length;
+    index_payload_at = index_at + 12;
+  } else {
+    // 1.0: every chunk is read (CRC checked) and the index built from the SCAN words.
+    std::vector<std::uint64_t> offsets, lengths;
+    std::vector<std::string> names;
+    std::vector<std::uint32_t> totals;
+    std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> inverted;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> words;
+    std::string name;
+    while (true) {
+      if (size - pos < 16) return bad_data("place database: truncated chunk (no end chunk)", pos);
+      auto c = read_chunk(bytes, size, pos);
+      if (!c.ok()) return c.status();
+      const ChunkView& cv = c.value();
+      if (cv.type == "SCAN") {
+        if (names.size() >= h.scan_count) return bad_data("place database: more SCAN chunks than PHDR's scan count", pos);
+        Status st = scan_words(cv.payload, cv.length, pos + 12, db.alphabet_.size(), db.has_alphabet_, name, words);
+        if (!st.ok()) return st;
+        const auto s = static_cast<std::uint32_t>(names.size());
+        std::uint32_t total = 0;
+        for (const auto& [w, n] : words) {
+          if (w >= inverted.size()) inverted.resize(static_cast<std::size_t>(w) + 1);
+          inverted[w].emplace_back(s, n);
+          total += n;
+        }
+        offsets.push_back(pos);
+        lengths.push_back(cv.length);
+        names.push_back(name);
+        totals.push_back(total);
+      } else if (cv.type == "PEND") {
+        if (cv.length != 0) return bad_data("place database: PEND chunk is not empty", pos + 4);
+        if (names.size() != h.scan_count)
+          return bad_data("place database: " + std::to_string(names.size()) + " SCAN chunks, PHDR says " +
+                              std::to_string(h.scan_count),
+                          pos);
+        if (pos + 16 != size) return bad_data("place database: bytes after the end chunk", pos + 16);
+        break;
+      } else if (cv.type == "ALPH" || cv.type == "PHDR" || cv.type == "PIDX") {
+        return bad_data("place database: unexpected " + cv.type + " chunk", pos);
+      } else if (std::isupper(static_cast<unsigned char>(cv.type[0]))) {
+        return bad_data("place database: unknown required chunk '" + cv.type + "'", pos);
+      }
+      pos += 16 + cv.length;
+    }
+    auto built = std::make_shared<const std::vector<std::uint8_t>>(encode_index(offsets, lengths, names, totals, inverted));
+    db.built_index_ = built;
+    index_payload = built->data();
+    index_length = built->size();
+    index_payload_at = 0;  // offsets in a built index are not file offsets
+    limit = size;
+    index_at = size;
+  }
+  auto ix = parse_index(index_payload, index_length, index_payload_at, first, index_at, db.alphabet_.size(), db.has_alphabet_);
+  if (!ix.ok()) return ix.status();
+  const ParsedIndex& x = ix.value();
+  db.index_.scans = x.scans;
+  db.index_.word_slots = x.word_slots;
+  db.index_.entries = x.entries;
+  db.index_.names = x.names;
+  db.index_.names_length = x.names_length;
+  db.index_.word_start = x.word_start;
+  db.index_.postings = x.postings_at;
+  db.info_.index_bytes = index_length + 16;
+  if (major == 2) {
+    std::uint64_t live = first + index_length + 16;
+    for (std::uint32_t i = 0; i < x.scans; ++i) live += 16 + ld64(x.entries + static_cast<std::size_t>(i) * kEntryBytes + 8);
+    db.info_.dead_bytes = limit - live;
+  }
+  return db;
 }
 
 }  // namespace lex3d

@@ -22,6 +22,8 @@
 /// gravity direction would come from an IMU; without it the sensor's z axis is used.
 
 #include <cstdint>
+#include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -267,12 +269,50 @@ struct PlaceQueryResult {
   bool accepted = false;
   std::size_t retrieved = 0;  ///< candidates from the inverted index
   double retrieval_ms = 0.0;
-  double verification_ms = 0.0;
+  double verification_ms = 0.0;  ///< includes decode_ms
+  double decode_ms = 0.0;        ///< reading the candidates' stored entries (summed over threads)
+  std::size_t decoded = 0;       ///< candidates read from the stored bytes (the others were cached or in memory)
   [[nodiscard]] const PlaceMatch* best() const noexcept { return matches.empty() ? nullptr : &matches.front(); }
 };
 
+/// Read-only bytes that stay valid while `owner` lives (a memory-mapped file, a buffer).
+struct SharedBytes {
+  const std::uint8_t* data = nullptr;
+  std::size_t size = 0;
+  std::shared_ptr<const void> owner;
+  /// Owns a copy of `bytes`.
+  [[nodiscard]] static SharedBytes copy_of(const std::vector<std::uint8_t>& bytes);
+};
+
+/// A stored database entry that cannot be read (CRC mismatch, bad field): thrown by
+/// PlaceDatabase::query / scan / save, which decode entries only when they need them.
+class PlaceDataError : public std::runtime_error {
+ public:
+  explicit PlaceDataError(Status status) : std::runtime_error(status.to_string()), status_(std::move(status)) {}
+  [[nodiscard]] const Status& status() const noexcept { return status_; }
+
+ private:
+  Status status_;
+};
+
+/// Where a database opened from bytes came from (formats/place_db.md).
+struct PlaceFileInfo {
+  int major = 0, minor = 0;             ///< format version of the bytes (0.0: not opened from bytes)
+  std::uint64_t commit_sequence = 0;    ///< 2.x: sequence number of the commit in force
+  std::uint64_t committed_bytes = 0;    ///< 2.x: bytes of the committed state (the file's length after a clean write)
+  std::uint64_t ignored_tail_bytes = 0; ///< 2.x: bytes after the committed state (an append that did not commit)
+  std::uint64_t dead_bytes = 0;         ///< 2.x: bytes of earlier indexes an append left behind
+  std::uint64_t index_bytes = 0;        ///< the inverted index chunk (2.x: read from the file; 1.0: built on open)
+};
+
 /// A scan database with an inverted index word id -> scans (after FAISS's Index:
-/// state lasts across add/query; save/load to bytes).
+/// state lasts across add/query; save/open to bytes).
+///
+/// A database opened from bytes (open / load) reads only what retrieval needs: the header,
+/// the alphabet and the inverted index with each scan's word total and tf-idf norm, as
+/// views into the bytes (a memory-mapped file stays on disk until pages are touched). A
+/// scan's entry is decoded, and its CRC checked, when a query verifies it as a candidate or
+/// scan() asks for it. Scans added after opening are kept in memory, decoded.
 class PlaceDatabase {
  public:
   explicit PlaceDatabase(PlaceStorageParams storage = {});
@@ -282,37 +322,131 @@ class PlaceDatabase {
   void set_alphabet(Alphabet alphabet) { alphabet_ = std::move(alphabet); has_alphabet_ = true; }
   [[nodiscard]] bool has_alphabet() const noexcept { return has_alphabet_; }
   [[nodiscard]] const Alphabet& alphabet() const noexcept { return alphabet_; }
+  /// Descriptor values a feature of this database's scans (0 until known).
+  [[nodiscard]] int descriptor_dim() const noexcept { return descriptor_dim_; }
 
-  /// Adds a scan; returns its index. Throws std::invalid_argument when its descriptor
-  /// layout differs from the database's.
+  /// Adds a scan (kept in memory); returns its index. Throws std::invalid_argument when
+  /// its descriptor layout differs from the database's.
   std::size_t add(PlaceScan scan);
-  [[nodiscard]] std::size_t size() const noexcept { return scans_.size(); }
-  [[nodiscard]] const PlaceScan& scan(std::size_t i) const { return scans_.at(i); }
+  [[nodiscard]] std::size_t size() const noexcept { return stored_count() + added_.size(); }
+  /// Scans read from bytes (the others were added in memory).
+  [[nodiscard]] std::size_t stored_count() const noexcept { return index_.scans; }
+  /// The name of scan i, without decoding it.
+  [[nodiscard]] std::string name(std::size_t i) const;
+  /// Scan i, decoded (a stored one is read from the bytes and its CRC checked). Throws
+  /// std::out_of_range for a bad index and PlaceDataError for a corrupt entry.
+  [[nodiscard]] PlaceScan scan(std::size_t i) const;
+  /// As scan(), with a corrupt entry as a Status (kBadData with the byte offset).
+  [[nodiscard]] StatusOr<PlaceScan> read_scan(std::size_t i) const;
+  /// Stored scans a query keeps decoded for the queries after it (least recently used
+  /// dropped first; about 0.6 MB each on balm); 0 = none. Default 32. Results do not depend on it.
+  void set_decoded_cache(std::size_t scans);
 
   /// tf-idf cosine similarity of `query` to every scan with a shared word, best first,
   /// at most `k` (ties by lower index). idf = ln(1 + N / n_w).
   [[nodiscard]] std::vector<std::pair<std::size_t, double>> retrieve(const PlaceScan& query, std::size_t k) const;
 
-  /// Retrieves top_k candidates and verifies them with match_scans.
+  /// Retrieves top_k candidates and verifies them with match_scans. Throws PlaceDataError
+  /// when a candidate's stored entry is corrupt.
   [[nodiscard]] PlaceQueryResult query(const PlaceScan& query, const PlaceParams& params) const;
 
-  /// Serialises the database (formats/place_db.md).
+  /// Serialises the whole database in the current format (formats/place_db.md), stored
+  /// entries copied as they are (their CRC checked). Throws PlaceDataError for a corrupt one.
   [[nodiscard]] std::vector<std::uint8_t> save() const;
-  /// Parses save()'s bytes; corrupt, truncated or inconsistent bytes give a kBadData
-  /// Status with the byte offset.
+  /// Opens a database from its bytes (format 2.x or 1.0) without decoding its entries;
+  /// corrupt, truncated or inconsistent bytes give a kBadData Status with the byte offset.
+  /// A newer major version is refused with a message that says so.
+  [[nodiscard]] static StatusOr<PlaceDatabase> open(SharedBytes bytes);
+  /// open() of a copy of `bytes`.
   [[nodiscard]] static StatusOr<PlaceDatabase> load(const std::vector<std::uint8_t>& bytes);
+  /// What open() found (version, commit, bytes left behind by appends).
+  [[nodiscard]] const PlaceFileInfo& file_info() const noexcept { return info_; }
+  /// The stored entry of scan i (i < stored_count()) as it is in the bytes: its whole SCAN
+  /// chunk, CRC checked; kBadData when it does not check.
+  [[nodiscard]] StatusOr<std::pair<const std::uint8_t*, std::size_t>> stored_chunk(std::size_t i) const;
 
  private:
+  friend class PlaceFileWriter;
   struct Posting {
     std::uint32_t scan;
     std::uint32_t count;
   };
+  /// The stored inverted index: views into the index bytes (formats/place_db.md §3.4).
+  struct StoredIndex {
+    std::uint32_t scans = 0;
+    std::uint32_t word_slots = 0;
+    const std::uint8_t* entries = nullptr;       // scans x 36 bytes
+    const std::uint8_t* names = nullptr;
+    std::uint64_t names_length = 0;
+    const std::uint8_t* word_start = nullptr;    // (word_slots + 1) x u64
+    const std::uint8_t* postings = nullptr;      // x (u32 scan, u32 count)
+  };
+  struct NormCache;
+  struct DecodedCache;
+  /// Stored scan i decoded, from the cache or read (and cached).
+  [[nodiscard]] StatusOr<std::shared_ptr<const PlaceScan>> decoded(std::size_t i, double& decode_ms) const;
+  [[nodiscard]] std::uint32_t word_total(std::size_t i) const;
+  [[nodiscard]] std::size_t stored_postings(std::uint32_t word) const;
+  [[nodiscard]] const std::vector<double>& norms() const;
+
   PlaceStorageParams storage_;
   Alphabet alphabet_;
   bool has_alphabet_ = false;
-  std::vector<PlaceScan> scans_;
-  std::vector<std::uint32_t> scan_word_total_;  // instances per scan
-  std::vector<std::vector<Posting>> inverted_;  // word id -> postings
+  int descriptor_dim_ = 0;
+  // Stored part (empty for a database made in memory).
+  SharedBytes bytes_;
+  std::shared_ptr<const std::vector<std::uint8_t>> built_index_;  // 1.0: the index built on open
+  StoredIndex index_;
+  PlaceFileInfo info_;
+  // Added in memory.
+  std::vector<PlaceScan> added_;
+  std::vector<std::uint32_t> added_total_;                      // instances per added scan
+  std::vector<std::vector<Posting>> added_inverted_;            // word id -> postings of added scans
+  std::shared_ptr<NormCache> norm_cache_;
+  std::shared_ptr<DecodedCache> decoded_cache_;  // shared by copies: stored entries never change
+};
+
+/// Writes a database file in format 2.0 piece by piece, holding one scan at a time (and
+/// the inverted index): `begin` bytes, then one SCAN chunk a scan, then `finish`'s index
+/// and commit. Each piece says where it goes; a writer that applies them in order and syncs
+/// before the commit leaves either the old committed state or the new one (formats/place_db.md §5).
+class PlaceFileWriter {
+ public:
+  struct Piece {
+    std::uint64_t offset = 0;
+    std::vector<std::uint8_t> bytes;
+  };
+  /// A new file: begin() gives the header, PHDR and ALPH at offset 0.
+  PlaceFileWriter(const PlaceStorageParams& storage, const Alphabet* alphabet, int descriptor_dim);
+  /// Appends to `db`, opened from a 2.x file: the new chunks go at its committed end
+  /// (bytes after it are overwritten; truncate the file there first).
+  explicit PlaceFileWriter(const PlaceDatabase& db);
+  /// Bytes to write first (empty when appending).
+  [[nodiscard]] Piece begin();
+  /// The SCAN chunk of `scan`, at the end. Throws std::invalid_argument when its descriptor
+  /// layout differs from the database's.
+  [[nodiscard]] Piece add(const PlaceScan& scan);
+  /// Copies stored scan i of `db` (its chunk CRC checked; kBadData otherwise).
+  [[nodiscard]] StatusOr<Piece> copy(const PlaceDatabase& db, std::size_t i);
+  /// The index chunk (write it, then sync) and the commit record (write it, then sync).
+  [[nodiscard]] std::pair<Piece, Piece> finish();
+  [[nodiscard]] std::size_t size() const noexcept { return names_.size(); }
+  /// Offset where the first new byte goes (the committed end when appending).
+  [[nodiscard]] std::uint64_t start() const noexcept { return start_; }
+
+ private:
+  void index(std::uint64_t chunk_offset, std::uint64_t payload_length, const std::string& name,
+             const std::vector<std::pair<std::uint32_t, std::uint32_t>>& words);
+  PlaceStorageParams storage_;
+  const Alphabet* alphabet_ = nullptr;
+  int descriptor_dim_ = 0;
+  std::uint64_t start_ = 0;
+  std::uint64_t end_ = 0;
+  std::uint64_t sequence_ = 1;
+  std::vector<std::uint64_t> offsets_, lengths_;
+  std::vector<std::string> names_;
+  std::vector<std::uint32_t> totals_;
+  std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> inverted_;  // word -> (scan, count)
 };
 
 namespace detail {
