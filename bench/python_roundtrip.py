@@ -3,7 +3,8 @@
 layer and decompressed, median wall time of RUNS runs each.
 
   command: lex3d compress SCAN -o M --max-error E, then lex3d decompress M -o OUT.bin
-  Python:  numpy reads SCAN, lex3d.compress, lex3d.decompress, numpy writes OUT.bin
+  Python:  numpy reads SCAN, lex3d.compress (points and intensity), lex3d.decompress (with
+           the intensities), numpy writes OUT.bin
            (in one process; the import is timed once, apart)
 
 Usage: bench/python_roundtrip.py [--build build] [--scan SCAN.bin] [--max-error 0.014] [--runs 5]
@@ -54,9 +55,9 @@ def main():
             t = time.perf_counter()
             raw = np.fromfile(a.scan, dtype="<f4").reshape(-1, 4)
             keep = np.isfinite(raw[:, :3]).all(axis=1) & (raw[:, :3] != 0).any(axis=1)
-            data = lex3d.compress(raw[keep, :3], max_error=a.max_error)
-            back = lex3d.decompress(data)
-            np.hstack([back, np.zeros((len(back), 1), np.float32)]).tofile(out_py)
+            data = lex3d.compress(raw[keep, :3], raw[keep, 3], max_error=a.max_error)
+            back, fields = lex3d.decompress(data, attributes=True)
+            np.hstack([back, fields["intensity"][:, None]]).tofile(out_py)
             py_times.append(time.perf_counter() - t)
         same = data == model.read_bytes()
     cli_s, py_s = statistics.median(cli_times), statistics.median(py_times)
