@@ -26,14 +26,18 @@ struct LearnOptions {
 };
 
 void run_learn(const LearnOptions& o) {
-  check_output_path(o.output, o.inputs);
+  OutputSet files;
+  o.scan_set.record_inputs(files, o.inputs);
+  files.output(o.output, "-o");
+  check_output_kind(o.output, "-o", "alphabet");
   Stopwatch sw;
   const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
   LearnParams p = o.scan_set.learn_params(o.model.params());
   p.patience = o.patience;
   p.prune = !o.no_prune;
   const LearnResult r = learn_with_progress(clouds, p);
-  throw_if_error(io::write_file_atomic(o.output, codec::encode_alphabet(r.alphabet)));
+  throw_if_error(io::write_file_atomic(files.staged(o.output), codec::encode_alphabet(r.alphabet)));
+  files.commit();
   std::size_t instances = 0, points = 0;
   for (const auto& m : r.models) instances += m.instances.size();
   for (const auto& c : clouds) points += c.size();

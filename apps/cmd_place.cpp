@@ -104,7 +104,13 @@ std::vector<PlaceScan> describe_all(std::size_t n, const GetScan& get, const std
 }
 
 void run_build(const PlaceOptions& o, bool add) {
-  check_output_path(o.db, o.inputs);
+  // Checked before any work: the database is neither a scan, the poses nor the alphabet.
+  OutputSet files;
+  files.inputs(o.inputs, "input");
+  files.input(o.poses, "--poses");
+  files.input(o.alphabet, "--alphabet");
+  files.output(o.db, "db");  // `add` rewrites it in place
+  check_output_kind(o.db, "db", "database");
   const ScanLoader loader(o.inputs, parse_format_option(o.format), o.poses, false);
   const GetScan get = [&](std::size_t i) { return loader.load(i); };
   std::vector<std::string> names;
@@ -124,7 +130,8 @@ void run_build(const PlaceOptions& o, bool add) {
   double prep = 0;
   for (auto& s : describe_all(loader.size(), get, names, db.alphabet(), db.storage(), &prep)) db.add(std::move(s));
   const auto bytes = db.save();
-  throw_if_error(io::write_file_atomic(o.db, bytes));
+  throw_if_error(io::write_file_atomic(files.staged(o.db), bytes));
+  files.commit();
   if (o.json) {
     Json j;
     j.begin_object().value("scans", db.size()).value("bytes", bytes.size()).value("alphabet_words", db.alphabet().size());

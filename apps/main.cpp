@@ -38,8 +38,14 @@ int main(int argc, char** argv) {
     std::cerr << "lex3d: " << e.what() << "\n";
     return 1;
   } catch (const std::bad_alloc&) {
-    std::cerr << "lex3d: out of memory\n";
-    return 3;
+    // Exit 4: the input asked for more memory than there is (not an output problem).
+    const std::string& file = lex3d::cli::current_file();
+    std::cerr << "lex3d: " << (file.empty() ? std::string() : file + ": ") << "out of memory\n";
+    return 4;
+  } catch (const std::length_error&) {
+    const std::string& file = lex3d::cli::current_file();
+    std::cerr << "lex3d: " << (file.empty() ? std::string() : file + ": ") << "out of memory (allocation too large)\n";
+    return 4;
   } catch (const std::exception& e) {
     std::cerr << "lex3d: " << e.what() << "\n";
     return 2;

@@ -333,9 +333,15 @@ class BallGrid {
   static constexpr std::uint32_t kNone = ~0U;
   static constexpr float kFar = 1e18F;  // padding: (1e18)² is finite and beyond any radius
 
+  // Clamped to +-2^30 so that the cast, and a query's neighbouring cells, never overflow an
+  // int for a point far out; keys wrap at 21 bits anyway, and distances are compared exactly.
+  [[nodiscard]] int cell_coord(float v) const {
+    constexpr float kLimit = static_cast<float>(1 << 30);
+    const float c = std::floor(v * inv_);
+    return static_cast<int>(c >= kLimit ? kLimit : c <= -kLimit ? -kLimit : c);
+  }
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
-    return {static_cast<int>(std::floor(p.x() * inv_)), static_cast<int>(std::floor(p.y() * inv_)),
-            static_cast<int>(std::floor(p.z() * inv_))};
+    return {cell_coord(p.x()), cell_coord(p.y()), cell_coord(p.z())};
   }
   // A cell's key is its coordinates, 21 bits each (wrapping): the upper 19 name its
   // block, the lower 2 its place in the block.
