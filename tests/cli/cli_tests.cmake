@@ -56,6 +56,8 @@ run(0 version --version)
 # --- usage errors: exit 1 ---
 run(1 usage.nosub)
 run(1 usage.unknown frobnicate)
+run(1 usage.unknown_near compres "${KITTI}")
+expect_match(usage.unknown_near "${LAST_ERR}" "unknown command 'compres'; did you mean 'compress'")
 run(1 usage.format info --format nope "${KITTI}")
 run(1 usage.threshold features "${KITTI}" --threshold 7)
 run(1 usage.up features "${KITTI}" --up 1,2)
