@@ -87,7 +87,7 @@ class PointHash {
   [[nodiscard]] int cell_coord(float v) const {
     constexpr float kLimit = static_cast<float>((1 << 20) - 2);
     const float c = std::floor(v * inv_cell_);
-    return static_cast<int>(c >= kLimit ? kLimit : c <= -kLimit ? -kLimit : c);
+    return static_cast<int>(!(c < kLimit) ? kLimit : c <= -kLimit ? -kLimit : c);  // NaN: kLimit
   }
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
     return {cell_coord(p.x()), cell_coord(p.y()), cell_coord(p.z())};
