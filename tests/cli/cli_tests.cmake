@@ -445,6 +445,36 @@ run(0 outlier.info info --json "${H}/outlier.bin")
 expect_match(outlier.info "${LAST_OUT}" "\"far_dropped\":1")
 
 # --- degenerate clouds get a bounded range image ---
-execute_process(COMMAND /usr/bin/python3 -c "import os,sys; open(sys.argv[1],'wb').write(os.urandom(102400))"
+# Seeded, so that every run reads the same bytes.
+execute_process(COMMAND /usr/bin/python3 -c "import random,sys; open(sys.argv[1],'wb').write(random.Random(7).randbytes(102400))"
                 "${H}/random.bin")
 run(0 degenerate.random features --json "${H}/random.bin")
+# at most max(16 pixels a point, 2^18) pixels
+string(REGEX MATCH "\"points\":([0-9]+)" _ "${LAST_OUT}")
+set(deg_points "${CMAKE_MATCH_1}")
+string(REGEX MATCH "\"width\":([0-9]+),\"height\":([0-9]+)" _ "${LAST_OUT}")
+if(deg_points STREQUAL "" OR CMAKE_MATCH_1 STREQUAL "")
+  message(SEND_ERROR "[degenerate.random] no point count or image size in: ${LAST_OUT}")
+else()
+  math(EXPR deg_pixels "${CMAKE_MATCH_1} * ${CMAKE_MATCH_2}")
+  math(EXPR deg_cap "16 * ${deg_points}")
+  if(deg_cap LESS 262144)
+    set(deg_cap 262144)
+  endif()
+  math(EXPR deg_cap "${deg_cap} + ${deg_cap} / 20")
+  if(deg_pixels GREATER deg_cap)
+    message(SEND_ERROR "[degenerate.random] range image of ${deg_pixels} pixels for ${deg_points} points")
+  endif()
+endif()
+
+# --- place databases that pass the CRCs but not the field checks, or have empty entries ---
+set(PATCH_DB "${CMAKE_CURRENT_LIST_DIR}/patch_place_db.py")
+run(0 placedb.build8 place build "${H}/db8.lex3dp" "${NC}" "${KITTI}" --alphabet "${WORK}/nc.lex3da" --descriptor-bits 8)
+execute_process(COMMAND /usr/bin/python3 "${PATCH_DB}" "${H}/db8.lex3dp" "${H}/db_az.lex3dp" az_tiny)
+execute_process(COMMAND /usr/bin/python3 "${PATCH_DB}" "${H}/db8.lex3dp" "${H}/db_nofeat.lex3dp" nofeat)
+# an azimuth resolution a 16-bit image width cannot span: refused at load
+run(2 placedb.azimuth_resolution place query "${H}/db_az.lex3dp" "${NC}")
+expect_match(placedb.azimuth_resolution "${LAST_ERR}" "db_az.lex3dp: place database: the coarse image's azimuth")
+# an entry without features (8-bit descriptors): loads, and the query still ranks both scans
+run(0 placedb.no_features place query "${H}/db_nofeat.lex3dp" "${NC}")
+expect_match(placedb.no_features "${LAST_OUT}" "kitti00_000000 score")
