@@ -223,6 +223,13 @@ std::string lex3d_file_kind(const std::vector<std::uint8_t>& bytes) {
   return "";
 }
 
+std::string ScanLoader::stem(std::size_t i) const {
+  const Entry& e = entries_.at(i);
+  std::string s = std::filesystem::path(e.path).stem().string();
+  if (e.turns) s += "_turn" + std::to_string(e.turn);
+  return s;
+}
+
 ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path,
                        bool points_in_world)
     : ScanLoader(paths, read_options(format, "", ""), poses_path, points_in_world) {}
@@ -305,6 +312,12 @@ std::string numbered_output(const std::string& output, std::size_t index, std::s
   char buf[16];
   std::snprintf(buf, sizeof buf, "_%03zu", index);
   return (p.parent_path() / (p.stem().string() + buf + p.extension().string())).string();
+}
+
+std::string named_output(const std::string& output, const std::string& name, std::size_t count) {
+  if (count <= 1) return output;
+  const std::filesystem::path p(output);
+  return (p.parent_path() / (p.stem().string() + "_" + name + p.extension().string())).string();
 }
 
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option) {

@@ -126,6 +126,8 @@ class ScanLoader {
   [[nodiscard]] Cloud load(std::size_t i) const;
   /// What scan i is: its file, or "<file> turn <k>" for a raw log's turn.
   [[nodiscard]] const std::string& name(std::size_t i) const { return entries_.at(i).name; }
+  /// A short name of scan i for a file: its file's stem, "<stem>_turn<k>" for a raw log's turn.
+  [[nodiscard]] std::string stem(std::size_t i) const;
 
  private:
   struct Entry {
@@ -145,6 +147,8 @@ std::array<std::uint8_t, 3> word_color(std::uint32_t word);
 
 /// OUT for one scan; OUT's stem + "_<index>" + extension for several.
 std::string numbered_output(const std::string& output, std::size_t index, std::size_t count);
+/// OUT for one scan; OUT's stem + "_<name>" + extension for several (a scan's stored name).
+std::string named_output(const std::string& output, const std::string& name, std::size_t count);
 
 /// Registration of each subcommand (one file each).
 void register_info(CLI::App& app);

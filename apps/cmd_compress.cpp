@@ -8,6 +8,7 @@
 #include <exception>
 #include <iostream>
 #include <optional>
+#include <set>
 
 #include "allocator.hpp"
 #include "cli_common.hpp"
@@ -361,6 +362,16 @@ void run_compress(const CompressOptions& o) {
   std::uint64_t alphabet_bytes = embed || !any_words ? 0 : alphabet_file.size();
   if (o.one_file) {  // one file: its size is the total (models, alphabet and framing)
     sequence.alphabet_file = alphabet_file;
+    // Each scan's name, for decompress to write it back under: kept when the stems are
+    // unique (inputs of one name from several folders are numbered on decompress instead).
+    std::set<std::string> unique;
+    for (std::size_t i = 0; i < loader.size(); ++i) {
+      sequence.names.push_back(loader.stem(i));
+      if (!codec::is_valid_scan_name(sequence.names.back()) || !unique.insert(sequence.names.back()).second) {
+        sequence.names.clear();
+        break;
+      }
+    }
     const std::vector<std::uint8_t> file = codec::encode_sequence(sequence);
     throw_if_error(io::write_file_atomic(files.staged(o.output), file));
     alphabet_bytes = 0;

@@ -45,7 +45,9 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   files.input(o.input, "model");
   std::vector<std::string> outputs;
   for (std::size_t i = 0; i < s.model_files.size(); ++i) {
-    outputs.push_back(numbered_output(o.output, i, s.model_files.size()));
+    // A file that keeps its scans' names (sequence 1.1) writes OUT_<name>; else OUT_000...
+    outputs.push_back(s.names.empty() ? numbered_output(o.output, i, s.model_files.size())
+                                      : named_output(o.output, s.names[i], s.model_files.size()));
     files.output(outputs.back(), "-o");
   }
   Json j;
