@@ -486,3 +486,33 @@ expect_match(placedb.azimuth_resolution "${LAST_ERR}" "db_az.lex3dp: place datab
 # an entry without features (8-bit descriptors): loads, and the query still ranks both scans
 run(0 placedb.no_features place query "${H}/db_nofeat.lex3dp" "${NC}")
 expect_match(placedb.no_features "${LAST_OUT}" "kitti00_000000 score")
+
+# --- place eval: its outputs (--cache, --dump, --png) are checked before any work and
+# written together at the end ---
+set(EV "${H}/eval_scans")
+file(MAKE_DIRECTORY "${EV}")
+file(COPY "${NC}" "${KITTI}" DESTINATION "${EV}")
+file(SHA256 "${EV}/newer_college_00.bin" ev_sha)
+file(WRITE "${H}/ev_poses.txt" "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 100 0 1 0 0 0 0 1 0\n")
+run(1 eval.dump_is_scan place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --dump "${EV}/newer_college_00.bin" --png "${H}/ev")
+file_unchanged(eval.dump_is_scan "${EV}/newer_college_00.bin" "${ev_sha}")
+no_file(eval.dump_is_scan "${H}/ev_pr.png")
+expect_match(eval.dump_is_scan "${LAST_ERR}" "refusing to overwrite input file .*newer_college_00.bin")
+run(1 eval.dump_is_png place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --dump "${H}/ev_pr.png" --png "${H}/ev")
+no_file(eval.dump_is_png "${H}/ev_pr.png")
+expect_match(eval.dump_is_png "${LAST_ERR}" "same file")
+run(1 eval.cache_is_alphabet place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --cache "${H}/ev.lex3dm" --png "${H}/ev")
+expect_match(eval.cache_is_alphabet "${LAST_ERR}" "--cache")
+run(0 eval.outputs place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --cache "${H}/ev.lex3dp" --dump "${H}/ev.txt" --png "${H}/ev")
+foreach(f ev.lex3dp ev.txt ev_confusion.png ev_pr.png)
+  if(NOT EXISTS "${H}/${f}")
+    message(SEND_ERROR "[eval.outputs] ${f} was not written")
+  endif()
+endforeach()
+file(GLOB leftovers "${H}/.lex3d-*")
+if(leftovers)
+  message(SEND_ERROR "[eval.outputs] left files behind: ${leftovers}")
+endif()
+# the cache, once written, is an input: an output of that name is refused
+run(1 eval.cache_as_dump place eval "${EV}" --poses "${H}/ev_poses.txt" --cache "${H}/ev.lex3dp" --dump "${H}/ev.lex3dp" --png "${H}/ev")
+expect_match(eval.cache_as_dump "${LAST_ERR}" "refusing to overwrite input file .*ev.lex3dp \\(--cache\\)")
