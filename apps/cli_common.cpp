@@ -2,11 +2,15 @@
 
 #include "lex3d/io/sensor_log.hpp"
 
+#include <atomic>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <sstream>
+#include <sys/stat.h>
+#include <unistd.h>
 
 namespace lex3d::cli {
 
@@ -38,11 +42,19 @@ io::ReadOptions read_options(io::Format format, const std::string& metadata, con
 }
 
 io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
+  set_current_file(path);
+  check_input_file(path);
   auto r = io::read_cloud(path, opt);
-  // Any input that cannot be read (missing, unreadable, malformed) is bad input: exit 2.
-  if (!r.ok()) throw CliError(2, r.status().to_string());
-  // never drop silently: what the file holds that lex3d does not keep, and what the reader noticed
+  // Any input that cannot be read (missing, unreadable, malformed) is bad input: exit 2;
+  // one too large for the memory there is: exit 4.
+  if (!r.ok()) throw CliError(r.status().code() == ErrorCode::kOutOfMemory ? 4 : 2, r.status().to_string());
   const io::ReadResult& res = r.value();
+  // A KITTI pose list (12 numbers a line, each a rotation and a translation) also parses as
+  // a 12-column text cloud: refuse it rather than report its translations as points.
+  if (res.format == io::Format::kXyz && opt.format == io::Format::kAuto && io::read_pose_list(path).ok())
+    throw CliError(2, path + ": a pose list (12 numbers a line: a rotation and a translation), not a point cloud; "
+                             "give it with --poses, or --format xyz to read it as points");
+  // never drop silently: what the file holds that lex3d does not keep, and what the reader noticed
   if (!res.dropped_fields.empty()) {
     std::string list;
     for (const auto& f : res.dropped_fields) list += (list.empty() ? "" : ", ") + f;
@@ -53,12 +65,167 @@ io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
 }
 
 void check_output_path(const std::string& output, const std::vector<std::string>& inputs) {
-  namespace fs = std::filesystem;
+  OutputSet files;
+  files.inputs(inputs, "input");
+  files.output(output, "output");
+}
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// The directory entry a path names: its canonical directory (symbolic links resolved) and
+/// its own name, so `x`, `./x` and `dir/../x` agree. A path that is itself a symbolic link is
+/// followed (writing through it would reach the target).
+std::string entry_of(const std::string& path) {
   std::error_code ec;
-  for (const auto& in : inputs) {
-    if (fs::exists(output, ec) && fs::equivalent(output, in, ec))
-      throw CliError(1, "refusing to overwrite input file " + in);
+  fs::path p = fs::absolute(path, ec);
+  if (ec) p = path;
+  const fs::path resolved = fs::weakly_canonical(p, ec);
+  if (!ec) p = resolved;
+  return p.lexically_normal().string();
+}
+
+/// True when both paths exist and are one file (same device and inode: hard links too).
+bool same_existing_file(const std::string& a, const std::string& b) {
+  struct stat sa {}, sb {};
+  if (::stat(a.c_str(), &sa) != 0 || ::stat(b.c_str(), &sb) != 0) return false;
+  return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+}
+
+std::atomic<unsigned> g_staged_counter{0};
+
+std::string g_current_file;
+
+}  // namespace
+
+void set_current_file(const std::string& path) { g_current_file = path; }
+const std::string& current_file() { return g_current_file; }
+
+OutputSet::~OutputSet() {
+  for (const auto& [tmp, final_path] : staged_) {
+    (void)final_path;
+    std::error_code ec;
+    fs::remove(tmp, ec);
   }
+}
+
+void check_input_file(const std::string& path) {
+  struct stat st {};
+  if (path.empty() || ::stat(path.c_str(), &st) != 0) return;  // a missing file is reported by its reader
+  if (S_ISREG(st.st_mode) || S_ISDIR(st.st_mode)) return;
+  const char* what = S_ISFIFO(st.st_mode) ? "a pipe or FIFO" : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device" : "a socket";
+  throw CliError(2, path + ": not a regular file (" + what +
+                        "); lex3d reads inputs from regular files only: save the stream to a file first");
+}
+
+void OutputSet::input(const std::string& path, const std::string& option) {
+  if (path.empty()) return;
+  check_input_file(path);
+  files_.push_back({path, option, false});
+}
+
+void OutputSet::inputs(const std::vector<std::string>& paths, const std::string& option) {
+  for (const auto& p : paths) input(p, option);
+}
+
+void OutputSet::output(const std::string& path, const std::string& option) {
+  if (path.empty()) return;
+  const std::string entry = entry_of(path);
+  for (const Entry& f : files_) {
+    if (!same_existing_file(path, f.path) && entry != entry_of(f.path)) continue;
+    if (f.is_output)
+      throw CliError(1, option + " " + path + " and " + f.option + " " + f.path +
+                            " are the same file: give each output its own name");
+    throw CliError(1, "refusing to overwrite input file " + f.path + " (" + f.option + ") with " + option + " " + path);
+  }
+  // Where it goes, checked before any work is done.
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) throw CliError(3, path + ": " + option + " names a directory, not a file");
+  const fs::path dir = fs::path(entry).parent_path();
+  if (!fs::is_directory(dir, ec))
+    throw CliError(3, path + ": cannot write " + option + ": directory " + dir.string() + " does not exist");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0)
+    throw CliError(3, path + ": cannot write " + option + ": directory " + dir.string() + " is not writable");
+  files_.push_back({path, option, true});
+}
+
+std::string OutputSet::staged(const std::string& path) {
+  const fs::path p(path);
+  const std::string name = ".lex3d-" + std::to_string(::getpid()) + "-" + std::to_string(g_staged_counter.fetch_add(1)) +
+                           "-" + p.filename().string();
+  const std::string tmp = (p.parent_path() / name).string();
+  staged_.emplace_back(tmp, path);
+  return tmp;
+}
+
+void OutputSet::commit() {
+  for (std::size_t i = 0; i < staged_.size(); ++i) {
+    const auto& [tmp, final_path] = staged_[i];
+    std::error_code ec;
+    if (!fs::exists(tmp, ec)) continue;  // nothing was written for it
+    fs::rename(tmp, final_path, ec);
+    if (ec) {
+      std::string done;
+      for (const auto& w : written_) done += (done.empty() ? "" : ", ") + w;
+      throw CliError(3, final_path + ": cannot rename the finished file into place: " + ec.message() +
+                            (done.empty() ? std::string(" (nothing written)") : " (already written: " + done + ")"));
+    }
+    written_.push_back(final_path);
+  }
+  staged_.clear();
+}
+
+namespace {
+
+/// Extensions of point-cloud files (what write_cloud picks a format from).
+bool is_cloud_extension(std::string ext) {
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".pcd" || ext == ".ply" || ext == ".bin" || ext == ".xyz" || ext == ".txt" || ext == ".las" ||
+         ext == ".laz" || ext == ".asc" || ext == ".csv" || ext == ".3d" || ext == ".pcap";
+}
+
+const char* extension_of_kind(const std::string& kind) {
+  if (kind == "model") return ".lex3dm";
+  if (kind == "alphabet") return ".lex3da";
+  if (kind == "sequence") return ".lex3dq";
+  if (kind == "database") return ".lex3dp";
+  return "";
+}
+
+}  // namespace
+
+void check_output_kind(const std::string& path, const std::string& option, const std::string& kind) {
+  if (path.empty()) return;
+  std::string ext = fs::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const bool lex3d_ext = ext == ".lex3dm" || ext == ".lex3da" || ext == ".lex3dq" || ext == ".lex3dp";
+  if (kind == "cloud") {
+    if (lex3d_ext)
+      throw CliError(1, option + " " + path + ": a point cloud is written here, but " + ext +
+                            " is a lex3d file extension (give .pcd, .ply, .bin, .xyz or .las)");
+    return;
+  }
+  if (is_cloud_extension(ext) || ext == ".bt" || ext == ".png" || (lex3d_ext && ext != extension_of_kind(kind)))
+    throw CliError(1, option + " " + path + ": a lex3d " + kind + " file is written here, but " + ext +
+                          " names another kind of file (use " + extension_of_kind(kind) + ")");
+}
+
+std::string lex3d_file_kind(const std::vector<std::uint8_t>& bytes) {
+  if (bytes.size() < 8) return "";
+  const std::string magic(bytes.begin(), bytes.begin() + 8);
+  if (magic == "LEX3DMDL") return "model";
+  if (magic == "LEX3DALP") return "alphabet";
+  if (magic == "LEX3DSEQ") return "sequence";
+  if (magic == "LEX3DPDB") return "database";
+  return "";
+}
+
+std::string ScanLoader::stem(std::size_t i) const {
+  const Entry& e = entries_.at(i);
+  std::string s = std::filesystem::path(e.path).stem().string();
+  if (e.turns) s += "_turn" + std::to_string(e.turn);
+  return s;
 }
 
 ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path,
@@ -69,6 +236,7 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
                        const std::string& poses_path, bool points_in_world)
     : options_(options), points_in_world_(points_in_world) {
   for (const auto& path : paths) {
+    check_input_file(path);
     const bool log = options.format == io::Format::kPcap || (options.format == io::Format::kAuto && io::is_sensor_log(path));
     if (!log) {
       entries_.push_back({path, path, nullptr, 0});
@@ -95,6 +263,7 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
 Cloud ScanLoader::load(std::size_t i) const {
   const Entry& e = entries_.at(i);
   Cloud cloud = e.turns ? (*e.turns)[e.turn] : load_cloud(e.path, options_).cloud;
+  set_current_file(e.name);
   if (!poses_.empty()) {
     if (points_in_world_) {
       cloud.T_cloud_sensor = poses_[i];
@@ -141,6 +310,12 @@ std::string numbered_output(const std::string& output, std::size_t index, std::s
   char buf[16];
   std::snprintf(buf, sizeof buf, "_%03zu", index);
   return (p.parent_path() / (p.stem().string() + buf + p.extension().string())).string();
+}
+
+std::string named_output(const std::string& output, const std::string& name, std::size_t count) {
+  if (count <= 1) return output;
+  const std::filesystem::path p(output);
+  return (p.parent_path() / (p.stem().string() + "_" + name + p.extension().string())).string();
 }
 
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option) {

@@ -42,8 +42,64 @@ io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& option
 /// Options of raw lidar logs (--metadata, --sensor-model) on top of `format`.
 io::ReadOptions read_options(io::Format format, const std::string& metadata, const std::string& sensor_model);
 
+/// Refuses (exit 2) an input that is not a regular file or a directory: a pipe, FIFO, device
+/// or socket is never opened (a FIFO without a writer would block, /dev/zero never ends).
+void check_input_file(const std::string& path);
+
 /// Refuses an output path that names one of the inputs (never overwrite an input).
 void check_output_path(const std::string& output, const std::vector<std::string>& inputs);
+
+/// The files one command reads and writes, checked before any work is done and written all
+/// or nothing. Every output is compared with every input and every other output by file
+/// identity (device and inode when it exists, else its canonical directory and name, so
+/// hard links, symbolic links and `./x` against `x` are caught): a clash is a usage error
+/// (exit 1) naming both options; an output whose directory is missing or that is a directory
+/// is an I/O error (exit 3). Outputs are written to temporary files beside their final names
+/// (`staged(path)`) and renamed by `commit()`; destroyed without a commit, the temporary
+/// files are removed, so a command that fails leaves no output behind.
+class OutputSet {
+ public:
+  OutputSet() = default;
+  OutputSet(const OutputSet&) = delete;
+  OutputSet& operator=(const OutputSet&) = delete;
+  ~OutputSet();
+  /// Records a file the command reads; `option` names it in messages ("--poses", "input").
+  void input(const std::string& path, const std::string& option);
+  void inputs(const std::vector<std::string>& paths, const std::string& option);
+  /// Records a file the command writes and checks it against every file recorded so far
+  /// (inputs and outputs alike, so record the inputs first).
+  void output(const std::string& path, const std::string& option);
+  /// Where to write output `path` (recorded with output()): a temporary name in its
+  /// directory that keeps its extension, so writers that pick a format by extension agree.
+  [[nodiscard]] std::string staged(const std::string& path);
+  /// Renames every staged file onto its output, in the order they were staged.
+  void commit();
+  /// The outputs renamed by commit().
+  [[nodiscard]] const std::vector<std::string>& written() const { return written_; }
+
+ private:
+  struct Entry {
+    std::string path, option;
+    bool is_output = false;
+  };
+  std::vector<Entry> files_;
+  std::vector<std::pair<std::string, std::string>> staged_;  // temporary, final
+  std::vector<std::string> written_;
+};
+
+/// Checks that the extension of `path` (option `option`) suits a file of kind `kind`
+/// ("model", "alphabet", "sequence", "database" or "cloud"); throws a usage CliError naming
+/// the option when it names another kind (a point-cloud extension for a model, say). Any
+/// other extension is accepted.
+void check_output_kind(const std::string& path, const std::string& option, const std::string& kind);
+
+/// The kind of lex3d file `bytes` hold from its magic ("model", "alphabet", "sequence",
+/// "database"), or "" when it is none of them.
+std::string lex3d_file_kind(const std::vector<std::uint8_t>& bytes);
+
+/// The file being read or worked on, for the message of an out-of-memory error.
+void set_current_file(const std::string& path);
+const std::string& current_file();
 
 /// Parses "x,y,z" into a vector; throws a usage CliError naming `option`.
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option);
@@ -70,6 +126,8 @@ class ScanLoader {
   [[nodiscard]] Cloud load(std::size_t i) const;
   /// What scan i is: its file, or "<file> turn <k>" for a raw log's turn.
   [[nodiscard]] const std::string& name(std::size_t i) const { return entries_.at(i).name; }
+  /// A short name of scan i for a file: its file's stem, "<stem>_turn<k>" for a raw log's turn.
+  [[nodiscard]] std::string stem(std::size_t i) const;
 
  private:
   struct Entry {
@@ -89,6 +147,8 @@ std::array<std::uint8_t, 3> word_color(std::uint32_t word);
 
 /// OUT for one scan; OUT's stem + "_<index>" + extension for several.
 std::string numbered_output(const std::string& output, std::size_t index, std::size_t count);
+/// OUT for one scan; OUT's stem + "_<name>" + extension for several (a scan's stored name).
+std::string named_output(const std::string& output, const std::string& name, std::size_t count);
 
 /// Registration of each subcommand (one file each).
 void register_info(CLI::App& app);

@@ -8,6 +8,7 @@
 #include <exception>
 #include <iostream>
 #include <optional>
+#include <set>
 
 #include "allocator.hpp"
 #include "cli_common.hpp"
@@ -80,10 +81,16 @@ void run_compress(const CompressOptions& o) {
   if (o.one_file) outputs.push_back(o.output);
   else
     for (std::size_t i = 0; i < loader.size(); ++i) outputs.push_back(numbered_output(o.output, i, loader.size()));
-  std::vector<std::string> protected_paths = o.inputs;
-  if (!o.alphabet.empty()) protected_paths.push_back(o.alphabet);
-  for (const auto& out : outputs) check_output_path(out, protected_paths);
-  if (!o.save_alphabet.empty()) check_output_path(o.save_alphabet, protected_paths);
+  // Every output is checked before any work; all are written at the end or none is.
+  OutputSet files;
+  o.scan_set.record_inputs(files, o.inputs);
+  files.input(o.alphabet, "--alphabet");
+  for (const auto& out : outputs) {
+    files.output(out, "-o");
+    check_output_kind(out, "-o", o.one_file ? "sequence" : "model");
+  }
+  files.output(o.save_alphabet, "--save-alphabet");
+  check_output_kind(o.save_alphabet, "--save-alphabet", "alphabet");
 
   Stopwatch sw;
   // Learning needs the scans it learns from at once (every scan, or --learn-scans K evenly
@@ -201,6 +208,9 @@ void run_compress(const CompressOptions& o) {
       out.coded = std::move(coded).value();
       if (!out.coded.words) d.model.instances.clear();
       out.code_ms = code_sw.elapsed_ms();
+    } catch (const std::invalid_argument& e) {
+      // Raised by the library on what this scan holds: bad data, named.
+      out.error = std::make_exception_ptr(CliError(2, loader.name(i) + ": " + e.what()));
     } catch (...) {
       out.error = std::current_exception();
     }
@@ -216,7 +226,7 @@ void run_compress(const CompressOptions& o) {
     const std::vector<std::uint8_t>& bytes = coded.bytes;
     Stopwatch write_sw;
     if (o.one_file) sequence.model_files.push_back(bytes);
-    else throw_if_error(io::write_file_atomic(outputs[i], bytes));
+    else throw_if_error(io::write_file_atomic(files.staged(outputs[i]), bytes));
     const double code_ms = r.code_ms + write_sw.elapsed_ms();
     const std::string& shown = o.one_file ? loader.name(i) : outputs[i];
     const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(d.input_points) : 0.0;
@@ -311,15 +321,26 @@ void run_compress(const CompressOptions& o) {
   bar.finish();
   j.end_array();
   // A saved alphabet is written once the models are; it is counted only when a model uses it.
-  if (!o.save_alphabet.empty()) throw_if_error(io::write_file_atomic(o.save_alphabet, alphabet_file));
+  if (!o.save_alphabet.empty()) throw_if_error(io::write_file_atomic(files.staged(o.save_alphabet), alphabet_file));
   std::uint64_t alphabet_bytes = embed || !any_words ? 0 : alphabet_file.size();
   if (o.one_file) {  // one file: its size is the total (models, alphabet and framing)
     sequence.alphabet_file = alphabet_file;
+    // Each scan's name, for decompress to write it back under: kept when the stems are
+    // unique (inputs of one name from several folders are numbered on decompress instead).
+    std::set<std::string> unique;
+    for (std::size_t i = 0; i < loader.size(); ++i) {
+      sequence.names.push_back(loader.stem(i));
+      if (!codec::is_valid_scan_name(sequence.names.back()) || !unique.insert(sequence.names.back()).second) {
+        sequence.names.clear();
+        break;
+      }
+    }
     const std::vector<std::uint8_t> file = codec::encode_sequence(sequence);
-    throw_if_error(io::write_file_atomic(o.output, file));
+    throw_if_error(io::write_file_atomic(files.staged(o.output), file));
     alphabet_bytes = 0;
     total_bytes = file.size();
   }
+  files.commit();
   const double total_ms = sw.elapsed_ms();
   const double bpp_all = total_points ? 8.0 * static_cast<double>(total_bytes + alphabet_bytes) / static_cast<double>(total_points) : 0.0;
   if (o.json) {

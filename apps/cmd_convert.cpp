@@ -23,13 +23,20 @@ void run_convert(const ConvertOptions& o) {
   const ScanLoader loader({o.input}, read_options(parse_format_option(o.format), o.metadata, o.sensor_model), "", false);
   std::vector<std::string> outputs;
   for (std::size_t i = 0; i < loader.size(); ++i) outputs.push_back(numbered_output(o.output, i, loader.size()));
-  for (const auto& out : outputs) check_output_path(out, {o.input, o.metadata});
+  OutputSet files;
+  files.input(o.input, "input");
+  files.input(o.metadata, "--metadata");
+  for (const auto& out : outputs) {
+    files.output(out, "output");
+    check_output_kind(out, "output", "cloud");
+  }
   for (std::size_t i = 0; i < loader.size(); ++i) {
     const Cloud cloud = loader.load(i);
-    throw_if_error(io::write_cloud(outputs[i], cloud));
+    throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud));
     std::printf("%s -> %s: %zu points%s\n", loader.name(i).c_str(), outputs[i].c_str(), cloud.size(),
                 cloud.rows > 0 ? (" (" + std::to_string(cloud.rows) + " x " + std::to_string(cloud.columns) + " organised)").c_str() : "");
   }
+  files.commit();
 }
 
 }  // namespace

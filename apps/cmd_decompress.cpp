@@ -41,10 +41,15 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   auto seq = codec::decode_sequence(bytes);
   if (!seq.ok()) throw CliError(2, o.input + ": " + seq.status().to_string());
   const codec::SequenceData& s = seq.value();
+  // Every scan is decoded and staged before any is renamed into place: all or nothing.
+  OutputSet files;
+  files.input(o.input, "model");
   std::vector<std::string> outputs;
   for (std::size_t i = 0; i < s.model_files.size(); ++i) {
-    outputs.push_back(numbered_output(o.output, i, s.model_files.size()));
-    check_output_path(outputs.back(), {o.input});
+    // A file that keeps its scans' names (sequence 1.1) writes OUT_<name>; else OUT_000...
+    outputs.push_back(s.names.empty() ? numbered_output(o.output, i, s.model_files.size())
+                                      : named_output(o.output, s.names[i], s.model_files.size()));
+    files.output(outputs.back(), "-o");
   }
   Json j;
   j.begin_object().value("sequence", o.input).value("scans", s.model_files.size()).begin_array("files");
@@ -55,16 +60,18 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
     auto cloud = residual::decode_cloud(d.value());
     if (!cloud.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + cloud.status().to_string());
     cloud.value().georef = d.value().georef;  // written in true coordinates
-    throw_if_error(io::write_cloud(outputs[i], cloud.value()));
+    set_current_file(o.input + " scan " + std::to_string(i));
+    throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud.value()));
     input_points += d.value().input_points;
     points += cloud.value().size();
     if (o.json)
       j.begin_object().value("output", outputs[i]).value("input_points", d.value().input_points)
           .value("points", cloud.value().size()).value("residual_layer", d.value().residual.has_value()).end_object();
     else
-      std::printf("wrote %s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), cloud.value().size(), i + 1,
+      std::printf("%s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), cloud.value().size(), i + 1,
                   s.model_files.size());
   }
+  files.commit();
   const double bpp = input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {
     j.end_array().value("input_points", input_points).value("points", points).value("bits_per_point", bpp);
@@ -78,14 +85,21 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
 
 void run_decompress(const DecompressOptions& o) {
   if (o.output.empty() && o.octomap.empty()) throw CliError(1, "give -o OUT and/or --octomap OUT.bt");
-  std::vector<std::string> inputs = {o.input};
-  if (!o.alphabet.empty()) inputs.push_back(o.alphabet);
-  if (!o.reference.empty()) inputs.push_back(o.reference);
-  if (!o.output.empty()) check_output_path(o.output, inputs);
-  if (!o.octomap.empty()) check_output_path(o.octomap, inputs);
+  OutputSet files;
+  files.input(o.input, "model");
+  files.input(o.alphabet, "--alphabet");
+  files.input(o.reference, "--reference");
+  files.output(o.output, "-o");
+  check_output_kind(o.output, "-o", "cloud");
+  files.output(o.octomap, "--octomap");
   Stopwatch sw;
+  set_current_file(o.input);
   auto bytes = io::read_file(o.input);
-  if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+  if (!bytes.ok()) throw CliError(exit_code_for(bytes.status().code()) == 4 ? 4 : 2, bytes.status().to_string());
+  const std::string kind = lex3d_file_kind(bytes.value());
+  if (kind != "model" && kind != "sequence")
+    throw CliError(2, o.input + ": not a lex3d model or sequence file" +
+                          (kind.empty() ? std::string(" (bad magic)") : " (it is a lex3d " + kind + " file)"));
   if (codec::is_sequence_file(bytes.value())) {
     run_decompress_sequence(o, bytes.value());
     return;
@@ -94,23 +108,32 @@ void run_decompress(const DecompressOptions& o) {
   std::vector<std::uint8_t> alphabet_file;
   if (!o.alphabet.empty()) {
     auto a = io::read_file(o.alphabet);
-    if (!a.ok()) throw CliError(2, a.status().to_string());
+    if (!a.ok()) throw CliError(2, "--alphabet " + a.status().to_string());
     alphabet_file = std::move(a).value();
+    const std::string akind = lex3d_file_kind(alphabet_file);
+    if (akind != "alphabet")
+      throw CliError(2, "--alphabet " + o.alphabet + ": not a lex3d alphabet file" +
+                            (akind.empty() ? std::string(" (bad magic)") : " (it is a lex3d " + akind + " file)"));
   }
   // The same decoding as lex3d::decompress (lex3d/lex3d.hpp).
   auto decoded = lex3d::decompress(bytes.value(), o.alphabet.empty() ? nullptr : &alphabet_file);
   if (!decoded.ok()) {
-    // A model that references an alphabet decoded without one is a usage error (1).
+    // A model that references an alphabet decoded without one: the alphabet is missing input (2).
     const auto& st = decoded.status();
-    throw CliError(st.code() == ErrorCode::kInvalidArgument ? 1 : 2, o.input + ": " + st.to_string());
+    if (st.code() == ErrorCode::kInvalidArgument && o.alphabet.empty())
+      throw CliError(2, o.input + ": " + st.to_string() + "; give that alphabet file with --alphabet FILE");
+    throw CliError(2, o.input + ": " + st.to_string());
   }
   const DecompressResult& d = decoded.value();
+  if (!o.alphabet.empty() && !d.references_alphabet)
+    std::fprintf(stderr, "note: %s embeds its alphabet; --alphabet %s is not used\n", o.input.c_str(),
+                 o.alphabet.c_str());
   const double decode_ms = d.decode_ms;
   const double reconstruct_ms = d.reconstruct_ms;
   Cloud cloud = std::move(decoded.value().cloud);  // georeferenced: written in true coordinates where the format can
   sw.lap_ms();
   if (!o.output.empty()) {
-    throw_if_error(io::write_cloud(o.output, cloud));
+    throw_if_error(io::write_cloud(files.staged(o.output), cloud));
     const std::string ext = std::filesystem::path(o.output).extension().string();
     if (cloud.georef && (ext == ".bin" || ext == ".BIN"))
       std::fprintf(stderr, "note: %s holds float32 coordinates relative to the georeference origin (%.3f, %.3f, %.3f) m; "
@@ -119,13 +142,14 @@ void run_decompress(const DecompressOptions& o) {
   }
   io::OctomapStats oct;
   if (!o.octomap.empty()) {
-    auto r = io::write_octomap(o.octomap, cloud,
+    auto r = io::write_octomap(files.staged(o.octomap), cloud,
                                o.free_space == "cast" ? std::optional<Eigen::Vector3d>(cloud.T_cloud_sensor.translation())
                                                       : std::nullopt,
                                o.resolution);
     throw_if_error(r.status());
     oct = r.value();
   }
+  files.commit();
   const double write_ms = sw.lap_ms();
 
   const double bpp = d.input_points ? 8.0 * static_cast<double>(bytes.value().size()) / static_cast<double>(d.input_points) : 0.0;

@@ -80,6 +80,7 @@ void georef_json(Json& j, const Georeference& g) {
 }
 
 bool info_lex3d_file(const InfoOptions& o) {
+  check_input_file(o.path);
   auto bytes = io::read_file(o.path);
   if (!bytes.ok()) return false;  // load_cloud reports the error
   const auto& b = bytes.value();
@@ -343,6 +344,7 @@ void run_info(const InfoOptions& o) {
     j.value("file", o.path).value("format", io::format_name(r.format)).value("encoding", r.encoding);
     j.value("file_bytes", r.file_bytes).value("points", c.size());
     j.value("non_finite_dropped", r.non_finite_dropped).value("no_return_dropped", r.no_return_dropped);
+    j.value("far_dropped", r.far_dropped);
     j.value("has_intensity", c.has_intensity());
     j.value("rows", c.rows).value("columns", c.columns).value("has_rings", c.has_rings());
     if (b.valid) {
@@ -373,6 +375,7 @@ void run_info(const InfoOptions& o) {
   std::printf("file size      %llu bytes\n", static_cast<unsigned long long>(r.file_bytes));
   std::printf("points         %zu\n", c.size());
   std::printf("NaN/Inf dropped %zu\n", r.non_finite_dropped);
+  if (r.far_dropped) std::printf("far dropped    %zu (beyond %.0f m)\n", r.far_dropped, r.far_limit_m);
   if (r.no_return_dropped)
     std::printf("no-return      %zu (%s)\n", r.no_return_dropped,
                 c.no_return_directions.empty() ? "not points" : "kept as max-range directions");

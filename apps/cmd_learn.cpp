@@ -28,7 +28,10 @@ struct LearnOptions {
 };
 
 void run_learn(const LearnOptions& o) {
-  check_output_path(o.output, o.inputs);
+  OutputSet files;
+  o.scan_set.record_inputs(files, o.inputs);
+  files.output(o.output, "-o");
+  check_output_kind(o.output, "-o", "alphabet");
   Stopwatch sw;
   const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
   LearnParams p = o.scan_set.learn_params(o.model.params());
@@ -46,7 +49,8 @@ void run_learn(const LearnOptions& o) {
   const AlphabetResult learnt = lex3d::learn_alphabet(clouds, ao);
   bar.finish();
   const LearnResult& r = learnt.learning;
-  throw_if_error(io::write_file_atomic(o.output, learnt.bytes));
+  throw_if_error(io::write_file_atomic(files.staged(o.output), learnt.bytes));
+  files.commit();
   std::size_t instances = 0, points = 0;
   for (const auto& m : r.models) instances += m.instances.size();
   for (const auto& c : clouds) points += c.size();

@@ -332,7 +332,20 @@ void print_write(const PlaceOptions& o, const WriteStats& st, std::size_t words,
   }
 }
 
+// Checked before any work: the database is not a scan, the poses or an alphabet given,
+// under any spelling of its path (file identity).
+void check_db_output(const PlaceOptions& o, const std::string& db) {
+  OutputSet files;
+  files.inputs(o.inputs, "input");
+  files.input(o.poses, "--poses");
+  files.input(o.alphabet, "--alphabet");
+  files.input(o.model_alphabet, "--model-alphabet");
+  files.output(db, "db");
+  check_output_kind(db, "db", "database");
+}
+
 void run_build(const PlaceOptions& o) {
+  check_db_output(o, o.db);
   check_output_path(o.db, o.inputs);
   const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
   Alphabet alphabet;
@@ -350,6 +363,7 @@ void run_build(const PlaceOptions& o) {
 }
 
 void run_add(const PlaceOptions& o) {
+  check_db_output(o, o.db);
   check_output_path(o.db, o.inputs);
   const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
   // Locked before it is read: a second `place add` on the same file waits for nothing and fails.
@@ -513,6 +527,23 @@ void run_eval(const PlaceOptions& o) {
     std::sort(files.begin(), files.end());
   }
   if (files.empty()) throw CliError(2, o.inputs[0] + ": no scans");
+  // Checked before any work: no output is a scan, the poses, times or alphabet, nor another
+  // output; all of them (the cache too, when made) are written together at the end.
+  OutputSet outs;
+  outs.inputs(files, "input");
+  outs.input(o.poses, "--poses");
+  outs.input(o.times, "--times");
+  outs.input(o.alphabet, "--alphabet");
+  const bool make_cache = !o.cache.empty() && !fs::exists(o.cache);
+  if (make_cache) {
+    outs.output(o.cache, "--cache");
+    check_output_kind(o.cache, "--cache", "database");
+  } else {
+    outs.input(o.cache, "--cache");
+  }
+  outs.output(o.dump, "--dump");
+  outs.output(o.png + "_confusion.png", "--png");
+  outs.output(o.png + "_pr.png", "--png");
   std::vector<Cloud> clouds;
   {
     // Point clouds and lex3d model files (decoded on the fly), one pose a scan.
@@ -533,7 +564,7 @@ void run_eval(const PlaceOptions& o) {
   Stopwatch sw;
   Alphabet alphabet;
   std::vector<PlaceScan> cached;
-  if (!o.cache.empty() && fs::exists(o.cache)) {
+  if (!o.cache.empty() && !make_cache) {
     // The scans as a database stores them (a database of these scans, written by an earlier
     // eval with the same --cache): skips learning and feature extraction.
     PlaceDatabase c = read_db(o.cache);
@@ -559,11 +590,11 @@ void run_eval(const PlaceOptions& o) {
   const auto scans = cached.empty() ? describe_all(clouds.size(), [&](std::size_t i) { return clouds[i]; }, names,
                                                    alphabet, o.storage, &prep_ms)
                                     : cached;
-  if (!o.cache.empty() && cached.empty()) {
+  if (make_cache) {
     PlaceDatabase c(o.storage);
     c.set_alphabet(alphabet);
     for (const auto& s : scans) c.add(s);
-    throw_if_error(io::write_file_atomic(o.cache, c.save()));
+    throw_if_error(io::write_file_atomic(outs.staged(o.cache), c.save()));
   }
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
@@ -703,7 +734,7 @@ void run_eval(const PlaceOptions& o) {
           }
       }
     }
-    throw_if_error(io::write_png_rgb(o.png + "_confusion.png", w, w, img));
+    throw_if_error(io::write_png_rgb(outs.staged(o.png + "_confusion.png"), w, w, img));
     const int W = 320, H = 320, m = 20;
     std::vector<std::uint8_t> pr(static_cast<std::size_t>(W) * H * 3, 255);
     draw_line(pr, W, H, m, H - m, W - m, H - m, {0, 0, 0});
@@ -713,7 +744,7 @@ void run_eval(const PlaceOptions& o) {
       auto py = [&](double pc) { return H - m - static_cast<int>(pc * (H - 2 * m)); };
       draw_line(pr, W, H, px(curve[i - 1][2]), py(curve[i - 1][1]), px(curve[i][2]), py(curve[i][1]), {200, 0, 0});
     }
-    throw_if_error(io::write_png_rgb(o.png + "_pr.png", W, H, pr));
+    throw_if_error(io::write_png_rgb(outs.staged(o.png + "_pr.png"), W, H, pr));
   }
 
   std::vector<std::array<double, 3>> by_distance;  // radius, tp, positives
@@ -762,8 +793,9 @@ void run_eval(const PlaceOptions& o) {
       }
       text += "\n";
     }
-    throw_if_error(io::write_file_atomic(o.dump, std::vector<std::uint8_t>(text.begin(), text.end())));
+    throw_if_error(io::write_file_atomic(outs.staged(o.dump), std::vector<std::uint8_t>(text.begin(), text.end())));
   }
+  outs.commit();
   if (o.json) {
     Json j;
     j.begin_object().value("scans", scans.size()).value("queries", recs.size()).value("positives", pos);

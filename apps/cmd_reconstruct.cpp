@@ -29,9 +29,13 @@ struct ReconstructOptions {
 void run_reconstruct(const ReconstructOptions& o) {
   std::vector<std::string> outputs;
   for (std::size_t i = 0; i < o.inputs.size(); ++i) outputs.push_back(numbered_output(o.output, i, o.inputs.size()));
-  std::vector<std::string> inputs = o.inputs;
-  if (!o.alphabet.empty()) inputs.push_back(o.alphabet);
-  for (const auto& out : outputs) check_output_path(out, inputs);
+  OutputSet files;
+  o.scan_set.record_inputs(files, o.inputs);
+  files.input(o.alphabet, "--alphabet");
+  for (const auto& out : outputs) {
+    files.output(out, "-o");
+    check_output_kind(out, "-o", "cloud");
+  }
   Stopwatch sw;
   const std::vector<Cloud> clouds = o.scan_set.load(o.inputs);
   const ModelParams mp = o.model.params();
@@ -52,8 +56,9 @@ void run_reconstruct(const ReconstructOptions& o) {
     io::WriteOptions wo;
     wo.colors.reserve(rec.word_of_point.size());
     for (const auto w : rec.word_of_point) wo.colors.push_back(word_color(w));
-    throw_if_error(io::write_cloud(outputs[i], rec.cloud, wo));
+    throw_if_error(io::write_cloud(files.staged(outputs[i]), rec.cloud, wo));
   }
+  files.commit();
   const double measure_ms = sw.lap_ms();
   std::vector<const Cloud*> cl;
   std::vector<const Model*> ml;

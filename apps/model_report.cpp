@@ -64,6 +64,12 @@ ScanLoader ScanSetOptions::loader(const std::vector<std::string>& inputs) const 
                     input_frame == "world");
 }
 
+void ScanSetOptions::record_inputs(OutputSet& files, const std::vector<std::string>& inputs) const {
+  files.inputs(inputs, "input");
+  files.input(poses, "--poses");
+  files.input(metadata, "--metadata");
+}
+
 LearnParams ScanSetOptions::learn_params(const ModelParams& model) const {
   LearnParams p;
   p.model = model;

@@ -42,6 +42,8 @@ struct ScanSetOptions {
   [[nodiscard]] std::vector<Cloud> load(const std::vector<std::string>& inputs) const;
   /// The same scans one at a time.
   [[nodiscard]] ScanLoader loader(const std::vector<std::string>& inputs) const;
+  /// Records the files these options read (the scans, --poses, --metadata) in `files`.
+  void record_inputs(OutputSet& files, const std::vector<std::string>& inputs) const;
   /// Learner parameters: these options plus `model`.
   [[nodiscard]] LearnParams learn_params(const ModelParams& model) const;
 };

@@ -93,6 +93,7 @@ struct DecompressResult {
   std::size_t instances = 0;       ///< word instances
   std::size_t alphabet_words = 0;  ///< words of the alphabet used
   bool residual_layer = false;     ///< the file has a residual layer (bounded error)
+  bool references_alphabet = false;  ///< the file references an alphabet file (else embeds its alphabet)
   double decode_ms = 0.0;          ///< parsing the file (chunks, alphabet, instances)
   double reconstruct_ms = 0.0;     ///< placing the words and decoding the layer
 };

@@ -104,6 +104,7 @@ StatusOr<DecompressResult> decompress(const std::vector<std::uint8_t>& model_fil
   r.instances = d.model.instances.size();
   r.alphabet_words = d.alphabet ? d.alphabet->size() : 0;
   r.residual_layer = d.residual.has_value();
+  r.references_alphabet = d.alphabet_hash.has_value();
   return r;
 }
 

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -30,6 +31,7 @@ constexpr char kModelMagic[8] = {'L', 'E', 'X', '3', 'D', 'M', 'D', 'L'};
 constexpr char kAlphabetMagic[8] = {'L', 'E', 'X', '3', 'D', 'A', 'L', 'P'};
 constexpr char kSequenceMagic[8] = {'L', 'E', 'X', '3', 'D', 'S', 'E', 'Q'};
 constexpr std::uint64_t kQhdrBytes = 8;
+constexpr std::size_t kMaxScanNameBytes = 255;  // sequence.md §2
 constexpr std::uint16_t kMajor = 1;
 constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
 /// The chunk of a residual layer by its coding (layer_coding), with the first minor
@@ -1112,15 +1114,38 @@ std::vector<std::uint8_t> encode_sequence(const SequenceData& data) {
                                   " is not a model file referencing the sequence's alphabet" +
                                   (m.ok() ? std::string() : ": " + m.status().to_string()));
   }
+  if (!data.names.empty()) {
+    if (data.names.size() != data.model_files.size())
+      throw std::invalid_argument("lex3d::codec::encode_sequence: " + std::to_string(data.names.size()) +
+                                  " names for " + std::to_string(data.model_files.size()) + " scans");
+    std::set<std::string> seen;
+    for (const auto& n : data.names)
+      if (!is_valid_scan_name(n) || !seen.insert(n).second)
+        throw std::invalid_argument("lex3d::codec::encode_sequence: scan name '" + n + "' is invalid or repeated");
+  }
   std::vector<std::uint8_t> out;
-  put_header(out, kSequenceMagic, 0);
+  // 1.0 when the scans have no names: such files keep the bytes of the first version.
+  put_header(out, kSequenceMagic, 0, data.names.empty() ? 0 : 1);
   std::vector<std::uint8_t> qhdr;
   put_u64(qhdr, data.model_files.size());
   put_chunk(out, "QHDR", qhdr);
   put_chunk(out, "ALPH", data.alphabet_file);
+  if (!data.names.empty()) {
+    std::vector<std::uint8_t> snam;
+    for (const auto& n : data.names) {
+      put_u16(snam, static_cast<std::uint16_t>(n.size()));
+      snam.insert(snam.end(), n.begin(), n.end());
+    }
+    put_chunk(out, "snam", snam);
+  }
   for (const auto& m : data.model_files) put_chunk(out, "SCAN", m);
   put_chunk(out, "QEND", {});
   return out;
+}
+
+bool is_valid_scan_name(const std::string& name) {
+  if (name.empty() || name.size() > kMaxScanNameBytes || name == "." || name == "..") return false;
+  return name.find_first_of(std::string("/\\\0", 3)) == std::string::npos;
 }
 
 StatusOr<SequenceData> decode_sequence(const std::vector<std::uint8_t>& bytes) {
@@ -1140,6 +1165,29 @@ StatusOr<SequenceData> decode_sequence(const std::vector<std::uint8_t>& bytes) {
     if (Status s = read_chunk(d, size, pos, ctx, c); !s.ok()) return s;
     const std::size_t next = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);
     const bool known = c.is("QHDR") || c.is("ALPH") || c.is("SCAN") || c.is("QEND");
+    if (c.is("snam") && state > 0) {  // the scans' names (1.1): one a scan, checked, once
+      if (!out.names.empty() || count == 0)
+        return ctx.error(count == 0 ? "chunk 'snam' in a file without scans" : "chunk 'snam' is repeated", pos);
+      std::set<std::string> seen;
+      std::uint64_t at = 0;
+      for (std::uint64_t i = 0; i < count; ++i) {
+        if (c.length - at < 2) return ctx.error("chunk 'snam' ends inside name " + std::to_string(i), c.payload_offset + at);
+        const std::uint16_t n = ld_u16(c.payload + at);
+        if (c.length - at - 2 < n)
+          return ctx.error("chunk 'snam': name " + std::to_string(i) + " of " + std::to_string(n) +
+                               " bytes does not fit the chunk", c.payload_offset + at);
+        std::string name(reinterpret_cast<const char*>(c.payload + at + 2), n);
+        if (!is_valid_scan_name(name) || !seen.insert(name).second)
+          return ctx.error("chunk 'snam': name " + std::to_string(i) + " is empty, too long, repeated or holds '/', '\\' or NUL",
+                           c.payload_offset + at);
+        out.names.push_back(std::move(name));
+        at += 2U + n;
+      }
+      if (at != c.length)
+        return ctx.error("chunk 'snam' has " + std::to_string(c.length - at) + " bytes after its names", c.payload_offset + at);
+      pos = next;
+      continue;
+    }
     if (!known) {
       if (state == 0) return ctx.error("the first chunk must be 'QHDR', found " + c.name, pos);
       if (c.required()) return ctx.error("unknown required chunk " + c.name, pos);

@@ -8,6 +8,7 @@ int exit_code_for(ErrorCode code) noexcept {
     case ErrorCode::kInvalidArgument: return 1;
     case ErrorCode::kBadData: return 2;
     case ErrorCode::kIoError: return 3;
+    case ErrorCode::kOutOfMemory: return 4;
   }
   return 2;
 }

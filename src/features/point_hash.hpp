@@ -81,9 +81,16 @@ class PointHash {
     return ((occupied_[b >> 6] >> (b & 63)) & 1U) != 0;
   }
 
+  // A cell index, clamped to the keys' 21 bits less one cell, so that neither the cast nor a
+  // neighbour's index (+-1) overflows for a point far out (1e30 m, say). Clamped points share
+  // the border cells; queries still compare exact distances, so answers stay right.
+  [[nodiscard]] int cell_coord(float v) const {
+    constexpr float kLimit = static_cast<float>((1 << 20) - 2);
+    const float c = std::floor(v * inv_cell_);
+    return static_cast<int>(!(c < kLimit) ? kLimit : c <= -kLimit ? -kLimit : c);  // NaN: kLimit
+  }
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
-    return {static_cast<int>(std::floor(p.x() * inv_cell_)), static_cast<int>(std::floor(p.y() * inv_cell_)),
-            static_cast<int>(std::floor(p.z() * inv_cell_))};
+    return {cell_coord(p.x()), cell_coord(p.y()), cell_coord(p.z())};
   }
   static std::uint64_t key(const Eigen::Vector3i& c) {
     // 21 bits a coordinate: +-1e6 cells, far beyond any lidar range at sane radii.

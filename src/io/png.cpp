@@ -87,7 +87,7 @@ Status write_png_rgb(const std::string& path, int width, int height, const std::
     put_chunk(png, "IEND", nullptr, 0);
     return write_file_atomic(path, png);
   } catch (const std::bad_alloc&) {
-    return io_error(detail::msg(path, "out of memory encoding the PNG"));
+    return out_of_memory(detail::msg(path, "out of memory encoding the PNG"));
   }
 }
 

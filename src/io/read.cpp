@@ -17,6 +17,7 @@
 #include <array>
 #include <cmath>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <new>
 #include <stdexcept>
@@ -106,6 +107,47 @@ Status Builder::finish() {
 
 namespace {
 
+/// Drops the points no lidar can have measured (see ReadResult::far_dropped), keeping every
+/// per-point channel in step.
+void drop_far_points(ReadResult& r) {
+  Cloud& c = r.cloud;
+  const std::size_t n = c.points.size();
+  if (n == 0 || c.georef) return;
+  const Eigen::Vector3f o = c.T_cloud_sensor.translation().cast<float>();
+  std::vector<float> d(n);
+  for (std::size_t i = 0; i < n; ++i) d[i] = (c.points[i] - o).norm();  // inf for 1e30-ish: fine
+  std::vector<float> sorted = d;
+  const std::size_t k = std::min(n - 1, static_cast<std::size_t>(0.99 * static_cast<double>(n)));
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k), sorted.end());
+  constexpr double kTerrestrialReachM = 1e4;  // no terrestrial lidar measures 10 km
+  const double limit = std::max(kTerrestrialReachM, 100.0 * static_cast<double>(sorted[k]));
+  sorted.clear();
+  sorted.shrink_to_fit();
+  r.far_limit_m = limit;
+  const auto keep = [&](std::size_t i) { return static_cast<double>(d[i]) <= limit; };
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!keep(i)) continue;
+    c.points[kept] = c.points[i];
+    if (c.intensity.size() == n) c.intensity[kept] = c.intensity[i];
+    if (c.ring.size() == n) c.ring[kept] = c.ring[i];
+    if (c.column.size() == n) c.column[kept] = c.column[i];
+    if (r.colors.size() == n) r.colors[kept] = r.colors[i];
+    ++kept;
+  }
+  if (kept == n) return;
+  r.far_dropped = n - kept;
+  c.points.resize(kept);
+  if (c.intensity.size() == n) c.intensity.resize(kept);
+  if (c.ring.size() == n) c.ring.resize(kept);
+  if (c.column.size() == n) c.column.resize(kept);
+  if (r.colors.size() == n) r.colors.resize(kept);
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "%zu point%s farther than %.0f m from the sensor dropped (beyond any lidar's reach)",
+                r.far_dropped, r.far_dropped == 1 ? "" : "s", limit);
+  r.notes.emplace_back(buf);
+}
+
 /// `<dir>/<stem>.pose` for `<dir>/<stem>.3d`.
 std::string pose_path_for(const std::string& path) {
   const std::size_t slash = path.find_last_of('/');
@@ -164,6 +206,7 @@ StatusOr<ReadResult> read_cloud_impl(const std::string& path, const ReadOptions&
     case Format::kAuto: s = bad_data(msg(path, "cannot tell the format")); break;
   }
   if (!s.ok()) return s;
+  drop_far_points(r);
   if (f == Format::kUos3d && options.load_pose) {
     const std::string pose_path = pose_path_for(path);
     struct stat st {};
@@ -225,7 +268,7 @@ StatusOr<std::vector<std::uint8_t>> read_file(const std::string& path, std::uint
     }
     buf.resize(got);
   } catch (const std::bad_alloc&) {
-    return io_error(msg(path, "out of memory reading the file"));
+    return out_of_memory(msg(path, "out of memory reading the file"));
   }
   return buf;
 }
@@ -239,9 +282,9 @@ StatusOr<ReadResult> read_cloud(const std::string& path, const ReadOptions& opti
       r.value().cloud.rgb = r.value().colors;
     return r;
   } catch (const std::bad_alloc&) {
-    return io_error(msg(path, "out of memory reading the point cloud"));
+    return out_of_memory(msg(path, "out of memory reading the point cloud"));
   } catch (const std::length_error&) {
-    return io_error(msg(path, "out of memory reading the point cloud"));
+    return out_of_memory(msg(path, "out of memory reading the point cloud"));
   }
 }
 

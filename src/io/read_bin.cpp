@@ -21,6 +21,20 @@ Status read_float_binary(const std::string& path, const std::uint8_t* data, std:
     return bad_data(msg(path, what), size - size % stride);
   }
   const std::size_t n = size / stride;
+  // x y z asked for, but the bytes are KITTI records: every fourth float, at the same place
+  // in each 16 bytes, is an intensity in [0, 1]. Read as x y z they would be garbage points
+  // (a real x y z cloud is not inside a unit cube on every third coordinate).
+  if (format == Format::kBinXyz && !detected && size % 16 == 0 && size / 16 >= 16) {
+    bool kitti = true;
+    for (std::size_t i = 0; i < size / 16 && kitti; ++i) {
+      const float v = load<float>(data + i * 16 + 12, kHostBigEndian);
+      kitti = v >= 0.0F && v <= 1.0F;
+    }
+    if (kitti)
+      return bad_data(msg(path, "holds KITTI records (x y z intensity, 16 bytes a point: every fourth float is an "
+                                "intensity in [0, 1]), not x y z float32; read it with --format kitti"),
+                      0);
+  }
   r.encoding = "binary_little_endian";
   Builder b(r, format == Format::kKitti, false);
   b.reserve(n);

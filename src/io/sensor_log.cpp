@@ -90,9 +90,9 @@ StatusOr<SensorLog> read_sensor_log(const std::string& path, const ReadOptions& 
   try {
     return read_sensor_log_impl(path, options);
   } catch (const std::bad_alloc&) {
-    return io_error(detail::msg(path, "out of memory reading the capture"));
+    return out_of_memory(detail::msg(path, "out of memory reading the capture"));
   } catch (const std::length_error&) {
-    return io_error(detail::msg(path, "out of memory reading the capture"));
+    return out_of_memory(detail::msg(path, "out of memory reading the capture"));
   }
 }
 

@@ -406,9 +406,9 @@ Status write_cloud(const std::string& path, const Cloud& cloud, const WriteOptio
   try {
     return write_cloud_impl(path, cloud, options);
   } catch (const std::bad_alloc&) {
-    return io_error(msg(path, "out of memory building the file"));
+    return out_of_memory(msg(path, "out of memory building the file"));
   } catch (const std::length_error&) {
-    return io_error(msg(path, "out of memory building the file"));
+    return out_of_memory(msg(path, "out of memory building the file"));
   }
 }
 

@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -240,12 +241,7 @@ class BallGrid {
     const float rc = radius + 1e-4F * cell_;
     const float rc2 = rc * rc;
     const float cx = c.x(), cy = c.y(), cz = c.z();
-    // Distance along one axis from c to cell v's slab (0 inside).
-    const auto gap = [&](int v, float cv) {
-      const float a = static_cast<float>(v) * cell_;
-      const float b = a + cell_;
-      return cv < a ? a - cv : (cv > b ? cv - b : 0.0F);
-    };
+    const auto gap = [&](int v, float cv) { return slab_gap(v, cv); };
     std::uint64_t last = kEmpty;
     std::uint32_t last_block = kNone;
     for (int z = lo.z(); z <= hi.z(); ++z) {
@@ -296,10 +292,7 @@ class BallGrid {
       first[a] = wrap(lo[a]) >> 2;
       for (int i = 0; i < n[a]; ++i) {
         const int v = lo[a] + i;
-        const float x0 = static_cast<float>(v) * cell_;
-        const float x1 = x0 + cell_;
-        const float cv = c[a];
-        const float g = cv < x0 ? x0 - cv : (cv > x1 ? cv - x1 : 0.0F);
+        const float g = slab_gap(v, c[a]);
         g2[a][i] = g * g;
         blk[a][i] = (wrap(v) >> 2) - first[a];
         loc[a][i] = wrap(v) & 3;
@@ -333,9 +326,24 @@ class BallGrid {
   static constexpr std::uint32_t kNone = ~0U;
   static constexpr float kFar = 1e18F;  // padding: (1e18)² is finite and beyond any radius
 
+  // Clamped to +-2^30 (NaN to the upper end) so that the cast, and a query's neighbouring
+  // cells, never overflow an int for a point far out; keys wrap at 21 bits anyway, the two
+  // border cells reach to infinity (slab_gap) and distances are compared exactly.
+  static constexpr int kCellLimit = 1 << 30;
+  [[nodiscard]] int cell_coord(float v) const {
+    constexpr auto kLimit = static_cast<float>(kCellLimit);
+    const float c = std::floor(v * inv_);
+    return static_cast<int>(!(c < kLimit) ? kLimit : c <= -kLimit ? -kLimit : c);
+  }
+  // Distance along one axis from cv to cell v's slab (0 inside); a border cell's slab is
+  // unbounded outwards, as it holds every point beyond it.
+  [[nodiscard]] float slab_gap(int v, float cv) const {
+    const float a = v <= -kCellLimit ? -std::numeric_limits<float>::infinity() : static_cast<float>(v) * cell_;
+    const float b = v >= kCellLimit ? std::numeric_limits<float>::infinity() : static_cast<float>(v) * cell_ + cell_;
+    return cv < a ? a - cv : (cv > b ? cv - b : 0.0F);
+  }
   [[nodiscard]] Eigen::Vector3i cell_of(const Eigen::Vector3f& p) const {
-    return {static_cast<int>(std::floor(p.x() * inv_)), static_cast<int>(std::floor(p.y() * inv_)),
-            static_cast<int>(std::floor(p.z() * inv_))};
+    return {cell_coord(p.x()), cell_coord(p.y()), cell_coord(p.z())};
   }
   // A cell's key is its coordinates, 21 bits each (wrapping): the upper 19 name its
   // block, the lower 2 its place in the block.

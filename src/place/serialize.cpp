@@ -302,7 +302,7 @@ StatusOr<PlaceScan> decode_scan(const std::uint8_t* p, std::size_t n, std::uint6
   const std::uint8_t* cb = r.take(static_cast<std::size_t>(code_bytes));
   s.descriptor_codes.resize(static_cast<std::size_t>(codes));
   if (h.descriptor_bits == 8) {
-    std::memcpy(s.descriptor_codes.data(), cb, static_cast<std::size_t>(codes));
+    if (codes > 0) std::memcpy(s.descriptor_codes.data(), cb, static_cast<std::size_t>(codes));
   } else {
     for (std::size_t i = 0; i < codes; ++i)
       s.descriptor_codes[i] = static_cast<std::uint8_t>((cb[i / 2] >> (4 * (i % 2))) & 0x0F);
@@ -321,6 +321,11 @@ StatusOr<PlaceScan> decode_scan(const std::uint8_t* p, std::size_t n, std::uint6
                        c.azimuth_resolution_rad <= 2 * M_PI && std::isfinite(c.azimuth_max_rad) &&
                        std::isfinite(c.elevation_resolution_rad) && c.elevation_resolution_rad > 0.0)))
     return bad_data("place database: invalid coarse image header", img_at);
+  // The image spans at most one turn, and a turn (half a turn in elevation) at its resolution
+  // fits the 16-bit width (height): projected pixel coordinates then stay small integers.
+  if (pixels > 0 && (static_cast<double>(w16) * c.azimuth_resolution_rad > 2 * M_PI + c.azimuth_resolution_rad ||
+                     2 * M_PI / c.azimuth_resolution_rad > 65535.0 || M_PI / c.elevation_resolution_rad > 65535.0))
+    return bad_data("place database: the coarse image's azimuth or elevation resolution does not fit its size", img_at);
   c.width = w16;
   c.height = h16;
   c.full_circle = full == 1;

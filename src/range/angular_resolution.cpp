@@ -67,7 +67,10 @@ std::optional<AngularResolution> estimate_spacing(const Direction* dir_data, std
   const double solid_angle =
       2.0 * M_PI * std::max(1e-4, std::sin(std::max(el_lo, el_hi)) - std::sin(std::min(el_lo, el_hi)));
   const double mean_spacing = std::sqrt(solid_angle / static_cast<double>(dirs.size()));
-  const double cell = std::clamp(6.0 * mean_spacing, 1e-4, 0.5);
+  // The grid has about 4π / cell² cells: at most four a direction (and a few thousand), so
+  // directions crowded into a tiny cone (a degenerate cloud) cannot ask for gigabytes.
+  const double min_cell = std::sqrt(4.0 * M_PI / (4.0 * static_cast<double>(dirs.size()) + 4096.0));
+  const double cell = std::clamp(6.0 * mean_spacing, std::max(1e-4, min_cell), 0.5);
 
   // Hash grid: rows of constant elevation, each row with its own azimuth cell count.
   const int rows = std::max(1, static_cast<int>(std::ceil(M_PI / cell)));

@@ -196,6 +196,23 @@ RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params) 
     }
   }
   img.full_circle = best_gap < 30;
+  // Pixels at most max(16 a ray, 2^18): a resolution measured on a degenerate cloud (random
+  // bytes read as points, a cloud inside a millimetre) is coarsened until the image fits, so
+  // its memory follows the input's size. A real scan has about one ray a pixel.
+  const double max_pixels = std::max(16.0 * static_cast<double>(used), 262144.0);
+  const double span_rad =
+      img.full_circle ? kTwoPi : (360.0 - best_gap + 2.0) * M_PI / 180.0;  // azimuth the image covers
+  {
+    const double cols = std::ceil(span_rad / res_az);
+    const double rows = std::floor((el_max - el_min) / res_el + 0.5) + 1.0;
+    if (cols * rows > max_pixels) {
+      const double f = std::sqrt(cols * rows / max_pixels) * 1.01;
+      res_az = std::min(res_az * f, span_rad);
+      res_el = std::min(res_el * f, M_PI);
+      img.elevation_resolution_rad = res_el;
+      img.azimuth_resolution_rad = res_az;
+    }
+  }
   if (img.full_circle) {
     img.azimuth_max_rad = M_PI;
     img.width = std::max(1, static_cast<int>(std::ceil(kTwoPi / res_az - 1e-6)));

@@ -56,6 +56,8 @@ run(0 version --version)
 # --- usage errors: exit 1 ---
 run(1 usage.nosub)
 run(1 usage.unknown frobnicate)
+run(1 usage.unknown_near compres "${KITTI}")
+expect_match(usage.unknown_near "${LAST_ERR}" "unknown command 'compres'; did you mean 'compress'")
 run(1 usage.format info --format nope "${KITTI}")
 run(1 usage.threshold features "${KITTI}" --threshold 7)
 run(1 usage.up features "${KITTI}" --up 1,2)
@@ -137,7 +139,8 @@ expect_match(info.alphabet "${LAST_OUT}" "\"kind\":\"alphabet\"")
 expect_match(info.alphabet "${LAST_OUT}" "\"word_radius_m\":[0-9]")
 set(ALPHABET_INFO "${LAST_OUT}")
 run(0 compress.reuse compress "${NC}" -o "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da")
-run(1 decompress.no_alphabet decompress "${WORK}/nc_reuse.lex3dm" -o "${WORK}/x.ply")
+run(2 decompress.no_alphabet decompress "${WORK}/nc_reuse.lex3dm" -o "${WORK}/x.ply")
+expect_match(decompress.no_alphabet "${LAST_ERR}" "--alphabet")
 run(0 decompress.with_alphabet decompress "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da" -o "${WORK}/nc_reuse.ply")
 # info on a model that references its alphabet: the chunks without it, the counts with it.
 run(0 info.referenced info "${WORK}/nc_reuse.lex3dm")
@@ -226,6 +229,14 @@ run(0 decompress.sequence decompress "${WORK}/set.lex3dq" -o "${WORK}/set.ply")
 if(NOT EXISTS "${WORK}/set_000.ply" OR NOT EXISTS "${WORK}/set_001.ply")
   message(SEND_ERROR "[decompress.sequence] the scans were not written")
 endif()
+# Scans of distinct stems keep their names (sequence 1.1) and decode to OUT_<stem>.
+run(0 compress.one_file_named compress "${NC}" "${KITTI}" -o "${WORK}/named.lex3dq" --one-file --max-error 0.05 --words off)
+run(0 decompress.sequence_named decompress "${WORK}/named.lex3dq" -o "${WORK}/named.ply")
+expect_match(decompress.sequence_named "${LAST_OUT}" "named_kitti00_000000.ply: [0-9]+ points \\(scan 2 of 2\\)")
+if(NOT EXISTS "${WORK}/named_newer_college_00.ply" OR NOT EXISTS "${WORK}/named_kitti00_000000.ply"
+   OR EXISTS "${WORK}/named_000.ply")
+  message(SEND_ERROR "[decompress.sequence_named] the scans were not written under their names")
+endif()
 run(1 decompress.sequence_octomap decompress "${WORK}/set.lex3dq" --octomap "${WORK}/set.bt")
 if(EXISTS "${WORK}/nc_bad.lex3dm")
   message(SEND_ERROR "[compress] an output was written for a refused residual layer")
@@ -273,23 +284,23 @@ if(EXISTS "${WORK}/w_bad.lex3dm")
   message(SEND_ERROR "[world] an output was written for a refused command")
 endif()
 
-# With an alphabet given, scans are read, coded and written one at a time: a bad scan in
-# the middle of a set stops the command (exit 2, its name in the message) after the scans
-# before it are written complete; nothing is written for it or after it.
+# With an alphabet given, scans are read, coded and staged one at a time: a bad scan in
+# the middle of a set stops the command (exit 2, its name in the message) and no output is
+# left, neither the scans before it nor temporary files (all or nothing).
 run(2 stream.bad_middle compress "${NC}" "${WORK}/odd.bin" "${NC}" --format binxyz -o "${WORK}/st.lex3dm"
     --alphabet "${WORK}/nc.lex3da")
 expect_match(stream.bad_middle "${LAST_ERR}" "odd.bin")
-if(NOT EXISTS "${WORK}/st_000.lex3dm" OR EXISTS "${WORK}/st_001.lex3dm" OR EXISTS "${WORK}/st_002.lex3dm")
-  message(SEND_ERROR "[stream.bad_middle] expected st_000 alone to be written")
+file(GLOB leftovers "${WORK}/st_*" "${WORK}/.lex3d-*")
+if(leftovers)
+  message(SEND_ERROR "[stream.bad_middle] left files behind: ${leftovers}")
 endif()
-run(0 stream.first_decodes decompress "${WORK}/st_000.lex3dm" --alphabet "${WORK}/nc.lex3da" -o "${WORK}/st_000.ply")
 # With two threads, scans are coded two at a time, one thread each: a bad third scan stops
-# the command after the first two are written, and nothing of the fourth is.
+# the command and nothing is written.
 run(2 stream.bad_third compress "${NC}" "${NC}" "${WORK}/odd.bin" "${NC}" --format binxyz -o "${WORK}/s3.lex3dm"
     --alphabet "${WORK}/nc.lex3da" --threads 2)
-if(NOT EXISTS "${WORK}/s3_000.lex3dm" OR NOT EXISTS "${WORK}/s3_001.lex3dm" OR EXISTS "${WORK}/s3_002.lex3dm"
-   OR EXISTS "${WORK}/s3_003.lex3dm")
-  message(SEND_ERROR "[stream.bad_third] expected s3_000 and s3_001 alone to be written")
+file(GLOB leftovers "${WORK}/s3_*" "${WORK}/.lex3d-*")
+if(leftovers)
+  message(SEND_ERROR "[stream.bad_third] left files behind: ${leftovers}")
 endif()
 # Scans side by side give the files of one thread, scan for scan.
 run(0 stream.side_by_side compress "${NC}" "${KITTI}" "${NC}" -o "${WORK}/sb2.lex3dm" --alphabet "${WORK}/nc.lex3da"
@@ -417,3 +428,165 @@ expect_match(place.add_after_tail "${LAST_OUT}" "\"scans\":4")
 # A foreign file and a flipped index byte.
 run(2 place.foreign place query "${NC}" "${NC}")
 expect_match(place.foreign "${LAST_ERR}" "newer_college_00.bin: .*bad magic.*at byte 0")
+# --- outputs never clash with inputs or with each other (compared by file identity) ---
+# file_unchanged(name path sha): the file still has the hash it had before the command.
+function(file_unchanged name path sha)
+  file(SHA256 "${path}" now)
+  if(NOT now STREQUAL sha)
+    message(SEND_ERROR "[${name}] ${path} was modified")
+  endif()
+endfunction()
+function(no_file name path)
+  if(EXISTS "${path}")
+    message(SEND_ERROR "[${name}] ${path} was written")
+  endif()
+endfunction()
+set(H "${WORK}/hard")
+file(MAKE_DIRECTORY "${H}")
+file(WRITE "${H}/p.txt" "1 0 0 0 0 1 0 0 0 0 1 0\n")
+file(SHA256 "${H}/p.txt" poses_sha)
+run(1 clash.poses compress "${KITTI}" --poses "${H}/p.txt" -o "${H}/p.txt" --max-error 0.02)
+expect_match(clash.poses "${LAST_ERR}" "--poses")
+file_unchanged(clash.poses "${H}/p.txt" "${poses_sha}")
+# the same file under another spelling
+run(1 clash.poses_dot learn "${NC}" --poses "${H}/p.txt" -o "${H}/./p.txt" --iterations 5)
+file_unchanged(clash.poses_dot "${H}/p.txt" "${poses_sha}")
+run(1 clash.poses_reconstruct reconstruct "${NC}" --poses "${H}/p.txt" -o "${H}/../hard/p.txt")
+file_unchanged(clash.poses_reconstruct "${H}/p.txt" "${poses_sha}")
+run(1 clash.poses_place place build "${H}/p.txt" "${NC}" --poses "${H}/p.txt")
+file_unchanged(clash.poses_place "${H}/p.txt" "${poses_sha}")
+# a hard link and a symbolic link to an input
+file(COPY "${NC}" DESTINATION "${H}")
+set(NCH "${H}/newer_college_00.bin")
+file(SHA256 "${NCH}" nc_sha)
+file(CREATE_LINK "${NCH}" "${H}/hard_link.bin")
+file(CREATE_LINK "${NCH}" "${H}/sym_link.lex3dm" SYMBOLIC)
+run(1 clash.hard_link convert "${NCH}" "${H}/hard_link.bin")
+file_unchanged(clash.hard_link "${NCH}" "${nc_sha}")
+run(1 clash.symlink compress "${NCH}" -o "${H}/sym_link.lex3dm" --max-error 0.05)
+file_unchanged(clash.symlink "${NCH}" "${nc_sha}")
+# the alphabet a database is built with
+file(SHA256 "${WORK}/nc.lex3da" alpha_sha)
+run(1 clash.place_alphabet place build "${WORK}/nc.lex3da" "${NC}" --alphabet "${WORK}/nc.lex3da")
+file_unchanged(clash.place_alphabet "${WORK}/nc.lex3da" "${alpha_sha}")
+# two outputs of one command
+run(1 clash.model_alphabet compress "${NC}" -o "${H}/x.lex3dm" --save-alphabet "${H}/./x.lex3dm" --iterations 5)
+no_file(clash.model_alphabet "${H}/x.lex3dm")
+run(1 clash.cloud_octomap decompress "${WORK}/nc.lex3dm" -o "${H}/out.bin" --octomap "${H}/out.bin")
+no_file(clash.cloud_octomap "${H}/out.bin")
+
+# --- a failed command leaves no output at all ---
+file(WRITE "${H}/a_file" "x")
+run(3 partial.save_alphabet compress "${NC}" -o "${H}/m.lex3dm" --save-alphabet "${H}/a_file/alpha.lex3da" --iterations 5)
+no_file(partial.save_alphabet "${H}/m.lex3dm")
+# a database path that is a directory is refused before any work
+run(3 partial.db_directory place build "${H}" "${NC}" --alphabet "${WORK}/nc.lex3da")
+expect_match(partial.db_directory "${LAST_ERR}" "directory")
+# a sequence whose second scan is corrupt: no scan is written
+execute_process(COMMAND /usr/bin/python3 -c "import sys; d=bytearray(open(sys.argv[1],'rb').read()); d[-30]^=0xFF; open(sys.argv[2],'wb').write(d)"
+                "${WORK}/set.lex3dq" "${H}/bad_seq.lex3dq")
+run(2 partial.sequence decompress "${H}/bad_seq.lex3dq" -o "${H}/bs.ply")
+no_file(partial.sequence "${H}/bs_000.ply")
+file(GLOB leftovers "${H}/.lex3d-*" "${H}/bs_*")
+if(leftovers)
+  message(SEND_ERROR "[partial] left files behind: ${leftovers}")
+endif()
+
+# --- inputs that are not what they claim ---
+run(2 kind.missing_alphabet compress "${NC}" -o "${H}/ma.lex3dm" --alphabet "${H}/no_such.lex3da")
+expect_match(kind.missing_alphabet "${LAST_ERR}" "no_such.lex3da")
+run(2 kind.scan_as_alphabet decompress "${WORK}/nc.lex3dm" --alphabet "${NC}" -o "${H}/sa.ply")
+expect_match(kind.scan_as_alphabet "${LAST_ERR}" "--alphabet")
+no_file(kind.scan_as_alphabet "${H}/sa.ply")
+run(1 kind.model_as_ply compress "${NC}" -o "${H}/out.ply" --max-error 0.05)
+no_file(kind.model_as_ply "${H}/out.ply")
+run(1 kind.cloud_as_model decompress "${WORK}/nc.lex3dm" -o "${H}/out.lex3dm")
+file(WRITE "${H}/poses.txt" "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 1 0 1 0 0 0 0 1 0\n1 0 0 2 0 1 0 0 0 0 1 0\n")
+run(2 kind.poses_as_cloud info "${H}/poses.txt")
+expect_match(kind.poses_as_cloud "${LAST_ERR}" "pose list")
+# a KITTI file (16 bytes a point) read as binxyz (12) is refused
+run(2 kind.kitti_as_binxyz info --format binxyz "${KITTI}")
+expect_match(kind.kitti_as_binxyz "${LAST_ERR}" "kitti")
+
+# --- non-regular inputs are refused at once (no blocking on a FIFO, no endless read) ---
+execute_process(COMMAND mkfifo "${H}/fifo.bin" RESULT_VARIABLE fifo_rc)
+if(fifo_rc EQUAL 0)
+  run(2 nonregular.fifo info "${H}/fifo.bin")
+  expect_match(nonregular.fifo "${LAST_ERR}" "not a regular file")
+endif()
+run(2 nonregular.device info /dev/zero)
+run(2 nonregular.device_compress compress /dev/zero -o "${H}/zero.lex3dm" --max-error 0.05)
+no_file(nonregular.device_compress "${H}/zero.lex3dm")
+
+# --- one point at 1e30 is dropped and counted, not a usage error ---
+execute_process(COMMAND /usr/bin/python3 -c "import struct,sys; d=open(sys.argv[1],'rb').read(); open(sys.argv[2],'wb').write(d+struct.pack('<4f',1e30,1e30,1e30,0))"
+                "${KITTI}" "${H}/outlier.bin")
+run(0 outlier.compress compress "${H}/outlier.bin" -o "${H}/outlier.lex3dm" --max-error 0.02)
+expect_match(outlier.compress "${LAST_ERR}" "outlier.bin: 1 point farther than [0-9]+ m from the sensor dropped")
+run(0 outlier.info info --json "${H}/outlier.bin")
+expect_match(outlier.info "${LAST_OUT}" "\"far_dropped\":1")
+
+# --- degenerate clouds get a bounded range image ---
+# Seeded, so that every run reads the same bytes.
+execute_process(COMMAND /usr/bin/python3 -c "import random,sys; open(sys.argv[1],'wb').write(random.Random(7).randbytes(102400))"
+                "${H}/random.bin")
+run(0 degenerate.random features --json "${H}/random.bin")
+# at most max(16 pixels a point, 2^18) pixels
+string(REGEX MATCH "\"points\":([0-9]+)" _ "${LAST_OUT}")
+set(deg_points "${CMAKE_MATCH_1}")
+string(REGEX MATCH "\"width\":([0-9]+),\"height\":([0-9]+)" _ "${LAST_OUT}")
+if(deg_points STREQUAL "" OR CMAKE_MATCH_1 STREQUAL "")
+  message(SEND_ERROR "[degenerate.random] no point count or image size in: ${LAST_OUT}")
+else()
+  math(EXPR deg_pixels "${CMAKE_MATCH_1} * ${CMAKE_MATCH_2}")
+  math(EXPR deg_cap "16 * ${deg_points}")
+  if(deg_cap LESS 262144)
+    set(deg_cap 262144)
+  endif()
+  math(EXPR deg_cap "${deg_cap} + ${deg_cap} / 20")
+  if(deg_pixels GREATER deg_cap)
+    message(SEND_ERROR "[degenerate.random] range image of ${deg_pixels} pixels for ${deg_points} points")
+  endif()
+endif()
+
+# --- place databases that pass the CRCs but not the field checks, or have empty entries ---
+set(PATCH_DB "${CMAKE_CURRENT_LIST_DIR}/patch_place_db.py")
+run(0 placedb.build8 place build "${H}/db8.lex3dp" "${NC}" "${KITTI}" --alphabet "${WORK}/nc.lex3da" --descriptor-bits 8)
+execute_process(COMMAND /usr/bin/python3 "${PATCH_DB}" "${H}/db8.lex3dp" "${H}/db_az.lex3dp" az_tiny)
+execute_process(COMMAND /usr/bin/python3 "${PATCH_DB}" "${H}/db8.lex3dp" "${H}/db_nofeat.lex3dp" nofeat)
+# an azimuth resolution a 16-bit image width cannot span: refused at load
+run(2 placedb.azimuth_resolution place query "${H}/db_az.lex3dp" "${NC}")
+expect_match(placedb.azimuth_resolution "${LAST_ERR}" "db_az.lex3dp: place database: the coarse image's azimuth")
+# an entry without features (8-bit descriptors): loads, and the query still ranks both scans
+run(0 placedb.no_features place query "${H}/db_nofeat.lex3dp" "${NC}")
+expect_match(placedb.no_features "${LAST_OUT}" "kitti00_000000 score")
+
+# --- place eval: its outputs (--cache, --dump, --png) are checked before any work and
+# written together at the end ---
+set(EV "${H}/eval_scans")
+file(MAKE_DIRECTORY "${EV}")
+file(COPY "${NC}" "${KITTI}" DESTINATION "${EV}")
+file(SHA256 "${EV}/newer_college_00.bin" ev_sha)
+file(WRITE "${H}/ev_poses.txt" "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 100 0 1 0 0 0 0 1 0\n")
+run(1 eval.dump_is_scan place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --dump "${EV}/newer_college_00.bin" --png "${H}/ev")
+file_unchanged(eval.dump_is_scan "${EV}/newer_college_00.bin" "${ev_sha}")
+no_file(eval.dump_is_scan "${H}/ev_pr.png")
+expect_match(eval.dump_is_scan "${LAST_ERR}" "refusing to overwrite input file .*newer_college_00.bin")
+run(1 eval.dump_is_png place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --dump "${H}/ev_pr.png" --png "${H}/ev")
+no_file(eval.dump_is_png "${H}/ev_pr.png")
+expect_match(eval.dump_is_png "${LAST_ERR}" "same file")
+run(1 eval.cache_is_alphabet place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --cache "${H}/ev.lex3dm" --png "${H}/ev")
+expect_match(eval.cache_is_alphabet "${LAST_ERR}" "--cache")
+run(0 eval.outputs place eval "${EV}" --poses "${H}/ev_poses.txt" --alphabet "${WORK}/nc.lex3da" --cache "${H}/ev.lex3dp" --dump "${H}/ev.txt" --png "${H}/ev")
+foreach(f ev.lex3dp ev.txt ev_confusion.png ev_pr.png)
+  if(NOT EXISTS "${H}/${f}")
+    message(SEND_ERROR "[eval.outputs] ${f} was not written")
+  endif()
+endforeach()
+file(GLOB leftovers "${H}/.lex3d-*")
+if(leftovers)
+  message(SEND_ERROR "[eval.outputs] left files behind: ${leftovers}")
+endif()
+# the cache, once written, is an input: an output of that name is refused
+run(1 eval.cache_as_dump place eval "${EV}" --poses "${H}/ev_poses.txt" --cache "${H}/ev.lex3dp" --dump "${H}/ev.lex3dp" --png "${H}/ev")
+expect_match(eval.cache_as_dump "${LAST_ERR}" "refusing to overwrite input file .*ev.lex3dp \\(--cache\\)")

@@ -47,11 +47,12 @@ struct Fixture {
 
 /// The file with chunk `index` (0 = QHDR) replaced by `type`/`payload`, CRCs recomputed by
 /// re-framing through a minimal writer of the container rules.
-Bytes frame(const std::vector<std::pair<std::string, Bytes>>& chunks, std::uint32_t flags = 0) {
+Bytes frame(const std::vector<std::pair<std::string, Bytes>>& chunks, std::uint32_t flags = 0, std::uint8_t minor = 0) {
   Fixture f;
   Bytes good = encode_sequence(f.data);
   Bytes out(good.begin(), good.begin() + 20);  // header of a valid file
-  if (flags != 0) {
+  if (flags != 0 || minor != 0) {
+    out[10] = minor;
     out[12] = static_cast<std::uint8_t>(flags);
     const auto crc = [](const std::uint8_t* p, std::size_t n) {
       std::uint32_t c = 0xFFFFFFFFU;
@@ -175,6 +176,78 @@ TEST(Sequence, ReaderChecks) {
   const auto r = decode_sequence(frame({{"QHDR", u64(1)}, {"ALPH", a}, {"SCAN", encode_model(other)}, {"QEND", {}}}));
   ASSERT_TRUE(r.ok());
   EXPECT_FALSE(decode_model(r.value().model_files[0], &r.value().alphabet_file).ok());
+}
+
+/// A `snam` payload: u16 length and bytes, a name each.
+Bytes snam(const std::vector<std::string>& names) {
+  Bytes b;
+  for (const auto& n : names) {
+    b.push_back(static_cast<std::uint8_t>(n.size()));
+    b.push_back(static_cast<std::uint8_t>(n.size() >> 8));
+    b.insert(b.end(), n.begin(), n.end());
+  }
+  return b;
+}
+
+TEST(Sequence, ScanNamesRoundTripIn1_1) {
+  Fixture f;
+  const Bytes v10 = encode_sequence(f.data);
+  EXPECT_EQ(v10[10], 0) << "without names a file stays 1.0";
+  f.data.names = {"000000", "scan b", "c.part"};
+  const Bytes v11 = encode_sequence(f.data);
+  EXPECT_EQ(v11[10], 1);
+  // The exact bytes (sequence.md §2): 'snam' right after 'ALPH'.
+  const auto& m = f.data.model_files;
+  EXPECT_EQ(v11, frame({{"QHDR", u64(3)}, {"ALPH", f.alphabet_file}, {"snam", snam(f.data.names)},
+                        {"SCAN", m[0]}, {"SCAN", m[1]}, {"SCAN", m[2]}, {"QEND", {}}}, 0, 1));
+  const auto r = decode_sequence(v11);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_EQ(r.value().names, f.data.names);
+  EXPECT_EQ(r.value().model_files, f.data.model_files);
+  // A 1.0 file decodes without names; 'snam' may stand anywhere after QHDR.
+  EXPECT_TRUE(decode_sequence(v10).value().names.empty());
+  const auto late = decode_sequence(frame({{"QHDR", u64(1)}, {"ALPH", f.alphabet_file}, {"SCAN", m[0]},
+                                           {"snam", snam({"x"})}, {"QEND", {}}}));
+  ASSERT_TRUE(late.ok()) << late.status().to_string();
+  EXPECT_EQ(late.value().names, std::vector<std::string>{"x"});
+  // The names are what a reader of 1.0 skips: the same file without 'snam' holds the same scans.
+  EXPECT_EQ(decode_sequence(frame({{"QHDR", u64(3)}, {"ALPH", f.alphabet_file}, {"SCAN", m[0]}, {"SCAN", m[1]},
+                                   {"SCAN", m[2]}, {"QEND", {}}}, 0, 1)).value().model_files, m);
+}
+
+TEST(Sequence, ScanNameChecks) {
+  Fixture f;
+  const Bytes a = f.alphabet_file;
+  const Bytes& m0 = f.data.model_files[0];
+  auto bad = [&](const Bytes& names, const std::string& needle) {
+    const auto r = decode_sequence(frame({{"QHDR", u64(1)}, {"ALPH", a}, {"snam", names}, {"SCAN", m0}, {"QEND", {}}}));
+    ASSERT_FALSE(r.ok()) << needle;
+    EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    EXPECT_NE(r.status().message().find(needle), std::string::npos) << r.status().to_string();
+  };
+  bad(snam({"a", "b"}), "bytes after its names");
+  bad(Bytes{5, 0, 'a'}, "does not fit the chunk");
+  bad(Bytes{1}, "ends inside name 0");
+  bad(snam({""}), "name 0 is empty");
+  bad(snam({"a/b"}), "holds '/'");
+  bad(snam({".."}), "name 0");
+  bad(snam({std::string(256, 'n')}), "too long");
+  bad(snam({std::string("a\0b", 3)}), "NUL");
+  const auto twice = decode_sequence(frame({{"QHDR", u64(1)}, {"ALPH", a}, {"snam", snam({"a"})}, {"snam", snam({"a"})},
+                                            {"SCAN", m0}, {"QEND", {}}}));
+  ASSERT_FALSE(twice.ok());
+  EXPECT_NE(twice.status().message().find("repeated"), std::string::npos);
+  const auto two = decode_sequence(frame({{"QHDR", u64(2)}, {"ALPH", a}, {"snam", snam({"a", "a"})}, {"SCAN", m0},
+                                          {"SCAN", m0}, {"QEND", {}}}));
+  ASSERT_FALSE(two.ok());
+  EXPECT_NE(two.status().message().find("name 1"), std::string::npos) << two.status().to_string();
+  // The encoder refuses what the reader would.
+  f.data.names = {"a", "b"};
+  EXPECT_THROW((void)encode_sequence(f.data), std::invalid_argument);  // 2 names, 3 scans
+  f.data.names = {"a", "b", "a"};
+  EXPECT_THROW((void)encode_sequence(f.data), std::invalid_argument);
+  f.data.names = {"a", "b", "c/d"};
+  EXPECT_THROW((void)encode_sequence(f.data), std::invalid_argument);
 }
 
 }  // namespace

@@ -370,6 +370,42 @@ TEST(ReadText, NonFiniteValuesAreDroppedAndCounted) {
   EXPECT_EQ(r.cloud.points[1], Eigen::Vector3f(4.0F, 5.0F, 0.5F));
 }
 
+TEST(ReadText, PointsBeyondAnyLidarAreDroppedAndCounted) {
+  const auto dir = temp_dir("read_text_far");
+  const std::string a = (dir / "a.xyz").string();
+  std::string text;
+  for (int i = 0; i < 200; ++i) text += std::to_string(i % 20) + " " + std::to_string(i / 20) + " 1 0." + std::to_string(i % 10) + "\n";
+  text += "1e30 1e30 1e30 0.5\n20000 0 0 0.5\n";  // 1e30 m and 20 km: no lidar measures either
+  write_bytes(a, text);
+  const ReadResult r = read_ok(a);
+  EXPECT_EQ(r.far_dropped, 2U);
+  EXPECT_EQ(r.far_limit_m, 1e4);  // the cloud spans ~30 m: the 10 km floor applies
+  ASSERT_EQ(r.cloud.size(), 200U);
+  ASSERT_TRUE(r.cloud.has_intensity());
+  EXPECT_EQ(r.cloud.intensity[199], 0.9F);  // channels stay in step
+  ASSERT_EQ(r.notes.size(), 1U);
+  EXPECT_NE(r.notes[0].find("2 points farther than 10000 m"), std::string::npos) << r.notes[0];
+}
+
+TEST(ReadBin, KittiRecordsForcedToBinXyzAreRefused) {
+  const auto dir = temp_dir("read_bin_kitti_as_xyz");
+  const std::string a = (dir / "a.bin").string();
+  std::string bytes;
+  for (int i = 0; i < 48; ++i) {  // 48 x 16 bytes: also a multiple of 12
+    const float v[4] = {5.0F + static_cast<float>(i), -3.0F, 1.5F, 0.25F};
+    bytes.append(reinterpret_cast<const char*>(v), sizeof v);
+  }
+  write_bytes(a, bytes);
+  ReadOptions opt;
+  opt.format = Format::kBinXyz;
+  const auto r = read_cloud(a, opt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  EXPECT_NE(r.status().message().find("--format kitti"), std::string::npos) << r.status().message();
+  opt.format = Format::kKitti;
+  EXPECT_TRUE(read_cloud(a, opt).ok());
+}
+
 TEST(ReadText, CommentsOnlyIsAnEmptyCloud) {
   const auto dir = temp_dir("read_text_comments");
   const std::string a = (dir / "a.xyz").string();

@@ -5,6 +5,8 @@
 
 #include "lex3d/eval/metrics.hpp"
 #include "lex3d/model/model.hpp"
+#include "features/point_hash.hpp"
+#include "model/point_grid.hpp"
 #include "support/test_support.hpp"
 
 using namespace lex3d;
@@ -284,4 +286,32 @@ TEST(Neighbourhoods, MatchABruteForceSearchForAnyThreadCount) {
     total += got.size();
   }
   EXPECT_EQ(total, s1.nearby_index.size());
+}
+
+// Points far out (1e30 m, near the float limit, NaN) clamp to the grids' border cells: no
+// integer overflow, and a point still lies in a ball around itself.
+TEST(PointGrids, PointsFarOutKeepExactAnswers) {
+  std::vector<Eigen::Vector3f> pts;
+  for (int i = 0; i < 200; ++i) pts.emplace_back(0.01F * static_cast<float>(i), 0.02F * static_cast<float>(i % 7), 1.0F);
+  const std::vector<Eigen::Vector3f> far = {{1e30F, 1e30F, 1e30F}, {-1e30F, 3e38F, -3e38F}, {2.1e9F, -2.1e9F, 5e5F}};
+  pts.insert(pts.end(), far.begin(), far.end());
+  detail::PointHash hash(0.5F);
+  for (const auto& p : pts) hash.insert(p);
+  for (const auto& p : pts) EXPECT_TRUE(hash.any_within(p));
+  EXPECT_FALSE(hash.any_within(Eigen::Vector3f(1e30F, 1e30F, 9e29F)));  // same border cell, 1e29 m away
+  EXPECT_FALSE(hash.any_within(Eigen::Vector3f(std::nanf(""), 0.0F, 0.0F)));
+
+  detail::BallGrid grid(0.5F);
+  std::vector<Eigen::Vector3f> centre = {pts[0]};
+  centre.insert(centre.end(), far.begin(), far.end());
+  const std::vector<float> radius(centre.size(), 0.3F);
+  std::vector<std::size_t> offset;
+  std::vector<std::uint32_t> index;
+  grid.points_in_balls(pts, centre, radius, 1, offset, index);
+  ASSERT_EQ(offset.size(), centre.size() + 1);
+  EXPECT_EQ(offset[1] - offset[0], 30U);  // x in [0, 0.29]: 30 points
+  for (std::size_t b = 1; b < centre.size(); ++b) {
+    ASSERT_EQ(offset[b + 1] - offset[b], 1U) << "ball " << b;
+    EXPECT_EQ(index[offset[b]], 200U + b - 1);
+  }
 }

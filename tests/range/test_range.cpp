@@ -82,6 +82,24 @@ TEST(AngularResolution, BalmOuster64) {
   EXPECT_LT(r->azimuth_rad / kDeg, 0.4);
 }
 
+TEST(RangeImage, DegenerateCloudsGetABoundedImage) {
+  // Random floats (random bytes read as points) and a cloud inside a millimetre: the measured
+  // spacing is tiny, the image must still be sized by the number of points.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> wide(-1e4F, 1e4F), mm(0.0F, 1e-3F);
+  Cloud random_cloud, tiny;
+  for (int i = 0; i < 20000; ++i) {
+    random_cloud.points.emplace_back(wide(rng), wide(rng), wide(rng) * 1e-3F);
+    tiny.points.emplace_back(10.0F + mm(rng), mm(rng), mm(rng));
+  }
+  for (const Cloud* c : {&random_cloud, &tiny}) {
+    const RangeImage img = make_range_image(*c);
+    const double pixels = static_cast<double>(img.width) * img.height;
+    EXPECT_LE(pixels, std::max(16.0 * static_cast<double>(c->size()), 262144.0) * 1.05);
+    EXPECT_GT(img.valid_count, 0U);
+  }
+}
+
 TEST(RangeImage, EmptyCloudGivesEmptyImage) {
   const RangeImage img = make_range_image(Cloud{});
   EXPECT_TRUE(img.empty());

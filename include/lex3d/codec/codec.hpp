@@ -98,11 +98,18 @@ struct ModelData {
 struct SequenceData {
   std::vector<std::uint8_t> alphabet_file;              ///< an alphabet file, byte for byte
   std::vector<std::vector<std::uint8_t>> model_files;   ///< model files referencing it, in scan order
+  /// Each scan's name (its input's file stem), one a model file, or empty when the file keeps
+  /// none (format 1.0). A name is 1 to 255 bytes with no '/', '\' or NUL, not "." or "..";
+  /// names are unique (formats/sequence.md §2).
+  std::vector<std::string> names;
 };
+/// Whether `name` may be a scan's name in a sequence file (see SequenceData::names).
+[[nodiscard]] bool is_valid_scan_name(const std::string& name);
 /// Whether `bytes` start with the sequence file's magic.
 [[nodiscard]] bool is_sequence_file(const std::vector<std::uint8_t>& bytes);
-/// Encodes a sequence file. Throws std::invalid_argument when the alphabet file is invalid
-/// or a model file does not decode as a model referencing that alphabet.
+/// Encodes a sequence file (1.1 with the scans' names, else 1.0). Throws
+/// std::invalid_argument when the alphabet file is invalid, a model file does not decode as
+/// a model referencing that alphabet, or the names are not one valid, unique name a model.
 [[nodiscard]] std::vector<std::uint8_t> encode_sequence(const SequenceData& data);
 /// Decodes a sequence file's framing and its alphabet; each model file is then decoded
 /// with `decode_model(model_files[i], &alphabet_file)`.

@@ -18,9 +18,11 @@ enum class ErrorCode : std::uint8_t {
   kInvalidArgument,  ///< a parameter out of range (exit 1)
   kBadData,          ///< malformed, truncated or corrupt input (exit 2)
   kIoError,          ///< the file system failed us: missing file, no permission, disk full (exit 3)
+  kOutOfMemory,      ///< an allocation the input asked for failed (exit 4)
 };
 
-/// Exit code of the `lex3d` command for an error code (0 ok, 1 usage, 2 bad data, 3 I/O).
+/// Exit code of the `lex3d` command for an error code (0 ok, 1 usage, 2 bad data, 3 I/O,
+/// 4 out of memory).
 [[nodiscard]] int exit_code_for(ErrorCode code) noexcept;
 
 /// An error with a message and, for bitstreams, the byte offset where it was found.
@@ -49,6 +51,9 @@ class Status {
 }
 [[nodiscard]] inline Status io_error(std::string message) {
   return {ErrorCode::kIoError, std::move(message)};
+}
+[[nodiscard]] inline Status out_of_memory(std::string message) {
+  return {ErrorCode::kOutOfMemory, std::move(message)};
 }
 
 /// Either a value or a non-ok Status (after Draco's StatusOr).

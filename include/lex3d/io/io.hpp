@@ -70,6 +70,11 @@ struct ReadResult {
   /// No-return readings dropped: kUos3d's no-return range, an organised cloud's NaN or exact
   /// (0, 0, 0) pixels, a `.bin`'s exact (0, 0, 0) records, a raw log's zero-range pixels.
   std::size_t no_return_dropped = 0;
+  /// Points beyond any lidar's reach, dropped: farther from the sensor origin than
+  /// `far_limit_m` = max(10 km, 100 x the 99th percentile of the points' distances). Not
+  /// applied to georeferenced clouds (their extent is a map's, not a sensor's).
+  std::size_t far_dropped = 0;
+  double far_limit_m = 0.0;  ///< the limit applied; 0: none
   /// kPcap: the sensor ("OS-1-128", "VLP-16") and how many complete turns the log holds
   /// (the cloud is the first of them).
   std::string sensor;
