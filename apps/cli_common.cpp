@@ -252,12 +252,16 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
   if (points_in_world && poses_path.empty())
     throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");
   if (poses_path.empty()) return;
-  auto poses = io::read_pose_list(poses_path);
+  poses_ = read_scan_poses(poses_path, entries_.size());
+}
+
+std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans) {
+  auto poses = io::read_pose_list(path);
   if (!poses.ok()) throw CliError(2, poses.status().to_string());
-  if (poses.value().size() != entries_.size())
-    throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
-                          std::to_string(entries_.size()) + " scans (one pose a scan, in order)");
-  poses_ = std::move(poses).value();
+  if (poses.value().size() != scans)
+    throw CliError(1, path + " has " + std::to_string(poses.value().size()) + " poses for " + std::to_string(scans) +
+                          " scans (one pose a scan, in order)");
+  return std::move(poses).value();
 }
 
 Cloud ScanLoader::load(std::size_t i) const {

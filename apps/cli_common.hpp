@@ -101,6 +101,10 @@ std::string lex3d_file_kind(const std::vector<std::uint8_t>& bytes);
 void set_current_file(const std::string& path);
 const std::string& current_file();
 
+/// The pose list `path` (formats: io::read_pose_list), one pose for each of `scans` scans in
+/// order; throws CliError 2 for an unreadable list, 1 for a count that does not match.
+std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans);
+
 /// Parses "x,y,z" into a vector; throws a usage CliError naming `option`.
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option);
 

@@ -124,12 +124,7 @@ class PlaceInputs {
       }
     }
     if (poses_path.empty()) return;
-    auto poses = io::read_pose_list(poses_path);
-    if (!poses.ok()) throw CliError(2, poses.status().to_string());
-    if (poses.value().size() != entries_.size())
-      throw CliError(1, poses_path + " has " + std::to_string(poses.value().size()) + " poses for " +
-                            std::to_string(entries_.size()) + " scans (one pose a scan, in order)");
-    poses_ = std::move(poses).value();
+    poses_ = read_scan_poses(poses_path, entries_.size());
   }
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
   [[nodiscard]] const std::string& name(std::size_t i) const { return entries_.at(i).name; }

@@ -42,6 +42,36 @@ class PointBallGrid {
   }
   [[nodiscard]] bool any_within(const Eigen::Vector3d& p) const {
     const double r2 = radius_ * radius_;
+    bool hit = false;
+    visit_near(p, [&](std::uint32_t i) {
+      hit = (points_[i].cast<double>() - p).squaredNorm() <= r2;
+      return hit;
+    });
+    return hit;
+  }
+  /// The point nearest to `p` within the radius (its insertion index; ties: the lowest),
+  /// or kNone when there is none.
+  [[nodiscard]] std::uint32_t nearest_within(const Eigen::Vector3d& p) const {
+    double best = radius_ * radius_;
+    std::uint32_t found = kNone;
+    visit_near(p, [&](std::uint32_t i) {
+      const double d2 = (points_[i].cast<double>() - p).squaredNorm();
+      if (d2 < best || (d2 == best && i < found)) {
+        best = d2;
+        found = i;
+      }
+      return false;
+    });
+    return found;
+  }
+  static constexpr std::uint32_t kNoPoint = 0xFFFFFFFFU;
+
+ private:
+  static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
+  /// Calls `f(i)` for each point i in the 2 x 2 x 2 cells nearest `p` (every point within
+  /// a cell's half-width of it) until `f` returns true.
+  template <typename F>
+  void visit_near(const Eigen::Vector3d& p, F&& f) const {
     std::int64_t base[3], step[3];
     for (int a = 0; a < 3; ++a) {
       const double c = p[a] * inv_cell_;
@@ -58,44 +88,9 @@ class PointBallGrid {
           std::size_t s = h & mask_;
           while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
           for (std::uint32_t i = heads_[s]; i != kNone; i = next_[i])
-            if ((points_[i].cast<double>() - p).squaredNorm() <= r2) return true;
+            if (f(i)) return;
         }
-    return false;
   }
-  /// The point nearest to `p` within the radius (its insertion index; ties: the lowest),
-  /// or kNone when there is none.
-  [[nodiscard]] std::uint32_t nearest_within(const Eigen::Vector3d& p) const {
-    double best = radius_ * radius_;
-    std::uint32_t found = kNone;
-    std::int64_t base[3], step[3];
-    for (int a = 0; a < 3; ++a) {
-      const double c = p[a] * inv_cell_;
-      base[a] = static_cast<std::int64_t>(std::floor(c));
-      step[a] = (c - static_cast<double>(base[a]) < 0.5) ? -1 : 1;
-    }
-    for (int dx = 0; dx < 2; ++dx)
-      for (int dy = 0; dy < 2; ++dy)
-        for (int dz = 0; dz < 2; ++dz) {
-          const std::uint64_t k = key_of(base[0] + dx * step[0], base[1] + dy * step[1], base[2] + dz * step[2]);
-          const std::uint64_t h = hash(k);
-          const std::size_t b = (h >> 40) & filter_mask_;
-          if (((filter_[b >> 6] >> (b & 63)) & 1U) == 0) continue;
-          std::size_t s = h & mask_;
-          while (heads_[s] != kNone && keys_[s] != k) s = (s + 1) & mask_;
-          for (std::uint32_t i = heads_[s]; i != kNone; i = next_[i]) {
-            const double d2 = (points_[i].cast<double>() - p).squaredNorm();
-            if (d2 < best || (d2 == best && i < found)) {
-              best = d2;
-              found = i;
-            }
-          }
-        }
-    return found;
-  }
-  static constexpr std::uint32_t kNoPoint = 0xFFFFFFFFU;
-
- private:
-  static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
   [[nodiscard]] std::int64_t cell(float v) const { return static_cast<std::int64_t>(std::floor(static_cast<double>(v) * inv_cell_)); }
   static std::uint64_t key_of(std::int64_t x, std::int64_t y, std::int64_t z) {
     const auto f = [](std::int64_t v) { return static_cast<std::uint64_t>(v) & 0x1FFFFFU; };
