@@ -14,6 +14,7 @@
 int main(int argc, char** argv) {
   CLI::App app{"lex3d: compact lidar scans and maps from a learned alphabet of local 3D structures"};
   app.set_version_flag("--version", std::string("lex3d ") + LEX3D_VERSION);
+  app.set_help_all_flag("--help-all", "Print the help of every command and subcommand, then exit");
   app.require_subcommand(1);
   // Every option's help shows its default value (subcommands inherit this).
   app.option_defaults()->always_capture_default(true);

@@ -51,6 +51,10 @@ endif()
 run(0 features.json features --json "${SAMPLES}/newer_college_00.bin")
 expect_match(features.json "${LAST_OUT}" "\"coverage_points\":[1-9]")
 run(0 help --help)
+run(0 help_all --help-all)
+foreach(command info features compress decompress convert learn reconstruct place)
+  expect_match(help_all "${LAST_OUT}" "\n${command}\n")
+endforeach()
 run(0 version --version)
 
 # --- usage errors: exit 1 ---
