@@ -31,7 +31,7 @@ struct CompressOptions {
   std::string output;
   std::string alphabet;
   std::string save_alphabet;
-  std::string max_error = "none";
+  std::string max_error = "auto";
   double target_bpp = 0.0;
   std::string words;  ///< on, off or auto; empty: off with a residual layer, on without
   bool keep_all_points = false;
@@ -48,13 +48,19 @@ struct CompressOptions {
   ModelOptions model;
 };
 
-/// Parses --max-error: "none" or metres within the residual layer's range.
-std::optional<double> parse_max_error(const std::string& text) {
+/// The bound `--max-error auto` gives: 1 cm, below the range noise of spinning lidars
+/// (1-3 cm in their data sheets), so that the decoded cloud is as good as the sensor's.
+constexpr double kAutoMaxError = 0.01;
+
+/// Parses --max-error: "none", "auto" (kAutoMaxError, or the bound --target-bpp finds) or
+/// metres within the residual layer's range.
+std::optional<double> parse_max_error(const std::string& text, double target_bpp) {
   if (text == "none") return std::nullopt;
+  if (text == "auto") return target_bpp > 0.0 ? std::nullopt : std::optional<double>(kAutoMaxError);
   char* end = nullptr;
   const double v = std::strtod(text.c_str(), &end);
   if (end == text.c_str() || *end != '\0' || !(v >= residual::kMinMaxError && v <= residual::kMaxMaxError))
-    throw CliError(1, "--max-error must be \"none\" or metres in [" + std::to_string(residual::kMinMaxError) + ", " +
+    throw CliError(1, "--max-error must be \"auto\", \"none\" or metres in [" + std::to_string(residual::kMinMaxError) + ", " +
                           std::to_string(residual::kMaxMaxError) + "], got \"" + text + "\"");
   return v;
 }
@@ -62,7 +68,7 @@ std::optional<double> parse_max_error(const std::string& text) {
 void run_compress(const CompressOptions& o) {
   if (!o.alphabet.empty() && !o.save_alphabet.empty())
     throw CliError(1, "--alphabet reuses an alphabet and --save-alphabet writes a learned one: give one of them");
-  const std::optional<double> max_error = parse_max_error(o.max_error);
+  const std::optional<double> max_error = parse_max_error(o.max_error, o.target_bpp);
   if (max_error && o.target_bpp > 0.0) throw CliError(1, "give --max-error or --target-bpp, not both");
   const bool layered = max_error || o.target_bpp > 0.0;
   if (!layered && o.words == "off")
@@ -70,8 +76,10 @@ void run_compress(const CompressOptions& o) {
   if (o.layer_coding == "voxel" && o.keep_all_points)
     throw CliError(1, "--layer-coding voxel codes one point a cell, --keep-all-points one a point: give one of them");
   // With a layer, words cost more than they save at every bound measured (README), so the
-  // layer alone is the default; --words on/auto brings them back.
-  const std::string words_mode = !o.words.empty() ? o.words : layered ? "off" : "on";
+  // layer alone is the default; --words on/auto brings them back, and so does an alphabet
+  // given or asked for (--alphabet, --save-alphabet).
+  const bool alphabet_asked = !o.alphabet.empty() || !o.save_alphabet.empty();
+  const std::string words_mode = !o.words.empty() ? o.words : layered && !alphabet_asked ? "off" : "on";
   const bool use_words = words_mode != "off";
   if (!use_words && (!o.alphabet.empty() || !o.save_alphabet.empty()))
     throw CliError(1, "--words off uses no alphabet: drop --alphabet / --save-alphabet");
@@ -130,7 +138,8 @@ void run_compress(const CompressOptions& o) {
   coding.max_error = max_error;
   coding.target_bpp = o.target_bpp;
   coding.words = o.words == "on" ? WordsMode::kOn : o.words == "off" ? WordsMode::kOff
-                 : o.words == "auto" ? WordsMode::kAuto : WordsMode::kDefault;
+                 : o.words == "auto" ? WordsMode::kAuto
+                 : layered && alphabet_asked ? WordsMode::kOn : WordsMode::kDefault;
   coding.keep_all_points = o.keep_all_points;
   coding.layer_coding = o.layer_coding == "spherical" ? LayerCoding::kSpherical
                         : o.layer_coding == "voxel"   ? LayerCoding::kVoxel
@@ -379,8 +388,8 @@ void register_compress(CLI::App& app) {
   sub->add_option("--alphabet", o->alphabet, "Reuse this alphabet file (nothing is learned)");
   sub->add_option("--save-alphabet", o->save_alphabet, "Write the learned alphabet here; the models reference it");
   sub->add_option("--max-error", o->max_error,
-                  "Add a residual layer: every input point has a decoded point within this many metres and "
-                  "vice versa; \"none\" keeps words only")
+                  "The bound of the residual layer, m: every input point has a decoded point within it and vice "
+                  "versa; \"auto\": 1 cm (or the bound --target-bpp finds); \"none\": words alone, no bound")
       ->capture_default_str();
   sub->add_option("--target-bpp", o->target_bpp,
                   "Add the residual layer with the smallest error that fits this many bits per input point")

@@ -15,7 +15,7 @@ for seq in "${SEQS[@]}"; do
   [ "$seq" = balm ] && poses=(--poses "$DATA/balm/poses.txt")
   # One alphabet per scan (embedded in each model file).
   for s in "${scans[@]}"; do
-    "$LEX3D" compress "$s" -o "$WORK/own.lex3dm" --json > "$WORK/own_$(basename "$s").json"
+    "$LEX3D" compress "$s" -o "$WORK/own.lex3dm" --max-error none --json > "$WORK/own_$(basename "$s").json"
   done
   # One shared alphabet: learned on every 10th scan, with their poses when known.
   learn=()
@@ -34,7 +34,7 @@ for seq in "${SEQS[@]}"; do
     s="${scans[$i]}"
     sp=()
     if [ "$seq" = balm ]; then sed -n "$((i + 1))p" "$DATA/balm/poses.txt" > "$WORK/p.txt"; sp=(--poses "$WORK/p.txt"); fi
-    "$LEX3D" compress "$s" "${sp[@]}" --alphabet "$WORK/$seq.lex3da" -o "$WORK/shared.lex3dm" --json > "$WORK/shared_$(basename "$s").json"
+    "$LEX3D" compress "$s" "${sp[@]}" --alphabet "$WORK/$seq.lex3da" -o "$WORK/shared.lex3dm" --max-error none --json > "$WORK/shared_$(basename "$s").json"
     "$LEX3D" decompress "$WORK/shared.lex3dm" --alphabet "$WORK/$seq.lex3da" -o "$WORK/dec.ply" --reference "$s" --json \
       > "$WORK/dec_$(basename "$s").json"
   done

@@ -17,7 +17,7 @@ for seq in "${SEQS[@]}"; do
   for s in "${scans[@]:1}"; do
     b="$(basename "$s" .bin)"
     start=$(date +%s%N)
-    "$LEX3D" compress "$s" --alphabet "$WORK/$seq.lex3da" -o "$WORK/m.lex3dm" --threads 1 --json > "$WORK/c_$b.json"
+    "$LEX3D" compress "$s" --alphabet "$WORK/$seq.lex3da" -o "$WORK/m.lex3dm" --max-error none --threads 1 --json > "$WORK/c_$b.json"
     end=$(date +%s%N)
     echo "{\"wall_ms\": $(( (end - start) / 1000000 ))}" > "$WORK/w_$b.json"
     "$LEX3D" decompress "$WORK/m.lex3dm" --alphabet "$WORK/$seq.lex3da" -o "$WORK/d.ply" --reference "$s" --json \

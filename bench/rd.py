@@ -537,7 +537,7 @@ class Bench:
             if mode == "lex3d-seq" and alphabet is None:
                 continue
             for e in es:
-                e_args = ["--max-error", e] if e is not None else []
+                e_args = ["--max-error", e] if e is not None else (["--max-error", "none"] if self.has_max_error else [])
                 if e is not None and mode == "lex3d-seq":
                     e_args += ["--words", "auto"]
                 a_args = ["--alphabet", alphabet["path"]] if mode == "lex3d-seq" else []
