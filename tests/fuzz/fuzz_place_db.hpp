@@ -1,12 +1,12 @@
 #pragma once
 // The place database loader under fuzzing (fuzz_place_db.cpp, and reader_replay.cpp in
-// CTest): open the bytes, read every entry a query could read, retrieve and verify with
-// the first entry, save and open again; abort when a documented property fails
+// CTest): open the bytes, read every entry a query could read, retrieve with them, save
+// and open again; abort when a documented property fails
 // (formats/place_db.md, place.hpp):
 // - open() fails with kBadData, one line, an offset inside the bytes; a newer major
 //   version is refused the same way;
-// - a corrupt entry is a kBadData Status from read_scan() or a PlaceDataError from query()
-//   and save(), never another exception;
+// - a corrupt entry is a kBadData Status from read_scan() or a PlaceDataError from save(),
+//   never another exception;
 // - an entry that reads is consistent (features, codes and words as the format bounds them);
 // - a database that saves opens again with the same scans.
 //
@@ -73,12 +73,10 @@ inline void check_place_db(const std::uint8_t* data, std::size_t size) {
     if (readable.size() < 2) readable.push_back(std::move(s).value());
   }
   try {
-    for (const auto& q : readable) {
-      (void)db.retrieve(q, 8);
-      PlaceParams p;
-      p.top_k = 2;
-      (void)db.query(q, p);
-    }
+    // Retrieval over the index for each readable entry. (A whole query, verification
+    // included, takes seconds under the sanitizers: it runs in the CLI tests on damaged
+    // databases, tests/cli/patch_place_db.py, not here.)
+    for (const auto& q : readable) (void)db.retrieve(q, 8);
     const auto saved = db.save();
     auto again = PlaceDatabase::load(saved);
     if (!again.ok()) db_fail("a saved database does not open", again.status().to_string());
