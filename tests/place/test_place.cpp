@@ -563,3 +563,32 @@ TEST(PlaceGravity, NoSurfacesGiveNone) {
 
 }  // namespace
 }  // namespace lex3d
+
+namespace lex3d {
+namespace {
+// Free-space conflicts of right alignments (dense alignment from the ground truth) of balm
+// scans 4-10 m apart, 20 s or more apart in time: the shares the check bounds.
+TEST(PlaceDiag, DISABLED_ConflictAtTruth) {
+  Balm& b = Balm::get();
+  PlaceParams p;
+  std::vector<double> shares;
+  for (int i = 0; i < 89; i += 1)
+    for (int j = i + 20; j < 89; j += 1) {
+      char qf[16], mf[16];
+      std::snprintf(qf, sizeof qf, "%06d", 2 * j);
+      std::snprintf(mf, sizeof mf, "%06d", 2 * i);
+      const Pose truth = b.pose(mf).inverse() * b.pose(qf);
+      const double dist = (b.pose(mf).translation() - b.pose(qf).translation()).head<2>().norm();
+      if (dist < 4.0 || dist > 10.0) continue;
+      const PlaceScan q = b.place(qf), m = b.place(mf);
+      const DenseAlignment a = dense_align(q, m, truth, p);
+      const DenseConsistency cq = dense_consistency(q, m, a.T_match_query, p);
+      const DenseConsistency cm = dense_consistency(m, q, a.T_match_query.inverse(), p);
+      const double s = std::max(cq.conflict_share(), cm.conflict_share());
+      shares.push_back(s);
+      std::printf("CONFLICT %s %s %.2f m: %.3f (q %zu/%zu, m %zu/%zu)\n", qf, mf, dist, s, cq.conflict, cq.visible,
+                  cm.conflict, cm.visible);
+    }
+}
+}  // namespace
+}  // namespace lex3d
