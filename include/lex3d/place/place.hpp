@@ -19,7 +19,8 @@
 ///
 /// Upright frames: features are upright with respect to the world's up direction, which
 /// prepare_scan takes from Cloud::T_world_cloud when has_world_pose. On a robot this
-/// gravity direction would come from an IMU; without it the sensor's z axis is used.
+/// gravity direction would come from an IMU; without one, apply_gravity (place/gravity.hpp)
+/// estimates it from the scan's points, and failing that the sensor's z axis is used.
 
 #include <cstdint>
 #include <memory>
