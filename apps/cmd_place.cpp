@@ -19,6 +19,7 @@
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/core/timer.hpp"
+#include "lex3d/place/gravity.hpp"
 #include "lex3d/place/place.hpp"
 #include "progress.hpp"
 
@@ -55,6 +56,9 @@ struct PlaceOptions {
   double max_distance = -1.0;  // < 0: not given
   PlaceParams params = default_query_params();
   PlaceStorageParams storage;
+  /// Up direction of the scans: auto (a scan's pose when given, else its points), poses,
+  /// points (estimated even when a pose is given: eval measures the no-pose case so), none.
+  std::string gravity = "auto";
 };
 
 ModelParams model_params() {
@@ -196,20 +200,38 @@ Alphabet learn_on(std::size_t n, const GetScan& get, int learn_scans, int iterat
   return std::move(r.alphabet);
 }
 
-PlaceScan describe(const Cloud& cloud, const std::string& name, const Alphabet& alphabet,
-                   const PlaceStorageParams& storage) {
+// Sets the up direction of `cloud` as --gravity asks; returns where it came from.
+GravitySource upright(Cloud& cloud, const std::string& gravity, const RangeImageParams& range) {
+  if (gravity == "points" || gravity == "none") {
+    cloud.has_world_pose = false;
+    cloud.T_world_cloud = Pose::Identity();
+    if (gravity == "none") return GravitySource::kNone;
+  } else if (gravity == "poses" && !cloud.has_world_pose) {
+    throw CliError(1, "--gravity poses: the scans have no poses (give --poses)");
+  }
+  return apply_gravity(cloud, range);
+}
+
+PlaceScan describe(Cloud cloud, const std::string& name, const Alphabet& alphabet,
+                   const PlaceStorageParams& storage, const std::string& gravity = "auto",
+                   GravitySource* source = nullptr) {
   const ModelParams mp = model_params();
+  const GravitySource g = upright(cloud, gravity, mp.features.range);
+  if (source != nullptr) *source = g;
   const PreparedScan s = prepare_scan(cloud, mp, alphabet.word_radius);
   return make_place_scan(s, alphabet, storage, mp.features.range, name);
 }
 
 std::vector<PlaceScan> describe_all(std::size_t n, const GetScan& get, const std::vector<std::string>& names,
-                                    const Alphabet& alphabet, const PlaceStorageParams& storage, double* prepare_ms) {
+                                    const Alphabet& alphabet, const PlaceStorageParams& storage, double* prepare_ms,
+                                    const std::string& gravity = "auto", std::vector<GravitySource>* sources = nullptr) {
   std::vector<PlaceScan> out;
   ProgressBar bar("preparing scans");
   Stopwatch sw;
   for (std::size_t i = 0; i < n; ++i) {
-    out.push_back(describe(get(i), names[i], alphabet, storage));
+    GravitySource g = GravitySource::kNone;
+    out.push_back(describe(get(i), names[i], alphabet, storage, gravity, &g));
+    if (sources != nullptr) sources->push_back(g);
     bar.update(static_cast<long>(i + 1), static_cast<long>(n), names[i]);
   }
   if (prepare_ms != nullptr) *prepare_ms = sw.elapsed_ms();
@@ -227,12 +249,12 @@ struct WriteStats {
 // Adds the inputs' scans through `w`, one at a time, handing each piece to `put`.
 template <typename Put>
 void add_inputs(PlaceFileWriter& w, const PlaceInputs* inputs, const Alphabet& alphabet,
-                const PlaceStorageParams& storage, const Put& put, WriteStats& st) {
+                const PlaceStorageParams& storage, const Put& put, WriteStats& st, const std::string& gravity) {
   if (inputs == nullptr) return;
   ProgressBar bar("adding scans");
   Stopwatch sw;
   for (std::size_t i = 0; i < inputs->size(); ++i) {
-    const PlaceScan s = describe(inputs->load(i), inputs->name(i), alphabet, storage);
+    const PlaceScan s = describe(inputs->load(i), inputs->name(i), alphabet, storage, gravity);
     put(w.add(s));
     ++st.added;
     bar.update(static_cast<long>(i + 1), static_cast<long>(inputs->size()), inputs->name(i));
@@ -243,7 +265,7 @@ void add_inputs(PlaceFileWriter& w, const PlaceInputs* inputs, const Alphabet& a
 // Writes a whole new database file (format 2.0) to a temporary name and renames it over
 // `path`: the stored scans of `from` copied as they are, then the inputs' scans.
 WriteStats write_new_db(const std::string& path, const PlaceStorageParams& storage, const Alphabet& alphabet,
-                        const PlaceDatabase* from, const PlaceInputs* inputs) {
+                        const PlaceDatabase* from, const PlaceInputs* inputs, const std::string& gravity = "auto") {
   const std::string tmp = io::temporary_path_for(path);
   auto f = io::PositionalFile::create_new(tmp);
   if (!f.ok()) throw CliError(3, f.status().to_string());
@@ -268,7 +290,7 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
       if (!p.ok()) throw CliError(2, p.status().to_string());
       put(p.value());
     }
-  add_inputs(w, inputs, alphabet, storage, put, st);
+  add_inputs(w, inputs, alphabet, storage, put, st, gravity);
   const auto [idx, commit] = w.finish();
   put(idx);
   throw_if_error(f.value()->sync());
@@ -286,7 +308,8 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
 // Appends the inputs' scans to a 2.x database in place: new SCAN chunks and a new index after
 // the committed end, synced, then the other commit record, synced. A crash before the commit
 // record is written leaves the committed database as it was (formats/place_db.md §5).
-WriteStats append_db(io::PositionalFile& file, const PlaceDatabase& db, const PlaceInputs& inputs) {
+WriteStats append_db(io::PositionalFile& file, const PlaceDatabase& db, const PlaceInputs& inputs,
+                     const std::string& gravity) {
   PlaceFileWriter w(db);
   WriteStats st;
   std::uint64_t end = w.start();
@@ -295,7 +318,7 @@ WriteStats append_db(io::PositionalFile& file, const PlaceDatabase& db, const Pl
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
   try {
-    add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st);
+    add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st, gravity);
   } catch (...) {
     // Nothing was committed: take back what was written after the committed end.
     (void)file.truncate(w.start());
@@ -353,7 +376,7 @@ void run_build(const PlaceOptions& o) {
   } else {
     alphabet = learn_on(inputs.size(), [&](std::size_t i) { return inputs.load(i); }, o.learn_scans, o.iterations);
   }
-  const WriteStats st = write_new_db(o.db, o.storage, alphabet, nullptr, &inputs);
+  const WriteStats st = write_new_db(o.db, o.storage, alphabet, nullptr, &inputs, o.gravity);
   print_write(o, st, alphabet.size(), "built from");
 }
 
@@ -369,12 +392,12 @@ void run_add(const PlaceOptions& o) {
   // In place when the format allows it (2.x) and earlier indexes left behind by appends
   // are under a quarter of the file; otherwise a compact new file replaces it.
   if (fi.major >= 2 && fi.dead_bytes * 4 <= fi.committed_bytes) {
-    print_write(o, append_db(*file.value(), db, inputs), db.alphabet().size(), "appended");
+    print_write(o, append_db(*file.value(), db, inputs, o.gravity), db.alphabet().size(), "appended");
     return;
   }
   if (fi.major < 2)
     std::fprintf(stderr, "note: %s is format %d.%d: rewritten as format 2.0\n", o.db.c_str(), fi.major, fi.minor);
-  print_write(o, write_new_db(o.db, db.storage(), db.alphabet(), &db, &inputs), db.alphabet().size(), "added");
+  print_write(o, write_new_db(o.db, db.storage(), db.alphabet(), &db, &inputs, o.gravity), db.alphabet().size(), "added");
 }
 
 void run_upgrade(const PlaceOptions& o) {
@@ -415,7 +438,8 @@ void run_query(const PlaceOptions& o) {
   for (std::size_t qi = 0; qi < inputs.size(); ++qi) {
     Stopwatch sw;
     const double c0 = cpu_ms();
-    const PlaceScan scan = describe(inputs.load(qi), inputs.name(qi), db.alphabet(), db.storage());
+    GravitySource gravity = GravitySource::kNone;
+    const PlaceScan scan = describe(inputs.load(qi), inputs.name(qi), db.alphabet(), db.storage(), o.gravity, &gravity);
     const double prep = sw.elapsed_ms();
     const double c1 = cpu_ms();
     PlaceQueryResult r;
@@ -428,7 +452,7 @@ void run_query(const PlaceOptions& o) {
     const std::size_t k = std::min<std::size_t>(r.matches.size(), static_cast<std::size_t>(o.top));
     if (o.json) {
       Json j;
-      j.begin_object().value("query", scan.name).value("accepted", r.accepted);
+      j.begin_object().value("query", scan.name).value("accepted", r.accepted).value("gravity", to_string(gravity));
       j.value("prepare_ms", prep).value("retrieval_ms", r.retrieval_ms).value("verification_ms", r.verification_ms);
       j.value("decode_ms", r.decode_ms).value("decoded", r.decoded).value("database_open_ms", open_ms).value("database_scans", db.size());
       // Process CPU time (all threads) of the two stages: what the wall times are on an idle machine.
@@ -582,9 +606,15 @@ void run_eval(const PlaceOptions& o) {
   }
   const double learn_ms = sw.lap_ms();
   double prep_ms = 0;
+  std::vector<GravitySource> sources;
   const auto scans = cached.empty() ? describe_all(clouds.size(), [&](std::size_t i) { return clouds[i]; }, names,
-                                                   alphabet, o.storage, &prep_ms)
+                                                   alphabet, o.storage, &prep_ms, o.gravity, &sources)
                                     : cached;
+  std::size_t from_points = 0, from_none = 0;
+  for (const GravitySource g : sources) {
+    from_points += g == GravitySource::kPoints ? 1 : 0;
+    from_none += g == GravitySource::kNone ? 1 : 0;
+  }
   if (make_cache) {
     PlaceDatabase c(o.storage);
     c.set_alphabet(alphabet);
@@ -796,6 +826,7 @@ void run_eval(const PlaceOptions& o) {
     j.begin_object().value("scans", scans.size()).value("queries", recs.size()).value("positives", pos);
     j.value("radius_m", o.radius).value("min_gap_s", o.min_gap).value("threshold", p.accept_score);
     j.value("max_distance_m", p.max_distance).value("max_conflict", p.max_conflict);
+    j.value("gravity", o.gravity).value("gravity_from_points", from_points).value("gravity_none", from_none);
     j.value("true_positives", tp).value("false_positives", fp).value("precision", precision).value("recall", recall);
     j.value("max_f1", max_f1).value("recall_at_precision_1", recall_at_p1);
     j.value("accepted_right_pose", right_pose).value("accepted_wrong_pose", wrong_pose);
@@ -813,6 +844,9 @@ void run_eval(const PlaceOptions& o) {
   }
   std::printf("scans %zu, queries with a database %zu, with a true revisit within %.1f m: %zu\n", scans.size(), recs.size(),
               o.radius, pos);
+  if (o.gravity == "points" || o.gravity == "none")
+    std::printf("up direction: --gravity %s (poses used as ground truth only): %zu scans from their points, %zu none%s\n",
+                o.gravity.c_str(), from_points, from_none, cached.empty() ? "" : " (scans from --cache: as it was made)");
   if (p.max_distance > 0.0) std::printf("transforms limited to sensors within %.1f m (--max-distance)\n", p.max_distance);
   if (p.max_conflict < 1.0) std::printf("transforms with more than %.3f of the points in free space rejected (--max-conflict)\n", p.max_conflict);
   std::printf("threshold %.2f: TP %zu FP %zu  precision %.3f recall %.3f\n", p.accept_score, tp, fp, precision, recall);
@@ -836,6 +870,10 @@ void add_common(CLI::App* sub, PlaceOptions& o) {
                   "sequence .lex3dq files, decoded on the fly)");
   sub->add_option("--poses", o.poses, "World <- sensor pose of each scan (KITTI poses.txt layout); gives upright features");
   sub->add_flag("--json", o.json, "Print one JSON object");
+  sub->add_option("--gravity", o.gravity,
+                  "Up direction of the scans: auto (the pose when given, else estimated from the points), poses, "
+                  "points (estimated, poses ignored for it), none (the sensor's spin axis)")
+      ->check(CLI::IsMember({"auto", "poses", "points", "none"}));
 }
 
 }  // namespace

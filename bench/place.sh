@@ -28,6 +28,14 @@ echo "== radius 4 m, min gap 20 s, transforms of any implied distance (--max-dis
 "$build/lex3d" place eval "$data" --poses "$data/poses.txt" --times "$data/times.txt" \
   --min-gap 20 --radius 4 --max-distance 0 --png "$out/any" --cache "$out/scans.lex3dp" "$@"
 
+# Without poses: each scan's up direction estimated from its own points (--gravity points);
+# the poses serve as ground truth only.
+for radius in 4 8; do
+  echo "== radius ${radius} m, min gap 20 s, up direction from the points (--gravity points) =="
+  "$build/lex3d" place eval "$data" --poses "$data/poses.txt" --times "$data/times.txt" \
+    --min-gap 20 --radius "$radius" --gravity points --png "$out/p$radius" --cache "$out/points.lex3dp" "$@"
+done
+
 # Scan Context on the same scans and protocol (bench/scan_context.py: its published 80 m
 # grid, and 40 m, which suits this 18 x 20 m courtyard better), for comparison.
 if [ -x /usr/bin/python3 ]; then

@@ -682,6 +682,8 @@ DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, c
   if (from.dense_points.empty() || img.empty()) return out;
   const Eigen::Isometry3f T = (img.T_cloud_sensor.inverse() * T_to_from).cast<float>();
   const auto dhat = static_cast<float>(params.max_range_difference);
+  // The angle across which the other scan's return in a pixel may have been taken.
+  const auto pixel = static_cast<float>(std::max(img.azimuth_resolution_rad, img.elevation_resolution_rad));
   const std::size_t n = from.dense_points.size();
   const std::size_t stride = std::max<std::size_t>(1, n / static_cast<std::size_t>(params.dense_points));
   for (std::size_t i = 0; i < n; i += stride) {
@@ -707,10 +709,17 @@ DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, c
         }
       }
     }
+    // A beam passed through the point's surface only when it went on beyond the range that
+    // surface spans across one pixel: r · pixel · tan(incidence) more than at the point. On a
+    // surface the other scan sees at a grazing angle (the ground a few metres off, a wall
+    // along the beam) a return in the same pixel may be metres farther and still lie on it;
+    // a surface it faces keeps the tolerance d̂.
+    const float cos_incidence = std::max(1e-3F, std::abs((T.linear() * from.dense_normals[i]).dot(p)) / std::max(r, 1e-6F));
+    const float spread = r * pixel * std::sqrt(std::max(0.0F, 1.0F - cos_incidence * cos_incidence)) / cos_incidence;
     if (support) {
       ++out.visible;
       ++out.support;
-    } else if (img.state[ci] == PixelState::kMaxRange || img.range[ci] > r + dhat) {
+    } else if (img.state[ci] == PixelState::kMaxRange || img.range[ci] > r + dhat + spread) {
       ++out.visible;
       ++out.conflict;  // the other scan's beam passed through this point
     }
