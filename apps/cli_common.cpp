@@ -335,4 +335,13 @@ Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option
   return v;
 }
 
+void note_fields_not_written(const std::string& output, const Cloud& cloud, const io::WriteOptions& options) {
+  const std::vector<std::string> missing = io::fields_not_written(output, cloud, options);
+  if (missing.empty()) return;
+  std::string list;
+  for (const auto& f : missing) list += (list.empty() ? "" : ", ") + f;
+  std::fprintf(stderr, "note: %s: %s not written (the format cannot hold %s; write .pcd or .ply to keep %s)\n",
+               output.c_str(), list.c_str(), missing.size() == 1 ? "it" : "them", missing.size() == 1 ? "it" : "them");
+}
+
 }  // namespace lex3d::cli

@@ -32,6 +32,11 @@ class CliError : public std::runtime_error {
 /// Throws CliError for a non-ok status.
 void throw_if_error(const Status& status);
 
+/// Says on stderr which of the cloud's attributes the format of `output` cannot hold (and so
+/// were not written there), e.g. "note: out.bin: ring, time not written (a KITTI .bin keeps x
+/// y z intensity; write .pcd or .ply to keep them)"; nothing when every one is written.
+void note_fields_not_written(const std::string& output, const Cloud& cloud, const io::WriteOptions& options = {});
+
 /// Parses a --format value; throws a usage CliError for an unknown name.
 io::Format parse_format_option(const std::string& name);
 

@@ -33,6 +33,7 @@ void run_convert(const ConvertOptions& o) {
   for (std::size_t i = 0; i < loader.size(); ++i) {
     const Cloud cloud = loader.load(i);
     throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud));
+    note_fields_not_written(outputs[i], cloud);
     std::printf("%s -> %s: %zu points%s\n", loader.name(i).c_str(), outputs[i].c_str(), cloud.size(),
                 cloud.rows > 0 ? (" (" + std::to_string(cloud.rows) + " x " + std::to_string(cloud.columns) + " organised)").c_str() : "");
   }

@@ -62,6 +62,7 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
     cloud.value().georef = d.value().georef;  // written in true coordinates
     set_current_file(o.input + " scan " + std::to_string(i));
     throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud.value()));
+    note_fields_not_written(outputs[i], cloud.value());
     input_points += d.value().input_points;
     points += cloud.value().size();
     if (o.json)
@@ -134,6 +135,7 @@ void run_decompress(const DecompressOptions& o) {
   sw.lap_ms();
   if (!o.output.empty()) {
     throw_if_error(io::write_cloud(files.staged(o.output), cloud));
+    note_fields_not_written(o.output, cloud);
     const std::string ext = std::filesystem::path(o.output).extension().string();
     if (cloud.georef && (ext == ".bin" || ext == ".BIN"))
       std::fprintf(stderr, "note: %s holds float32 coordinates relative to the georeference origin (%.3f, %.3f, %.3f) m; "

@@ -306,9 +306,16 @@ class Builder {
     if (columns_) r_.cloud.column.push_back(column);
   }
 
-  /// A point whose coordinates are doubles (only in `wide` mode).
-  void add_wide(double x, double y, double z, float i = 0.0F, const Rgb& c = {}) {
-    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+  /// A point whose coordinates are doubles (only in `wide` mode), with its laser and column
+  /// as add_at records them.
+  void add_wide(double x, double y, double z, float i = 0.0F, const Rgb& c = {}, std::uint16_t ring = 0,
+                std::uint32_t column = 0) {
+    const bool finite = std::isfinite(x) && std::isfinite(y) && std::isfinite(z);
+    if (organised_ && (!finite || (x == 0.0 && y == 0.0 && z == 0.0))) {
+      ++r_.no_return_dropped;
+      return;
+    }
+    if (!finite) {
       ++r_.non_finite_dropped;
       return;
     }
@@ -316,6 +323,8 @@ class Builder {
     if (intensity_) r_.cloud.intensity.push_back(i);
     if (color_) r_.colors.push_back(c);
     if (time_) r_.cloud.time.push_back(next_time_);
+    if (rings_) r_.cloud.ring.push_back(ring);
+    if (columns_) r_.cloud.column.push_back(column);
   }
 
   [[nodiscard]] bool wide() const { return wide_; }

@@ -76,12 +76,16 @@ Status Builder::finish() {
       if (intensity_) r_.cloud.intensity[kept] = r_.cloud.intensity[i];
       if (color_) r_.colors[kept] = r_.colors[i];
       if (time_) r_.cloud.time[kept] = r_.cloud.time[i];
+      if (rings_) r_.cloud.ring[kept] = r_.cloud.ring[i];
+      if (columns_) r_.cloud.column[kept] = r_.cloud.column[i];
       ++kept;
     }
     r_.cloud.points.resize(kept);
     if (intensity_) r_.cloud.intensity.resize(kept);
     if (color_) r_.colors.resize(kept);
     if (time_) r_.cloud.time.resize(kept);
+    if (rings_) r_.cloud.ring.resize(kept);
+    if (columns_) r_.cloud.column.resize(kept);
     return {};
   }
   r_.cloud.points.resize(n);

@@ -321,31 +321,30 @@ struct LasField {
   std::uint16_t offset;
   std::uint16_t size;
   std::uint8_t mask;  // for one-byte fields; 0xFF otherwise
+  std::uint8_t plain = 0;  // a one-byte value that carries nothing either (return 1 of 1)
 };
 
 std::vector<LasField> dropped_fields_of(int format) {
   std::vector<LasField> f;
   if (format <= 5) {
-    f = {{"return number / number of returns", 14, 1, 0x3F},
+    f = {{"return number / number of returns", 14, 1, 0x3F, 0x09},
          {"scan direction / edge of flight line", 14, 1, 0xC0},
          {"classification", 15, 1, 0x1F},
          {"classification flags", 15, 1, 0xE0},
          {"scan angle", 16, 1, 0xFF},
          {"user data", 17, 1, 0xFF},
          {"point source id", 18, 2, 0xFF}};
-    if (format == 1 || format >= 3) f.push_back({"GPS time", 20, 8, 0xFF});
     if (format == 4) f.push_back({"waveform packet", 28, 29, 0xFF});
     if (format == 5) f.push_back({"waveform packet", 34, 29, 0xFF});
   } else {
-    f = {{"return number / number of returns", 14, 1, 0xFF},
+    f = {{"return number / number of returns", 14, 1, 0xFF, 0x11},
          {"classification flags", 15, 1, 0x0F},
          {"scanner channel", 15, 1, 0x30},
          {"scan direction / edge of flight line", 15, 1, 0xC0},
          {"classification", 16, 1, 0xFF},
          {"user data", 17, 1, 0xFF},
          {"scan angle", 18, 2, 0xFF},
-         {"point source id", 20, 2, 0xFF},
-         {"GPS time", 22, 8, 0xFF}};
+         {"point source id", 20, 2, 0xFF}};
     if (format == 8 || format == 10) f.push_back({"NIR", 36, 2, 0xFF});
     if (format == 9) f.push_back({"waveform packet", 30, 29, 0xFF});
     if (format == 10) f.push_back({"waveform packet", 38, 29, 0xFF});
@@ -561,6 +560,11 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   r.cloud.points.resize(n);
   r.cloud.intensity.resize(n);
   const int rgb_at = rgb_offset(format);
+  // GPS time (formats 1 and 3-10) is each point's time (Cloud::time), kept when the file
+  // holds one: a time other than zero, every one finite.
+  const int time_at = format == 1 || (format >= 3 && format <= 5) ? 20 : format >= 6 ? 22 : -1;
+  if (time_at >= 0) r.cloud.time.resize(n);
+  bool time_seen = false, time_finite = true;
   std::vector<std::array<std::uint16_t, 3>> rgb16;
   if (rgb_at >= 0) rgb16.resize(n);
   std::uint16_t rgb_max = 0;
@@ -584,6 +588,12 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
     worst2 = std::max(worst2, e2);
     r.cloud.points[i] = q;
     r.cloud.intensity[i] = static_cast<float>(le<std::uint16_t>(p + 12));
+    if (time_at >= 0) {
+      const double t = le<double>(p + time_at);
+      r.cloud.time[i] = t;
+      time_seen = time_seen || t != 0.0;
+      time_finite = time_finite && std::isfinite(t);
+    }
     if (rgb_at >= 0) {
       for (int c = 0; c < 3; ++c) {
         rgb16[i][static_cast<std::size_t>(c)] = le<std::uint16_t>(p + rgb_at + 2 * c);
@@ -592,7 +602,12 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
     }
     for (std::size_t k = 0; k < fields.size(); ++k) {
       const LasField& f = fields[k];
-      for (std::uint16_t b = 0; b < f.size; ++b) seen[k] |= static_cast<std::uint8_t>(p[f.offset + b] & f.mask);
+      if (f.size == 1) {
+        const std::uint8_t v = p[f.offset] & f.mask;
+        seen[k] |= static_cast<std::uint8_t>(v != f.plain ? v : 0);
+      } else {
+        for (std::uint16_t b = 0; b < f.size; ++b) seen[k] |= static_cast<std::uint8_t>(p[f.offset + b] & f.mask);
+      }
     }
     if (!extra_seen)
       for (std::size_t b = kMinRecord[format]; b < record_len; ++b) extra_seen = extra_seen || p[b] != 0;
@@ -618,6 +633,8 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   }
   for (std::size_t k = 0; k < fields.size(); ++k)
     if (seen[k] != 0) r.dropped_fields.emplace_back(fields[k].name);
+  if (time_seen && !time_finite) r.dropped_fields.emplace_back("GPS time (a value is not finite)");
+  if (!time_seen || !time_finite) r.cloud.time.clear();
   if (extra_seen) r.dropped_fields.emplace_back("extra bytes (" + std::to_string(record_len - kMinRecord[format]) + " a record)");
   r.encoding = "LAS 1." + std::to_string(minor) + ", point format " + std::to_string(format);
   r.cloud.georef = std::move(g);

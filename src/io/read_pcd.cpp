@@ -340,7 +340,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       Status rs = ring_of(done, ring_value, ring);
       if (!rs.ok()) return rs;
       out.next_time(time_value);
-      if (wide) out.add_wide(w[0], w[1], w[2], v[3], unpack_rgb(rgb_bits));
+      if (wide)
+        out.add_wide(w[0], w[1], w[2], v[3], unpack_rgb(rgb_bits), ring, static_cast<std::uint32_t>(done % row_width));
       else out.add_at(v[0], v[1], v[2], v[3], unpack_rgb(rgb_bits), ring, static_cast<std::uint32_t>(done % row_width));
       ++done;
     }
@@ -442,7 +443,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     if (wide)
       out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
                    load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),
-                   load_scalar(block + az.base + i * az.stride, fz->scalar, swap), in, c);
+                   load_scalar(block + az.base + i * az.stride, fz->scalar, swap), in, c, ring,
+                   static_cast<std::uint32_t>(i % row_width));
     else out.add_at(x, y, z, in, c, ring, static_cast<std::uint32_t>(i % row_width));
   }
   return out.finish();

@@ -227,7 +227,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   }
   if (vi == elements.size()) return bad_data(msg(path, "header has no 'vertex' element"));
   const PlyElement& vertex = elements[vi];
-  int ix = -1, iy = -1, iz = -1, ii = -1, ir = -1, ig = -1, ib = -1, il = -1;
+  int ix = -1, iy = -1, iz = -1, ii = -1, ir = -1, ig = -1, ib = -1, il = -1, it = -1;
   for (std::size_t k = 0; k < vertex.props.size(); ++k) {
     const PlyProperty& p = vertex.props[k];
     const int kk = static_cast<int>(k);
@@ -240,6 +240,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     else if (ig < 0 && name_is(p.name, {"green", "diffuse_green"})) ig = kk;
     else if (ib < 0 && name_is(p.name, {"blue", "diffuse_blue"})) ib = kk;
     else if (il < 0 && name_is(p.name, {"ring", "laser_id", "ring_id"})) il = kk;
+    else if (it < 0 && name_is(p.name, {"time", "t", "timestamp"})) it = kk;
   }
   if (ix < 0 || iy < 0 || iz < 0) {
     return bad_data(msg(path, std::string("vertex element has no '") +
@@ -252,9 +253,12 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                     vertex.props[static_cast<std::size_t>(iy)].type == Scalar::kF64 ||
                     vertex.props[static_cast<std::size_t>(iz)].type == Scalar::kF64;
   Builder out(r, ii >= 0, color, wide);
-  // A ring (laser) property gives each point's laser (not with double coordinates).
-  const bool rings = il >= 0 && !wide;
+  // A ring (laser) property gives each point's laser.
+  const bool rings = il >= 0;
   out.set_layout(rings, false, false);
+  // A time property gives each point's time (Cloud::time), seconds.
+  const bool times = it >= 0;
+  out.set_time(times);
   auto ring_of = [&](std::uint64_t item, double value, std::uint16_t& ring) -> Status {
     if (!(value >= 0.0 && value <= 65535.0) || value != std::floor(value))
       return bad_data(msg(path, "vertex " + std::to_string(item) + ": " + vertex.props[static_cast<std::size_t>(il)].name +
@@ -264,14 +268,15 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   };
   // A vertex parsed one property at a time (ascii, or binary with list properties).
   auto add_vertex = [&](std::uint64_t item, const float (&v)[4], const double (&w)[3], const double (&c)[3],
-                        double lv) -> Status {
+                        double lv, double tv) -> Status {
+    out.next_time(tv);
     std::uint16_t ring = 0;
     if (rings) {
       Status rs = ring_of(item, lv, ring);
       if (!rs.ok()) return rs;
     }
     const Rgb rgb{to_u8(c[0]), to_u8(c[1]), to_u8(c[2])};
-    if (wide) out.add_wide(w[0], w[1], w[2], v[3], rgb);
+    if (wide) out.add_wide(w[0], w[1], w[2], v[3], rgb, ring);
     else out.add_at(v[0], v[1], v[2], v[3], rgb, ring, 0);
     return {};
   };
@@ -332,7 +337,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
       double w[3] = {0.0, 0.0, 0.0};
       double c[3] = {0.0, 0.0, 0.0};
-      double lv = 0.0;
+      double lv = 0.0, tv = 0.0;
       for (std::size_t k = 0; k < nprops; ++k) {
         const PlyProperty& p = vertex.props[k];
         if (!tc.next(b, e)) {
@@ -363,10 +368,11 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (color && kk == ig) ok = parse_number(b, e, c[1]);
         else if (color && kk == ib) ok = parse_number(b, e, c[2]);
         else if (rings && kk == il) ok = parse_number(b, e, lv);
+        else if (times && kk == it) ok = parse_number(b, e, tv);
         else ok = is_number(b, e);
         if (!ok) return not_number();
       }
-      Status added = add_vertex(item, v, w, c, lv);
+      Status added = add_vertex(item, v, w, c, lv, tv);
       if (!added.ok()) return added;
     }
     return out.finish();
@@ -461,10 +467,14 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         Status rs = ring_of(item, load_scalar(p + offsets[u], vertex.props[u].type, swap), ring);
         if (!rs.ok()) return rs;
       }
+      if (times) {
+        const auto u = static_cast<std::size_t>(it);
+        out.next_time(load_scalar(p + offsets[u], vertex.props[u].type, swap));
+      }
       if (wide)
         out.add_wide(load_scalar(p + offsets[static_cast<std::size_t>(ix)], sx, swap),
                      load_scalar(p + offsets[static_cast<std::size_t>(iy)], sy, swap),
-                     load_scalar(p + offsets[static_cast<std::size_t>(iz)], sz, swap), in, c);
+                     load_scalar(p + offsets[static_cast<std::size_t>(iz)], sz, swap), in, c, ring);
       else out.add_at(x, y, z, in, c, ring, 0);
     }
     return out.finish();
@@ -473,7 +483,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
     double w[3] = {0.0, 0.0, 0.0};
     double c[3] = {0.0, 0.0, 0.0};
-    double lv = 0.0;
+    double lv = 0.0, tv = 0.0;
     for (std::size_t k = 0; k < nprops; ++k) {
       const PlyProperty& p = vertex.props[k];
       const int kk = static_cast<int>(k);
@@ -491,6 +501,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       else if (color && kk == ig) ok = bc.scalar(p.type, c[1]);
       else if (color && kk == ib) ok = bc.scalar(p.type, c[2]);
       else if (rings && kk == il) ok = bc.scalar(p.type, lv);
+      else if (times && kk == it) ok = bc.scalar(p.type, tv);
       else ok = bc.skip(scalar_size(p.type));
       if (!ok) {
         return bad_data(msg(path, "truncated binary data: vertex " + std::to_string(item) + " of " +
@@ -498,7 +509,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                         bc.offset());
       }
     }
-    Status added = add_vertex(item, v, w, c, lv);
+    Status added = add_vertex(item, v, w, c, lv, tv);
     if (!added.ok()) return added;
   }
   return out.finish();

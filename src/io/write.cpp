@@ -116,6 +116,17 @@ class Bytes {
       text(cloud.intensity[i]);
     }
   }
+  /// " ring time" of point i as text, each when asked (no end of line).
+  void ring_time(const Cloud& cloud, std::size_t i, bool with_r, bool with_t) {
+    if (with_r) {
+      u8(' ');
+      text(static_cast<std::uint64_t>(cloud.ring[i]));
+    }
+    if (with_t) {
+      u8(' ');
+      text(cloud.time[i]);
+    }
+  }
   std::vector<std::uint8_t>& vec() { return b_; }
 
  private:
@@ -131,7 +142,9 @@ std::uint32_t pack_rgb(const std::array<std::uint8_t, 3>& c) {
 Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions& o, bool with_i,
                  bool with_c, const Georeference* g, std::vector<std::uint8_t>& out, std::size_t height = 1) {
   const std::size_t n = cloud.size();
-  const std::size_t point_size = (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0);
+  const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
+  const std::size_t point_size =
+      (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0) + (with_r ? 2 : 0) + (with_t ? 8 : 0);
   Bytes b(256 + n * point_size + (o.pcd_encoding == PcdEncoding::kAscii ? n * 40 : 0));
   std::string fields = "x y z", sizes = g != nullptr ? "8 8 8" : "4 4 4", types = "F F F", counts = "1 1 1";
   if (with_i) {
@@ -146,6 +159,18 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
     fields += " rgb";
     sizes += " 4";
     types += o.pcd_encoding == PcdEncoding::kAscii ? " U" : " F";
+    counts += " 1";
+  }
+  if (with_r) {  // the laser, as Velodyne's and Ouster's ROS drivers name it
+    fields += " ring";
+    sizes += " 2";
+    types += " U";
+    counts += " 1";
+  }
+  if (with_t) {
+    fields += " time";
+    sizes += " 8";
+    types += " F";
     counts += " 1";
   }
   // true coordinates: the viewpoint moves with the points (in the CRS's units when they are metres)
@@ -166,6 +191,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
           b.u8(' ');
           b.text(static_cast<std::uint64_t>(pack_rgb(o.colors[i])));
         }
+        b.ring_time(cloud, i, with_r, with_t);
         b.u8('\n');
       }
       break;
@@ -174,6 +200,8 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
         b.xyz(cloud, i, g);
         if (with_i) b.f32(cloud.intensity[i]);
         if (with_c) b.le(pack_rgb(o.colors[i]));
+        if (with_r) b.le(cloud.ring[i]);
+        if (with_t) b.f64(cloud.time[i]);
       }
       break;
     case PcdEncoding::kBinaryCompressed: {
@@ -195,6 +223,12 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
       }
       if (with_c) {
         for (std::size_t i = 0; i < n; ++i) raw.le(pack_rgb(o.colors[i]));
+      }
+      if (with_r) {
+        for (std::size_t i = 0; i < n; ++i) raw.le(cloud.ring[i]);
+      }
+      if (with_t) {
+        for (std::size_t i = 0; i < n; ++i) raw.f64(cloud.time[i]);
       }
       std::vector<std::uint8_t> comp;
       unsigned comp_size = 0;
@@ -225,6 +259,9 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
        "\nproperty " + coord + " x\nproperty " + coord + " y\nproperty " + coord + " z\n";
   if (with_i) h += "property float intensity\n";
   if (with_c) h += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
+  if (with_r) h += "property ushort ring\n";
+  if (with_t) h += "property double time\n";
   h += "end_header\n";
   b.str(h);
   for (std::size_t i = 0; i < n; ++i) {
@@ -236,6 +273,8 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
         b.u8(o.colors[i][1]);
         b.u8(o.colors[i][2]);
       }
+      if (with_r) b.le(cloud.ring[i]);
+      if (with_t) b.f64(cloud.time[i]);
     } else {
       b.text_point(cloud, i, with_i, g);
       if (with_c) {
@@ -244,6 +283,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
           b.text(static_cast<std::uint64_t>(o.colors[i][static_cast<std::size_t>(ch)]));
         }
       }
+      b.ring_time(cloud, i, with_r, with_t);
       b.u8('\n');
     }
   }
@@ -305,21 +345,24 @@ Status write_atomic(const std::string& path, const std::uint8_t* data, std::size
   return {};
 }
 
+/// The format a cloud is written as: options.format, else the one its extension names.
+StatusOr<Format> output_format(const std::string& path, const WriteOptions& options) {
+  if (options.format != Format::kAuto) return options.format;
+  const std::string ext = detail::extension_lower(path);
+  if (ext == ".pcd") return Format::kPcd;
+  if (ext == ".ply") return Format::kPly;
+  if (ext == ".bin") return Format::kKitti;
+  if (ext == ".xyz" || ext == ".txt" || ext == ".asc" || ext == ".csv") return Format::kXyz;
+  if (ext == ".las") return Format::kLas;
+  if (ext == ".laz") return invalid(path, "writing compressed LAS (.laz) is not supported: use .las");
+  return invalid(path, "cannot tell the output format from the extension '" + detail::printable(ext, 16) +
+                           "' (use .pcd, .ply, .bin, .xyz, .txt or .las)");
+}
+
 Status write_cloud_impl(const std::string& path, const Cloud& cloud, const WriteOptions& options) {
-  Format f = options.format;
-  if (f == Format::kAuto) {
-    const std::string ext = detail::extension_lower(path);
-    if (ext == ".pcd") f = Format::kPcd;
-    else if (ext == ".ply") f = Format::kPly;
-    else if (ext == ".bin") f = Format::kKitti;
-    else if (ext == ".xyz" || ext == ".txt" || ext == ".asc" || ext == ".csv") f = Format::kXyz;
-    else if (ext == ".las") f = Format::kLas;
-    else if (ext == ".laz") return invalid(path, "writing compressed LAS (.laz) is not supported: use .las");
-    else {
-      return invalid(path, "cannot tell the output format from the extension '" +
-                               detail::printable(ext, 16) + "' (use .pcd, .ply, .bin, .xyz, .txt or .las)");
-    }
-  }
+  const auto format = output_format(path, options);
+  if (!format.ok()) return format.status();
+  const Format f = format.value();
   if (!cloud.intensity.empty() && cloud.intensity.size() != cloud.points.size()) {
     return invalid(path, "cloud has " + std::to_string(cloud.intensity.size()) + " intensities for " +
                              std::to_string(cloud.points.size()) + " points");
@@ -357,12 +400,16 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
         grid.points.assign(at.size(), Eigen::Vector3f(nan, nan, nan));
         if (with_i) grid.intensity.assign(at.size(), 0.0F);
         if (with_c) go.colors.assign(at.size(), {0, 0, 0});
+        grid.ring.resize(at.size());  // a no-return pixel keeps its row as its laser
+        for (std::size_t k = 0; k < at.size(); ++k) grid.ring[k] = static_cast<std::uint16_t>(k / cloud.columns);
+        if (cloud.has_time()) grid.time.assign(at.size(), 0.0);
         for (std::size_t k = 0; k < at.size(); ++k) {
           if (at[k] < 0) continue;
           const auto i = static_cast<std::size_t>(at[k]);
           grid.points[k] = cloud.points[i];
           if (with_i) grid.intensity[k] = cloud.intensity[i];
           if (with_c) go.colors[k] = options.colors[i];
+          if (cloud.has_time()) grid.time[k] = cloud.time[i];
         }
         s = build_pcd(path, grid, go, with_i, with_c, g, bytes, cloud.rows);
       } else {
@@ -389,6 +436,20 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
 }
 
 }  // namespace
+
+std::vector<std::string> fields_not_written(const std::string& path, const Cloud& cloud, const WriteOptions& options) {
+  const auto format = output_format(path, options);
+  if (!format.ok()) return {};
+  const Format f = format.value();
+  std::vector<std::string> out;
+  const bool text_or_bin = f == Format::kKitti || f == Format::kBinXyz || f == Format::kXyz;
+  if (cloud.has_intensity() && (f == Format::kBinXyz || (!options.write_intensity && f != Format::kKitti)))
+    out.emplace_back("intensity");
+  if (cloud.has_rings() && (text_or_bin || f == Format::kLas)) out.emplace_back("ring");
+  if (cloud.has_time() && text_or_bin) out.emplace_back("time");
+  if ((cloud.has_rgb() || !options.colors.empty()) && text_or_bin) out.emplace_back("rgb");
+  return out;
+}
 
 Status write_file_atomic(const std::string& path, const std::vector<std::uint8_t>& bytes) {
   return write_atomic(path, bytes.data(), bytes.size());

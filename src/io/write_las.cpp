@@ -42,13 +42,15 @@ class Out {
   }
 };
 
-/// The largest power of ten not above the float32 spacing of `max_abs` metres: steps that
-/// keep every float32 position to within half a step.
+/// The smallest power of ten above the float32 spacing of `max_abs` metres: a step a float32
+/// position can hold (read back, a point lands within half an ulp of its step, so within half
+/// a step, which is what a reader needs to keep the file's resolution). A finer step would
+/// store digits that float32 coordinates do not have, and the file would not read back.
 double step_for(double max_abs) {
   const double ulp = std::max(static_cast<double>(std::nextafter(static_cast<float>(max_abs), INFINITY)) -
                                   static_cast<double>(static_cast<float>(max_abs)),
                               1e-9);
-  return std::pow(10.0, std::floor(std::log10(ulp)));
+  return std::pow(10.0, std::floor(std::log10(ulp)) + 1.0);
 }
 
 }  // namespace
@@ -62,8 +64,9 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   if (georef) g = *cloud.georef;
   else g = Georeference{};  // local coordinates, metres
 
+  const bool with_t = cloud.has_time();
   int minor = 2;
-  int format = with_c ? 2 : 0;
+  int format = with_t ? (with_c ? 3 : 1) : (with_c ? 2 : 0);
   if (g.is_las()) {
     minor = std::clamp<int>(g.las_version_minor, 2, 4);
     format = g.las_point_format;
@@ -72,6 +75,8 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
     if (format == 9) format = 6;
     if (format == 10) format = 8;
     if (format > las::kMaxFormat) format = with_c ? 2 : 0;
+    if (with_t && format == 0) format = 1;  // a format with GPS time for the points' times
+    if (with_t && format == 2) format = 3;
     if (format >= 6) minor = 4;
   }
   const int rgb_at = las::rgb_offset(format);
@@ -185,6 +190,7 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
       w.put_at<std::uint16_t>(at + 12, static_cast<std::uint16_t>(c));
     }
     w.b[at + 14] = format >= 6 ? 0x11 : 0x09;  // return 1 of 1
+    if (with_t) w.put_at<double>(at + (format >= 6 ? 22U : 20U), cloud.time[i]);
     if (rgb_at >= 0 && with_c)
       for (std::size_t c = 0; c < 3; ++c)
         w.put_at<std::uint16_t>(at + static_cast<std::size_t>(rgb_at) + 2 * c,

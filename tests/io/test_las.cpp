@@ -1,6 +1,7 @@
 // LAS reading and writing, georeferenced clouds (a double origin, the CRS's units), and
 // double-precision PCD/PLY/text in projected coordinates.
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -142,7 +143,10 @@ TEST(LasRead, AutzenIsInInternationalFeet) {
   // metres: the file spans 1177 ft = 359 m in x
   const Bounds b = compute_bounds(r.cloud);
   EXPECT_NEAR(b.max.x() - b.min.x(), (637179.22 - 636001.76) * 0.3048, 0.01);
-  EXPECT_TRUE(has_field(r, "GPS time"));
+  EXPECT_FALSE(has_field(r, "GPS time"));  // kept as each point's time
+  ASSERT_TRUE(r.cloud.has_time());
+  EXPECT_NE(*std::min_element(r.cloud.time.begin(), r.cloud.time.end()),
+            *std::max_element(r.cloud.time.begin(), r.cloud.time.end()));
   EXPECT_TRUE(has_field(r, "classification"));
   EXPECT_EQ(r.colors.size(), r.cloud.size());  // PDRF 3 has RGB
   ASSERT_TRUE(r.cloud.has_intensity());

@@ -1,6 +1,7 @@
 // Writing: bit-exact round trips in every writable format, colours,
 // determinism, atomicity, edge-case clouds and the PNG writer.
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -146,6 +147,87 @@ TEST(WriteRoundTrip, BitExactInEveryFormat) {
       }
     }
   }
+}
+
+// Every attribute a point carries (intensity, laser, time, colour) comes back from PCD (each
+// encoding) and PLY (binary and ascii); the formats that cannot hold one say so
+// (fields_not_written), and LAS keeps the time as GPS time.
+TEST(WriteRoundTrip, RingAndTimeAreKeptWhereTheFormatHoldsThem) {
+  Cloud cloud = tricky_cloud(true);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    cloud.ring.push_back(static_cast<std::uint16_t>((i * 13) % 70));
+    cloud.time.push_back(1.7e9 + 0.1 * static_cast<double>(i) + 1e-7);  // needs double precision
+  }
+  cloud.rgb = colours_for(cloud.size());
+  for (const Case& c : all_cases()) {
+    SCOPED_TRACE(c.name);
+    const auto dir = temp_dir(std::string("rt_attr_") + c.name);
+    const std::string path = (dir / c.file).string();
+    ASSERT_TRUE(write_cloud(path, cloud, c.options).ok());
+    ReadOptions ro;
+    if (c.options.format == Format::kBinXyz) ro.format = Format::kBinXyz;
+    auto r = read_cloud(path, ro);
+    ASSERT_TRUE(r.ok()) << r.status().to_string();
+    const Cloud& back = r.value().cloud;
+    const std::vector<std::string> missing = fields_not_written(path, cloud, c.options);
+    const bool pcd_or_ply = std::string(c.file) != "c.bin" && std::string(c.file) != "c.xyz" &&
+                            std::string(c.file) != "c.txt";
+    if (pcd_or_ply) {
+      EXPECT_TRUE(missing.empty());
+      ASSERT_TRUE(back.has_rings());
+      ASSERT_TRUE(back.has_time());
+      EXPECT_EQ(back.ring, cloud.ring);
+      for (std::size_t i = 0; i < cloud.size(); ++i) ASSERT_EQ(back.time[i], cloud.time[i]) << i;
+      EXPECT_EQ(r.value().colors, cloud.rgb);
+    } else {
+      // each attribute the file did not get is named, and none is read back
+      EXPECT_EQ(std::count(missing.begin(), missing.end(), "ring"), 1);
+      EXPECT_EQ(std::count(missing.begin(), missing.end(), "time"), 1);
+      EXPECT_EQ(std::count(missing.begin(), missing.end(), "rgb"), 1);
+      EXPECT_EQ(std::count(missing.begin(), missing.end(), "intensity"), c.keeps_intensity ? 0 : 1);
+      EXPECT_FALSE(back.has_rings());
+      EXPECT_FALSE(back.has_time());
+    }
+  }
+  // LAS: GPS time (format 3 with colours), no ring.
+  const std::string las = (temp_dir("rt_attr_las") / "c.las").string();
+  Cloud small = cloud;
+  for (std::size_t i = 0; i < small.size(); ++i)
+    small.points[i] = Eigen::Vector3f(0.25F * static_cast<float>(i), 3.0F - 0.5F * static_cast<float>(i % 7), 1.5F);
+  ASSERT_TRUE(write_cloud(las, small).ok());
+  EXPECT_EQ(fields_not_written(las, small), std::vector<std::string>{"ring"});
+  auto r = read_cloud(las);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_NE(r.value().encoding.find("point format 3"), std::string::npos) << r.value().encoding;
+  ASSERT_TRUE(r.value().cloud.has_time());
+  for (std::size_t i = 0; i < small.size(); ++i) ASSERT_EQ(r.value().cloud.time[i], small.time[i]) << i;
+  EXPECT_TRUE(r.value().dropped_fields.empty());
+}
+
+// An organised cloud written as an organised PCD keeps each point's laser and time; the
+// no-return pixels are not points when it is read back.
+TEST(WriteRoundTrip, OrganisedPcdKeepsRingAndTime) {
+  Cloud c;
+  c.rows = 3;
+  c.columns = 4;
+  for (std::uint32_t r = 0; r < 3; ++r)
+    for (std::uint32_t col = 0; col < 4; ++col) {
+      if ((r + col) % 3 == 0) continue;  // a no-return
+      c.points.emplace_back(1.0F + static_cast<float>(col), 0.5F * static_cast<float>(r), 2.0F);
+      c.ring.push_back(static_cast<std::uint16_t>(r));
+      c.column.push_back(col);
+      c.time.push_back(0.001 * (4 * r + col));
+    }
+  const std::string path = (temp_dir("rt_organised") / "o.pcd").string();
+  ASSERT_TRUE(write_cloud(path, c).ok());
+  auto r = read_cloud(path);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_EQ(r.value().cloud.rows, 3U);
+  EXPECT_EQ(r.value().cloud.size(), c.size());
+  EXPECT_EQ(r.value().no_return_dropped, 12U - c.size());
+  EXPECT_EQ(r.value().cloud.ring, c.ring);
+  EXPECT_EQ(r.value().cloud.column, c.column);
+  EXPECT_EQ(r.value().cloud.time, c.time);
 }
 
 TEST(WriteRoundTrip, ColoursArePreserved) {

@@ -121,6 +121,13 @@ struct WriteOptions {
 [[nodiscard]] Status write_cloud(const std::string& path, const Cloud& cloud,
                                  const WriteOptions& options = {});
 
+/// The per-point attributes of `cloud` ("intensity", "ring", "time", "rgb") that the format
+/// `path` is written in (options.format, else its extension) cannot hold: a KITTI `.bin`
+/// keeps the intensity only, an x y z `.bin` nothing, text the intensity, LAS everything but
+/// the ring; PCD and PLY keep them all. Empty when every one is written.
+[[nodiscard]] std::vector<std::string> fields_not_written(const std::string& path, const Cloud& cloud,
+                                                          const WriteOptions& options = {});
+
 /// Writes `bytes` to `path` atomically (temporary file + rename).
 [[nodiscard]] Status write_file_atomic(const std::string& path, const std::vector<std::uint8_t>& bytes);
 
