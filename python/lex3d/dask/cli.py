@@ -54,8 +54,11 @@ def _client(args):
     if args.workers < 1:
         raise CompressError(1, f"--workers must be at least 1, got {args.workers}")
     cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None)
-    return Client(cluster), cluster
+                           dashboard_address=":0")
+    client = Client(cluster)
+    if not args.no_progress:
+        print(f"lex3d-dask: a LocalCluster of {args.workers} workers; dashboard {client.dashboard_link}", file=sys.stderr)
+    return client, cluster
 
 
 def main(argv=None):
