@@ -18,7 +18,6 @@ Usage: PYTHONPATH=build/python/package /usr/bin/python3 bench/dask_scaling.py [-
 """
 
 import argparse
-import glob
 import os
 import pathlib
 import resource

@@ -1,6 +1,7 @@
 """Distributed compression: the driver (compress) and the work a worker does for one scan."""
 
 import hashlib
+import itertools
 import json
 import os
 import pickle
@@ -138,13 +139,6 @@ def _uses_words(options):
     return options.get("max_error") is None and options.get("target_bpp") is None
 
 
-def _same_file(a, b):
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.abspath(a) == os.path.abspath(b)
-
-
 class _Progress:
     """One line on stderr, redrawn: done/total, failures, rate."""
 
@@ -184,7 +178,6 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     scans = expand_inputs(inputs)
     n = len(scans)
     output = os.fspath(output)
-    outputs = [numbered_output(output, i, n) for i in range(n)]
     out_dir = os.path.dirname(output) or "."
     if not os.path.isdir(out_dir):
         raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
@@ -207,14 +200,29 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
         alphabet_bytes = None
     if words and alphabet_bytes is None:
         alphabet_path = os.fspath(save_alphabet) if save_alphabet else stem + ".lex3da"
-    # Every output checked against every input before any work: nothing is overwritten.
-    written_by_us = outputs + [manifest] + ([alphabet_path] if alphabet_bytes is None and words else [])
-    for out in written_by_us:
-        for src in scans + ([alphabet_path] if alphabet_bytes is not None and alphabet_path else []):
-            if os.path.exists(out) and _same_file(out, src):
-                raise CompressError(1, f"{out}: an output would overwrite the input {src}")
-    if len(set(map(os.path.abspath, written_by_us))) != len(written_by_us):
-        raise CompressError(1, f"{manifest}: two outputs share a name")
+    # Every output checked against every input (by file identity) before any work: nothing
+    # is overwritten. One stat a file; the identities are held only for this check.
+    inputs_seen = {}
+    for src in scans + ([alphabet_path] if alphabet_bytes is not None and alphabet_path else []):
+        try:
+            st = os.stat(src)
+            inputs_seen[(st.st_dev, st.st_ino)] = src
+        except OSError:
+            pass  # a missing scan is that scan's error, reported in the manifest
+    extra = [manifest] + ([alphabet_path] if alphabet_bytes is None and words else [])
+    extra_abs = {os.path.abspath(p) for p in extra}
+    if len(extra_abs) != len(extra):
+        raise CompressError(1, f"{manifest}: the manifest and the alphabet would share a name")
+    for i, out in enumerate(itertools.chain((numbered_output(output, i, n) for i in range(n)), extra)):
+        if i < n and os.path.abspath(out) in extra_abs:
+            raise CompressError(1, f"{out}: a scan's output and the manifest or alphabet share a name")
+        try:
+            st = os.stat(out)
+        except OSError:
+            continue
+        if (st.st_dev, st.st_ino) in inputs_seen:
+            raise CompressError(1, f"{out}: an output would overwrite the input {inputs_seen[(st.st_dev, st.st_ino)]}")
+    del inputs_seen
 
     job = uuid.uuid4().hex[:12]
     seed_kw = {} if seed is None else {"seed": seed}
@@ -264,8 +272,9 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
             submitted = 0
 
             def submit(i):
-                args = (i, scans[i], outputs[i], alphabet_ref, coding, job)
-                totals["task_bytes"] += len(pickle.dumps((scans[i], outputs[i], coding, job))) + 64
+                out = numbered_output(output, i, n)
+                args = (i, scans[i], out, alphabet_ref, coding, job)
+                totals["task_bytes"] += len(pickle.dumps((i, scans[i], out, coding, job)))
                 queue.add(client.submit(code_task, *args, key=f"lex3d-code-{job}-{i}", retries=2))
 
             # A window of scans in flight, the rows written in scan order as they complete:
