@@ -127,6 +127,15 @@ def run_command(*args):
                           timeout=300)
 
 
+def test_command_on_a_running_scheduler(client, tmp_path):
+    r = run_command("compress", SCANS[0], SCANS[1], "-o", str(tmp_path / "s.lex3dm"), "--max-error", "0.03",
+                    "--scheduler", client.scheduler.address, "--json")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["ok"] == 2 and summary["workers"] == 2
+    assert (tmp_path / "s_001.lex3dm").read_bytes() == lex3d.compress(SCANS[1], max_error=0.03)
+
+
 def test_command_exit_codes_and_messages(tmp_path):
     r = run_command("compress", SCANS[0], str(tmp_path / "missing.bin"), "-o", str(tmp_path / "c.lex3dm"),
                     "--max-error", "0.03", "--workers", "2", "--no-progress")

@@ -127,9 +127,22 @@ def code_task(index, path, output, alphabet, options, job):
                    dropped_attributes=info["dropped_attributes"], sha256=_sha256(data), written=written)
     row["cpu_s"] = time.process_time() - cpu0
     row["wall_s"] = time.perf_counter() - wall0
-    row["worker_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    row["worker_peak_rss_mb"] = _peak_rss_mb()
     row["pid"] = os.getpid()
     return row
+
+
+def _peak_rss_mb():
+    """This process's peak resident memory: VmHWM (of this process image; getrusage's
+    ru_maxrss also counts what the parent held when it forked the worker)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _uses_words(options):
