@@ -1,14 +1,14 @@
-// The Python module `lex3d`: the one-call API of lex3d/lex3d.hpp on numpy arrays and bytes.
-// Points are an (N, 3) float32 or float64 array (metres), intensity an optional (N,) array;
-// model and alphabet files are bytes. Bad arrays and undecodable data raise ValueError
-// with the library's one-line message.
+// The compiled part of the Python package `lex3d` (lex3d._lex3d, re-exported by
+// lex3d/__init__.py): the one-call API of lex3d/lex3d.hpp on numpy arrays, paths and bytes,
+// and the place database (place.cpp). Points are an (N, 3) float32 or float64 array (metres),
+// intensity an optional (N,) array; model and alphabet files are bytes. Bad arrays and
+// undecodable data raise ValueError, files that cannot be read OSError, with the library's
+// one-line message.
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include <cmath>
-#include <cstring>
 #include <optional>
 #include <string>
 #include <vector>
