@@ -290,12 +290,23 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                 totals["task_bytes"] += len(pickle.dumps((i, scans[i], out, coding, job)))
                 queue.add(client.submit(code_task, *args, key=f"lex3d-code-{job}-{i}", retries=2))
 
-            # A window of scans in flight, the rows written in scan order as they complete:
-            # the driver holds at most `window` rows, whatever the number of scans.
-            while submitted < n and submitted < window:
-                submit(submitted)
-                submitted += 1
+            # At most `window` scans in flight, the rows written in scan order as they
+            # complete; rows that wait for an earlier, slower scan are held, at most
+            # `reorder` of them (a slow scan stops new work only after that many): the driver's
+            # memory is bounded whatever the number of scans.
+            reorder = max(16 * window, 4096)
+            in_flight = 0
+
+            def top_up():
+                nonlocal submitted, in_flight
+                while submitted < n and in_flight < window and submitted - next_row < reorder:
+                    submit(submitted)
+                    submitted += 1
+                    in_flight += 1
+
+            top_up()
             for fut in queue:
+                in_flight -= 1
                 row = fut.result()
                 fut.release()
                 totals["result_bytes"] += len(pickle.dumps(row))
@@ -316,9 +327,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                 while next_row in pending:
                     mf.write(json.dumps(pending.pop(next_row)) + "\n")
                     next_row += 1
-                    if submitted < n:
-                        submit(submitted)
-                        submitted += 1
+                top_up()
                 bar.update(done, failed)
             mf.flush()
             os.fsync(mf.fileno())
