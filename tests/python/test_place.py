@@ -1,10 +1,11 @@
 """lex3d.PlaceDatabase: built from the sample scans, queried with a moved copy of one of
 them (the right scan and the inverse of the motion come back), saved and opened again with
-the same answers, scans given as arrays, paths and model bytes, and bad input as ValueError /
+the same answers (and the same bytes as `lex3d place build`), scans given as arrays, paths and model bytes, and bad input as ValueError /
 OSError with one line. Run by ctest (python.tests)."""
 
 import os
 import pathlib
+import subprocess
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ import pytest
 import lex3d
 
 SAMPLES = pathlib.Path(os.environ.get("LEX3D_SAMPLES", pathlib.Path(__file__).parents[2] / "samples"))
+CLI = os.environ.get("LEX3D_CLI")
 SCANS = [SAMPLES / "newer_college_00.bin", SAMPLES / "kitti00_000000.bin", SAMPLES / "room_scan1.pcd"]
 
 
@@ -135,3 +137,14 @@ def test_bad_input_raises_one_line(db, tmp_path):
     with pytest.raises(ValueError):
         db.add(b"\x00" * 40)  # not a model file
     assert len(db) == 3
+
+
+
+@pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
+def test_built_and_saved_as_the_command_builds_it(tmp_path):
+    alphabet = lex3d.learn_alphabet(SCANS[:2], iterations=40)
+    (tmp_path / "a.lex3da").write_bytes(alphabet)
+    subprocess.run([CLI, "place", "build", str(tmp_path / "cli.lex3dp"), *map(str, SCANS),
+                    "--alphabet", str(tmp_path / "a.lex3da")], check=True, capture_output=True)
+    lex3d.PlaceDatabase.build(SCANS, alphabet=alphabet).save(tmp_path / "py.lex3dp")
+    assert (tmp_path / "py.lex3dp").read_bytes() == (tmp_path / "cli.lex3dp").read_bytes()
