@@ -1,7 +1,7 @@
-"""lex3d.PlaceDatabase: built from the sample scans, queried with a moved copy of one of
-them (the right scan and the inverse of the motion come back), saved and opened again with
-the same answers (and the same bytes as `lex3d place build`), scans given as arrays, paths and model bytes, and bad input as ValueError /
-OSError with one line. Run by ctest (python.tests)."""
+"""lex3d.PlaceDatabase: built from the sample scans (the same bytes as `lex3d place build`),
+queried with a moved copy of one of them (the right scan and the inverse of the motion come
+back), saved and opened again with the same answers, scans given as arrays, paths and model
+bytes, and bad input as ValueError / OSError with one line. Run by ctest (python.tests)."""
 
 import os
 import pathlib
