@@ -6,6 +6,8 @@ bytes, and bad input as ValueError / OSError with one line. Run by ctest (python
 import os
 import pathlib
 import subprocess
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -148,3 +150,27 @@ def test_built_and_saved_as_the_command_builds_it(tmp_path):
                     "--alphabet", str(tmp_path / "a.lex3da")], check=True, capture_output=True)
     lex3d.PlaceDatabase.build(SCANS, alphabet=alphabet).save(tmp_path / "py.lex3dp")
     assert (tmp_path / "py.lex3dp").read_bytes() == (tmp_path / "cli.lex3dp").read_bytes()
+
+
+def test_a_query_lets_other_python_threads_run(db):
+    """The GIL is released while the query works: a ticking thread keeps ticking."""
+    ticks, stop = [], threading.Event()
+
+    def tick():
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.001)
+
+    query = moved(points_of(SCANS[1]), yaw_motion(5.0, [0.3, 0.0, 0.0]))
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    time.sleep(0.05)
+    t0 = time.perf_counter()
+    db.query(query, threads=1)
+    t1 = time.perf_counter()
+    stop.set()
+    ticker.join()
+    inside = [t0] + [t for t in ticks if t0 <= t <= t1] + [t1]
+    longest = max(b - a for a, b in zip(inside, inside[1:]))
+    assert t1 - t0 > 0.05
+    assert longest < 0.5 * (t1 - t0), (longest, t1 - t0)
