@@ -149,3 +149,16 @@ def test_command_exit_codes_and_messages(tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1
     r = run_command("compress", SCANS[0], "-o", SCANS[0], "--max-error", "0.03", "--workers", "1")
     assert r.returncode == 1 and "would overwrite the input" in r.stderr
+    r = run_command("compress", SCANS[0])
+    assert r.returncode == 1 and "-o/--output" in r.stderr
+
+
+def test_bad_options_and_alphabet_are_refused_before_any_work(client, tmp_path):
+    with pytest.raises(lex3d.dask.CompressError, match="max_error must be metres") as e:
+        lex3d.dask.compress(SCANS, tmp_path / "o.lex3dm", client=client, max_error=50.0)
+    assert e.value.code == 1
+    (tmp_path / "bad.lex3da").write_bytes(b"not an alphabet")
+    with pytest.raises(lex3d.dask.CompressError, match="bad.lex3da: alphabet: .*bad magic") as e:
+        lex3d.dask.compress(SCANS, tmp_path / "o.lex3dm", client=client, alphabet=tmp_path / "bad.lex3da")
+    assert e.value.code == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.lex3da"]

@@ -237,6 +237,20 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
             raise CompressError(1, f"{out}: an output would overwrite the input {inputs_seen[(st.st_dev, st.st_ino)]}")
     del inputs_seen
 
+    # The options, and an alphabet given, checked once here rather than failing every scan:
+    # an empty scan codes in well under a millisecond.
+    import numpy as np
+    empty = np.zeros((0, 3), np.float32)
+    try:
+        lex3d.compress(empty, **options)
+    except ValueError as e:
+        raise CompressError(1, str(e)) from None
+    if alphabet_bytes is not None:
+        try:
+            lex3d.compress(empty, alphabet=alphabet_bytes, **options)
+        except ValueError as e:
+            raise CompressError(2, f"{alphabet_path or 'alphabet'}: {e}") from None
+
     job = uuid.uuid4().hex[:12]
     seed_kw = {} if seed is None else {"seed": seed}
     wall0 = time.perf_counter()

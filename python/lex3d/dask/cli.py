@@ -15,10 +15,18 @@ import sys
 from ._compress import CompressError, compress
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with lex3d's exit code for a usage error (1; argparse's own 2 means bad data here)."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(1, f"{self.prog}: error: {message}\n")
+
+
 def _parser():
-    p = argparse.ArgumentParser(prog="python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
+    p = _Parser(prog="python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     c = sub.add_parser("compress", help="code scans with one shared alphabet on a Dask cluster")
     c.add_argument("inputs", nargs="+", help="scan files, folders of scans, or @LIST (one path a line)")
     c.add_argument("-o", "--output", required=True, help="OUT.lex3dm: OUT_000.lex3dm, ... for several scans")
