@@ -17,6 +17,7 @@ PACKAGES=(
   draco time python3-matplotlib
   libpcap-dev nlohmann-json3-dev
   python3-dev pybind11-dev python3-pytest
+  python3-distributed python3-dask
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

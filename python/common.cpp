@@ -1,0 +1,186 @@
+// Conversions shared by the Python module's files (common.hpp).
+
+#include "common.hpp"
+
+#include <cmath>
+#include <string_view>
+
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/io/io.hpp"
+#include "lex3d/residual/residual.hpp"
+
+namespace lex3d::python {
+
+std::string shape_of(const py::array& a) {
+  std::string s = "(";
+  for (py::ssize_t d = 0; d < a.ndim(); ++d) s += (d ? ", " : "") + std::to_string(a.shape(d));
+  return s + (a.ndim() == 1 ? ",)" : ")");
+}
+
+namespace {
+
+std::string dtype_of(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
+
+/// float32 or float64 (either byte order).
+bool is_float(const py::array& a) {
+  return a.dtype().kind() == 'f' && (a.dtype().itemsize() == 4 || a.dtype().itemsize() == 8);
+}
+
+template <typename T>
+void copy_points(const py::array& a, Cloud& cloud, const std::string& what) {
+  const auto v = py::array_t<T, py::array::forcecast>(a).template unchecked<2>();
+  const auto n = static_cast<std::size_t>(v.shape(0));
+  cloud.points.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto k = static_cast<py::ssize_t>(i);
+    const T x = v(k, 0), y = v(k, 1), z = v(k, 2);
+    if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z))
+      throw py::value_error(what + ": row " + std::to_string(i) + " is not finite (" + std::to_string(x) + ", " +
+                            std::to_string(y) + ", " + std::to_string(z) + ")");
+    cloud.points[i] = Eigen::Vector3f(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+  }
+}
+
+Cloud decode_model_file(const std::vector<std::uint8_t>& bytes, const std::vector<std::uint8_t>* alphabet,
+                        const std::string& what) {
+  StatusOr<Cloud> cloud = Status(ErrorCode::kBadData, "");
+  {
+    py::gil_scoped_release unlocked;
+    auto d = codec::decode_model(bytes, alphabet);
+    if (!d.ok()) {
+      cloud = d.status();
+    } else {
+      cloud = residual::decode_cloud(d.value());
+      if (cloud.ok()) cloud.value().T_cloud_sensor = d.value().T_cloud_sensor;  // the range image's viewpoint
+    }
+  }
+  if (!cloud.ok()) {
+    const Status& st = cloud.status();
+    raise(Status(st.code(), what + ": " + st.message() +
+                                (st.code() == ErrorCode::kInvalidArgument ? " (give its alphabet)" : ""),
+                 st.offset()));
+  }
+  return std::move(cloud).value();
+}
+
+}  // namespace
+
+Cloud to_cloud(const py::handle& points_obj, const py::object& intensity_obj, const std::string& what) {
+  if (!py::isinstance<py::array>(points_obj))
+    throw py::value_error(what + " must be a numpy array of shape (N, 3), got " +
+                          py::str(py::type::of(points_obj)).cast<std::string>());
+  const auto points = py::reinterpret_borrow<py::array>(points_obj);
+  if (points.ndim() != 2 || points.shape(1) != 3)
+    throw py::value_error(what + " must have shape (N, 3), got " + shape_of(points));
+  if (!is_float(points)) throw py::value_error(what + " must be float32 or float64, got " + dtype_of(points));
+  Cloud cloud;
+  if (points.dtype().itemsize() == 4) copy_points<float>(points, cloud, what);
+  else copy_points<double>(points, cloud, what);
+  if (!intensity_obj.is_none()) {
+    const std::string iwhat = what == "points" ? "intensity" : what + " intensity";
+    if (!py::isinstance<py::array>(intensity_obj)) throw py::value_error(iwhat + " must be a numpy array of shape (N,)");
+    const auto in = py::reinterpret_borrow<py::array>(intensity_obj);
+    if (in.ndim() != 1 || static_cast<std::size_t>(in.shape(0)) != cloud.size())
+      throw py::value_error(iwhat + " must have shape (" + std::to_string(cloud.size()) + ",), got " + shape_of(in));
+    if (!is_float(in)) throw py::value_error(iwhat + " must be float32 or float64, got " + dtype_of(in));
+    const auto v = py::array_t<float, py::array::forcecast>(in).unchecked<1>();
+    cloud.intensity.resize(cloud.size());
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const float x = v(static_cast<py::ssize_t>(i));
+      if (!std::isfinite(x)) throw py::value_error(iwhat + ": value " + std::to_string(i) + " is not finite");
+      cloud.intensity[i] = x;
+    }
+  }
+  return cloud;
+}
+
+bool is_path(const py::handle& obj) {
+  if (py::isinstance<py::str>(obj)) return true;
+  return py::hasattr(obj, "__fspath__");
+}
+
+std::string path_of(const py::handle& obj) {
+  const py::object p = py::module_::import("os").attr("fspath")(obj);
+  if (!py::isinstance<py::str>(p)) throw py::value_error("a path must be a str, got bytes");
+  return p.cast<std::string>();
+}
+
+Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what) {
+  if (py::isinstance<py::bytes>(scan)) return decode_model_file(to_vector(py::reinterpret_borrow<py::bytes>(scan)), alphabet, what);
+  if (!is_path(scan)) return to_cloud(scan, py::none(), what);
+  const std::string path = path_of(scan);
+  std::string ext = path.size() >= 7 ? path.substr(path.size() - 7) : "";
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".lex3dm") {
+    auto bytes = io::read_file(path);
+    if (!bytes.ok()) raise(bytes.status());
+    return decode_model_file(bytes.value(), alphabet, path);
+  }
+  StatusOr<io::ReadResult> r = Status(ErrorCode::kBadData, "");
+  {
+    py::gil_scoped_release unlocked;
+    r = io::read_cloud(path);
+  }
+  if (!r.ok()) raise(r.status());
+  // never drop silently: what the file holds that lex3d does not keep, and what the reader noticed
+  if (!r.value().dropped_fields.empty()) {
+    std::string list;
+    for (const auto& f : r.value().dropped_fields) list += (list.empty() ? "" : ", ") + f;
+    warn(path + ": fields not kept (lex3d keeps x y z, intensity, ring, time and colour): " + list);
+  }
+  for (const auto& n : r.value().notes) warn(path + ": " + n);
+  return std::move(r.value().cloud);
+}
+
+std::vector<std::uint8_t> to_vector(const py::bytes& b) {
+  const std::string_view s = b;  // pybind11 >= 2.6
+  return {s.begin(), s.end()};
+}
+
+py::bytes to_bytes(const std::vector<std::uint8_t>& v) { return {reinterpret_cast<const char*>(v.data()), v.size()}; }
+
+void raise(const Status& st) {
+  if (st.code() == ErrorCode::kIoError) {
+    PyErr_SetString(PyExc_OSError, st.to_string().c_str());
+    throw py::error_already_set();
+  }
+  throw py::value_error(st.to_string());
+}
+
+Pose to_pose(const py::handle& obj, const std::string& what) {
+  if (!py::isinstance<py::array>(obj)) throw py::value_error(what + " must be a 4x4 numpy array");
+  const auto a = py::reinterpret_borrow<py::array>(obj);
+  if (a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4 || !is_float(a))
+    throw py::value_error(what + " must be a 4x4 float array, got " + shape_of(a) + " " + dtype_of(a));
+  const auto v = py::array_t<double, py::array::forcecast>(a).unchecked<2>();
+  Eigen::Matrix4d m;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) {
+      m(r, c) = v(r, c);
+      if (!std::isfinite(m(r, c))) throw py::value_error(what + " is not finite");
+    }
+  const Eigen::Matrix3d R = m.topLeftCorner<3, 3>();
+  if ((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 || R.determinant() < 0.0 ||
+      (m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-9)
+    throw py::value_error(what + " is not a rigid transform (rotation orthonormal within 1e-3, last row 0 0 0 1)");
+  Pose T = Pose::Identity();
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  T.linear() = svd.matrixU() * svd.matrixV().transpose();  // re-orthonormalised
+  T.translation() = m.topRightCorner<3, 1>();
+  return T;
+}
+
+py::array_t<double> from_pose(const Pose& T) {
+  py::array_t<double> out({py::ssize_t{4}, py::ssize_t{4}});
+  auto w = out.mutable_unchecked<2>();
+  const Eigen::Matrix4d m = T.matrix();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) w(r, c) = m(r, c);
+  return out;
+}
+
+void warn(const std::string& message) {
+  if (PyErr_WarnEx(PyExc_UserWarning, message.c_str(), 1) != 0) throw py::error_already_set();
+}
+
+}  // namespace lex3d::python

@@ -1,0 +1,49 @@
+#pragma once
+// Conversions shared by the Python module's files: numpy arrays, bytes and paths to lex3d
+// clouds, and library errors to Python exceptions with the library's one-line message.
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lex3d/core/cloud.hpp"
+#include "lex3d/core/status.hpp"
+
+namespace lex3d::python {
+
+namespace py = pybind11;
+
+std::string shape_of(const py::array& a);
+
+/// An (N, 3) float array (and optional (N,) intensity) as a Cloud; ValueError naming
+/// `what` and what is wrong otherwise.
+Cloud to_cloud(const py::handle& points, const py::object& intensity, const std::string& what);
+
+/// A scan given as an (N, 3) float array, a path (str or os.PathLike: any point cloud
+/// format lex3d reads, or a .lex3dm model file) or the bytes of a model file. `alphabet`:
+/// the alphabet file a model references (may be null). A file's notes and the fields it
+/// drops become UserWarnings naming the file.
+Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what);
+
+/// True for str and os.PathLike objects.
+bool is_path(const py::handle& obj);
+std::string path_of(const py::handle& obj);
+
+std::vector<std::uint8_t> to_vector(const py::bytes& b);
+py::bytes to_bytes(const std::vector<std::uint8_t>& v);
+
+/// A non-ok Status as a Python exception: OSError for I/O, ValueError otherwise.
+[[noreturn]] void raise(const Status& st);
+/// A 4x4 float array as a rigid transform (ValueError naming `what` when it is not one).
+Pose to_pose(const py::handle& m, const std::string& what);
+py::array_t<double> from_pose(const Pose& T);
+
+/// A UserWarning; throws error_already_set when warnings are errors.
+void warn(const std::string& message);
+
+void bind_place(py::module_& m);
+
+}  // namespace lex3d::python

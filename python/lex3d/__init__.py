@@ -1,0 +1,14 @@
+"""lex3d: compress lidar scans with a learned alphabet of local 3D structures and a
+bounded-error residual layer, and recognise places from the compressed form.
+
+    data = lex3d.compress(points, max_error=0.014)   # points: (N, 3) float32/float64, metres
+    back = lex3d.decompress(data)                    # (M, 3) float32
+    db = lex3d.PlaceDatabase.open("map.lex3dp")      # db.query(points) -> matches
+
+The bytes are those `lex3d compress` writes for the same settings (formats/model.md).
+lex3d.dask (imported on its own) runs the same work on a Dask cluster.
+"""
+
+from ._lex3d import PlaceDatabase, __version__, compress, decompress, learn_alphabet
+
+__all__ = ["compress", "decompress", "learn_alphabet", "PlaceDatabase", "__version__"]

@@ -1,0 +1,385 @@
+"""Distributed compression: the driver (compress) and the work a worker does for one scan."""
+
+import hashlib
+import itertools
+import json
+import os
+import pickle
+import resource
+import sys
+import time
+import uuid
+import warnings
+
+# Point cloud files a folder is searched for (pose lists, READMEs and times.txt are not scans).
+SCAN_EXTENSIONS = (".bin", ".pcd", ".ply", ".las", ".xyz", ".3d", ".pcap")
+
+
+class CompressError(Exception):
+    """A job that cannot start (bad arguments, inputs or outputs): `code` is the exit code
+    (1 usage, 2 bad data, 3 I/O) and the message one line naming what is wrong."""
+
+    def __init__(self, code, message):
+        super().__init__(message)
+        self.code = code
+
+
+def expand_inputs(items):
+    """The scans of `items`, in order: a file is itself, a folder its point cloud files sorted
+    by name, `@LIST` the paths in LIST (one a line, relative to LIST's folder; # comments)."""
+    scans = []
+    for item in items:
+        item = os.fspath(item)
+        if item.startswith("@"):
+            listing = item[1:]
+            try:
+                with open(listing, encoding="utf-8") as f:
+                    lines = f.read().splitlines()
+            except OSError as e:
+                raise CompressError(3, f"{listing}: cannot read the file list: {e.strerror}") from None
+            base = os.path.dirname(listing)
+            for line in lines:
+                line = line.strip()
+                if line and not line.startswith("#"):
+                    scans.append(os.path.join(base, line))
+        elif os.path.isdir(item):
+            found = sorted(e.path for e in os.scandir(item)
+                           if e.is_file() and os.path.splitext(e.name)[1].lower() in SCAN_EXTENSIONS)
+            if not found:
+                raise CompressError(2, f"{item}: a folder with no point cloud files ({', '.join(SCAN_EXTENSIONS)})")
+            scans.extend(found)
+        else:
+            scans.append(item)
+    if not scans:
+        raise CompressError(1, "no scans given")
+    return scans
+
+
+def numbered_output(output, index, count):
+    """OUT for one scan; OUT's stem + "_<index>" (3 digits at least) + extension for several,
+    as `lex3d compress` names its files."""
+    if count <= 1:
+        return output
+    head, tail = os.path.split(output)
+    stem, ext = os.path.splitext(tail)
+    return os.path.join(head, f"{stem}_{index:03d}{ext}")
+
+
+def _sha256(data):
+    return hashlib.sha256(data).hexdigest()
+
+
+def _temporary_name(path, job):
+    head, tail = os.path.split(path)
+    return os.path.join(head, f".{tail}.lex3d-dask-{job}-{os.getpid()}.tmp")
+
+
+def write_once(path, data, job):
+    """Writes `data` to `path` through a temporary file in the same folder and a rename, so
+    `path` is never partial. A file already there with the same bytes (a retried scan) is
+    left alone: returns False then, True when written."""
+    try:
+        with open(path, "rb") as f:
+            if f.read() == data:
+                return False
+    except OSError:
+        pass
+    tmp = _temporary_name(path, job)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return True
+
+
+def learn_task(paths, iterations, seed_kw, threads):
+    """On a worker: the alphabet file (bytes) learned on `paths`, as `lex3d learn`."""
+    import lex3d
+    return lex3d.learn_alphabet(list(paths), iterations=iterations, threads=threads, **seed_kw)
+
+
+def code_task(index, path, output, alphabet, options, job):
+    """On a worker: codes one scan into `output` and returns its manifest row. A scan that
+    cannot be read or coded gives a row with status "error" and the one-line message."""
+    import lex3d
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    row = {"index": index, "scan": path, "file": output}
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            data, info = lex3d.compress(path, alphabet=alphabet, report=True, **options)
+        row["notes"] = [str(w.message) for w in caught]
+        written = write_once(output, data, job)
+    except (ValueError, OSError) as e:
+        row.update(status="error", error=str(e))
+    else:
+        row.update(status="ok", bytes=info["bytes"], points=info["points"],
+                   bits_per_point=info["bits_per_point"], max_error=info["max_error"],
+                   words=info["words"], attributes=info["attributes"],
+                   dropped_attributes=info["dropped_attributes"], sha256=_sha256(data), written=written)
+    row["cpu_s"] = time.process_time() - cpu0
+    row["wall_s"] = time.perf_counter() - wall0
+    row["worker_peak_rss_mb"] = _peak_rss_mb()
+    row["pid"] = os.getpid()
+    return row
+
+
+def _peak_rss_mb():
+    """This process's peak resident memory: VmHWM (of this process image; getrusage's
+    ru_maxrss also counts what the parent held when it forked the worker)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _uses_words(options):
+    words = options.get("words")
+    if words is not None:
+        return words != "off"
+    return options.get("max_error") is None and options.get("target_bpp") is None
+
+
+class _Progress:
+    """One line on stderr, redrawn: done/total, failures, rate."""
+
+    def __init__(self, total, enabled):
+        self.total, self.enabled, self.start = total, enabled, time.perf_counter()
+        self.last = 0.0
+
+    def update(self, done, failed, final=False):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if not final and now - self.last < 0.2:
+            return
+        self.last = now
+        width = 30
+        filled = int(width * done / max(1, self.total))
+        rate = done / max(1e-9, now - self.start)
+        sys.stderr.write(f"\rcoding [{'#' * filled}{'.' * (width - filled)}] {done}/{self.total}"
+                         f" {rate:.1f} scans/s" + (f", {failed} failed" if failed else "") + ("\n" if final else ""))
+        sys.stderr.flush()
+
+
+def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn_scans=5,
+             iterations=400, seed=None, manifest=None, progress=False, window=None, **options):
+    """Codes every scan of `inputs` (expand_inputs) on the cluster of `client` into OUT_000,
+    OUT_001, ... (numbered_output) and writes the manifest; returns the summary (a dict).
+
+    alphabet: an alphabet file (path or bytes) to reuse; otherwise, when words are used, one is
+    learned on `learn_scans` evenly spaced scans on one worker and written to `save_alphabet`
+    (default: OUT's stem + ".lex3da"). options: those of lex3d.compress (max_error, target_bpp,
+    words, layer_coding, keep_all_points, word_radius, threads). A scan that fails is named in
+    the manifest and the summary; the others complete. Raises CompressError when the job
+    cannot start."""
+    import lex3d
+    from distributed import as_completed
+
+    scans = expand_inputs(inputs)
+    n = len(scans)
+    output = os.fspath(output)
+    out_dir = os.path.dirname(output) or "."
+    if not os.path.isdir(out_dir):
+        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
+    stem = os.path.splitext(output)[0]
+    manifest = os.fspath(manifest) if manifest else stem + ".manifest.jsonl"
+    words = _uses_words(options)
+    if alphabet is not None and not words:
+        raise CompressError(1, "words off uses no alphabet: drop --alphabet (or give --words on)")
+    alphabet_path = None
+    if isinstance(alphabet, (bytes, bytearray)):
+        alphabet_bytes = bytes(alphabet)
+    elif alphabet is not None:
+        alphabet_path = os.fspath(alphabet)
+        try:
+            with open(alphabet_path, "rb") as f:
+                alphabet_bytes = f.read()
+        except OSError as e:
+            raise CompressError(2, f"{alphabet_path}: cannot read the alphabet: {e.strerror}") from None
+    else:
+        alphabet_bytes = None
+    if words and alphabet_bytes is None:
+        alphabet_path = os.fspath(save_alphabet) if save_alphabet else stem + ".lex3da"
+    # Every output checked against every input (by file identity) before any work: nothing
+    # is overwritten. One stat a file; the identities are held only for this check.
+    inputs_seen = {}
+    for src in scans + ([alphabet_path] if alphabet_bytes is not None and alphabet_path else []):
+        try:
+            st = os.stat(src)
+            inputs_seen[(st.st_dev, st.st_ino)] = src
+        except OSError:
+            pass  # a missing scan is that scan's error, reported in the manifest
+    extra = [manifest] + ([alphabet_path] if alphabet_bytes is None and words else [])
+    extra_abs = {os.path.abspath(p) for p in extra}
+    if len(extra_abs) != len(extra):
+        raise CompressError(1, f"{manifest}: the manifest and the alphabet would share a name")
+    for i, out in enumerate(itertools.chain((numbered_output(output, i, n) for i in range(n)), extra)):
+        if i < n and os.path.abspath(out) in extra_abs:
+            raise CompressError(1, f"{out}: a scan's output and the manifest or alphabet share a name")
+        try:
+            st = os.stat(out)
+        except OSError:
+            continue
+        if (st.st_dev, st.st_ino) in inputs_seen:
+            raise CompressError(1, f"{out}: an output would overwrite the input {inputs_seen[(st.st_dev, st.st_ino)]}")
+    del inputs_seen
+
+    # The options, and an alphabet given, checked once here rather than failing every scan:
+    # an empty scan codes in well under a millisecond.
+    import numpy as np
+    empty = np.zeros((0, 3), np.float32)
+    try:
+        lex3d.compress(empty, **options)
+    except ValueError as e:
+        raise CompressError(1, str(e)) from None
+    if alphabet_bytes is not None:
+        try:
+            lex3d.compress(empty, alphabet=alphabet_bytes, **options)
+        except ValueError as e:
+            raise CompressError(2, f"{alphabet_path or 'alphabet'}: {e}") from None
+
+    job = uuid.uuid4().hex[:12]
+    seed_kw = {} if seed is None else {"seed": seed}
+    wall0 = time.perf_counter()
+    learn_s = 0.0
+    if words and alphabet_bytes is None:
+        k = min(n, max(1, learn_scans))
+        sample = [scans[j * n // k] for j in range(k)]
+        t = time.perf_counter()
+        fut = client.submit(learn_task, sample, iterations, seed_kw, options.get("threads", 1), pure=False)
+        try:
+            alphabet_bytes = fut.result()
+        except (ValueError, OSError) as e:
+            raise CompressError(2, f"learning the alphabet: {e}") from None
+        learn_s = time.perf_counter() - t
+        write_once(alphabet_path, alphabet_bytes, job)
+    coding = dict(options)
+    coding.setdefault("threads", 1)
+    if words:
+        coding.setdefault("iterations", iterations)
+        coding.update(seed_kw)
+    # The alphabet goes to every worker once, under its content hash; tasks refer to it.
+    alphabet_sha = _sha256(alphabet_bytes) if alphabet_bytes is not None else None
+    alphabet_ref = None
+    if alphabet_bytes is not None:
+        alphabet_ref = client.scatter({f"lex3d-alphabet-{alphabet_sha[:16]}": alphabet_bytes},
+                                      broadcast=True)[f"lex3d-alphabet-{alphabet_sha[:16]}"]
+    workers = len(client.scheduler_info().get("workers", {}))
+    slots = max(1, sum(client.nthreads().values()))
+    window = window or 4 * slots
+
+    header = {"lex3d": lex3d.__version__, "scans": n, "alphabet": alphabet_path,
+              "alphabet_sha256": alphabet_sha, "options": {k: v for k, v in coding.items()}}
+    tmp_manifest = _temporary_name(manifest, job)
+    bar = _Progress(n, progress)
+    done = failed = 0
+    next_row = 0
+    pending = {}
+    totals = {"bytes": 0, "points": 0, "cpu_s": 0.0, "task_bytes": 0, "result_bytes": 0,
+              "peak_rss_mb": 0.0, "rewritten": 0}
+    failures = []
+    cpu_per_scan = []
+    try:
+        with open(tmp_manifest, "w", encoding="utf-8") as mf:
+            mf.write(json.dumps(header) + "\n")
+            queue = as_completed()
+            submitted = 0
+
+            def submit(i):
+                out = numbered_output(output, i, n)
+                args = (i, scans[i], out, alphabet_ref, coding, job)
+                totals["task_bytes"] += len(pickle.dumps((i, scans[i], out, coding, job)))
+                queue.add(client.submit(code_task, *args, key=f"lex3d-code-{job}-{i}", retries=2))
+
+            # At most `window` scans in flight, the rows written in scan order as they
+            # complete; rows that wait for an earlier, slower scan are held, at most
+            # `reorder` of them (a slow scan stops new work only after that many): the driver's
+            # memory is bounded whatever the number of scans.
+            reorder = max(16 * window, 4096)
+            in_flight = 0
+
+            def top_up():
+                nonlocal submitted, in_flight
+                while submitted < n and in_flight < window and submitted - next_row < reorder:
+                    submit(submitted)
+                    submitted += 1
+                    in_flight += 1
+
+            top_up()
+            for fut in queue:
+                in_flight -= 1
+                row = fut.result()
+                fut.release()
+                totals["result_bytes"] += len(pickle.dumps(row))
+                pending[row["index"]] = row
+                done += 1
+                if row["status"] == "ok":
+                    totals["bytes"] += row["bytes"]
+                    totals["points"] += row["points"]
+                    totals["rewritten"] += 0 if row["written"] else 1
+                else:
+                    failed += 1
+                    if len(failures) < 20:
+                        failures.append(f"{row['scan']}: {row['error']}")
+                totals["cpu_s"] += row["cpu_s"]
+                if len(cpu_per_scan) < 100000:  # the median of the first 1e5: bounded memory
+                    cpu_per_scan.append(row["cpu_s"])
+                totals["peak_rss_mb"] = max(totals["peak_rss_mb"], row["worker_peak_rss_mb"])
+                while next_row in pending:
+                    mf.write(json.dumps(pending.pop(next_row)) + "\n")
+                    next_row += 1
+                top_up()
+                bar.update(done, failed)
+            mf.flush()
+            os.fsync(mf.fileno())
+        os.replace(tmp_manifest, manifest)
+    finally:
+        if done:
+            bar.update(done, failed, final=True)
+        _remove_temporaries(out_dir, job)
+        if os.path.exists(tmp_manifest):
+            os.unlink(tmp_manifest)
+    wall = time.perf_counter() - wall0
+    cpu_per_scan.sort()
+    return {
+        "scans": n, "ok": n - failed, "failed": failed, "failures": failures,
+        "manifest": manifest, "alphabet": alphabet_path, "alphabet_sha256": alphabet_sha,
+        "alphabet_bytes": len(alphabet_bytes) if alphabet_bytes is not None else 0,
+        "workers": workers, "threads": slots, "wall_s": wall, "learn_s": learn_s,
+        "scans_per_s": n / wall if wall > 0 else 0.0,
+        "points": totals["points"], "bytes": totals["bytes"],
+        "bits_per_point": 8.0 * totals["bytes"] / totals["points"] if totals["points"] else 0.0,
+        "cpu_s": totals["cpu_s"],
+        "cpu_s_median": cpu_per_scan[len(cpu_per_scan) // 2] if cpu_per_scan else 0.0,
+        "worker_peak_rss_mb": totals["peak_rss_mb"],
+        "bytes_to_workers": totals["task_bytes"] + workers * (len(alphabet_bytes) if alphabet_bytes else 0),
+        "bytes_from_workers": totals["result_bytes"],
+        "already_written": totals["rewritten"],
+    }
+
+
+def _remove_temporaries(folder, job):
+    """Temporary files of this job a dead worker may have left behind."""
+    marker = f".lex3d-dask-{job}-"
+    try:
+        for e in os.scandir(folder):
+            if marker in e.name and e.name.endswith(".tmp"):
+                try:
+                    os.unlink(e.path)
+                except OSError:
+                    pass
+    except OSError:
+        pass

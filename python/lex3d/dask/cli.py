@@ -1,0 +1,117 @@
+"""python3 -m lex3d.dask compress SCAN|FOLDER|@LIST... -o OUT.lex3dm [options]
+
+Codes the scans on a Dask cluster (--scheduler ADDRESS, or a LocalCluster of --workers
+processes on this machine), writes OUT_000.lex3dm ... (the files `lex3d compress SCANS
+--alphabet A -o OUT` writes), OUT.manifest.jsonl and, when it learns one, the alphabet.
+Exit codes: 0 every scan coded, 1 usage, 2 a scan (or more) could not be coded (the others
+are, and the manifest names the failed ones), 3 I/O (an output folder, the scheduler).
+"""
+
+import argparse
+import json
+import os
+import sys
+
+from ._compress import CompressError, compress
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with lex3d's exit code for a usage error (1; argparse's own 2 means bad data here)."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(1, f"{self.prog}: error: {message}\n")
+
+
+def _parser():
+    p = _Parser(prog="python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    c = sub.add_parser("compress", help="code scans with one shared alphabet on a Dask cluster")
+    c.add_argument("inputs", nargs="+", help="scan files, folders of scans, or @LIST (one path a line)")
+    c.add_argument("-o", "--output", required=True, help="OUT.lex3dm: OUT_000.lex3dm, ... for several scans")
+    c.add_argument("--alphabet", help="reuse this alphabet file (nothing is learned)")
+    c.add_argument("--save-alphabet", help="where the learned alphabet goes (default OUT.lex3da)")
+    c.add_argument("--learn-scans", type=int, default=5, help="learn on this many evenly spaced scans (default 5)")
+    c.add_argument("--iterations", type=int, default=400, help="candidate words drawn when learning")
+    c.add_argument("--seed", type=int, help="seed of the learner")
+    c.add_argument("--max-error", type=float, help="residual-layer bound, metres")
+    c.add_argument("--target-bpp", type=float, help="bits a point each file should fit")
+    c.add_argument("--words", choices=["on", "off", "auto"])
+    c.add_argument("--layer-coding", choices=["auto", "spherical", "voxel", "laser"], default="auto")
+    c.add_argument("--keep-all-points", action="store_true")
+    c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
+    c.add_argument("--manifest", help="default OUT.manifest.jsonl")
+    c.add_argument("--scheduler", help="address of a running scheduler (tcp://host:8786); default: a LocalCluster")
+    c.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worker processes of the LocalCluster (default: the CPUs), one thread each")
+    c.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the scheduler")
+    c.add_argument("--no-progress", action="store_true")
+    c.add_argument("--json", action="store_true", help="the summary as one JSON object on stdout")
+    return p
+
+
+def _client(args):
+    """A client of the scheduler given, or of a new LocalCluster on loopback; (client, cluster)."""
+    from distributed import Client, LocalCluster
+    if args.scheduler:
+        try:
+            return Client(args.scheduler, timeout=f"{args.timeout}s"), None
+        except (OSError, TimeoutError, ValueError) as e:
+            raise CompressError(3, f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None
+    if args.workers < 1:
+        raise CompressError(1, f"--workers must be at least 1, got {args.workers}")
+    cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=":0")
+    client = Client(cluster)
+    if not args.no_progress:
+        print(f"lex3d-dask: a LocalCluster of {args.workers} workers; dashboard {client.dashboard_link}", file=sys.stderr)
+    return client, cluster
+
+
+def main(argv=None):
+    args = _parser().parse_args(argv)
+    options = {"layer_coding": args.layer_coding, "threads": args.threads}
+    for name in ("max_error", "target_bpp", "words"):
+        if getattr(args, name) is not None:
+            options[name] = getattr(args, name)
+    if args.keep_all_points:
+        options["keep_all_points"] = True
+    client = cluster = None
+    try:
+        if args.max_error is not None and args.target_bpp is not None:
+            raise CompressError(1, "give --max-error or --target-bpp, not both")
+        client, cluster = _client(args)
+        summary = compress(args.inputs, args.output, client=client, alphabet=args.alphabet,
+                           save_alphabet=args.save_alphabet, learn_scans=args.learn_scans,
+                           iterations=args.iterations, seed=args.seed, manifest=args.manifest,
+                           progress=not args.no_progress and sys.stderr.isatty(), **options)
+    except CompressError as e:
+        print(f"lex3d-dask: {e}", file=sys.stderr)
+        return e.code
+    except KeyboardInterrupt:
+        print("lex3d-dask: interrupted (no partial output files; the manifest is not written)", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    for line in summary["failures"]:
+        print(f"lex3d-dask: {line}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        s = summary
+        print(f"{s['ok']} of {s['scans']} scans coded on {s['workers']} workers ({s['threads']} threads) in "
+              f"{s['wall_s']:.1f} s ({s['scans_per_s']:.2f} scans/s; learning {s['learn_s']:.1f} s): "
+              f"{s['points']} points, {s['bytes']} bytes, {s['bits_per_point']:.3f} bits a point")
+        print(f"  CPU {s['cpu_s']:.1f} s (median {s['cpu_s_median'] * 1000:.0f} ms a scan), worker peak memory "
+              f"{s['worker_peak_rss_mb']:.0f} MB, sent to workers {s['bytes_to_workers']} bytes, "
+              f"returned {s['bytes_from_workers']} bytes")
+        print(f"  manifest {s['manifest']}" + (f", alphabet {s['alphabet']}" if s["alphabet"] else ""))
+    if summary["failed"]:
+        print(f"lex3d-dask: {summary['failed']} of {summary['scans']} scans could not be coded "
+              f"(named in {summary['manifest']})", file=sys.stderr)
+        return 2
+    return 0
