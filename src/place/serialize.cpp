@@ -8,6 +8,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -1002,10 +1003,13 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
     db.set_alphabet(std::move(a).value());
     pos += 16 + ac.value().length;
   }
-  // 2.1: the recognition vocabulary, right after ALPH (or PHDR) when there is one.
-  if (major == 2 && minor >= 1 && limit - pos >= 16 && std::memcmp(bytes + pos, "VOCB", 4) == 0) {
-    auto vc = read_chunk(bytes, limit, pos);
-    if (!vc.ok()) return vc.status();
+  // 2.1: the recognition vocabulary, right after ALPH (or PHDR) when there is one. The chunk
+  // there is read whatever it is (CRC checked), so a damaged type cannot hide a vocabulary.
+  std::optional<StatusOr<ChunkView>> next;
+  if (major == 2 && minor >= 1 && pos < index_at) next = read_chunk(bytes, limit, pos);
+  if (next && !next->ok()) return next->status();
+  if (next && next->value().type == "VOCB") {
+    auto& vc = *next;
     auto v = decode_vocabulary(vc.value().payload, vc.value().length, pos + 12);
     if (!v.ok()) return v.status();
     if (h.descriptor_dim != 0 && v.value().descriptor_dim != h.descriptor_dim)
