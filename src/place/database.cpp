@@ -90,6 +90,10 @@ std::size_t PlaceDatabase::add(PlaceScan scan) {
     throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' was quantised to " +
                                 std::to_string(scan.descriptor_bits) + " bits, the database uses " +
                                 std::to_string(storage_.descriptor_bits));
+  if (vocabulary_ != nullptr && !scan.features.empty() && scan.descriptor_dim != vocabulary_->descriptor_dim)
+    throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' has descriptors of " +
+                                std::to_string(scan.descriptor_dim) + " values, the recognition vocabulary " +
+                                std::to_string(vocabulary_->descriptor_dim));
   if (!scan.features.empty()) descriptor_dim_ = scan.descriptor_dim;
   const auto index = static_cast<std::uint32_t>(size());
   std::uint32_t total = 0;

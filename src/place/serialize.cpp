@@ -697,7 +697,7 @@ PlaceFileWriter::Piece PlaceFileWriter::begin() {
   p.bytes.assign(kMagic, kMagic + 8);
   Writer h;
   h.u16(kMajor);
-  h.u16(kMinor);
+  h.u16(vocabulary_ != nullptr ? kMinor : 0);  // 2.0 when nothing of 2.1 is needed
   h.u32(0);
   p.bytes.insert(p.bytes.end(), h.b.begin(), h.b.end());
   const std::uint32_t hc = crc(p.bytes.data(), 16);
