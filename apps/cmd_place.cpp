@@ -983,7 +983,7 @@ void register_place(CLI::App& app) {
     s->add_option("--threads", o->params.threads, "Worker threads of a query")->check(CLI::Range(1, 64));
     s->add_option("--retrieval", o->retrieval,
                   "First stage: tfidf-alphabet (compression alphabet), tfidf or fabmap (recognition vocabulary); "
-                  "default: tfidf when the database has a vocabulary")
+                  "default: tfidf-alphabet")
         ->check(CLI::IsMember({"default", "tfidf-alphabet", "tfidf", "fabmap"}));
   };
   CLI::App* query = sub->add_subcommand("query", "Find the place of each scan in a database (one database load)");

@@ -131,7 +131,7 @@ TEST(PlaceVocabulary, RetrievalFindsTheSamePlaceWithEveryMethod) {
   plain.add(t[0]);
   EXPECT_THROW((void)plain.retrieve(t[0], 5, PlaceRetrieval::kTfidf, params), std::invalid_argument);
   EXPECT_EQ(plain.resolve(PlaceRetrieval::kDefault), PlaceRetrieval::kTfidfAlphabet);
-  EXPECT_EQ(db.resolve(PlaceRetrieval::kDefault), PlaceRetrieval::kTfidf);
+  EXPECT_EQ(db.resolve(PlaceRetrieval::kDefault), PlaceRetrieval::kTfidfAlphabet);
 }
 
 void expect_same(const PlaceDatabase& a, const PlaceDatabase& b, const std::vector<PlaceScan>& queries) {
