@@ -59,7 +59,19 @@ struct PlaceOptions {
   /// Up direction of the scans: auto (a scan's pose when given, else its points), poses,
   /// points (estimated even when a pose is given: eval measures the no-pose case so), none.
   std::string gravity = "auto";
+  std::string retrieval = "default";   // --retrieval
+  std::string vocabulary;              // --vocabulary FROM.lex3dp
+  int vocabulary_words = 0;            // --vocabulary-words N (0: none learned)
+  int vocabulary_scans = 1000;         // --vocabulary-scans
+  int list_retrieved = 0;              // --list-retrieved N
 };
+
+PlaceRetrieval parse_retrieval(const std::string& s) {
+  if (s == "tfidf-alphabet") return PlaceRetrieval::kTfidfAlphabet;
+  if (s == "tfidf") return PlaceRetrieval::kTfidf;
+  if (s == "fabmap") return PlaceRetrieval::kFabmap;
+  return PlaceRetrieval::kDefault;
+}
 
 ModelParams model_params() {
   ModelParams mp;
@@ -222,6 +234,23 @@ PlaceScan describe(Cloud cloud, const std::string& name, const Alphabet& alphabe
   return make_place_scan(s, alphabet, storage, mp.features.range, name);
 }
 
+PlaceVocabulary learn_place_vocabulary(const std::vector<PlaceScan>& train, int words) {
+  std::vector<const PlaceScan*> ptrs;
+  for (const auto& s : train) ptrs.push_back(&s);
+  VocabularyParams vp;
+  vp.words = words;
+  VocabularyStats vs;
+  try {
+    PlaceVocabulary v = learn_vocabulary(ptrs, vp, &vs);
+    std::fprintf(stderr, "recognition vocabulary: %zu leaves (%zu nodes) from %zu descriptors of %zu scans, "
+                 "%zu Chow-Liu edges, %.0f ms\n", vs.leaves, vs.nodes, vs.training_descriptors, vs.training_scans,
+                 vs.chow_liu_edges, vs.learn_ms);
+    return v;
+  } catch (const std::invalid_argument& e) {
+    throw CliError(2, std::string("cannot learn a recognition vocabulary: ") + e.what());
+  }
+}
+
 std::vector<PlaceScan> describe_all(std::size_t n, const GetScan& get, const std::vector<std::string>& names,
                                     const Alphabet& alphabet, const PlaceStorageParams& storage, double* prepare_ms,
                                     const std::string& gravity = "auto", std::vector<GravitySource>* sources = nullptr) {
@@ -265,7 +294,8 @@ void add_inputs(PlaceFileWriter& w, const PlaceInputs* inputs, const Alphabet& a
 // Writes a whole new database file (format 2.0) to a temporary name and renames it over
 // `path`: the stored scans of `from` copied as they are, then the inputs' scans.
 WriteStats write_new_db(const std::string& path, const PlaceStorageParams& storage, const Alphabet& alphabet,
-                        const PlaceDatabase* from, const PlaceInputs* inputs, const std::string& gravity = "auto") {
+                        const PlaceDatabase* from, const PlaceInputs* inputs, const std::string& gravity = "auto",
+                        std::shared_ptr<const PlaceVocabulary> vocabulary = nullptr) {
   const std::string tmp = io::temporary_path_for(path);
   auto f = io::PositionalFile::create_new(tmp);
   if (!f.ok()) throw CliError(3, f.status().to_string());
@@ -283,6 +313,10 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
   PlaceFileWriter w(storage, &alphabet, alphabet.descriptor_dim);
+  if (vocabulary != nullptr && vocabulary->descriptor_dim != alphabet.descriptor_dim)
+    throw CliError(2, "the recognition vocabulary's descriptors have " + std::to_string(vocabulary->descriptor_dim) +
+                          " values, the alphabet's " + std::to_string(alphabet.descriptor_dim));
+  w.set_vocabulary(std::move(vocabulary));
   put(w.begin());
   if (from != nullptr)
     for (std::size_t i = 0; i < from->stored_count(); ++i) {
@@ -376,7 +410,27 @@ void run_build(const PlaceOptions& o) {
   } else {
     alphabet = learn_on(inputs.size(), [&](std::size_t i) { return inputs.load(i); }, o.learn_scans, o.iterations);
   }
-  const WriteStats st = write_new_db(o.db, o.storage, alphabet, nullptr, &inputs, o.gravity);
+  std::shared_ptr<const PlaceVocabulary> vocabulary;
+  if (!o.vocabulary.empty()) {
+    vocabulary = read_db(o.vocabulary, false).vocabulary();
+    if (vocabulary == nullptr) throw CliError(2, o.vocabulary + ": has no recognition vocabulary (--vocabulary)");
+  } else if (o.vocabulary_words > 0) {
+    // Learned on the inputs' place features (evenly spaced, at most --vocabulary-scans), described
+    // here and again when written: only the training scans' features are held.
+    const std::size_t n = inputs.size(), k = std::min<std::size_t>(n, static_cast<std::size_t>(o.vocabulary_scans));
+    std::vector<PlaceScan> train;
+    ProgressBar bar("vocabulary scans");
+    for (std::size_t i = 0; i < k; ++i) {
+      PlaceScan s = describe(inputs.load(i * n / k), inputs.name(i * n / k), alphabet, o.storage, o.gravity);
+      s.coarse = RangeImage{};
+      s.dense_points.clear(), s.dense_normals.clear(), s.dense_index.clear(), s.pairs.clear();
+      train.push_back(std::move(s));
+      bar.update(static_cast<long>(i + 1), static_cast<long>(k), inputs.name(i * n / k));
+    }
+    bar.finish();
+    vocabulary = std::make_shared<const PlaceVocabulary>(learn_place_vocabulary(train, o.vocabulary_words));
+  }
+  const WriteStats st = write_new_db(o.db, o.storage, alphabet, nullptr, &inputs, o.gravity, vocabulary);
   print_write(o, st, alphabet.size(), "built from");
 }
 
@@ -397,7 +451,8 @@ void run_add(const PlaceOptions& o) {
   }
   if (fi.major < 2)
     std::fprintf(stderr, "note: %s is format %d.%d: rewritten as format 2.0\n", o.db.c_str(), fi.major, fi.minor);
-  print_write(o, write_new_db(o.db, db.storage(), db.alphabet(), &db, &inputs, o.gravity), db.alphabet().size(), "added");
+  print_write(o, write_new_db(o.db, db.storage(), db.alphabet(), &db, &inputs, o.gravity, db.vocabulary()),
+              db.alphabet().size(), "added");
 }
 
 void run_upgrade(const PlaceOptions& o) {
@@ -405,7 +460,7 @@ void run_upgrade(const PlaceOptions& o) {
   const std::string& out = o.inputs[0];
   check_output_path(out, {o.db});
   const PlaceDatabase db = read_db(o.db, false);
-  const WriteStats st = write_new_db(out, db.storage(), db.alphabet(), &db, nullptr);
+  const WriteStats st = write_new_db(out, db.storage(), db.alphabet(), &db, nullptr, "auto", db.vocabulary());
   if (o.json) {
     Json j;
     j.begin_object().value("scans", st.scans).value("bytes", st.bytes).value("from_major", db.file_info().major);
@@ -415,6 +470,15 @@ void run_upgrade(const PlaceOptions& o) {
     std::printf("%s: %zu scans, format %d.%d -> %s: format 2.0, %llu bytes\n", o.db.c_str(), st.scans,
                 db.file_info().major, db.file_info().minor, out.c_str(), static_cast<unsigned long long>(st.bytes));
   }
+}
+
+// The first stage asked for, checked against the database (a vocabulary method needs one).
+PlaceRetrieval retrieval_for(const PlaceOptions& o, const PlaceDatabase& db) {
+  const PlaceRetrieval r = parse_retrieval(o.retrieval);
+  if ((r == PlaceRetrieval::kTfidf || r == PlaceRetrieval::kFabmap) && !db.has_vocabulary())
+    throw CliError(1, "--retrieval " + o.retrieval + ": " + (o.db.empty() ? std::string("the database") : o.db) +
+                          " has no recognition vocabulary (build it with --vocabulary-words N or --vocabulary FILE)");
+  return r;
 }
 
 void pose_json(Json& j, const Pose& T) {
@@ -434,6 +498,7 @@ void run_query(const PlaceOptions& o) {
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
   p.max_distance = std::max(0.0, o.max_distance);
+  p.retrieval = retrieval_for(o, db);
   auto cpu_ms = [] { return 1000.0 * static_cast<double>(std::clock()) / CLOCKS_PER_SEC; };
   for (std::size_t qi = 0; qi < inputs.size(); ++qi) {
     Stopwatch sw;
@@ -457,6 +522,15 @@ void run_query(const PlaceOptions& o) {
       j.value("decode_ms", r.decode_ms).value("decoded", r.decoded).value("database_open_ms", open_ms).value("database_scans", db.size());
       // Process CPU time (all threads) of the two stages: what the wall times are on an idle machine.
       j.value("prepare_cpu_ms", c1 - c0).value("query_cpu_ms", c2 - c1);
+      j.value("retrieval", to_string(r.retrieval));
+      if (r.new_place_probability >= 0.0) j.value("new_place_probability", r.new_place_probability);
+      if (o.list_retrieved > 0) {
+        // The first stage's ranking (what verification would see with --candidates N).
+        const auto ranked = db.retrieve(scan, static_cast<std::size_t>(o.list_retrieved), p.retrieval, p);
+        j.begin_array("retrieved");
+        for (const auto& [s, v] : ranked) j.value({}, db.name(s));
+        j.end_array();
+      }
       j.begin_array("matches");
       for (std::size_t i = 0; i < k; ++i) {
         const PlaceMatch& m = r.matches[i];
@@ -583,6 +657,7 @@ void run_eval(const PlaceOptions& o) {
   Stopwatch sw;
   Alphabet alphabet;
   std::vector<PlaceScan> cached;
+  std::shared_ptr<const PlaceVocabulary> cached_vocabulary;
   if (!o.cache.empty() && !make_cache) {
     // The scans as a database stores them (a database of these scans, written by an earlier
     // eval with the same --cache): skips learning and feature extraction.
@@ -595,6 +670,7 @@ void run_eval(const PlaceOptions& o) {
       cached.push_back(std::move(s).value());
     }
     alphabet = c.alphabet();
+    cached_vocabulary = c.vocabulary();
   } else if (!o.alphabet.empty()) {
     auto bytes = io::read_file(o.alphabet);
     if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
@@ -615,9 +691,17 @@ void run_eval(const PlaceOptions& o) {
     from_points += g == GravitySource::kPoints ? 1 : 0;
     from_none += g == GravitySource::kNone ? 1 : 0;
   }
+  std::shared_ptr<const PlaceVocabulary> vocabulary = cached_vocabulary;
+  if (!o.vocabulary.empty()) {
+    vocabulary = read_db(o.vocabulary, false).vocabulary();
+    if (vocabulary == nullptr) throw CliError(2, o.vocabulary + ": has no recognition vocabulary (--vocabulary)");
+  } else if (vocabulary == nullptr && o.vocabulary_words > 0) {
+    vocabulary = std::make_shared<const PlaceVocabulary>(learn_place_vocabulary(scans, o.vocabulary_words));
+  }
   if (make_cache) {
     PlaceDatabase c(o.storage);
     c.set_alphabet(alphabet);
+    if (vocabulary != nullptr) c.set_vocabulary(*vocabulary);
     for (const auto& s : scans) c.add(s);
     throw_if_error(io::write_file_atomic(outs.staged(o.cache), c.save()));
   }
@@ -632,6 +716,8 @@ void run_eval(const PlaceOptions& o) {
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return times[a] < times[b]; });
   PlaceDatabase db(o.storage);
   db.set_alphabet(alphabet);
+  if (vocabulary != nullptr) db.set_vocabulary(*vocabulary);
+  p.retrieval = retrieval_for(o, db);
   std::vector<std::size_t> db_to_scan;
   std::size_t next = 0;
   std::vector<QueryRecord> recs;
@@ -890,6 +976,16 @@ void register_place(CLI::App& app) {
   build->add_option("--learn-scans", o->learn_scans, "Scans (evenly spaced) the alphabet is learned on")->check(CLI::Range(1, 100000));
   build->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
   build->add_option("--descriptor-bits", o->storage.descriptor_bits, "Bits a stored descriptor value: 4 or 8");
+  auto add_vocabulary = [&](CLI::App* s) {
+    auto* from = s->add_option("--vocabulary", o->vocabulary, "Use the recognition vocabulary of this place database");
+    s->add_option("--vocabulary-words", o->vocabulary_words,
+                  "Learn a recognition vocabulary of at most N leaf words on the scans' place features")
+        ->check(CLI::Range(2, 1 << 20))
+        ->excludes(from);
+    s->add_option("--vocabulary-scans", o->vocabulary_scans, "Scans (evenly spaced) the vocabulary is learned on at most")
+        ->check(CLI::Range(1, 10000000));
+  };
+  add_vocabulary(build);
   add_common(build, *o);
   build->callback([o] { run_build(*o); });
 
@@ -924,11 +1020,17 @@ void register_place(CLI::App& app) {
     s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
     s->add_option("--validation-points", o->params.validation_points, "Validation points a scan (steder2010: 100)")->check(CLI::Range(1, 4096));
     s->add_option("--threads", o->params.threads, "Worker threads of a query")->check(CLI::Range(1, 64));
+    s->add_option("--retrieval", o->retrieval,
+                  "First stage: tfidf-alphabet (compression alphabet), tfidf or fabmap (recognition vocabulary); "
+                  "default: tfidf-alphabet")
+        ->check(CLI::IsMember({"default", "tfidf-alphabet", "tfidf", "fabmap"}));
   };
   CLI::App* query = sub->add_subcommand("query", "Find the place of each scan in a database (one database load)");
   query->add_option("db", o->db, "Database file")->required();
   query->add_option("scans", o->inputs, "Query point clouds (or .lex3dm / .lex3dq files)")->required();
   query->add_option("--top", o->top, "Matches printed")->check(CLI::Range(1, 1000000));
+  query->add_option("--list-retrieved", o->list_retrieved, "With --json: the first stage's best N scans, in order (\"retrieved\")")
+      ->check(CLI::Range(1, 1000000));
   add_match(query);
   add_common(query, *o);
   query->get_option("--json")->description("Print one JSON object a scan (JSON Lines)");
@@ -945,6 +1047,7 @@ void register_place(CLI::App& app) {
   ev->add_option("--cache", o->cache, "Place database of the scans: read when it exists (no learning, no feature extraction), else written");
   ev->add_option("--dump", o->dump, "Write one line a query (best match, distances, scores, pose error) to this file");
   ev->add_option("--png", o->png, "Prefix of the PNGs written (PREFIX_confusion.png, PREFIX_pr.png)");
+  add_vocabulary(ev);
   add_match(ev);
   add_common(ev, *o);
   ev->get_option("--poses")->required();

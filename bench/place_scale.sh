@@ -19,7 +19,17 @@
 # coarse-image pixels); the base entries, and so the true revisits, are kept unmodified. A
 # copy shows its place from another frame, so a match to a copy of a base scan within 4 m is
 # a right place too; both counts are printed.
+# The base database carries a recognition vocabulary learned on its own scans
+# (--vocabulary-words 4096; the tree stops splitting where a child would get fewer than 2
+# descriptors). The first stage is then measured for each method (--retrieval tfidf-alphabet,
+# tfidf, fabmap): for every query with a true revisit, the rank among the first 50 retrieved
+# entries of (a) the first entry whose sensor lies within 8 m (a right place: an unmodified
+# base scan or a copy, which verification can confirm from its other frame), printed with the
+# rank a random order would give, and (b) the first entry of the nearest base scan (itself or
+# one of its copies); recall@K for K = 1...50, the retrieval time, and the final recall of the
+# whole query (8 candidates verified) per method. A PNG of recall@K goes to PNG_DIR when set.
 # Usage: bench/place_scale.sh [BUILD_DIR] [SIZES...]   (default: build, 100 1000 5000)
+#        PNG_DIR=dir bench/place_scale.sh ...   also writes dir/place_scale_recall.png
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${1:-$root/build}"
@@ -43,7 +53,9 @@ for i in "${!frames[@]}"; do
 done
 echo "base scans: ${#base[@]}, queries: ${#queries[@]}"
 t0=$(date +%s%N)
-"$build/lex3d" place build "$out/base.lex3dp" "${base[@]}" --poses "$out/base_poses.txt" --learn-scans 5 > "$out/build.txt"
+"$build/lex3d" place build "$out/base.lex3dp" "${base[@]}" --poses "$out/base_poses.txt" --learn-scans 5 \
+  --vocabulary-words 4096 > "$out/build.txt" 2> "$out/build_err.txt"
+grep -a "recognition vocabulary" "$out/build_err.txt" | tr '\r' '\n' | grep -a "recognition vocabulary" | tail -1
 echo "built base database in $(( ($(date +%s%N) - t0) / 1000000 )) ms: $(cat "$out/build.txt")"
 head -10 "$out/query_poses.txt" > "$out/query10_poses.txt"
 
@@ -129,7 +141,89 @@ print(f"  whole process, 10 queries: CPU {cpu10:.2f} s (user + system)")
 with open(f"{out}/summary.txt", "a") as s:
     s.write(f"{n} {size} {qs[0]['database_open_ms']} {rss_kb} {pct(col('retrieval_ms'),0.5)} {pct(col('verification_ms'),0.5)} {pct(col('prepare_ms'),0.5)}\n")
 PY
+  # The first stage of each method: its 50 best entries a query (and the whole query's answer).
+  for m in tfidf-alphabet tfidf fabmap; do
+    "$build/lex3d" place query "$out/db$n.lex3dp" "${queries[@]}" --poses "$out/query_poses.txt" \
+      --json --top 1 --threads 1 --max-distance 8 --retrieval "$m" --list-retrieved 50 > "$out/rank${n}_$m.jsonl"
+  done
 done
+
+/usr/bin/python3 - "$out" "$data/poses.txt" "${PNG_DIR:-}" "${sizes[@]}" <<'PY'
+import json, math, os, sys
+import numpy as np
+out, poses_path, png_dir, sizes = sys.argv[1], sys.argv[2], sys.argv[3], [int(x) for x in sys.argv[4:]]
+frames = [l.strip() for l in open(os.path.join(os.path.dirname(poses_path), "frames.txt")) if l.strip()]
+poses = [list(map(float, l.split())) for l in open(poses_path) if l.strip()]
+qpos = {f[:-4]: (poses[i][3], poses[i][7]) for i, f in enumerate(frames)}
+Tq = {}
+for i, f in enumerate(frames):
+    M = np.eye(4); M[:3, :] = np.array(poses[i]).reshape(3, 4); Tq[f[:-4]] = M
+methods = ["tfidf-alphabet", "tfidf", "fabmap"]
+Ks = list(range(1, 51))
+curves = {}
+print("== FIRST STAGE: recall@K of the true revisits (R = 8 m), per method ==")
+print("  (a) place: first retrieved entry within 8 m (chance: what a random order gives);"
+      " (b) nearest: first entry of the nearest base scan or its copies")
+print(f"  {'entries':>7s} {'method':14s} {'revisits':>8s}  " + "  ".join(f"{'@'+str(k):>6s}" for k in (1, 2, 4, 8, 16, 32, 50))
+      + "   retrieval ms median/p95   final recall (accepted right)")
+for n in sizes:
+    ent, T = {}, {}
+    for l in open(f"{out}/sensors{n}.txt"):
+        p = l.split(); ent[p[0]] = (float(p[1]), float(p[2]))
+        M = np.eye(4); M[:3, :] = np.array(list(map(float, p[4:16]))).reshape(3, 4); T[p[0]] = M
+    base = [k for k in ent if "~" not in k]
+    for m in methods:
+        qs = [json.loads(l) for l in open(f"{out}/rank{n}_{m}.jsonl")]
+        ra, rb, chance, tp = [], [], [], 0
+        for q in qs:
+            qp = qpos[q["query"]]
+            d = lambda s: math.hypot(qp[0] - ent[s][0], qp[1] - ent[s][1])
+            good = [b for b in base if d(b) <= 8.0]
+            if not good: continue
+            nearest = min(good, key=d)
+            ra.append(next((i + 1 for i, s in enumerate(q["retrieved"]) if d(s) <= 8.0), None))
+            rb.append(next((i + 1 for i, s in enumerate(q["retrieved"]) if s.split("~")[0] == nearest), None))
+            f = sum(1 for s in ent if d(s) <= 8.0) / len(ent)
+            chance.append([1 - (1 - f) ** k for k in Ks])
+            mm = q["matches"][0] if q["matches"] else None
+            if mm and mm["accepted"]:
+                Tm = np.eye(4); Tm[:3, :] = np.array(mm["T_match_query"]).reshape(3, 4)
+                D = np.linalg.inv(np.linalg.inv(T[mm["scan"]]) @ Tq[q["query"]]) @ Tm
+                te = np.linalg.norm(D[:3, 3]); re = math.degrees(math.acos(max(-1, min(1, (np.trace(D[:3, :3]) - 1) / 2))))
+                tp += d(mm["scan"]) <= 8.0 and te <= 1.0 and re <= 5.0
+        nr = max(len(ra), 1)
+        rec = lambda r: [sum(1 for x in r if x is not None and x <= k) / nr for k in Ks]
+        ca, cb, cc = rec(ra), rec(rb), list(np.mean(chance, axis=0)) if chance else [0] * len(Ks)
+        curves[(n, m)] = (ca, cb, cc)
+        rt = sorted(q["retrieval_ms"] for q in qs)
+        p95 = rt[min(len(rt) - 1, int(round(0.95 * (len(rt) - 1))))]
+        for label, c in (("(a) place", ca), ("(b) nearest", cb)):
+            print(f"  {n:7d} {m:14s} {len(ra):8d}  " + "  ".join(f"{c[k-1]:6.3f}" for k in (1, 2, 4, 8, 16, 32, 50))
+                  + (f"   {rt[len(rt)//2]:.2f} / {p95:.2f}   {tp}/{len(ra)} = {tp/nr:.3f}" if label == "(a) place" else "") + f"  {label}")
+    c = curves[(n, methods[0])][2]
+    print(f"  {n:7d} {'chance (a)':14s} {'':8s}  " + "  ".join(f"{c[k-1]:6.3f}" for k in (1, 2, 4, 8, 16, 32, 50)))
+if png_dir:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, len(sizes), figsize=(5 * len(sizes), 4), squeeze=False)
+    for ax, n in zip(axes[0], sizes):
+        for m, col in zip(methods, ("tab:gray", "tab:blue", "tab:red")):
+            ca, cb, cc = curves[(n, m)]
+            ax.plot(Ks, ca, color=col, label=f"{m}: place within 8 m")
+            ax.plot(Ks, cb, color=col, linestyle="--", label=f"{m}: nearest base scan")
+        ax.plot(Ks, curves[(n, methods[0])][2], color="k", linestyle=":", label="chance (place within 8 m)")
+        ax.set_title(f"balm, {n} entries")
+        ax.set_xlabel("K (candidates of the first stage)")
+        ax.set_ylabel("recall@K of the true revisits")
+        ax.set_ylim(0, 1.02)
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    path = os.path.join(png_dir, "place_scale_recall.png")
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+PY
 
 /usr/bin/python3 - "$out/summary.txt" <<'PY'
 import sys

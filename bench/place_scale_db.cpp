@@ -93,6 +93,7 @@ int main(int argc, char** argv) {
     return 3;
   }
   lex3d::PlaceFileWriter w(base.storage(), base.has_alphabet() ? &base.alphabet() : nullptr, base.descriptor_dim());
+  w.set_vocabulary(base.vocabulary());  // the base's recognition vocabulary, when it has one
   auto put = [&](const lex3d::PlaceFileWriter::Piece& p) {
     const auto st = file.value()->write_at(p.offset, p.bytes.data(), p.bytes.size());
     if (!st.ok()) {

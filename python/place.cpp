@@ -18,6 +18,7 @@
 #include "lex3d/io/io.hpp"
 #include "lex3d/io/mapped_file.hpp"
 #include "lex3d/model/model.hpp"
+#include "lex3d/place/gravity.hpp"
 #include "lex3d/place/place.hpp"
 
 namespace lex3d::python {
@@ -217,8 +218,11 @@ class PyPlaceDatabase {
  private:
   [[nodiscard]] std::string where() const { return path_.empty() ? std::string{} : path_ + ": "; }
 
-  PlaceScan describe(const Cloud& cloud, const std::string& name) const {
+  /// As `lex3d place` describes a scan (--gravity auto): a scan without a pose or gravity
+  /// takes the up direction its surfaces give (apply_gravity).
+  PlaceScan describe(Cloud cloud, const std::string& name) const {
     const ModelParams mp = place_model_params();
+    apply_gravity(cloud, mp.features.range);
     const PreparedScan s = prepare_scan(cloud, mp, db_.alphabet().word_radius);
     return make_place_scan(s, db_.alphabet(), db_.storage(), mp.features.range, name);
   }

@@ -13,6 +13,7 @@
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/place/place.hpp"
+#include "place/internal.hpp"
 
 namespace lex3d {
 
@@ -33,14 +34,6 @@ constexpr std::size_t kEntryBytes = 36;  // formats/place_db.md §3.4
 
 }  // namespace
 
-// Squared tf-idf norms of every scan once scans were added in memory (idf depends on N);
-// computed at the first retrieval after an add.
-struct PlaceDatabase::NormCache {
-  std::mutex mutex;
-  bool valid = false;
-  std::vector<double> norm2;
-};
-
 // Recently decoded stored scans, least recently used first out.
 struct PlaceDatabase::DecodedCache {
   std::mutex mutex;
@@ -50,7 +43,8 @@ struct PlaceDatabase::DecodedCache {
 };
 
 PlaceDatabase::PlaceDatabase(PlaceStorageParams storage)
-    : storage_(storage), norm_cache_(std::make_shared<NormCache>()), decoded_cache_(std::make_shared<DecodedCache>()) {
+    : storage_(storage), norm_cache_(std::make_shared<NormCache>()), decoded_cache_(std::make_shared<DecodedCache>()),
+      vnorm_cache_(std::make_shared<NormCache>()) {
   storage_.validate();
 }
 
@@ -96,6 +90,10 @@ std::size_t PlaceDatabase::add(PlaceScan scan) {
     throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' was quantised to " +
                                 std::to_string(scan.descriptor_bits) + " bits, the database uses " +
                                 std::to_string(storage_.descriptor_bits));
+  if (vocabulary_ != nullptr && !scan.features.empty() && scan.descriptor_dim != vocabulary_->descriptor_dim)
+    throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' has descriptors of " +
+                                std::to_string(scan.descriptor_dim) + " values, the recognition vocabulary " +
+                                std::to_string(vocabulary_->descriptor_dim));
   if (!scan.features.empty()) descriptor_dim_ = scan.descriptor_dim;
   const auto index = static_cast<std::uint32_t>(size());
   std::uint32_t total = 0;
@@ -105,6 +103,16 @@ std::size_t PlaceDatabase::add(PlaceScan scan) {
     total += count;
   }
   added_total_.push_back(total);
+  if (vocabulary_ != nullptr) {
+    std::uint32_t vtotal = 0;
+    for (const auto& [word, count] : detail::vocabulary_words(*vocabulary_, scan)) {
+      if (word >= added_vinverted_.size()) added_vinverted_.resize(static_cast<std::size_t>(word) + 1);
+      added_vinverted_[word].push_back({index, count});
+      vtotal += count;
+    }
+    added_vtotal_.push_back(vtotal);
+    vnorm_cache_ = std::make_shared<NormCache>();
+  }
   added_.push_back(std::move(scan));
   norm_cache_ = std::make_shared<NormCache>();  // idf changed; copies keep their own cache
   return index;
@@ -191,7 +199,9 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   params.validate();
   PlaceQueryResult r;
   Stopwatch sw;
-  const auto cands = retrieve(query, static_cast<std::size_t>(params.top_k));
+  r.retrieval = resolve(params.retrieval);
+  const auto cands = retrieve(query, static_cast<std::size_t>(params.top_k), r.retrieval, params,
+                              r.retrieval == PlaceRetrieval::kFabmap ? &r.new_place_probability : nullptr);
   r.retrieved = cands.size();
   r.retrieval_ms = sw.lap_ms();
   r.matches.resize(cands.size());

@@ -3,9 +3,22 @@
 
 #include <array>
 #include <cstdint>
+#include <mutex>
 #include <vector>
 
 #include "lex3d/place/place.hpp"
+
+namespace lex3d {
+
+// Squared tf-idf norms of every scan once scans were added in memory (idf depends on N);
+// computed at the first retrieval after an add.
+struct PlaceDatabase::NormCache {
+  std::mutex mutex;
+  bool valid = false;
+  std::vector<double> norm2;
+};
+
+}  // namespace lex3d
 
 namespace lex3d::detail {
 
@@ -22,5 +35,9 @@ Eigen::Quaternionf dequantise_rotation(const std::array<std::int16_t, 4>& c) noe
 
 /// The payload of a SCAN chunk (formats/place_db.md §3.3).
 std::vector<std::uint8_t> encode_scan_payload(const PlaceScan& scan, double range_step);
+
+/// The vocabulary words of a scan (from its descriptors, or its codes when they are not
+/// dequantised); empty when the descriptor sizes differ.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> vocabulary_words(const PlaceVocabulary& v, const PlaceScan& scan);
 
 }  // namespace lex3d::detail

@@ -60,6 +60,11 @@ void PlaceParams::validate() const {
         "PlaceParams::dense_gate_end must be in (0, dense_gate_start] m");
   check(dense_candidates >= 1 && dense_candidates <= 1000000, "PlaceParams::dense_candidates must be in [1, 1e6]");
   check(threads >= 1 && threads <= 64, "PlaceParams::threads must be in [1, 64]");
+  check(fabmap_p_detect > 0.0 && fabmap_p_detect < 1.0, "PlaceParams::fabmap_p_detect must be in (0, 1)");
+  check(fabmap_p_false > 0.0 && fabmap_p_false < fabmap_p_detect,
+        "PlaceParams::fabmap_p_false must be in (0, fabmap_p_detect)");
+  check(fabmap_new_place_prior > 0.0 && fabmap_new_place_prior < 1.0,
+        "PlaceParams::fabmap_new_place_prior must be in (0, 1)");
 }
 
 namespace detail {

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -21,7 +22,7 @@ namespace {
 
 constexpr char kMagic[8] = {'L', 'E', 'X', '3', 'D', 'P', 'D', 'B'};
 constexpr std::uint16_t kMajor = 2;  // written; 1.0 is read too
-constexpr std::uint16_t kMinor = 0;
+constexpr std::uint16_t kMinor = 1;  // 2.1: the recognition vocabulary (VOCB, VIDX)
 constexpr std::size_t kSlotBytes = 28;
 constexpr std::size_t kSlotsEnd = 20 + 2 * kSlotBytes;  // first chunk of a 2.x file
 constexpr std::size_t kEntryBytes = 36;
@@ -539,6 +540,47 @@ std::vector<std::uint8_t> encode_index(const std::vector<std::uint64_t>& offsets
   return std::move(w.b);
 }
 
+// The VIDX payload (formats/place_db.md §3.6): per scan its vocabulary word total and tf-idf
+// norm, the postings of every vocabulary word, and the payload's own length last (a reader
+// finds the chunk from the PIDX offset).
+std::vector<std::uint8_t> encode_vindex(const std::vector<std::uint32_t>& totals, std::size_t word_slots,
+                                        const std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>& inverted) {
+  const std::size_t n = totals.size();
+  std::vector<double> norm2(n, 0.0);
+  std::uint64_t postings = 0;
+  for (std::size_t w = 0; w < inverted.size(); ++w) {
+    postings += inverted[w].size();
+    if (inverted[w].empty()) continue;
+    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(inverted[w].size()));
+    for (const auto& [s, c] : inverted[w]) {
+      const double v = static_cast<double>(c) / static_cast<double>(totals[s]) * idf;
+      norm2[s] += v * v;
+    }
+  }
+  Writer w;
+  w.b.reserve(24 + 12 * n + 8 * (word_slots + 1) + 8 * postings);
+  w.u32(static_cast<std::uint32_t>(n));
+  w.u32(static_cast<std::uint32_t>(word_slots));
+  w.u64(postings);
+  for (std::size_t i = 0; i < n; ++i) {
+    w.u32(totals[i]);
+    w.f64(norm2[i]);
+  }
+  std::uint64_t start = 0;
+  w.u64(0);
+  for (std::size_t k = 0; k < word_slots; ++k) {
+    if (k < inverted.size()) start += inverted[k].size();
+    w.u64(start);
+  }
+  for (const auto& list : inverted)
+    for (const auto& [s, c] : list) {
+      w.u32(s);
+      w.u32(c);
+    }
+  w.u64(w.b.size() + 8);
+  return std::move(w.b);
+}
+
 std::vector<std::uint8_t> commit_slot(std::uint64_t seq, std::uint64_t end, std::uint64_t index_offset) {
   Writer w;
   w.u64(seq);
@@ -627,6 +669,17 @@ PlaceFileWriter::PlaceFileWriter(const PlaceDatabase& db)
     totals_.push_back(ld32(e + 16));
     names_.push_back(db.name(i));
   }
+  if (db.vocabulary_ != nullptr) {
+    vocabulary_ = db.vocabulary_;
+    const auto& vx = db.vindex_;
+    for (std::size_t i = 0; i < vx.scans; ++i) vtotals_.push_back(ld32(vx.entries + 12 * i));
+    vinverted_.resize(vx.word_slots);
+    for (std::uint32_t w = 0; w < vx.word_slots; ++w) {
+      const std::uint64_t a = ld64(vx.word_start + 8 * static_cast<std::size_t>(w));
+      const std::uint64_t b = ld64(vx.word_start + 8 * static_cast<std::size_t>(w) + 8);
+      for (std::uint64_t k = a; k < b; ++k) vinverted_[w].emplace_back(ld32(vx.postings + 8 * k), ld32(vx.postings + 8 * k + 4));
+    }
+  }
   inverted_.resize(ix.word_slots);
   for (std::uint32_t w = 0; w < ix.word_slots; ++w) {
     const std::uint64_t a = ld64(ix.word_start + 8 * static_cast<std::size_t>(w));
@@ -644,7 +697,7 @@ PlaceFileWriter::Piece PlaceFileWriter::begin() {
   p.bytes.assign(kMagic, kMagic + 8);
   Writer h;
   h.u16(kMajor);
-  h.u16(kMinor);
+  h.u16(vocabulary_ != nullptr ? kMinor : 0);  // 2.0 when nothing of 2.1 is needed
   h.u32(0);
   p.bytes.insert(p.bytes.end(), h.b.begin(), h.b.end());
   const std::uint32_t hc = crc(p.bytes.data(), 16);
@@ -652,8 +705,28 @@ PlaceFileWriter::Piece PlaceFileWriter::begin() {
   p.bytes.resize(kSlotsEnd, 0);  // two empty commit records
   put_chunk(p.bytes, "PHDR", phdr_payload(storage_, descriptor_dim_, alphabet_ != nullptr, 0));
   if (alphabet_ != nullptr) put_chunk(p.bytes, "ALPH", codec::encode_alphabet(*alphabet_));
+  if (vocabulary_ != nullptr) put_chunk(p.bytes, "VOCB", encode_vocabulary(*vocabulary_));
   end_ = start_ = p.bytes.size();
   return p;
+}
+
+void PlaceFileWriter::set_vocabulary(std::shared_ptr<const PlaceVocabulary> vocabulary) {
+  if (end_ != 0) throw std::logic_error("PlaceFileWriter::set_vocabulary after begin");
+  if (vocabulary != nullptr && (vocabulary->empty() || (descriptor_dim_ != 0 && vocabulary->descriptor_dim != descriptor_dim_)))
+    throw std::invalid_argument("PlaceFileWriter::set_vocabulary: the vocabulary is empty or its descriptors differ from descriptor_dim");
+  vocabulary_ = std::move(vocabulary);
+}
+
+void PlaceFileWriter::vocab_index(const PlaceScan& scan) {
+  if (vocabulary_ == nullptr) return;
+  const auto index = static_cast<std::uint32_t>(vtotals_.size());
+  std::uint32_t total = 0;
+  for (const auto& [word, count] : detail::vocabulary_words(*vocabulary_, scan)) {
+    if (word >= vinverted_.size()) vinverted_.resize(static_cast<std::size_t>(word) + 1);
+    vinverted_[word].emplace_back(index, count);
+    total += count;
+  }
+  vtotals_.push_back(total);
 }
 
 void PlaceFileWriter::index(std::uint64_t chunk_offset, std::uint64_t payload_length, const std::string& name,
@@ -691,6 +764,7 @@ PlaceFileWriter::Piece PlaceFileWriter::add(const PlaceScan& scan) {
   const auto payload = detail::encode_scan_payload(scan, storage_.range_step);
   put_chunk(p.bytes, "SCAN", payload);
   index(end_, payload.size(), scan.name, scan.words);
+  vocab_index(scan);
   end_ += p.bytes.size();
   return p;
 }
@@ -706,6 +780,7 @@ StatusOr<PlaceFileWriter::Piece> PlaceFileWriter::copy(const PlaceDatabase& db, 
   p.offset = end_;
   p.bytes.assign(c.value().first, c.value().first + c.value().second);
   index(end_, c.value().second - 16, s.value().name, s.value().words);
+  vocab_index(s.value());
   end_ += p.bytes.size();
   return p;
 }
@@ -714,11 +789,15 @@ std::pair<PlaceFileWriter::Piece, PlaceFileWriter::Piece> PlaceFileWriter::finis
   if (end_ == 0) throw std::logic_error("PlaceFileWriter::finish before begin");
   Piece idx;
   idx.offset = end_;
-  idx.bytes = chunk_bytes("PIDX", encode_index(offsets_, lengths_, names_, totals_, inverted_));
+  if (vocabulary_ != nullptr)  // VIDX right before PIDX (formats/place_db.md §3.6)
+    idx.bytes = chunk_bytes("VIDX", encode_vindex(vtotals_, vocabulary_->nodes(), vinverted_));
+  const std::uint64_t pidx_at = end_ + idx.bytes.size();
+  const auto pidx = chunk_bytes("PIDX", encode_index(offsets_, lengths_, names_, totals_, inverted_));
+  idx.bytes.insert(idx.bytes.end(), pidx.begin(), pidx.end());
   const std::uint64_t end = end_ + idx.bytes.size();
   Piece commit;
   commit.offset = slot_offset(sequence_);
-  commit.bytes = commit_slot(sequence_, end, idx.offset);
+  commit.bytes = commit_slot(sequence_, end, pidx_at);
   return {std::move(idx), std::move(commit)};
 }
 
@@ -726,6 +805,7 @@ std::vector<std::uint8_t> PlaceDatabase::save() const {
   int dim = descriptor_dim_;
   if (dim == 0 && has_alphabet_) dim = alphabet_.descriptor_dim;
   PlaceFileWriter w(storage_, has_alphabet_ ? &alphabet_ : nullptr, dim);
+  w.set_vocabulary(vocabulary_);
   std::vector<std::uint8_t> out;
   auto put = [&](const PlaceFileWriter::Piece& p) {
     if (out.size() < p.offset + p.bytes.size()) out.resize(static_cast<std::size_t>(p.offset + p.bytes.size()));
@@ -923,6 +1003,20 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
     db.set_alphabet(std::move(a).value());
     pos += 16 + ac.value().length;
   }
+  // 2.1: the recognition vocabulary, right after ALPH (or PHDR) when there is one. The chunk
+  // there is read whatever it is (CRC checked), so a damaged type cannot hide a vocabulary.
+  std::optional<StatusOr<ChunkView>> next;
+  if (major == 2 && minor >= 1 && pos < index_at) next = read_chunk(bytes, limit, pos);
+  if (next && !next->ok()) return next->status();
+  if (next && next->value().type == "VOCB") {
+    auto& vc = *next;
+    auto v = decode_vocabulary(vc.value().payload, vc.value().length, pos + 12);
+    if (!v.ok()) return v.status();
+    if (h.descriptor_dim != 0 && v.value().descriptor_dim != h.descriptor_dim)
+      return bad_data("place database: the vocabulary's descriptor size differs from PHDR's", pos + 12);
+    db.vocabulary_ = std::make_shared<const PlaceVocabulary>(std::move(v).value());
+    pos += 16 + vc.value().length;
+  }
   const std::uint64_t first = pos;
   const std::uint8_t* index_payload = nullptr;
   std::size_t index_length = 0;
@@ -988,8 +1082,66 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
     limit = size;
     index_at = size;
   }
-  auto ix = parse_index(index_payload, index_length, index_payload_at, first, index_at, db.alphabet_.size(), db.has_alphabet_);
+  // The vocabulary's index ends where PIDX begins; its payload's last 8 bytes are its length.
+  std::uint64_t scans_end = index_at;
+  if (db.vocabulary_ != nullptr) {
+    if (index_at < first + 16 + 24) return bad_data("place database: VIDX chunk missing before PIDX", index_at);
+    const std::uint64_t vlen = ld64(bytes + index_at - 12);
+    if (vlen < 24 || vlen > index_at - first - 16)
+      return bad_data("place database: VIDX chunk missing before PIDX (bad length; an older lex3d may have appended to "
+                      "this file: rewrite it with lex3d place upgrade after removing the vocabulary)",
+                      index_at - 12);
+    const std::uint64_t vat = index_at - 16 - vlen;
+    auto vc = read_chunk(bytes, index_at, vat);
+    if (!vc.ok()) return vc.status();
+    if (vc.value().type != "VIDX" || vc.value().length != vlen)
+      return bad_data("place database: VIDX chunk missing before PIDX", vat);
+    const std::uint8_t* v = vc.value().payload;
+    const std::uint64_t at = vat + 12;
+    StoredVocabIndex vx;
+    vx.scans = ld32(v);
+    vx.word_slots = ld32(v + 4);
+    const std::uint64_t np = ld64(v + 8);
+    if (vx.word_slots != db.vocabulary_->nodes())
+      return bad_data("place database: VIDX word count differs from the vocabulary's nodes", at + 4);
+    if (vx.scans > kMaxScans) return bad_data("place database: VIDX scan count too large", at);
+    const std::uint64_t fixed = 16 + 12ull * vx.scans + 8ull * (static_cast<std::uint64_t>(vx.word_slots) + 1) + 8;
+    if (fixed > vlen || np > (vlen - fixed) / 8 || fixed + 8 * np != vlen)
+      return bad_data("place database: VIDX sizes do not add up to its length", at + 8);
+    vx.entries = v + 16;
+    vx.word_start = vx.entries + 12ull * vx.scans;
+    vx.postings = vx.word_start + 8 * (static_cast<std::size_t>(vx.word_slots) + 1);
+    const std::uint64_t ws_at = at + 16 + 12ull * vx.scans;
+    for (std::uint32_t i = 0; i < vx.scans; ++i) {
+      const double n2 = ldf64(vx.entries + 12ull * i + 4);
+      if (!std::isfinite(n2) || n2 < 0.0) return bad_data("place database: VIDX entry " + std::to_string(i) + " has a bad norm", at + 16 + 12ull * i + 4);
+    }
+    if (ld64(vx.word_start) != 0 || ld64(vx.word_start + 8 * static_cast<std::size_t>(vx.word_slots)) != np)
+      return bad_data("place database: VIDX word starts do not cover the postings", ws_at);
+    std::vector<std::uint64_t> sums(vx.scans, 0);
+    const std::uint64_t post_at = ws_at + 8 * (static_cast<std::uint64_t>(vx.word_slots) + 1);
+    for (std::uint32_t w = 0; w < vx.word_slots; ++w) {
+      const std::uint64_t a = ld64(vx.word_start + 8 * static_cast<std::size_t>(w));
+      const std::uint64_t b = ld64(vx.word_start + 8 * static_cast<std::size_t>(w) + 8);
+      if (b < a || b > np) return bad_data("place database: VIDX word starts decrease", ws_at + 8 * (w + 1ull));
+      for (std::uint64_t k = a; k < b; ++k) {
+        const std::uint32_t s = ld32(vx.postings + 8 * k), c = ld32(vx.postings + 8 * k + 4);
+        if (s >= vx.scans || c == 0 || (k > a && s <= ld32(vx.postings + 8 * (k - 1))))
+          return bad_data("place database: VIDX posting is out of range, unsorted or zero", post_at + 8 * k);
+        sums[s] += c;
+      }
+    }
+    for (std::uint32_t i = 0; i < vx.scans; ++i)
+      if (sums[i] != ld32(vx.entries + 12ull * i))
+        return bad_data("place database: VIDX word total of scan " + std::to_string(i) + " differs from its postings",
+                        at + 16 + 12ull * i);
+    db.vindex_ = vx;
+    scans_end = vat;
+  }
+  auto ix = parse_index(index_payload, index_length, index_payload_at, first, scans_end, db.alphabet_.size(), db.has_alphabet_);
   if (!ix.ok()) return ix.status();
+  if (db.vocabulary_ != nullptr && ix.value().scans != db.vindex_.scans)
+    return bad_data("place database: VIDX and PIDX count different scans", index_at + 12);
   const ParsedIndex& x = ix.value();
   db.index_.scans = x.scans;
   db.index_.word_slots = x.word_slots;
@@ -1000,7 +1152,7 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
   db.index_.postings = x.postings_at;
   db.info_.index_bytes = index_length + 16;
   if (major == 2) {
-    std::uint64_t live = first + index_length + 16;
+    std::uint64_t live = first + index_length + 16 + (index_at - scans_end);  // + VIDX
     for (std::uint32_t i = 0; i < x.scans; ++i) live += 16 + ld64(x.entries + static_cast<std::size_t>(i) * kEntryBytes + 8);
     db.info_.dead_bytes = limit - live;
   }

@@ -45,7 +45,7 @@ def no_temporaries(folder):
 
 @pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
 @pytest.mark.parametrize("options, cli_args", [
-    ({"iterations": 40}, []),
+    ({"iterations": 40}, ["--max-error", "none"]),
     ({"max_error": 0.02}, ["--max-error", "0.02"]),
 ])
 def test_same_files_as_the_command(client, tmp_path, options, cli_args):

@@ -56,7 +56,8 @@ def test_round_trip_of_a_real_scan_meets_the_bound_both_ways(kitti):
 
 
 @pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
-@pytest.mark.parametrize("args", [["--max-error", "0.014"], ["--target-bpp", "5"], ["--iterations", "60"]])
+@pytest.mark.parametrize("args", [["--max-error", "0.014"], ["--target-bpp", "5"],
+                                  ["--iterations", "60", "--max-error", "none"]])
 def test_same_bytes_as_the_command(args):
     scan = SAMPLES / "newer_college_00.bin"
     points, _ = read_bin(scan, 3)

@@ -33,6 +33,7 @@
 #include "lex3d/core/status.hpp"
 #include "lex3d/model/model.hpp"
 #include "lex3d/range/range_image.hpp"
+#include "lex3d/place/vocabulary.hpp"
 
 namespace lex3d {
 
@@ -50,6 +51,16 @@ struct PlaceStorageParams {
   double range_step = 0.02;
   void validate() const;
 };
+
+/// The first stage of a query: how candidates are ranked before verification.
+enum class PlaceRetrieval {
+  kDefault,         ///< kTfidfAlphabet (measured best on balm at 100-5,000 entries, README)
+  kTfidfAlphabet,   ///< tf-idf cosine over the compression alphabet's word ids (PlaceScan::words)
+  kTfidf,           ///< tf-idf cosine over the recognition vocabulary's words (every tree level)
+  kFabmap,          ///< FAB-MAP-style likelihood over the vocabulary's leaves (collier2012 §3)
+};
+/// "tfidf-alphabet", "tfidf", "fabmap" ("default" for kDefault).
+[[nodiscard]] const char* to_string(PlaceRetrieval r) noexcept;
 
 /// Parameters of matching and scoring (defaults from steder2010 and collier2012).
 struct PlaceParams {
@@ -136,6 +147,15 @@ struct PlaceParams {
   int dense_candidates = 3;
   /// Worker threads over candidates; [1, 64]. Results do not depend on it.
   int threads = 1;
+  /// First stage (retrieval of the top_k candidates).
+  PlaceRetrieval retrieval = PlaceRetrieval::kDefault;
+  /// FAB-MAP detector model: p(word seen | word in the place), (0, 1) (Cummins and Newman's 0.39).
+  double fabmap_p_detect = 0.39;
+  /// FAB-MAP detector model: p(word seen | word not in the place), (0, fabmap_p_detect)
+  /// (Cummins and Newman: 0.005).
+  double fabmap_p_false = 0.005;
+  /// FAB-MAP prior probability that a query shows a place not in the database; (0, 1).
+  double fabmap_new_place_prior = 0.9;
   void validate() const;
 };
 
@@ -277,6 +297,9 @@ struct PlaceQueryResult {
   double verification_ms = 0.0;  ///< includes decode_ms
   double decode_ms = 0.0;        ///< reading the candidates' stored entries (summed over threads)
   std::size_t decoded = 0;       ///< candidates read from the stored bytes (the others were cached or in memory)
+  PlaceRetrieval retrieval = PlaceRetrieval::kTfidfAlphabet;  ///< the first stage used
+  /// FAB-MAP: posterior probability that the query is a new place; -1 for the tf-idf stages.
+  double new_place_probability = -1.0;
   [[nodiscard]] const PlaceMatch* best() const noexcept { return matches.empty() ? nullptr : &matches.front(); }
 };
 
@@ -370,6 +393,23 @@ class PlaceDatabase {
   /// chunk, CRC checked; kBadData when it does not check.
   [[nodiscard]] StatusOr<std::pair<const std::uint8_t*, std::size_t>> stored_chunk(std::size_t i) const;
 
+  /// The recognition vocabulary (formats/place_db.md §3.5); set before any scan is added
+  /// (throws std::logic_error otherwise, std::invalid_argument for an empty one or one whose
+  /// descriptor size differs from the database's).
+  void set_vocabulary(PlaceVocabulary vocabulary);
+  [[nodiscard]] bool has_vocabulary() const noexcept { return vocabulary_ != nullptr; }
+  /// The vocabulary (null when none).
+  [[nodiscard]] const std::shared_ptr<const PlaceVocabulary>& vocabulary() const noexcept { return vocabulary_; }
+  /// The first stage by `method` (kDefault resolved as PlaceParams says): scans with a shared
+  /// word, best first, at most `k` (ties by lower index), with their tf-idf cosine or, for
+  /// kFabmap, their posterior probability. `new_place_probability` (kFabmap) may be null.
+  /// Throws std::invalid_argument for kTfidf / kFabmap without a vocabulary.
+  [[nodiscard]] std::vector<std::pair<std::size_t, double>> retrieve(const PlaceScan& query, std::size_t k,
+                                                                     PlaceRetrieval method, const PlaceParams& params,
+                                                                     double* new_place_probability = nullptr) const;
+  /// kDefault resolved for this database.
+  [[nodiscard]] PlaceRetrieval resolve(PlaceRetrieval method) const noexcept;
+
  private:
   friend class PlaceFileWriter;
   struct Posting {
@@ -409,6 +449,22 @@ class PlaceDatabase {
   std::vector<std::vector<Posting>> added_inverted_;            // word id -> postings of added scans
   std::shared_ptr<NormCache> norm_cache_;
   std::shared_ptr<DecodedCache> decoded_cache_;  // shared by copies: stored entries never change
+  // Recognition vocabulary and its inverted index (VOCB, VIDX chunks).
+  struct StoredVocabIndex {
+    std::uint32_t scans = 0;
+    std::uint32_t word_slots = 0;
+    const std::uint8_t* entries = nullptr;     // scans x (word_total u32, norm2 f64)
+    const std::uint8_t* word_start = nullptr;  // (word_slots + 1) x u64
+    const std::uint8_t* postings = nullptr;    // x (u32 scan, u32 count)
+  };
+  [[nodiscard]] std::uint32_t vocab_total(std::size_t i) const;
+  [[nodiscard]] std::size_t vocab_stored_postings(std::uint32_t word) const;
+  [[nodiscard]] const std::vector<double>& vocab_norms() const;
+  std::shared_ptr<const PlaceVocabulary> vocabulary_;
+  StoredVocabIndex vindex_;
+  std::vector<std::uint32_t> added_vtotal_;
+  std::vector<std::vector<Posting>> added_vinverted_;
+  std::shared_ptr<NormCache> vnorm_cache_;
 };
 
 /// Writes a database file in format 2.0 piece by piece, holding one scan at a time (and
@@ -438,6 +494,9 @@ class PlaceFileWriter {
   [[nodiscard]] std::size_t size() const noexcept { return names_.size(); }
   /// Offset where the first new byte goes (the committed end when appending).
   [[nodiscard]] std::uint64_t start() const noexcept { return start_; }
+  /// A new file with a recognition vocabulary (before begin(); null = none): begin() writes
+  /// its VOCB chunk and finish() the VIDX chunk of every scan's vocabulary words.
+  void set_vocabulary(std::shared_ptr<const PlaceVocabulary> vocabulary);
 
  private:
   void index(std::uint64_t chunk_offset, std::uint64_t payload_length, const std::string& name,
@@ -452,6 +511,10 @@ class PlaceFileWriter {
   std::vector<std::string> names_;
   std::vector<std::uint32_t> totals_;
   std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> inverted_;  // word -> (scan, count)
+  std::shared_ptr<const PlaceVocabulary> vocabulary_;
+  std::vector<std::uint32_t> vtotals_;
+  std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> vinverted_;  // vocabulary word -> (scan, count)
+  void vocab_index(const PlaceScan& scan);
 };
 
 namespace detail {

@@ -23,6 +23,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(1, f"{self.prog}: error: {message}\n")
 
 
+# The bound --max-error auto gives, as `lex3d compress` (apps/cmd_compress.cpp): 1 cm.
+AUTO_MAX_ERROR = 0.01
+
+
 def _parser():
     p = _Parser(prog="python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -35,7 +39,9 @@ def _parser():
     c.add_argument("--learn-scans", type=int, default=5, help="learn on this many evenly spaced scans (default 5)")
     c.add_argument("--iterations", type=int, default=400, help="candidate words drawn when learning")
     c.add_argument("--seed", type=int, help="seed of the learner")
-    c.add_argument("--max-error", type=float, help="residual-layer bound, metres")
+    c.add_argument("--max-error", default="auto",
+                   help="residual-layer bound, metres; auto (the default, as lex3d compress): 1 cm, "
+                        "or the bound --target-bpp finds; none: words alone")
     c.add_argument("--target-bpp", type=float, help="bits a point each file should fit")
     c.add_argument("--words", choices=["on", "off", "auto"])
     c.add_argument("--layer-coding", choices=["auto", "spherical", "voxel", "laser"], default="auto")
@@ -72,6 +78,21 @@ def _client(args):
 def main(argv=None):
     args = _parser().parse_args(argv)
     options = {"layer_coding": args.layer_coding, "threads": args.threads}
+    explicit_error = args.max_error not in ("auto", "none")
+    if explicit_error:
+        try:
+            args.max_error = float(args.max_error)
+        except ValueError:
+            print(f'lex3d-dask: --max-error must be "auto", "none" or metres, got "{args.max_error}"', file=sys.stderr)
+            return 1
+    elif args.max_error == "auto" and args.target_bpp is None:
+        args.max_error = AUTO_MAX_ERROR
+    else:
+        args.max_error = None
+    # As lex3d compress: an alphabet given or saved brings the words back with the layer.
+    if args.words is None and (args.alphabet or args.save_alphabet) and \
+            (args.max_error is not None or args.target_bpp is not None):
+        args.words = "on"
     for name in ("max_error", "target_bpp", "words"):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)
@@ -79,7 +100,7 @@ def main(argv=None):
         options["keep_all_points"] = True
     client = cluster = None
     try:
-        if args.max_error is not None and args.target_bpp is not None:
+        if explicit_error and args.target_bpp is not None:
             raise CompressError(1, "give --max-error or --target-bpp, not both")
         client, cluster = _client(args)
         summary = compress(args.inputs, args.output, client=client, alphabet=args.alphabet,
