@@ -628,7 +628,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const bool thin = options.thin;
   // Sweep coding's direction cells: half the angular spacing of the coded points.
   const double sweep_cell = res ? 0.5 * std::max(res->azimuth_rad, res->elevation_rad) : 0.0;
-  const std::vector<std::uint32_t> rows = row_order(spherical, coded, row_height);
+  // (every coded point in row order: made only when a spherical coding is coded in full)
+  std::vector<std::uint32_t> rows;
+  const auto need_rows = [&] {
+    if (rows.empty()) rows = row_order(spherical, coded, row_height);
+  };
   struct Way {
     bool by_rows;
     bool sweep;
@@ -729,6 +733,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // HDL-32E cloud stored firing by firing its window cost 1.6 times the sensor-geometry
       // coding's bits while in full it came out 5 % smaller.)
       const bool full_spherical = !skip_others && !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
+      if (full_spherical) need_rows();
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical)
           streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
@@ -736,9 +741,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
           voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
-      if (!voxel && !full_spherical && !skip_others)
+      if (!voxel && !full_spherical && !skip_others) {
+        need_rows();
         streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
+      }
     } else {
+      need_rows();
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
         if (w == ways.size()) voxel = voxel_layer(head, input.points, coded, check_error);
         else streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w], &way_sources[w]);
@@ -750,8 +758,10 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // A spherical winner skipped for a voxel coding that the sensor-geometry coding beats may
   // beat both: it is coded in full after all.
   if (others && options.spherical && laser && voxel && streams[best].empty() &&
-      extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size())
+      extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size()) {
+    need_rows();
     streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
+  }
   const bool use_voxel =
       voxel && (streams[best].empty() ||  // (no spherical stream: `spherical` off, or skipped)
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
