@@ -44,6 +44,10 @@ struct LayerChunk {
 constexpr LayerChunk kLayerChunks[] = {
     {"RESD", 1, "previous-point"}, {"RESW", 2, "sweep"}, {"RESV", 3, "voxel"}, {"RESL", 4, "sensor-geometry"}};
 constexpr std::uint32_t kLayerCodings = 4;
+/// A sensor-geometry layer whose range predictor is 2 or 3 (edge flags, model.md §2.8.2)
+/// and the first minor version that has it.
+constexpr std::uint16_t kLaserEdgeMinor = 7;
+constexpr std::size_t kLaserPredictorOffset = 68;
 /// The georeference chunk and the first minor version that has it (model.md §2.9).
 constexpr char kGeorType[] = "GEOR";
 constexpr std::uint16_t kGeorMinor = 5;
@@ -716,6 +720,12 @@ std::uint32_t layer_coding(const std::vector<std::uint8_t>& payload) {
 
 bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_coding(payload) == 1; }
 
+/// Whether a layer is a sensor-geometry layer with edge flags (range predictor 2 or 3).
+bool laser_edge_layer(const std::vector<std::uint8_t>& payload) {
+  return layer_coding(payload) == 3 && payload.size() >= kLaserPredictorOffset + 4 &&
+         ld_u32(payload.data() + kLaserPredictorOffset) >= 2;
+}
+
 Quantization quantization_for_word_radius(double word_radius) {
   Quantization q;
   q.word_point_m = 0.0005;
@@ -956,8 +966,9 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
     throw std::invalid_argument("lex3d::codec::encode_model: residual layer of unknown coding " + std::to_string(coding));
   const LayerChunk& layer_chunk = kLayerChunks[coding];
   std::vector<std::uint8_t> out;
-  put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced,
-             data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor);
+  std::uint16_t minor = data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor;
+  if (data.residual && laser_edge_layer(*data.residual)) minor = std::max(minor, kLaserEdgeMinor);
+  put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
@@ -1084,6 +1095,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                                  kLayerChunks[coding].coding + " coding, which belongs in an '" +
                                  kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8)",
                              c.payload_offset);
+          if (laser_edge_layer(*out.residual) && h.minor < kLaserEdgeMinor)
+            return ctx.error("a sensor-geometry layer with range predictor " +
+                                 std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
+                                 " needs format version 1." + std::to_string(kLaserEdgeMinor) + ", the header says 1." +
+                                 std::to_string(h.minor),
+                             c.payload_offset + kLaserPredictorOffset);
         }
         return {};
       default: return {};

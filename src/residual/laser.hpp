@@ -27,7 +27,9 @@ struct LaserTable {
   /// Unit of the per-column azimuth shifts, radians (the grid's step / 64).
   double shift_unit = 0.0;
   std::int32_t direction = 1;
-  std::uint32_t predictor = 0;  ///< beam lengths predicted by 0: the left neighbour; 1: the median edge detector
+  /// Beam lengths predicted by 0: the left neighbour; 1: the median edge detector; 2 and 3:
+  /// 1 and 0 with a flag at edges picking the left or upper pixel (formats/model.md §2.8.2).
+  std::uint32_t predictor = 0;
   double azimuth0 = 0.0;
   Pose T_sensor_head = Pose::Identity();
 

@@ -62,6 +62,11 @@ constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
 /// The voxel coding is not coded in full when its trial window costs this many times the
 /// sensor-geometry coding's bits a point (encoder only).
 constexpr double kLaserSkipRatio = 1.6;
+/// With a laser table read from the sensor, neither the voxel nor the spherical codings are
+/// tried further when the spherical trial window costs this many times the sensor-geometry
+/// coding's bits a point (encoder only). On the Ouster scans at 5-50 mm the window cost
+/// 2.1-2.5 times the sensor-geometry bits and the full spherical coding 1.4-2.1 times.
+constexpr double kExactLaserSkipRatio = 2.0;
 /// What a payload of a coding adds to its stream besides the fields every coding has.
 constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
   return coding == kCodingSweep   ? kSweepPrefixBytes + kSweepExtraBytes
@@ -623,7 +628,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const bool thin = options.thin;
   // Sweep coding's direction cells: half the angular spacing of the coded points.
   const double sweep_cell = res ? 0.5 * std::max(res->azimuth_rad, res->elevation_rad) : 0.0;
-  const std::vector<std::uint32_t> rows = row_order(spherical, coded, row_height);
+  // (every coded point in row order: made only when a spherical coding is coded in full)
+  std::vector<std::uint32_t> rows;
+  const auto need_rows = [&] {
+    if (rows.empty()) rows = row_order(spherical, coded, row_height);
+  };
   struct Way {
     bool by_rows;
     bool sweep;
@@ -653,9 +662,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<detail::LaserLayer> laser;
   std::optional<detail::LaserAssignment> lasers_of;
   if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true);
+  bool exact_table = false;
   if (lasers_of) {
     // A table read from the sensor reproduces the beams: the whole budget along them.
     const bool exact = lasers_of->fit_rms < 1e-3 * max_error;
+    exact_table = exact;
     const std::vector<double> shares =
         exact ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
     laser = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, max_error, check_error,
@@ -677,18 +688,25 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
+      const auto voxel_trial = [&] {
+        const std::size_t span = std::min(coded.size(), kVoxelTrialSpan * kOrderTrialPoints);
+        const std::size_t at = coded.size() / 2 - span / 2;
+        const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
+                                              coded.begin() + static_cast<std::ptrdiff_t>(at + span));
+        const auto v = voxel_layer(RangeEncoder{}, input.points, wide, check_error);
+        voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(span)
+                              : std::numeric_limits<double>::infinity();
+      };
+      // With a laser table read from the sensor, the spherical trial comes first, alone:
+      // where it costs kExactLaserSkipRatio times the sensor-geometry coding's bits or
+      // more, neither the voxel trial nor a full spherical coding runs.
+      const bool defer_voxel = laser && exact_table;
       // (the voxel trial, the longest job, first: the other thread meanwhile takes the
       // spherical ones)
-      const std::size_t first_way = try_voxel ? 1 : 0;
+      const std::size_t first_way = try_voxel && !defer_voxel ? 1 : 0;
       parallel_for(ways.size() + first_way, threads, [&](std::size_t job) {
         if (job < first_way) {
-          const std::size_t span = std::min(coded.size(), kVoxelTrialSpan * kOrderTrialPoints);
-          const std::size_t at = coded.size() / 2 - span / 2;
-          const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
-                                                coded.begin() + static_cast<std::ptrdiff_t>(at + span));
-          const auto v = voxel_layer(RangeEncoder{}, input.points, wide, check_error);
-          voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(span)
-                                : std::numeric_limits<double>::infinity();
+          voxel_trial();
           return;
         }
         const std::size_t w = job - first_way;
@@ -706,13 +724,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
           laser ? 8.0 * static_cast<double>(laser->stream.size() - std::min(laser->stream.size(), head_bytes)) /
                       static_cast<double>(coded.size())
                 : std::numeric_limits<double>::infinity();
-      const bool full_voxel = try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits &&
+      const bool skip_others = defer_voxel && spherical_window_bits >= kExactLaserSkipRatio * laser_bits;
+      if (try_voxel && defer_voxel && !skip_others) voxel_trial();
+      const bool full_voxel = !skip_others && try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits &&
                               voxel_window_bits < kLaserSkipRatio * laser_bits;
       // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
       // (The spherical trial does not rule it out against the sensor-geometry coding: on a
       // HDL-32E cloud stored firing by firing its window cost 1.6 times the sensor-geometry
       // coding's bits while in full it came out 5 % smaller.)
-      const bool full_spherical = !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
+      const bool full_spherical = !skip_others && !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits);
+      if (full_spherical) need_rows();
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical)
           streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
@@ -720,9 +741,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
           voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
-      if (!voxel && !full_spherical)
+      if (!voxel && !full_spherical && !skip_others) {
+        need_rows();
         streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
+      }
     } else {
+      need_rows();
       parallel_for(ways.size() + (try_voxel ? 1 : 0), threads, [&](std::size_t w) {
         if (w == ways.size()) voxel = voxel_layer(head, input.points, coded, check_error);
         else streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w], &way_sources[w]);
@@ -734,8 +758,10 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // A spherical winner skipped for a voxel coding that the sensor-geometry coding beats may
   // beat both: it is coded in full after all.
   if (others && options.spherical && laser && voxel && streams[best].empty() &&
-      extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size())
+      extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size()) {
+    need_rows();
     streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
+  }
   const bool use_voxel =
       voxel && (streams[best].empty() ||  // (no spherical stream: `spherical` off, or skipped)
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <

@@ -207,12 +207,12 @@ expect_match(decompress.voxel "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.0
 run(0 compress.spherical compress "${NC}" -o "${WORK}/nc_s.lex3dm" --max-error 0.02 --layer-coding spherical --json)
 expect_match(compress.spherical "${LAST_OUT}" "\"coding\":\"(previous-point|sweep)\"")
 # The sensor-geometry coding, forced on the KITTI sample (its lasers estimated from the
-# points): a format 1.4 file whose decoded cloud meets the bound.
+# points): a format 1.7 file (range predictor 2 or 3) whose decoded cloud meets the bound.
 run(0 compress.laser compress "${KITTI}" -o "${WORK}/k_l.lex3dm" --max-error 0.02 --layer-coding laser --json)
 expect_match(compress.laser "${LAST_OUT}" "\"coding\":\"sensor-geometry\"")
 expect_match(compress.laser "${LAST_OUT}" "\"laser_table\":{\"source\":\"estimated")
 run(0 info.laser info "${WORK}/k_l.lex3dm")
-expect_match(info.laser "${LAST_OUT}" "format 1\\.6")  # (the sample's intensity: an ATTR chunk)
+expect_match(info.laser "${LAST_OUT}" "format 1\\.7")  # (edge flags; the sample's intensity: an ATTR chunk)
 expect_match(info.laser "${LAST_OUT}" "RESL")
 expect_match(info.laser "${LAST_OUT}" "laser table")
 run(0 decompress.laser decompress "${WORK}/k_l.lex3dm" -o "${WORK}/k_l.bin" --reference "${KITTI}" --json)

@@ -179,6 +179,26 @@ TEST(ResidualLaser, EstimatedBeamsThatMissThePointsStillCompete) {
   }
 }
 
+/// Predictors 2 and 3 leave out the symbols of corrections and of several points a pixel
+/// when a scan has none; a scan with both (points a centimetre off their pixel's beam, a
+/// second return in a pixel, thinning off) must code them and keep the bound.
+TEST(ResidualLaser, SeveralPointsAPixelAndCorrectionsKeepTheBound) {
+  const Cloud scan = organised_scan(16, 512, 0.05, 13);
+  Cloud c = scan;
+  for (std::size_t i = 0; i < scan.size(); i += 7) {
+    c.points.push_back(scan.points[i] + Eigen::Vector3f(0.0F, 0.0F, 0.012F));  // off the beam by more than E
+    c.ring.push_back(scan.ring[i]);
+    c.column.push_back(scan.column[i]);
+  }
+  residual::LayerOptions o = only(true);
+  o.thin = false;
+  residual::LayerStats st;
+  const Bytes layer = residual::encode_layer(c, Cloud{}, Pose::Identity(), 0.005, &st, o);
+  ASSERT_TRUE(st.laser);
+  EXPECT_EQ(st.residual_points, c.size()) << "thinning off: every point coded";
+  expect_layer_bound(layer, c, Pose::Identity(), 0.005);
+}
+
 TEST(ResidualLaser, ACloudOfNoLidarKeepsTheBound) {
   std::mt19937 rng(4);
   std::uniform_real_distribution<float> u(-20.0F, 20.0F);
@@ -199,7 +219,12 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   const residual::LayerStats st = residual::add_layer(d, Alphabet{}, scan, 0.01);
   ASSERT_TRUE(st.laser);
   const Bytes file = codec::encode_model(d);
-  EXPECT_EQ(file[10], 4) << "a sensor-geometry layer makes the file format 1.4";
+  EXPECT_EQ(file[10], 7) << "a sensor-geometry layer with edge flags (predictor 2 or 3) makes the file format 1.7";
+  ASSERT_TRUE(d.residual);
+  ASSERT_GE(d.residual->size(), 72U);
+  std::uint32_t predictor = 0;
+  std::memcpy(&predictor, d.residual->data() + 68, 4);  // (little-endian hosts)
+  EXPECT_GE(predictor, 2U);
   const auto decoded = codec::decode_model(file);
   ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
   const auto cloud = residual::decode_cloud(decoded.value());
@@ -207,6 +232,7 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
   expect_rejected(retype_chunk(file, "RESL", "RESL", 3), "1.4");
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 6), "1.7");
   expect_rejected(retype_chunk(file, "RESL", "RESD", 4), "RESL");
   expect_rejected(retype_chunk(file, "RESL", "RESV", 4), "RESL");
 }
@@ -238,7 +264,15 @@ TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
   EXPECT_FALSE(residual::decode_layer(poke(good, 64, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok());
   for (const double unit : {-1.0, 0.5, std::nan("")})
     EXPECT_FALSE(residual::decode_layer(poke(good, 48, &unit, 8), Cloud{}, Pose::Identity(), scan.size()).ok()) << unit;
-  EXPECT_FALSE(residual::decode_layer(poke(good, 68, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok()) << "predictor";
+  const std::uint32_t bad_predictor = 4;
+  EXPECT_FALSE(residual::decode_layer(poke(good, 68, &bad_predictor, 4), Cloud{}, Pose::Identity(), scan.size()).ok())
+      << "predictor";
+  // Another valid predictor on the same stream decodes other points, or fails, but never
+  // more points than the layer holds.
+  for (const std::uint32_t other : {0U, 1U, 2U, 3U}) {
+    const auto d = residual::decode_layer(poke(good, 68, &other, 4), Cloud{}, Pose::Identity(), scan.size());
+    if (d.ok()) EXPECT_LE(d.value().size(), scan.size()) << other;
+  }
   const double not_rigid = 2.0;
   EXPECT_FALSE(residual::decode_layer(poke(good, 80, &not_rigid, 8), Cloud{}, Pose::Identity(), scan.size()).ok());
   for (std::size_t at = 176; at < good.size(); at += 37) {
@@ -347,6 +381,50 @@ TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile) {
   out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
   write_xyz(golden_path("tiny_residual_laser_1.4.input.xyz"), input);
   write_xyz(golden_path("tiny_residual_laser_1.4.decoded.xyz"), cloud.value());
+}
+
+// Format 1.7: the same scan with range predictor 2 or 3 (edge flags).
+TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_7) {
+  const Cloud input = organised_scan(8, 128, 0.1, 21);
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError);
+  ASSERT_TRUE(st.laser);
+  const Bytes file = codec::encode_model(d);
+  ASSERT_EQ(file[10], 7);
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok());
+  const auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok());
+  std::ofstream out(golden_path("tiny_residual_laser_1.7.lex3dm"), std::ios::binary);
+  out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
+  write_xyz(golden_path("tiny_residual_laser_1.7.input.xyz"), input);
+  write_xyz(golden_path("tiny_residual_laser_1.7.decoded.xyz"), cloud.value());
+}
+
+TEST(ResidualLaserGolden, Format1_7FileDecodesToTheRecordedCloud) {
+  const Bytes file = read_bytes(golden_path("tiny_residual_laser_1.7.lex3dm"));
+  const Cloud input = read_xyz(golden_path("tiny_residual_laser_1.7.input.xyz"));
+  const Cloud recorded = read_xyz(golden_path("tiny_residual_laser_1.7.decoded.xyz"));
+  ASSERT_FALSE(file.empty());
+  ASSERT_FALSE(input.empty());
+  ASSERT_FALSE(recorded.empty());
+  const auto d = codec::decode_model(file);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_EQ(d.value().input_points, input.size());
+  const auto cloud = residual::decode_cloud(d.value());
+  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
+  ASSERT_EQ(cloud.value().size(), recorded.size());
+  for (std::size_t i = 0; i < recorded.size(); ++i) EXPECT_TRUE(cloud.value().points[i] == recorded.points[i]) << i;
+  EXPECT_LE(hausdorff(input, cloud.value()), kGoldenMaxError);
+  EXPECT_LE(hausdorff(cloud.value(), input), kGoldenMaxError);
+  const auto info = codec::inspect(file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info.value().minor, 7);
+  std::string types;
+  for (const auto& c : info.value().chunks) types += c.type + " ";
+  EXPECT_EQ(types, "MHDR ALPH INST RESL IEND ");
 }
 
 TEST(ResidualLaserGolden, Format1_4FileDecodesToTheRecordedCloud) {
