@@ -76,10 +76,11 @@ void run_compress(const CompressOptions& o) {
   if (o.layer_coding == "voxel" && o.keep_all_points)
     throw CliError(1, "--layer-coding voxel codes one point a cell, --keep-all-points one a point: give one of them");
   // With a layer, words cost more than they save at every bound measured (README), so the
-  // layer alone is the default; --words on/auto brings them back, and so does an alphabet
-  // given or asked for (--alphabet, --save-alphabet).
+  // layer alone is the default; --words on/auto brings them back. An alphabet given or asked
+  // for (--alphabet, --save-alphabet) makes it auto: the words are tried, and kept in a scan's
+  // file only where they make it smaller.
   const bool alphabet_asked = !o.alphabet.empty() || !o.save_alphabet.empty();
-  const std::string words_mode = !o.words.empty() ? o.words : layered && !alphabet_asked ? "off" : "on";
+  const std::string words_mode = !o.words.empty() ? o.words : !layered ? "on" : alphabet_asked ? "auto" : "off";
   const bool use_words = words_mode != "off";
   if (!use_words && (!o.alphabet.empty() || !o.save_alphabet.empty()))
     throw CliError(1, "--words off uses no alphabet: drop --alphabet / --save-alphabet");
@@ -139,7 +140,7 @@ void run_compress(const CompressOptions& o) {
   coding.target_bpp = o.target_bpp;
   coding.words = o.words == "on" ? WordsMode::kOn : o.words == "off" ? WordsMode::kOff
                  : o.words == "auto" ? WordsMode::kAuto
-                 : layered && alphabet_asked ? WordsMode::kOn : WordsMode::kDefault;
+                 : layered && alphabet_asked ? WordsMode::kAuto : WordsMode::kDefault;
   coding.keep_all_points = o.keep_all_points;
   coding.layer_coding = o.layer_coding == "spherical" ? LayerCoding::kSpherical
                         : o.layer_coding == "voxel"   ? LayerCoding::kVoxel

@@ -89,10 +89,11 @@ def main(argv=None):
         args.max_error = AUTO_MAX_ERROR
     else:
         args.max_error = None
-    # As lex3d compress: an alphabet given or saved brings the words back with the layer.
+    # As lex3d compress: with an alphabet given or saved, the words are tried with the layer
+    # and kept where they make a scan's file smaller.
     if args.words is None and (args.alphabet or args.save_alphabet) and \
             (args.max_error is not None or args.target_bpp is not None):
-        args.words = "on"
+        args.words = "auto"
     for name in ("max_error", "target_bpp", "words"):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)
