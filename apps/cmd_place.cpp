@@ -230,8 +230,7 @@ PlaceScan describe(Cloud cloud, const std::string& name, const Alphabet& alphabe
   const ModelParams mp = model_params();
   const GravitySource g = upright(cloud, gravity, mp.features.range);
   if (source != nullptr) *source = g;
-  const PreparedScan s = prepare_scan(cloud, mp, alphabet.word_radius);
-  return make_place_scan(s, alphabet, storage, mp.features.range, name);
+  return make_place_scan(cloud, alphabet, storage, mp, name);
 }
 
 PlaceVocabulary learn_place_vocabulary(const std::vector<PlaceScan>& train, int words) {

@@ -50,18 +50,34 @@ double derive_word_radius(const Cloud& cloud) {
   return std::clamp(8.0 * spacing, 0.1, 1.0);
 }
 
+namespace {
+
+double resolve_word_radius(const Cloud& cloud, const ModelParams& params, double word_radius) {
+  return word_radius > 0.0 ? word_radius : params.word_radius > 0.0 ? params.word_radius : derive_word_radius(cloud);
+}
+
+FeatureParams feature_params_for(const Cloud& cloud, const ModelParams& params, double word_radius) {
+  FeatureParams fp = params.features;
+  fp.threads = params.threads;
+  fp.coverage.distance = params.coverage_factor * word_radius;
+  if (cloud.has_world_pose) fp.descriptor.up = cloud.T_world_cloud.linear().transpose() * Eigen::Vector3d::UnitZ();
+  return fp;
+}
+
+}  // namespace
+
+FeatureParams prepare_feature_params(const Cloud& cloud, const ModelParams& params, double word_radius) {
+  params.validate();
+  return feature_params_for(cloud, params, resolve_word_radius(cloud, params, word_radius));
+}
+
 PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double word_radius) {
   params.validate();
   Stopwatch sw;
   PreparedScan s;
   s.cloud = cloud;
-  s.word_radius = word_radius > 0.0 ? word_radius
-                  : params.word_radius > 0.0 ? params.word_radius
-                                             : derive_word_radius(cloud);
-  FeatureParams fp = params.features;
-  fp.threads = params.threads;
-  fp.coverage.distance = params.coverage_factor * s.word_radius;
-  if (cloud.has_world_pose) fp.descriptor.up = cloud.T_world_cloud.linear().transpose() * Eigen::Vector3d::UnitZ();
+  s.word_radius = resolve_word_radius(cloud, params, word_radius);
+  const FeatureParams fp = feature_params_for(cloud, params, s.word_radius);
   FeatureResult fr = extract_features(cloud, fp);
   s.features = std::move(fr.features);
   s.timings = fr.timings;

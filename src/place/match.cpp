@@ -130,7 +130,7 @@ class Matcher {
       if (!(u.x() >= 0 && u.y() >= 0 && u.z() >= 0)) continue;
       const auto x = static_cast<int>(u.x()), y = static_cast<int>(u.y()), z = static_cast<int>(u.z());
       if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
-      if (grid_[cell_index(x, y, z)] != 0) ++h.inliers;
+      if (cell_set(cell_index(x, y, z))) ++h.inliers;
     }
     return h;
   }
@@ -508,7 +508,8 @@ class Matcher {
       dims_ = {0, 0, 0};
       return;
     }
-    grid_.assign(static_cast<std::size_t>(dims_[0]) * static_cast<std::size_t>(dims_[1]) * static_cast<std::size_t>(dims_[2]), 0);
+    // One bit a cell: an eighth of the memory to clear and to look up.
+    grid_.assign((static_cast<std::size_t>(dims_[0]) * static_cast<std::size_t>(dims_[1]) * static_cast<std::size_t>(dims_[2]) + 63) / 64, 0);
     const int reach = static_cast<int>(std::ceil(r / cell_));
     for (const auto& g : gm_) {
       const Eigen::Vector3d u = (g - origin_) / cell_;
@@ -518,7 +519,10 @@ class Matcher {
           for (int x = cx - reach; x <= cx + reach; ++x) {
             if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
             const Eigen::Vector3d centre = origin_ + (Eigen::Vector3d(x, y, z) + Eigen::Vector3d::Constant(0.5)) * cell_;
-            if ((centre - g).norm() <= r) grid_[cell_index(x, y, z)] = 1;
+            if ((centre - g).norm() <= r) {
+              const std::size_t i = cell_index(x, y, z);
+              grid_[i >> 6] |= std::uint64_t{1} << (i & 63);
+            }
           }
     }
   }
@@ -527,13 +531,14 @@ class Matcher {
                static_cast<std::size_t>(dims_[0]) +
            static_cast<std::size_t>(x);
   }
+  [[nodiscard]] bool cell_set(std::size_t i) const { return ((grid_[i >> 6] >> (i & 63)) & 1U) != 0; }
   [[nodiscard]] bool occupied(const Eigen::Vector3d& p) const {
     if (grid_.empty()) return false;
     const Eigen::Vector3d u = (p - origin_) / cell_;
     if (!(u.x() >= 0 && u.y() >= 0 && u.z() >= 0)) return false;
     const auto x = static_cast<int>(u.x()), y = static_cast<int>(u.y()), z = static_cast<int>(u.z());
     if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return false;
-    return grid_[cell_index(x, y, z)] != 0;
+    return cell_set(cell_index(x, y, z));
   }
 
   const PlaceScan& q_;
@@ -546,7 +551,7 @@ class Matcher {
   double cell_ = 0.25;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   std::array<int, 3> dims_{0, 0, 0};
-  std::vector<std::uint8_t> grid_;
+  std::vector<std::uint64_t> grid_;  // occupancy bits, cell_index order
 };
 
 bool close_poses(const Pose& a, const Pose& b) {

@@ -2,6 +2,8 @@
 // coarse range image).
 
 #include <algorithm>
+#include <array>
+#include <cstring>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -102,9 +104,22 @@ void finish_place_scan(PlaceScan& scan) {
         if (h >= 1.0F)
           scan.pairs.push_back({h, v.z(), std::atan2(v.y(), v.x()), static_cast<std::uint16_t>(a), static_cast<std::uint16_t>(b)});
       }
-    std::sort(scan.pairs.begin(), scan.pairs.end(), [](const PlaceScan::FeaturePair& x, const PlaceScan::FeaturePair& y) {
-      return x.horizontal != y.horizontal ? x.horizontal < y.horizontal : (x.a != y.a ? x.a < y.a : x.b < y.b);
-    });
+    // By horizontal distance, ties by (a, b): the pairs are made in (a, b) order, so a stable
+    // sort on the distance alone gives that order. The distances are finite and at least 1, so
+    // their bit patterns sort as the values do: three stable 11-bit counting passes.
+    std::vector<PlaceScan::FeaturePair> tmp(scan.pairs.size());
+    auto key = [](const PlaceScan::FeaturePair& e) {
+      std::uint32_t k = 0;
+      std::memcpy(&k, &e.horizontal, sizeof k);
+      return k;
+    };
+    for (int shift = 0; shift < 32; shift += 11) {
+      std::array<std::size_t, 2049> start{};
+      for (const auto& e : scan.pairs) ++start[((key(e) >> shift) & 0x7FFU) + 1];
+      for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+      for (const auto& e : scan.pairs) tmp[start[(key(e) >> shift) & 0x7FFU]++] = e;
+      scan.pairs.swap(tmp);
+    }
   }
   // Farthest-point order: the strongest feature first, then always the feature
   // farthest from those chosen (ties: lower index).
@@ -142,11 +157,29 @@ void make_dense_points(PlaceScan& scan) {
       c.range.size() != c.state.size() || c.row_edges.size() != static_cast<std::size_t>(c.height) + 1)
     return;
   // Sensor-frame points along the pixel-centre rays.
+  // The rays are RangeImage::ray(x + 0.5, y + 0.5), its sines and cosines taken once a row
+  // and once a column.
+  std::vector<double> cos_az(static_cast<std::size_t>(c.width)), sin_az(cos_az.size());
+  std::vector<double> cos_el(static_cast<std::size_t>(c.height)), sin_el(cos_el.size());
+  for (int x = 0; x < c.width; ++x) {
+    const double az = c.azimuth_max_rad - (x + 0.5) * c.azimuth_resolution_rad;
+    cos_az[static_cast<std::size_t>(x)] = std::cos(az);
+    sin_az[static_cast<std::size_t>(x)] = std::sin(az);
+  }
+  for (int y = 0; y < c.height; ++y) {
+    const double el = c.elevation_at(y + 0.5);
+    cos_el[static_cast<std::size_t>(y)] = std::cos(el);
+    sin_el[static_cast<std::size_t>(y)] = std::sin(el);
+  }
   std::vector<Eigen::Vector3f> pts(c.state.size(), Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
   for (int y = 0; y < c.height; ++y)
     for (int x = 0; x < c.width; ++x) {
       const std::size_t i = c.index(x, y);
-      if (c.state[i] == PixelState::kValid) pts[i] = c.ray(x + 0.5, y + 0.5) * c.range[i];
+      if (c.state[i] != PixelState::kValid) continue;
+      const auto ux = static_cast<std::size_t>(x), uy = static_cast<std::size_t>(y);
+      const Eigen::Vector3f ray(static_cast<float>(cos_el[uy] * cos_az[ux]), static_cast<float>(cos_el[uy] * sin_az[ux]),
+                                static_cast<float>(sin_el[uy]));
+      pts[i] = ray * c.range[i];
     }
   // Normals from the neighbours left/right and up/down on the same surface: a neighbour
   // counts when its range differs by at most what a surface inclined by 75 degrees to the
@@ -258,13 +291,35 @@ float dequantise_range(std::uint16_t code, double step) noexcept {
 
 }  // namespace detail
 
-PlaceScan make_place_scan(const PreparedScan& scan, const Model& model, const PlaceStorageParams& storage,
-                          const RangeImageParams& range, std::string name) {
-  storage.validate();
+namespace {
+
+// Word ids of every feature (interest and coverage): the word with the nearest descriptor.
+Model assign_words(const Features& features, const Alphabet& alphabet) {
+  Model model;
+  if (alphabet.size() > 0 && features.size() > 0) {
+    if (alphabet.descriptor_dim != features.descriptor_dim)
+      throw std::invalid_argument("make_place_scan: the alphabet's descriptors have " +
+                                  std::to_string(alphabet.descriptor_dim) + " values, the scan's " +
+                                  std::to_string(features.descriptor_dim));
+    const WordIndex index(alphabet);
+    const auto matches = index.nearest(features.descriptors.data(), features.size(), 1);
+    model.instances.resize(matches.size());
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      model.instances[i].word = matches[i].word;
+      model.instances[i].feature = static_cast<std::uint32_t>(i);
+      model.instances[i].T_cloud_word = features.features[i].T_cloud_feature;
+    }
+  }
+  return model;
+}
+
+// The PlaceScan of a cloud, its features, its word instances and its (fine) range image.
+PlaceScan build_place_scan(const Cloud& cloud, const Features& f, const Model& model, const PlaceStorageParams& storage,
+                           const RangeImage& fine, std::string name) {
   PlaceScan p;
   p.name = std::move(name);
-  p.T_world_cloud = scan.cloud.T_world_cloud;
-  p.has_world_pose = scan.cloud.has_world_pose;
+  p.T_world_cloud = cloud.T_world_cloud;
+  p.has_world_pose = cloud.has_world_pose;
   // Bag of words.
   std::vector<std::uint32_t> ids;
   ids.reserve(model.instances.size());
@@ -277,7 +332,6 @@ PlaceScan make_place_scan(const PreparedScan& scan, const Model& model, const Pl
     i = j;
   }
   // The strongest interest-point features (they come first, by decreasing interest).
-  const Features& f = scan.features;
   const std::size_t n = std::min<std::size_t>(f.interest_count, static_cast<std::size_t>(storage.max_features));
   p.descriptor_dim = f.descriptor_dim;
   p.descriptor_bits = storage.descriptor_bits;
@@ -293,30 +347,35 @@ PlaceScan make_place_scan(const PreparedScan& scan, const Model& model, const Pl
     for (int k = 0; k < f.descriptor_dim; ++k)
       p.descriptor_codes.push_back(detail::quantise_descriptor_value(d[k], storage.descriptor_bits));
   }
-  const RangeImage fine = make_range_image(scan.cloud, range);
   p.coarse = detail::make_coarse_image(fine, storage);
   detail::finish_place_scan(p);
   return p;
 }
 
+}  // namespace
+
+PlaceScan make_place_scan(const PreparedScan& scan, const Model& model, const PlaceStorageParams& storage,
+                          const RangeImageParams& range, std::string name) {
+  storage.validate();
+  const RangeImage fine = make_range_image(scan.cloud, range);
+  return build_place_scan(scan.cloud, scan.features, model, storage, fine, std::move(name));
+}
+
 PlaceScan make_place_scan(const PreparedScan& scan, const Alphabet& alphabet, const PlaceStorageParams& storage,
                           const RangeImageParams& range, std::string name) {
-  Model model;
-  if (alphabet.size() > 0 && scan.features.size() > 0) {
-    if (alphabet.descriptor_dim != scan.features.descriptor_dim)
-      throw std::invalid_argument("make_place_scan: the alphabet's descriptors have " +
-                                  std::to_string(alphabet.descriptor_dim) + " values, the scan's " +
-                                  std::to_string(scan.features.descriptor_dim));
-    const WordIndex index(alphabet);
-    const auto matches = index.nearest(scan.features.descriptors.data(), scan.features.size(), 1);
-    model.instances.resize(matches.size());
-    for (std::size_t i = 0; i < matches.size(); ++i) {
-      model.instances[i].word = matches[i].word;
-      model.instances[i].feature = static_cast<std::uint32_t>(i);
-      model.instances[i].T_cloud_word = scan.features.features[i].T_cloud_feature;
-    }
-  }
+  const Model model = assign_words(scan.features, alphabet);
   return make_place_scan(scan, model, storage, range, std::move(name));
+}
+
+PlaceScan make_place_scan(const Cloud& cloud, const Alphabet& alphabet, const PlaceStorageParams& storage,
+                          const ModelParams& params, std::string name) {
+  storage.validate();
+  // prepare_scan's feature extraction, its range image kept for the coarse image (the same
+  // image make_range_image(cloud, params.features.range) gives); the neighbourhoods and σ
+  // prepare_scan adds for coding are not needed here.
+  const FeatureResult fr = extract_features(cloud, prepare_feature_params(cloud, params, alphabet.word_radius));
+  const Model model = assign_words(fr.features, alphabet);
+  return build_place_scan(cloud, fr.features, model, storage, fr.image, std::move(name));
 }
 
 namespace detail {

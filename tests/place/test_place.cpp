@@ -237,6 +237,70 @@ TEST(PlaceDense, SelfConsistency) {
   EXPECT_GT(static_cast<double>(c.support), 0.95 * static_cast<double>(c.points));
 }
 
+// The query path describes a cloud from one feature extraction: the same PlaceScan as the
+// prepared scan gives, derived state included.
+TEST(PlaceScanFromCloud, SameAsFromThePreparedScan) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  Balm& b = Balm::get();
+  const Alphabet& alphabet = b.alphabet();
+  const PlaceScan a = b.place("000106");
+  ModelParams mp;
+  const PlaceScan c = make_place_scan(b.prepared("000106").cloud, alphabet, PlaceStorageParams{}, mp, "000106");
+  EXPECT_EQ(a.words, c.words);
+  ASSERT_EQ(a.features.size(), c.features.size());
+  for (std::size_t i = 0; i < a.features.size(); ++i) {
+    EXPECT_EQ(a.features[i].position, c.features[i].position);
+    EXPECT_EQ(a.features[i].rotation.coeffs(), c.features[i].rotation.coeffs());
+  }
+  EXPECT_EQ(a.descriptor_codes, c.descriptor_codes);
+  EXPECT_EQ(a.coarse.range.size(), c.coarse.range.size());
+  EXPECT_TRUE(std::equal(a.coarse.state.begin(), a.coarse.state.end(), c.coarse.state.begin(), c.coarse.state.end()));
+  EXPECT_EQ(a.validation, c.validation);
+  EXPECT_EQ(a.dense_points, c.dense_points);
+  EXPECT_EQ(a.dense_index, c.dense_index);
+  ASSERT_EQ(a.pairs.size(), c.pairs.size());
+  EXPECT_GT(a.pairs.size(), 1000U);
+}
+
+// Derived state against plain oracles: the pair table in (horizontal, a, b) order, every
+// pair at least 1 m apart listed; dense points on the pixel-centre rays.
+TEST(PlaceScanDerived, PairTableAndDensePointsMatchOracles) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  const PlaceScan s = Balm::get().place("000040");
+  const Eigen::Matrix3f R = s.T_world_cloud.linear().cast<float>();
+  std::vector<PlaceScan::FeaturePair> want;
+  for (std::size_t a = 0; a < s.features.size(); ++a)
+    for (std::size_t b2 = a + 1; b2 < s.features.size(); ++b2) {
+      const Eigen::Vector3f v = R * s.features[b2].position - R * s.features[a].position;
+      const float h = std::hypot(v.x(), v.y());
+      if (h >= 1.0F) want.push_back({h, v.z(), std::atan2(v.y(), v.x()), static_cast<std::uint16_t>(a), static_cast<std::uint16_t>(b2)});
+    }
+  std::sort(want.begin(), want.end(), [](const PlaceScan::FeaturePair& x, const PlaceScan::FeaturePair& y) {
+    return x.horizontal != y.horizontal ? x.horizontal < y.horizontal : (x.a != y.a ? x.a < y.a : x.b < y.b);
+  });
+  ASSERT_EQ(want.size(), s.pairs.size());
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    ASSERT_EQ(want[i].a, s.pairs[i].a) << i;
+    ASSERT_EQ(want[i].b, s.pairs[i].b) << i;
+    ASSERT_EQ(want[i].horizontal, s.pairs[i].horizontal) << i;
+    ASSERT_EQ(want[i].angle, s.pairs[i].angle) << i;
+  }
+  const RangeImage& c = s.coarse;
+  const Eigen::Matrix3f Rs = c.T_cloud_sensor.linear().cast<float>();
+  const Eigen::Vector3f ts = c.T_cloud_sensor.translation().cast<float>();
+  std::size_t checked = 0;
+  for (int y = 0; y < c.height; ++y)
+    for (int x = 0; x < c.width; ++x) {
+      const std::int32_t k = s.dense_index[c.index(x, y)];
+      if (k < 0) continue;
+      const Eigen::Vector3f p = Rs * (c.ray(x + 0.5, y + 0.5) * c.range[c.index(x, y)]) + ts;
+      ASSERT_EQ(p, s.dense_points[static_cast<std::size_t>(k)]) << x << " " << y;
+      ++checked;
+    }
+  EXPECT_EQ(checked, s.dense_points.size());
+  EXPECT_GT(checked, 1000U);
+}
+
 TEST(PlaceDatabase, ThreadsDoNotChangeResults) {
   LEX3D_REQUIRE_SHARED(kBalm);
   Balm& b = Balm::get();

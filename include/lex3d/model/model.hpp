@@ -72,6 +72,11 @@ struct PreparedScan {
 /// The word radius ModelParams::word_radius = 0 stands for.
 [[nodiscard]] double derive_word_radius(const Cloud& cloud);
 
+/// The feature extraction prepare_scan runs: params.features with its thread count, the
+/// coverage distance coverage_factor · δ and the descriptors' up direction from the cloud's pose.
+/// `word_radius` as for prepare_scan (0: params.word_radius, 0 there too: derived).
+[[nodiscard]] FeatureParams prepare_feature_params(const Cloud& cloud, const ModelParams& params, double word_radius = 0.0);
+
 /// Extracts features (coverage distance = coverage_factor · δ), σ and neighbourhoods.
 /// `word_radius` > 0 overrides params.word_radius (to share one δ across scans).
 [[nodiscard]] PreparedScan prepare_scan(const Cloud& cloud, const ModelParams& params, double word_radius = 0.0);

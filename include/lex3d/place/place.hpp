@@ -218,6 +218,12 @@ struct PlaceScan {
                                         const PlaceStorageParams& storage, const RangeImageParams& range = {},
                                         std::string name = {});
 
+/// As above from the cloud itself: the same PlaceScan as make_place_scan(prepare_scan(cloud,
+/// params, alphabet.word_radius), alphabet, storage, params.features.range, name), with one range
+/// image instead of two and without the neighbourhoods prepare_scan finds for coding.
+[[nodiscard]] PlaceScan make_place_scan(const Cloud& cloud, const Alphabet& alphabet, const PlaceStorageParams& storage,
+                                        const ModelParams& params, std::string name = {});
+
 /// Bytes of one scan in the database format (its SCAN chunk, framing included).
 [[nodiscard]] std::size_t stored_bytes(const PlaceScan& scan);
 
