@@ -361,10 +361,12 @@ void run_compress(const CompressOptions& o) {
     std::cout << j.str() << "\n";
     return;
   }
+  const std::string alphabet_path = o.alphabet.empty() ? o.save_alphabet : o.alphabet;
   const std::string where = o.one_file ? "in the sequence file " + o.output
                             : embed   ? std::string("embedded in each model file")
-                                      : std::to_string(alphabet_bytes) + " bytes in " +
-                                            (o.alphabet.empty() ? o.save_alphabet : o.alphabet);
+                            : any_words ? std::to_string(alphabet_bytes) + " bytes in " + alphabet_path
+                                        : std::to_string(alphabet_file.size()) + " bytes in " + alphabet_path +
+                                              "; no scan's file uses it (the layer alone was smaller), so not counted";
   std::printf("alphabet: %zu words, %s\n", alphabet.size(), where.c_str());
   std::printf("total: %llu bytes for %llu points = %.3f bits per point (alphabet included), %.0f ms\n",
               static_cast<unsigned long long>(total_bytes + alphabet_bytes), static_cast<unsigned long long>(total_points),

@@ -223,8 +223,7 @@ class PyPlaceDatabase {
   PlaceScan describe(Cloud cloud, const std::string& name) const {
     const ModelParams mp = place_model_params();
     apply_gravity(cloud, mp.features.range);
-    const PreparedScan s = prepare_scan(cloud, mp, db_.alphabet().word_radius);
-    return make_place_scan(s, db_.alphabet(), db_.storage(), mp.features.range, name);
+    return make_place_scan(cloud, db_.alphabet(), db_.storage(), mp, name);
   }
 
   std::size_t add_cloud(Cloud cloud, const std::string& name) {
