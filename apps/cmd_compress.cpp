@@ -75,7 +75,7 @@ void run_compress(const CompressOptions& o) {
     throw CliError(1, "--words off needs a residual layer: give --max-error E or --target-bpp B");
   if (o.layer_coding == "voxel" && o.keep_all_points)
     throw CliError(1, "--layer-coding voxel codes one point a cell, --keep-all-points one a point: give one of them");
-  // With a layer, words cost more than they save at every bound measured (README), so the
+  // With a layer, words cost more than they save at every bound measured (bench/README.md), so the
   // layer alone is the default; --words on/auto brings them back. An alphabet given or asked
   // for (--alphabet, --save-alphabet) makes it auto: the words are tried, and kept in a scan's
   // file only where they make it smaller.

@@ -40,7 +40,7 @@ std::vector<std::string> attribute_fields(const Cloud& cloud) {
 }
 
 WordsMode CodingOptions::words_mode() const noexcept {
-  // With a layer, words cost more than they save at every bound measured (README), so the
+  // With a layer, words cost more than they save at every bound measured (bench/README.md), so the
   // layer alone is the default.
   if (words != WordsMode::kDefault) return words;
   return layered() ? WordsMode::kOff : WordsMode::kOn;

@@ -75,7 +75,7 @@ void PlaceDatabase::set_vocabulary(PlaceVocabulary vocabulary) {
 
 PlaceRetrieval PlaceDatabase::resolve(PlaceRetrieval method) const noexcept {
   // The alphabet's tf-idf stays the default: over the vocabulary the first stage was not better
-  // on balm at 100-5,000 entries and the final recall at 1,000-5,000 was lower (README).
+  // on balm at 100-5,000 entries and the final recall at 1,000-5,000 was lower (bench/README.md).
   return method != PlaceRetrieval::kDefault ? method : PlaceRetrieval::kTfidfAlphabet;
 }
 

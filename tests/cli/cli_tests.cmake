@@ -137,12 +137,22 @@ run(0 decompress.octomap_map decompress "${WORK}/nc.lex3dm" --octomap "${WORK}/n
 expect_match(decompress.octomap_map "${LAST_OUT}" " 0 free leaves")
 run(1 decompress.octomap_bad_free decompress "${WORK}/nc.lex3dm" --octomap "${WORK}/nc_bad.bt" --free-space some)
 # Alphabet reuse: a learned alphabet file, models that reference it.
-run(0 compress.save compress "${NC}" -o "${WORK}/nc_ref.lex3dm" --save-alphabet "${WORK}/nc.lex3da" --iterations 30)
+run(0 compress.save compress "${NC}" -o "${WORK}/nc_ref.lex3dm" --save-alphabet "${WORK}/nc.lex3da" --iterations 30 --max-error none)
 run(0 info.alphabet info --json "${WORK}/nc.lex3da")
 expect_match(info.alphabet "${LAST_OUT}" "\"kind\":\"alphabet\"")
 expect_match(info.alphabet "${LAST_OUT}" "\"word_radius_m\":[0-9]")
 set(ALPHABET_INFO "${LAST_OUT}")
-run(0 compress.reuse compress "${NC}" -o "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da")
+run(0 compress.reuse compress "${NC}" -o "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da" --max-error none)
+# With the default bound, a reused alphabet's words are kept only where they make the file
+# smaller; the bound holds either way.
+run(0 compress.reuse_bounded compress "${NC}" -o "${WORK}/nc_reuse_b.lex3dm" --alphabet "${WORK}/nc.lex3da")
+expect_match(compress.reuse_bounded "${LAST_OUT}" "0\\.0100 m")
+run(0 decompress.reuse_bounded decompress "${WORK}/nc_reuse_b.lex3dm" -o "${WORK}/nc_reuse_b.ply" --alphabet "${WORK}/nc.lex3da"
+    --reference "${NC}" --json)
+string(REGEX MATCH "\"hausdorff_m\":([0-9.e+-]+)" m "${LAST_OUT}")
+if(NOT m OR CMAKE_MATCH_1 GREATER 0.0100001)
+  message(SEND_ERROR "[decompress.reuse_bounded] not within 1 cm: ${LAST_OUT}")
+endif()
 run(2 decompress.no_alphabet decompress "${WORK}/nc_reuse.lex3dm" -o "${WORK}/x.ply")
 expect_match(decompress.no_alphabet "${LAST_ERR}" "--alphabet")
 run(0 decompress.with_alphabet decompress "${WORK}/nc_reuse.lex3dm" --alphabet "${WORK}/nc.lex3da" -o "${WORK}/nc_reuse.ply")

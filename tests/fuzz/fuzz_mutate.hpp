@@ -65,19 +65,22 @@ inline bool parse(const Bytes& b, Container& c) {
 }
 
 /// Reassembles with a correct header CRC and chunk CRCs.
+/// Appends one chunk (type, length, payload, CRC over the three) to `b`.
+inline void append_chunk(Bytes& b, const Container::Chunk& k) {
+  const std::size_t start = b.size();
+  b.insert(b.end(), k.type.begin(), k.type.end());
+  b.resize(b.size() + 8);
+  store_u64(&b[b.size() - 8], k.payload.size());
+  b.insert(b.end(), k.payload.begin(), k.payload.end());
+  b.resize(b.size() + 4);
+  store_u32(&b[b.size() - 4], crc_of(b.data() + start, b.size() - 4 - start));
+}
+
 inline Bytes build(const Container& c) {
   Bytes b = c.head;
   b.resize(20, 0);
   store_u32(&b[16], crc_of(b.data(), 16));
-  for (const auto& k : c.chunks) {
-    const std::size_t start = b.size();
-    b.insert(b.end(), k.type.begin(), k.type.end());
-    b.resize(b.size() + 8);
-    store_u64(&b[b.size() - 8], k.payload.size());
-    b.insert(b.end(), k.payload.begin(), k.payload.end());
-    b.resize(b.size() + 4);
-    store_u32(&b[b.size() - 4], crc_of(b.data() + start, b.size() - 4 - start));
-  }
+  for (const auto& k : c.chunks) append_chunk(b, k);
   return b;
 }
 

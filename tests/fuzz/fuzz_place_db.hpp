@@ -136,15 +136,7 @@ inline Bytes build_place_2(PlaceFile& f) {
       }
     }
   }
-  for (const auto& k : f.chunks.chunks) {
-    const std::size_t start = b.size();
-    b.insert(b.end(), k.type.begin(), k.type.end());
-    b.resize(b.size() + 8);
-    store_u64(&b[b.size() - 8], k.payload.size());
-    b.insert(b.end(), k.payload.begin(), k.payload.end());
-    b.resize(b.size() + 4);
-    store_u32(&b[b.size() - 4], crc_of(b.data() + start, b.size() - 4 - start));
-  }
+  for (const auto& k : f.chunks.chunks) append_chunk(b, k);
   // The record in force: the valid one with the higher sequence (slot = sequence mod 2).
   int slot = -1;
   std::uint64_t best = 0;

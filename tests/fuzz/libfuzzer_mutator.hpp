@@ -8,6 +8,12 @@
 
 #include "fuzz_mutate.hpp"
 
+// The structure-aware mutation: the model/alphabet container's unless the target names
+// another (define it before including this file, e.g. fuzz_place_db.cpp's mutate_place_db).
+#ifndef LEX3D_FUZZ_MUTATE_STRUCTURE
+#define LEX3D_FUZZ_MUTATE_STRUCTURE lex3d::fuzz::mutate_structure
+#endif
+
 extern "C" std::size_t LLVMFuzzerMutate(std::uint8_t* data, std::size_t size, std::size_t max_size);
 
 extern "C" std::size_t LLVMFuzzerCustomMutator(std::uint8_t* data, std::size_t size, std::size_t max_size,
@@ -21,7 +27,7 @@ extern "C" std::size_t LLVMFuzzerCustomMutator(std::uint8_t* data, std::size_t s
       b.resize(n + 64 + n / 4);
       b.resize(LLVMFuzzerMutate(b.data(), n, b.size()));
     };
-    if (lex3d::fuzz::mutate_structure(file, rng, mutate) && !file.empty() && file.size() <= max_size) {
+    if (LEX3D_FUZZ_MUTATE_STRUCTURE(file, rng, mutate) && !file.empty() && file.size() <= max_size) {
       std::memcpy(data, file.data(), file.size());
       return file.size();
     }

@@ -54,7 +54,7 @@ struct PlaceStorageParams {
 
 /// The first stage of a query: how candidates are ranked before verification.
 enum class PlaceRetrieval {
-  kDefault,         ///< kTfidfAlphabet (measured best on balm at 100-5,000 entries, README)
+  kDefault,         ///< kTfidfAlphabet (measured best on balm at 100-5,000 entries, bench/README.md)
   kTfidfAlphabet,   ///< tf-idf cosine over the compression alphabet's word ids (PlaceScan::words)
   kTfidf,           ///< tf-idf cosine over the recognition vocabulary's words (every tree level)
   kFabmap,          ///< FAB-MAP-style likelihood over the vocabulary's leaves (collier2012 §3)
