@@ -304,6 +304,7 @@ void run_compress(const CompressOptions& o) {
       j.end_array();
       j.end_object();
     } else {
+      bar.clear();  // the table row starts on a clean line
       std::printf("%-32s %9llu %9zu %10zu %10.3f", shown.c_str(), static_cast<unsigned long long>(d.input_points),
                   d.model.instances.size(), bytes.size(), bpp);
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
@@ -318,6 +319,7 @@ void run_compress(const CompressOptions& o) {
                     : coded.max_error ? "not coded"
                                       : "words alone: give --max-error to keep attributes");
     }
+    std::fflush(stdout);
     bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), loader.name(i));
   };
   std::vector<Outcome> batch;

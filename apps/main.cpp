@@ -10,11 +10,22 @@
 #include <iostream>
 
 #include "cli_common.hpp"
+#include "progress.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"lex3d: compact lidar scans and maps from a learned alphabet of local 3D structures"};
   app.set_version_flag("--version", std::string("lex3d ") + LEX3D_VERSION);
   app.set_help_all_flag("--help-all", "Print the help of every command and subcommand, then exit");
+  // Progress of long work on stderr (apps/progress.hpp): a bar on a terminal by default.
+  // Given before or after the command name (fallthrough).
+  app.fallthrough();
+  app.add_flag_callback("--quiet", [] { lex3d::cli::progress_mode() = lex3d::cli::ProgressMode::kQuiet; },
+                        "No progress display (errors and notes are still printed)")
+      ->trigger_on_parse();
+  app.add_flag_callback("--progress", [] { lex3d::cli::progress_mode() = lex3d::cli::ProgressMode::kLines; },
+                        "Show progress even when stderr is not a terminal: a plain line a second with the "
+                        "elapsed time and the time left (for logs)")
+      ->trigger_on_parse();
   app.require_subcommand(1);
   // Every option's help shows its default value (subcommands inherit this).
   app.option_defaults()->always_capture_default(true);

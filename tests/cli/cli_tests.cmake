@@ -233,6 +233,20 @@ run(1 compress.bad_error compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error
 run(1 compress.bad_error_text compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error lots)
 run(1 compress.both compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error 0.01 --target-bpp 4)
 run(1 compress.words_off_no_layer compress "${NC}" -o "${WORK}/nc_bad.lex3dm" --max-error none --words off)
+# Progress: nothing on a stderr that is not a terminal, plain lines with --progress (before
+# or after the command name), nothing with --quiet.
+run(0 progress.default compress "${NC}" "${NC}" -o "${WORK}/pg.lex3dm" --max-error 0.05)
+if(NOT LAST_ERR STREQUAL "")
+  message(SEND_ERROR "[progress.default] stderr is not empty: ${LAST_ERR}")
+endif()
+run(0 progress.lines compress "${NC}" "${NC}" -o "${WORK}/pg.lex3dm" --max-error 0.05 --progress)
+expect_match(progress.lines "${LAST_ERR}" "encoding 2/2 [^\n]*newer_college_00\\.bin \\([0-9]+ s\\)")
+run(0 progress.global --progress compress "${NC}" -o "${WORK}/pg.lex3dm" --max-error 0.05)
+expect_match(progress.global "${LAST_ERR}" "encoding 1/1")
+run(0 progress.quiet compress "${NC}" "${NC}" -o "${WORK}/pg.lex3dm" --max-error 0.05 --quiet)
+if(NOT LAST_ERR STREQUAL "")
+  message(SEND_ERROR "[progress.quiet] stderr is not empty: ${LAST_ERR}")
+endif()
 # The default is bounded (--max-error auto: 1 cm), printed, and kept: every point back within it.
 run(0 compress.default_bound compress "${NC}" -o "${WORK}/nc_default.lex3dm")
 expect_match(compress.default_bound "${LAST_OUT}" "0\\.0100 m")
