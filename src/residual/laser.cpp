@@ -817,6 +817,14 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     }
   }
 
+  // The kept points' lasers and columns side by side, read by every predictor's pass.
+  std::vector<std::uint16_t> kept_ring(kept.size());
+  std::vector<std::uint32_t> kept_column(kept.size());
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    const std::uint32_t i = coded[order[kept[k]]];
+    kept_ring[k] = a.ring[i];
+    kept_column[k] = a.column[i];
+  }
   // The stream, once for each predictor (side by side); the smallest is kept.
   std::vector<std::optional<LaserLayer>> streams(predictors.size());
   parallel_for(predictors.size(), threads, [&](std::size_t pi) {
@@ -829,8 +837,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     out.sources.resize(kept.size());
     for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[kept[k]]];
     RangeEncoder enc = head;
-    const auto ring_at = [&](std::size_t k) { return a.ring[coded[order[kept[k]]]]; };
-    const auto column_at = [&](std::size_t k) { return a.column[coded[order[kept[k]]]]; };
+    const auto ring_at = [&](std::size_t k) { return kept_ring[k]; };
+    const auto column_at = [&](std::size_t k) { return kept_column[k]; };
     put_table(enc, table);
     // Predictors 2 and 3: whether any point has a correction and whether any pixel holds
     // more than one point; without them those symbols are not coded.
