@@ -320,6 +320,18 @@ Status decode_ouster(const std::string& path, const std::string& metadata_path,
     cloud.columns = m.W;
     cloud.geometry = g;
     std::size_t no_returns = 0;
+    const std::size_t pixels = static_cast<std::size_t>(m.H) * m.W;
+    cloud.points.reserve(pixels);
+    cloud.intensity.reserve(pixels);
+    cloud.ring.reserve(pixels);
+    cloud.column.reserve(pixels);
+    // each measurement column's encoder angle, and its cosine and sine (shared by the beams)
+    std::vector<double> theta(m.W), cos_theta(m.W), sin_theta(m.W);
+    for (std::uint32_t mc = 0; mc < m.W; ++mc) {
+      theta[mc] = two_pi * (1.0 - static_cast<double>(mc) / m.W);
+      cos_theta[mc] = std::cos(theta[mc]);
+      sin_theta[mc] = std::sin(theta[mc]);
+    }
     for (std::uint32_t l = 0; l < m.H; ++l) {
       const double phi = g.elevation[l];
       const double cphi = std::cos(phi), sphi = std::sin(phi);
@@ -333,10 +345,9 @@ Status decode_ouster(const std::string& path, const std::string& metadata_path,
           ++no_returns;
           continue;
         }
-        const double th = two_pi * (1.0 - static_cast<double>(mc) / m.W);
-        const double a = th + g.beam_azimuth[l];
+        const double a = theta[mc] + g.beam_azimuth[l];
         const double r = r_mm / 1000.0 - n_m;
-        const Eigen::Vector3d p(r * std::cos(a) * cphi + n_m * std::cos(th), r * std::sin(a) * cphi + n_m * std::sin(th),
+        const Eigen::Vector3d p(r * std::cos(a) * cphi + n_m * cos_theta[mc], r * std::sin(a) * cphi + n_m * sin_theta[mc],
                                 r * sphi + z_m);
         cloud.points.push_back((T_sensor_lidar * p).cast<float>());
         cloud.intensity.push_back(static_cast<float>(f.refl[k]));

@@ -73,10 +73,20 @@ struct Beams {
   /// The beam of laser l in column c shifted by `shift` units, head frame: origin,
   /// direction and two unit vectors across it (e1 horizontal, e2 = u × e1 pointing up).
   [[nodiscard]] Beam beam(std::uint32_t l, std::uint32_t c, std::int64_t shift) const {
+    return beam(l, trig(l, c, shift));
+  }
+  /// The cosines and sines of a beam's two azimuths (its origin's and its direction's): all
+  /// a beam needs besides its laser, 32 bytes where the beam takes 96.
+  struct Trig {
+    double ca, sa, cb, sb;
+  };
+  [[nodiscard]] Trig trig(std::uint32_t l, std::uint32_t c, std::int64_t shift) const {
     const double alpha = azimuth0 + column_angle * static_cast<double>(c) + col_az[l] + static_cast<double>(shift) * shift_unit;
     const double beta = alpha + beam_az[l];
-    const double ca = std::cos(alpha), sa = std::sin(alpha);
-    const double cb = std::cos(beta), sb = std::sin(beta);
+    return {std::cos(alpha), std::sin(alpha), std::cos(beta), std::sin(beta)};
+  }
+  [[nodiscard]] Beam beam(std::uint32_t l, const Trig& t) const {
+    const double ca = t.ca, sa = t.sa, cb = t.cb, sb = t.sb;
     Beam b;
     b.o = Eigen::Vector3d(radial[l] * ca, radial[l] * sa, z[l]);
     b.u = Eigen::Vector3d(cb * cos_el[l], sb * cos_el[l], sin_el[l]);
@@ -744,7 +754,7 @@ namespace {
 std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
                                      const Beams& beams, const std::vector<std::uint32_t>& order,
-                                     const std::vector<std::int64_t>& shift, const std::vector<Beams::Beam>& beam_of,
+                                     const std::vector<std::int64_t>& shift, const std::vector<Beams::Trig>& beam_of,
                                      const std::vector<Eigen::Vector3d>& offset, double max_error, double bound,
                                      bool thin, double share, const std::vector<std::uint32_t>& predictors,
                                      int threads) {
@@ -763,7 +773,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   parallel_for(order.size(), threads, [&](std::size_t j) {
     const std::uint32_t i = coded[order[j]];
     const Eigen::Vector3d truth = input[i].cast<double>();
-    const Beams::Beam& b = beam_of[j];
+    const Beams::Beam b = beams.beam(a.ring[i], beam_of[j]);
     const Eigen::Vector3d& v = offset[j];
     Coded& c = q[j];
     if (!quantise(v.dot(b.u), qr, c.k)) {
@@ -807,6 +817,14 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     }
   }
 
+  // The kept points' lasers and columns side by side, read by every predictor's pass.
+  std::vector<std::uint16_t> kept_ring(kept.size());
+  std::vector<std::uint32_t> kept_column(kept.size());
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    const std::uint32_t i = coded[order[kept[k]]];
+    kept_ring[k] = a.ring[i];
+    kept_column[k] = a.column[i];
+  }
   // The stream, once for each predictor (side by side); the smallest is kept.
   std::vector<std::optional<LaserLayer>> streams(predictors.size());
   parallel_for(predictors.size(), threads, [&](std::size_t pi) {
@@ -819,8 +837,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     out.sources.resize(kept.size());
     for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[kept[k]]];
     RangeEncoder enc = head;
-    const auto ring_at = [&](std::size_t k) { return a.ring[coded[order[kept[k]]]]; };
-    const auto column_at = [&](std::size_t k) { return a.column[coded[order[kept[k]]]]; };
+    const auto ring_at = [&](std::size_t k) { return kept_ring[k]; };
+    const auto column_at = [&](std::size_t k) { return kept_column[k]; };
     put_table(enc, table);
     // Predictors 2 and 3: whether any point has a correction and whether any pixel holds
     // more than one point; without them those symbols are not coded.
@@ -909,6 +927,40 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   return best;
 }
 
+/// The positions in `coded` column by column, lasers in order, then input order: a counting
+/// sort over the pixels where `coded` ascends and every laser and column is in the table
+/// (as the assignment makes them), else a comparison sort to the same order.
+std::vector<std::uint32_t> pixel_order(const std::vector<std::uint32_t>& coded, const LaserAssignment& a) {
+  const std::size_t n = coded.size();
+  const std::uint64_t lasers = a.table.lasers(), columns = a.table.columns;
+  const std::uint64_t pixels = lasers * columns;
+  bool counting = pixels > 0 && pixels <= 4 * static_cast<std::uint64_t>(n) + 65536;
+  for (std::size_t k = 0; k < n && counting; ++k) {
+    const std::uint32_t i = coded[k];
+    counting = (k == 0 || coded[k - 1] < i) && a.ring[i] < lasers && a.column[i] < columns;
+  }
+  std::vector<std::uint32_t> order(n);
+  if (!counting) {
+    std::iota(order.begin(), order.end(), 0U);
+    std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+      const std::uint32_t ix = coded[x], iy = coded[y];
+      if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
+      if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
+      return ix < iy;
+    });
+    return order;
+  }
+  const auto pixel = [&](std::size_t k) {
+    const std::uint32_t i = coded[k];
+    return static_cast<std::size_t>(a.column[i]) * lasers + a.ring[i];
+  };
+  std::vector<std::uint32_t> start(static_cast<std::size_t>(pixels) + 1, 0);
+  for (std::size_t k = 0; k < n; ++k) ++start[pixel(k) + 1];
+  for (std::size_t p = 1; p < start.size(); ++p) start[p] += start[p - 1];
+  for (std::size_t k = 0; k < n; ++k) order[start[pixel(k)]++] = static_cast<std::uint32_t>(k);
+  return order;
+}
+
 }  // namespace
 
 std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
@@ -921,18 +973,20 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
 
   // Column by column, lasers in order, then input order.
-  std::vector<std::uint32_t> order(coded.size());
-  std::iota(order.begin(), order.end(), 0U);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
-    const std::uint32_t ix = coded[x], iy = coded[y];
-    if (a.column[ix] != a.column[iy]) return a.column[ix] < a.column[iy];
-    if (a.ring[ix] != a.ring[iy]) return a.ring[ix] < a.ring[iy];
-    return ix < iy;
-  });
+  std::vector<std::uint32_t> order = pixel_order(coded, a);
   // Each column's azimuth shift: the median of its points' azimuths off their beams (a
   // sensor whose firings do not fall on an even grid), in the table's shift units.
+  // Every point's beam (its azimuths' cosines and sines) and its offset from the beam's
+  // origin (head frame), first unshifted: a column whose shift comes out 0 keeps them.
   std::vector<std::int64_t> shift(coded.size(), 0);  // by position in `order`
-  {
+  std::vector<Beams::Trig> beam_of(order.size());
+  std::vector<Eigen::Vector3d> offset(order.size());
+  parallel_for(order.size(), threads, [&](std::size_t j) {
+    const std::uint32_t i = coded[order[j]];
+    beam_of[j] = beams.trig(a.ring[i], a.column[i], 0);
+    offset[j] = T_head_cloud * input[i].cast<double>() - beams.beam(a.ring[i], beam_of[j]).o;
+  }, 4096);
+  if (table.shift_unit > 0.0) {
     std::vector<double> off;
     std::int64_t last = 0;
     for (std::size_t at = 0; at < order.size();) {
@@ -940,15 +994,15 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
       std::size_t end = at;
       off.clear();
       for (; end < order.size() && a.column[coded[order[end]]] == column; ++end) {
-        const std::uint32_t i = coded[order[end]];
-        const auto b = beams.beam(a.ring[i], column, 0);
-        const Eigen::Vector3d v = T_head_cloud * input[i].cast<double>() - b.o;
+        const Eigen::Vector3d& v = offset[end];
         if (std::hypot(v.x(), v.y()) < 1.0) continue;
-        const double beam = std::atan2(b.u.y(), b.u.x());
+        const Beams::Trig& t = beam_of[end];
+        const double cos_el = beams.cos_el[a.ring[coded[order[end]]]];
+        const double beam = std::atan2(t.sb * cos_el, t.cb * cos_el);
         off.push_back(std::remainder(std::atan2(v.y(), v.x()) - beam, kTwoPi));
       }
       std::int64_t s = last;
-      if (!off.empty() && table.shift_unit > 0.0) {
+      if (!off.empty()) {
         std::nth_element(off.begin(), off.begin() + static_cast<std::ptrdiff_t>(off.size() / 2), off.end());
         s = static_cast<std::int64_t>(std::llround(off[off.size() / 2] / table.shift_unit));
       }
@@ -956,15 +1010,13 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
       last = s;
       at = end;
     }
+    parallel_for(order.size(), threads, [&](std::size_t j) {
+      if (shift[j] == 0) return;
+      const std::uint32_t i = coded[order[j]];
+      beam_of[j] = beams.trig(a.ring[i], a.column[i], shift[j]);
+      offset[j] = T_head_cloud * input[i].cast<double>() - beams.beam(a.ring[i], beam_of[j]).o;
+    }, 4096);
   }
-  // Every point's beam and its offset from the beam's origin (head frame).
-  std::vector<Beams::Beam> beam_of(order.size());
-  std::vector<Eigen::Vector3d> offset(order.size());
-  parallel_for(order.size(), threads, [&](std::size_t j) {
-    const std::uint32_t i = coded[order[j]];
-    beam_of[j] = beams.beam(a.ring[i], a.column[i], shift[j]);
-    offset[j] = T_head_cloud * input[i].cast<double>() - beam_of[j].o;
-  }, 4096);
 
   // Each share with predictor 3 (left neighbour, a flag at edges), the first also with
   // predictor 2 (median edge detector, a flag at edges): at 14 mm predictor 2 coded the
