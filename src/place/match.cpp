@@ -12,6 +12,7 @@
 #include <Eigen/Geometry>
 
 #include "lex3d/place/place.hpp"
+#include "lex3d/range/pixel_locator.hpp"
 
 namespace lex3d {
 
@@ -567,12 +568,13 @@ Eigen::Vector3d up_in_cloud(const PlaceScan& s) {
 
 // Looks up the dense point of `to` nearest to x (cloud frame of `to`) among the pixels
 // around x's projection (±1 pixel); returns its index or -1.
-int nearest_dense(const PlaceScan& to, const Eigen::Isometry3f& T_sensor_cloud, const Eigen::Vector3f& x,
-                  float max_d2) {
+// `locator` is built on to.coarse: the same pixel as its project(), found from tables.
+int nearest_dense(const PlaceScan& to, const PixelLocator& locator, const Eigen::Isometry3f& T_sensor_cloud,
+                  const Eigen::Vector3f& x, float max_d2) {
   const RangeImage& img = to.coarse;
-  float fx = 0, fy = 0, r = 0;
-  if (!img.project(T_sensor_cloud * x, fx, fy, r)) return -1;
-  const int xi = static_cast<int>(std::floor(fx)), yi = static_cast<int>(std::floor(fy));
+  int xi = 0, yi = 0;
+  float r = 0;
+  if (!locator.locate(T_sensor_cloud * x, xi, yi, r)) return -1;
   int best = -1;
   float bd = max_d2;
   for (int dy = -1; dy <= 1; ++dy) {
@@ -620,6 +622,7 @@ DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const
   if (query.dense_points.empty() || match.dense_points.empty()) return out;
   const Eigen::Isometry3f Sm = match.coarse.T_cloud_sensor.inverse().cast<float>();
   const Eigen::Isometry3f Sq = query.coarse.T_cloud_sensor.inverse().cast<float>();
+  const PixelLocator locate_m(match.coarse), locate_q(query.coarse);
   const std::size_t nq = query.dense_points.size(), nm = match.dense_points.size();
   const std::size_t stride_q = std::max<std::size_t>(1, nq / static_cast<std::size_t>(params.dense_points));
   const std::size_t stride_m = std::max<std::size_t>(1, nm / static_cast<std::size_t>(params.dense_points));
@@ -646,7 +649,7 @@ DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const
     // Query points against the match's tangent planes.
     for (std::size_t i = 0; i < nq; i += stride_q) {
       const Eigen::Vector3f x = Tf * query.dense_points[i];
-      const int k = nearest_dense(match, Sm, x, g2);
+      const int k = nearest_dense(match, locate_m, Sm, x, g2);
       if (k < 0) continue;
       const Eigen::Vector3d n = match.dense_normals[static_cast<std::size_t>(k)].cast<double>();
       const Eigen::Vector3d xd = x.cast<double>();
@@ -655,7 +658,7 @@ DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const
     // Match points against the query's tangent planes (moved into the match frame).
     for (std::size_t i = 0; i < nm; i += stride_m) {
       const Eigen::Vector3f xm = match.dense_points[i];
-      const int k = nearest_dense(query, Sq, Ti * xm, g2);
+      const int k = nearest_dense(query, locate_q, Sq, Ti * xm, g2);
       if (k < 0) continue;
       const auto ku = static_cast<std::size_t>(k);
       const Eigen::Vector3d n = T.linear() * query.dense_normals[ku].cast<double>();
