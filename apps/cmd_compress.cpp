@@ -380,6 +380,7 @@ void run_compress(const CompressOptions& o) {
 void register_compress(CLI::App& app) {
   auto o = std::make_shared<CompressOptions>();
   CLI::App* sub = app.add_subcommand("compress", "Compress scans into lex3d model files");
+  sub->footer("Examples:\n  lex3d compress scan.bin -o scan.lex3dm                  (every point within 1 cm)\n  lex3d compress drive/*.pcd -o drive.lex3dq --one-file --max-error 0.02\n  lex3d compress new/*.bin -o new.lex3dm --alphabet fleet.lex3da --max-error none");
   sub->add_option("scans", o->inputs, "Point clouds")->required();
   sub->add_option("-o,--output", o->output,
                   "Model file (numbered _000, _001... for several scans), or the sequence file with --one-file")

@@ -45,6 +45,7 @@ void run_convert(const ConvertOptions& o) {
 void register_convert(CLI::App& app) {
   auto o = std::make_shared<ConvertOptions>();
   CLI::App* sub = app.add_subcommand("convert", "Convert a point cloud or raw lidar log (one file a turn) to PCD, PLY, .bin or text");
+  sub->footer("Examples:\n  lex3d convert capture.pcap turns.pcd                  (one organised PCD a turn)\n  lex3d convert scan.bin scan.ply");
   sub->add_option("input", o->input, "Point cloud or raw lidar log (.pcap)")->required();
   sub->add_option("output", o->output, "Output (.pcd, .ply, .bin, .xyz/.txt); numbered _000, _001... for several turns")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");

@@ -233,6 +233,7 @@ void register_decompress(CLI::App& app) {
   auto o = std::make_shared<DecompressOptions>();
   CLI::App* sub = app.add_subcommand("decompress", "Reconstruct a point cloud (or an OctoMap) from a model file, "
                                                    "or every scan of a sequence file");
+  sub->footer("Examples:\n  lex3d decompress scan.lex3dm -o scan.pcd --reference scan.bin\n  lex3d decompress drive.lex3dq -o drive.ply                (one file a scan)\n  lex3d decompress scan.lex3dm --octomap scan.bt --resolution 0.1");
   sub->add_option("model", o->input, "lex3d model file or sequence file")->required();
   sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz)");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references");

@@ -156,6 +156,7 @@ void run_features(const FeaturesOptions& o) {
 void register_features(CLI::App& app) {
   auto o = std::make_shared<FeaturesOptions>();
   CLI::App* sub = app.add_subcommand("features", "Range image, interest points, coverage points and descriptors");
+  sub->footer("Examples:\n  lex3d features scan.bin --png features.png --json");
   sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d)")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
   sub->add_option("--png", o->png, "Draw the range image with interest (red) and coverage (white) points");

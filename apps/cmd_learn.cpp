@@ -88,6 +88,7 @@ void run_learn(const LearnOptions& o) {
 void register_learn(CLI::App& app) {
   auto o = std::make_shared<LearnOptions>();
   CLI::App* sub = app.add_subcommand("learn", "Learn an alphabet of local 3D structures from one or more scans");
+  sub->footer("Examples:\n  lex3d learn drive/*.bin -o fleet.lex3da --poses poses.txt");
   sub->add_option("scans", o->inputs, "Point clouds (one alphabet for all)")->required();
   sub->add_option("-o,--output", o->output, "Alphabet file to write")->required();
   sub->add_option("--patience", o->patience, "Stop after this many rejections in a row")->check(CLI::Range(1, 1000000));

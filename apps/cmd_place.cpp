@@ -969,6 +969,7 @@ void register_place(CLI::App& app) {
   sub->require_subcommand(1);
 
   CLI::App* build = sub->add_subcommand("build", "Build a place database from scans");
+  build->footer("Examples:\n  lex3d place build map.lex3dp drive/*.bin --poses poses.txt\n  lex3d place build map.lex3dp drive/*.lex3dm --vocabulary-words 4096");
   build->add_option("db", o->db, "Database file to write")->required();
   build->add_option("scans", o->inputs, "Point clouds")->required();
   build->add_option("--alphabet", o->alphabet, "Use this alphabet (else one is learned on --learn-scans of the inputs)");
@@ -989,12 +990,14 @@ void register_place(CLI::App& app) {
   build->callback([o] { run_build(*o); });
 
   CLI::App* add = sub->add_subcommand("add", "Add scans to a place database");
+  add->footer("Examples:\n  lex3d place add map.lex3dp today/*.bin --poses today_poses.txt");
   add->add_option("db", o->db, "Database file (appended to in place; a format 1.0 file is rewritten as 2.0)")->required();
   add->add_option("scans", o->inputs, "Point clouds")->required();
   add_common(add, *o);
   add->callback([o] { run_add(*o); });
 
   CLI::App* up = sub->add_subcommand("upgrade", "Rewrite a place database in the current format (2.0), compacted");
+  up->footer("Examples:\n  lex3d place upgrade old.lex3dp new.lex3dp");
   up->add_option("old", o->db, "Database file to read (format 1.0 or 2.x)")->required();
   up->add_option("new", o->inputs, "Database file to write")->required()->expected(1);
   up->add_flag("--json", o->json, "Print one JSON object");
@@ -1025,6 +1028,7 @@ void register_place(CLI::App& app) {
         ->check(CLI::IsMember({"default", "tfidf-alphabet", "tfidf", "fabmap"}));
   };
   CLI::App* query = sub->add_subcommand("query", "Find the place of each scan in a database (one database load)");
+  query->footer("Examples:\n  lex3d place query map.lex3dp scan.bin --json\n  lex3d place query map.lex3dp a.bin b.bin --gravity points --max-distance 8");
   query->add_option("db", o->db, "Database file")->required();
   query->add_option("scans", o->inputs, "Query point clouds (or .lex3dm / .lex3dq files)")->required();
   query->add_option("--top", o->top, "Matches printed")->check(CLI::Range(1, 1000000));
@@ -1036,6 +1040,7 @@ void register_place(CLI::App& app) {
   query->callback([o] { run_query(*o); });
 
   CLI::App* ev = sub->add_subcommand("eval", "Evaluate place recognition on a sequence with poses");
+  ev->footer("Examples:\n  lex3d place eval balm/ --poses balm/poses.txt --times balm/times.txt --min-gap 20 --radius 8");
   ev->add_option("dir", o->inputs, "Folder of scans (frames.txt order when present)")->required()->expected(1);
   ev->add_option("--times", o->times, "Time of each scan, seconds (default: 1 s apart)");
   ev->add_option("--min-gap", o->min_gap, "A query's database holds the scans at least this much older, s")->check(CLI::Range(0.0, 1e9));

@@ -102,6 +102,7 @@ void run_reconstruct(const ReconstructOptions& o) {
 void register_reconstruct(CLI::App& app) {
   auto o = std::make_shared<ReconstructOptions>();
   CLI::App* sub = app.add_subcommand("reconstruct", "Model scans with an alphabet and write the reconstruction");
+  sub->footer("Examples:\n  lex3d reconstruct scan.bin --alphabet fleet.lex3da -o words.ply   (points coloured by word)");
   sub->add_option("scans", o->inputs, "Point clouds")->required();
   sub->add_option("-o,--output", o->output, "Reconstruction (.ply or .pcd; numbered for several scans)")->required();
   sub->add_option("--alphabet", o->alphabet, "Use this alphabet instead of learning one");
