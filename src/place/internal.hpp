@@ -1,8 +1,11 @@
 #pragma once
 // Private pieces of the place module shared between its sources.
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <mutex>
 #include <vector>
 
@@ -21,6 +24,52 @@ struct PlaceDatabase::NormCache {
 }  // namespace lex3d
 
 namespace lex3d::detail {
+
+/// Little-endian loads from index and chunk bytes.
+inline std::uint32_t ld32(const std::uint8_t* p) {
+  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
+}
+inline std::uint64_t ld64(const std::uint8_t* p) { return ld32(p) | static_cast<std::uint64_t>(ld32(p + 4)) << 32; }
+inline double ldf64(const std::uint8_t* p) {
+  const std::uint64_t v = ld64(p);
+  double d = 0;
+  std::memcpy(&d, &v, 8);
+  return d;
+}
+
+/// Squared tf-idf norms of `n` scans over an inverted index (formats/place_db.md §3.4):
+/// Σ_w (count / total(scan) · idf_w)², idf_w = ln(1 + n / postings_w), summed in word order,
+/// the stored postings of a word (views into the index bytes: `word_start`, `postings`,
+/// `word_slots`) before those of scans added in memory. One function for the alphabet's
+/// index and the vocabulary's, so both give the same numbers for the same postings.
+template <typename StoredIndex, typename Posting, typename Total>
+void tfidf_norms(std::size_t n, const StoredIndex& stored, const std::vector<std::vector<Posting>>& added,
+                 Total total, std::vector<double>& norm2) {
+  const std::size_t words = std::max<std::size_t>(stored.word_slots, added.size());
+  norm2.assign(n, 0.0);
+  for (std::size_t w = 0; w < words; ++w) {
+    const std::size_t ns = w < stored.word_slots ? static_cast<std::size_t>(ld64(stored.word_start + 8 * (w + 1)) -
+                                                                              ld64(stored.word_start + 8 * w))
+                                                 : 0;
+    const std::size_t na = w < added.size() ? added[w].size() : 0;
+    if (ns + na == 0) continue;
+    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(ns + na));
+    if (ns > 0) {
+      const std::uint64_t a = ld64(stored.word_start + 8 * w);
+      for (std::uint64_t k = a; k < a + ns; ++k) {
+        const std::uint32_t s = ld32(stored.postings + 8 * k);
+        const double v = static_cast<double>(ld32(stored.postings + 8 * k + 4)) / static_cast<double>(total(s)) * idf;
+        norm2[s] += v * v;
+      }
+    }
+    for (std::size_t j = 0; j < na; ++j) {
+      const auto& p = added[w][j];
+      const double v = static_cast<double>(p.count) / static_cast<double>(total(p.scan)) * idf;
+      norm2[p.scan] += v * v;
+    }
+  }
+}
 
 /// Fills scan.dense_points / dense_normals / dense_index from scan.coarse.
 void make_dense_points(PlaceScan& scan);

@@ -15,17 +15,9 @@ namespace lex3d {
 
 namespace {
 
-std::uint32_t ld32(const std::uint8_t* p) {
-  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
-         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
-}
-std::uint64_t ld64(const std::uint8_t* p) { return ld32(p) | static_cast<std::uint64_t>(ld32(p + 4)) << 32; }
-double ldf64(const std::uint8_t* p) {
-  const std::uint64_t v = ld64(p);
-  double d = 0;
-  std::memcpy(&d, &v, 8);
-  return d;
-}
+using detail::ld32;
+using detail::ld64;
+using detail::ldf64;
 constexpr std::size_t kVEntryBytes = 12;  // formats/place_db.md §3.6
 
 void keep_best(std::vector<std::pair<std::size_t, double>>& out, std::size_t k) {
@@ -93,28 +85,7 @@ const std::vector<double>& PlaceDatabase::vocab_norms() const {
   NormCache& c = *vnorm_cache_;
   std::lock_guard<std::mutex> lock(c.mutex);
   if (c.valid) return c.norm2;
-  const std::size_t n = size();
-  const std::size_t words = std::max<std::size_t>(vindex_.word_slots, added_vinverted_.size());
-  c.norm2.assign(n, 0.0);
-  for (std::size_t w = 0; w < words; ++w) {
-    const std::size_t ns = vocab_stored_postings(static_cast<std::uint32_t>(w));
-    const std::size_t na = w < added_vinverted_.size() ? added_vinverted_[w].size() : 0;
-    if (ns + na == 0) continue;
-    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(ns + na));
-    if (ns > 0) {
-      const std::uint64_t a = ld64(vindex_.word_start + 8 * w);
-      for (std::uint64_t k = a; k < a + ns; ++k) {
-        const std::uint32_t s = ld32(vindex_.postings + 8 * k);
-        const double v = static_cast<double>(ld32(vindex_.postings + 8 * k + 4)) / static_cast<double>(vocab_total(s)) * idf;
-        c.norm2[s] += v * v;
-      }
-    }
-    if (na > 0)
-      for (const auto& p : added_vinverted_[w]) {
-        const double v = static_cast<double>(p.count) / static_cast<double>(vocab_total(p.scan)) * idf;
-        c.norm2[p.scan] += v * v;
-      }
-  }
+  detail::tfidf_norms(size(), vindex_, added_vinverted_, [this](std::uint32_t s) { return vocab_total(s); }, c.norm2);
   c.valid = true;
   return c.norm2;
 }

@@ -391,18 +391,10 @@ SharedBytes SharedBytes::copy_of(const std::vector<std::uint8_t>& bytes) {
 
 namespace {
 
-std::uint32_t ld32(const std::uint8_t* p) {
-  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
-         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
-}
-std::uint64_t ld64(const std::uint8_t* p) { return ld32(p) | static_cast<std::uint64_t>(ld32(p + 4)) << 32; }
+using detail::ld32;
+using detail::ld64;
 std::uint16_t ld16(const std::uint8_t* p) { return static_cast<std::uint16_t>(p[0] | p[1] << 8); }
-double ldf64(const std::uint8_t* p) {
-  const std::uint64_t v = ld64(p);
-  double d = 0;
-  std::memcpy(&d, &v, 8);
-  return d;
-}
+using detail::ldf64;
 
 std::vector<std::uint8_t> chunk_bytes(const char type[4], const std::vector<std::uint8_t>& payload) {
   std::vector<std::uint8_t> out;
