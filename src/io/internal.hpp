@@ -244,6 +244,8 @@ inline float load_float(const std::uint8_t* p, Scalar s, bool swap) {
 
 // ---------------------------------------------------------------- readers
 
+/// No coordinate frame on Earth reaches this far (metres): a PCD viewpoint or a LAS point beyond it is bad data.
+constexpr double kMaxCoordinateM = 1e9;
 constexpr std::size_t kMaxHeaderBytes = 1U << 20;  // PCD / PLY header cap
 constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties (PLY) / columns (text) cap
 

@@ -550,6 +550,12 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
     for (int a = 0; a < 3; ++a) {
       const double pmin = offset[a] + static_cast<double>(lo[a]) * scale[a];
       const double pmax = offset[a] + static_cast<double>(hi[a]) * scale[a];
+      // No coordinate frame on Earth reaches 10^9 m (what PCD viewpoints allow too).
+      const double reach = std::max(std::abs(pmin), std::abs(pmax)) * units[a];
+      if (!(reach <= kMaxCoordinateM))
+        return bad(std::string("the points reach ") + std::to_string(reach) + " m along " + "xyz"[a] +
+                       ", beyond any coordinate frame on Earth (the limit is 1e9 m)",
+                   point_offset);
       if (pmin < hmin[a] - scale[a] || pmax > hmax[a] + scale[a]) {
         r.notes.push_back(std::string("the header's ") + "xyz"[a] + " bounds [" + std::to_string(hmin[a]) + ", " +
                           std::to_string(hmax[a]) + "] do not hold the points' [" + std::to_string(pmin) + ", " +

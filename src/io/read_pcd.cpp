@@ -119,7 +119,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
       for (std::size_t k = 0; ok && k < 7; ++k)
         ok = parse_number(tok[k + 1].data(), tok[k + 1].data() + tok[k + 1].size(), v[k]) && std::isfinite(v[k]);
       const double qn = ok ? std::sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5] + v[6] * v[6]) : 0.0;
-      if (!ok || !(std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}) <= 1e9) || !(qn > 0.5 && qn < 2.0)) {
+      if (!ok || !(std::max({std::abs(v[0]), std::abs(v[1]), std::abs(v[2])}) <= kMaxCoordinateM) || !(qn > 0.5 && qn < 2.0)) {
         return bad_data(msg(path, where + "VIEWPOINT needs tx ty tz qw qx qy qz (finite, a unit quaternion), got " +
                                       quoted(trim(t.substr(tok[0].size())))),
                         lines.line_offset());

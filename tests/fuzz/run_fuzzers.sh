@@ -2,7 +2,7 @@
 # Runs every libFuzzer target of a Clang build for a bounded time, two at a time, each on a
 # fresh copy of its seed corpus (tests/fuzz/corpus for the model and alphabet decoders,
 # tests/fuzz/readers/<format> for the readers, tests/fuzz/readers/placedb for the place
-# database). Exits non-zero when any target finds a crash, a sanitizer report or a
+# database), with a fixed seed (-seed=1). Exits non-zero when any target finds a crash, a sanitizer report or a
 # violated property; the input that did it is kept in the target's artifact directory.
 #
 #   tests/fuzz/run_fuzzers.sh BUILD_DIR [SECONDS_EACH=60] [TARGET...]
@@ -33,7 +33,7 @@ run_one() {
   mkdir -p "$work/$target/corpus" "$work/$target/artifacts"
   cp "$seeds"/* "$work/$target/corpus/"
   local log="$work/$target/log"
-  if "$build/tests/fuzz/$target" -max_total_time="$seconds" -print_final_stats=1 \
+  if "$build/tests/fuzz/$target" -seed=1 -max_total_time="$seconds" -print_final_stats=1 \
        -artifact_prefix="$work/$target/artifacts/" "$work/$target/corpus" > "$log" 2>&1; then
     printf '%-22s %s runs, %s exec/s, corpus %s -> %s files\n' "$target" \
       "$(grep -o 'number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$')" \
