@@ -332,7 +332,7 @@ class Builder {
   [[nodiscard]] bool wide() const { return wide_; }
 
   /// Ends the reading (read.cpp): in `wide` mode, chooses the georeference.
-  Status finish();
+  Status finish(const std::string& path);
 
  private:
   bool time_ = false;

@@ -48,7 +48,7 @@ std::vector<std::string_view> split_ws(std::string_view line) {
 // box centre rounded to the largest power of ten not above the extent, so that the local
 // coordinates stay within the extent and the origin reads well. Anything else is rounded
 // to float32 as before.
-Status Builder::finish() {
+Status Builder::finish(const std::string& path) {
   if (!wide_) return {};
   const std::size_t n = wide_points_.size();
   Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
@@ -72,6 +72,10 @@ Status Builder::finish() {
         ++r_.non_finite_dropped;
         continue;
       }
+      if (organised_ && p.isZero(0.0F)) {  // underflowed to (0, 0, 0): a no-return, as in float files
+        ++r_.no_return_dropped;
+        continue;
+      }
       r_.cloud.points[kept] = p;
       if (intensity_) r_.cloud.intensity[kept] = r_.cloud.intensity[i];
       if (color_) r_.colors[kept] = r_.colors[i];
@@ -88,6 +92,9 @@ Status Builder::finish() {
     if (columns_) r_.cloud.column.resize(kept);
     return {};
   }
+  if (!(max_abs <= kMaxCoordinateM))
+    return bad_data(msg(path, "the points reach " + std::to_string(max_abs) +
+                                  " m, beyond any coordinate frame on Earth (the limit is 1e9 m)"));
   r_.cloud.points.resize(n);
   const double step = std::pow(10.0, std::floor(std::log10(std::max(extent, 1e-3))));
   Georeference g;

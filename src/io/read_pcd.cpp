@@ -350,7 +350,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                                     " points, header says " + std::to_string(points)),
                       size);
     }
-    return out.finish();
+    return out.finish(path);
   }
 
   // --- binary and binary_compressed: the data block
@@ -447,7 +447,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
                    static_cast<std::uint32_t>(i % row_width));
     else out.add_at(x, y, z, in, c, ring, static_cast<std::uint32_t>(i % row_width));
   }
-  return out.finish();
+  return out.finish(path);
 }
 
 }  // namespace lex3d::io::detail

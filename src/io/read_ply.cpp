@@ -375,7 +375,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       Status added = add_vertex(item, v, w, c, lv, tv);
       if (!added.ok()) return added;
     }
-    return out.finish();
+    return out.finish(path);
   }
 
   // ---------------- binary
@@ -477,7 +477,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                      load_scalar(p + offsets[static_cast<std::size_t>(iz)], sz, swap), in, c, ring);
       else out.add_at(x, y, z, in, c, ring, 0);
     }
-    return out.finish();
+    return out.finish(path);
   }
   for (std::uint64_t item = 0; item < vertex.count; ++item) {
     float v[4] = {0.0F, 0.0F, 0.0F, 0.0F};
@@ -512,7 +512,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     Status added = add_vertex(item, v, w, c, lv, tv);
     if (!added.ok()) return added;
   }
-  return out.finish();
+  return out.finish(path);
 }
 
 }  // namespace lex3d::io::detail

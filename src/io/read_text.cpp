@@ -127,7 +127,7 @@ Status read_text(const std::string& path, const std::uint8_t* data, std::size_t 
     out->add(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
              static_cast<float>(v[3]));
   }
-  return out ? out->finish() : Status{};
+  return out ? out->finish(path) : Status{};
 }
 
 }  // namespace lex3d::io::detail
