@@ -2,6 +2,9 @@
 
 #include "lex3d/io/sensor_log.hpp"
 
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cmath>
@@ -10,6 +13,7 @@
 #include <filesystem>
 #include <sstream>
 #include <sys/stat.h>
+#include <thread>
 #include <unistd.h>
 
 namespace lex3d::cli {
@@ -194,6 +198,19 @@ const char* extension_of_kind(const std::string& kind) {
 }
 
 }  // namespace
+
+int all_cores() {
+  const unsigned n = std::thread::hardware_concurrency();  // 0 where unknown
+  return static_cast<int>(std::clamp(n, 1U, 64U));
+}
+
+void add_threads_option(CLI::App& app, int& threads, const std::string& what) {
+  threads = all_cores();
+  app.add_option_function<int>(
+         "--threads", [&threads](const int& n) { threads = n == 0 ? all_cores() : n; },
+         what + " (0 = every core, the default; the output does not depend on it)")
+      ->check(CLI::Range(0, 64));
+}
 
 void check_output_kind(const std::string& path, const std::string& option, const std::string& kind) {
   if (path.empty()) return;

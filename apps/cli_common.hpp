@@ -159,6 +159,12 @@ std::string numbered_output(const std::string& output, std::size_t index, std::s
 /// OUT for one scan; OUT's stem + "_<name>" + extension for several (a scan's stored name).
 std::string named_output(const std::string& output, const std::string& name, std::size_t count);
 
+/// The machine's cores, in [1, 64]: what `--threads 0` means.
+int all_cores();
+/// `--threads N` on a command, the same on every one: worker threads, 0 = every core (the
+/// default); `threads` is set to the resolved count, never 0. The outputs do not depend on it.
+void add_threads_option(CLI::App& app, int& threads, const std::string& what);
+
 /// Registration of each subcommand (one file each).
 void register_info(CLI::App& app);
 void register_features(CLI::App& app);

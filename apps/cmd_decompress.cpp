@@ -2,10 +2,12 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <cstdio>
 #include <iostream>
+#include <thread>
 
 #include "allocator.hpp"
 #include "cli_common.hpp"
@@ -31,6 +33,7 @@ struct DecompressOptions {
   std::string reference_format = "auto";
   double sigma_lambda = ModelParams{}.sigma_lambda;
   bool json = false;
+  int threads = 1;  // set by --threads
 };
 
 /// A sequence file: every scan's decoded cloud, written to OUT_000, OUT_001, ...
@@ -54,23 +57,58 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   Json j;
   j.begin_object().value("sequence", o.input).value("scans", s.model_files.size()).begin_array("files");
   std::uint64_t input_points = 0, points = 0;
-  for (std::size_t i = 0; i < s.model_files.size(); ++i) {
-    auto d = codec::decode_model(s.model_files[i], &s.alphabet_file);
-    if (!d.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + d.status().to_string());
-    auto cloud = residual::decode_cloud(d.value());
-    if (!cloud.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + cloud.status().to_string());
-    cloud.value().georef = d.value().georef;  // written in true coordinates
-    set_current_file(o.input + " scan " + std::to_string(i));
-    throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud.value()));
-    note_fields_not_written(outputs[i], cloud.value());
-    input_points += d.value().input_points;
-    points += cloud.value().size();
-    if (o.json)
-      j.begin_object().value("output", outputs[i]).value("input_points", d.value().input_points)
-          .value("points", cloud.value().size()).value("residual_layer", d.value().residual.has_value()).end_object();
-    else
-      std::printf("%s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), cloud.value().size(), i + 1,
-                  s.model_files.size());
+  // Scans are decoded and written `threads` at a time (each on one thread, into its own staged
+  // file); what is printed follows the scan order. Memory holds one batch of clouds.
+  struct Decoded {
+    std::uint64_t input_points = 0;
+    std::size_t points = 0;
+    bool residual_layer = false;
+    std::string error;  // non-empty: the scan failed
+    int exit_code = 2;  // decoding: bad data; writing: as the write's status says
+  };
+  const std::size_t n = s.model_files.size();
+  const std::size_t batch = static_cast<std::size_t>(std::max(1, o.threads));
+  std::vector<std::string> staged(n);
+  for (std::size_t i = 0; i < n; ++i) staged[i] = files.staged(outputs[i]);
+  for (std::size_t first = 0; first < n; first += batch) {
+    const std::size_t count = std::min(batch, n - first);
+    std::vector<Decoded> done(count);
+    std::vector<Cloud> clouds(count);
+    auto work = [&](std::size_t k) {
+      const std::size_t i = first + k;
+      auto d = codec::decode_model(s.model_files[i], &s.alphabet_file);
+      if (!d.ok()) return void(done[k].error = d.status().to_string());
+      auto cloud = residual::decode_cloud(d.value());
+      if (!cloud.ok()) return void(done[k].error = cloud.status().to_string());
+      cloud.value().georef = d.value().georef;  // written in true coordinates
+      const Status w = io::write_cloud(staged[i], cloud.value());
+      if (!w.ok()) {
+        done[k].exit_code = exit_code_for(w.code());
+        done[k].error = outputs[i] + ": " + w.to_string();
+        return;
+      }
+      done[k].input_points = d.value().input_points;
+      done[k].points = cloud.value().size();
+      done[k].residual_layer = d.value().residual.has_value();
+      clouds[k] = std::move(cloud).value();
+    };
+    std::vector<std::thread> pool;
+    for (std::size_t k = 1; k < count; ++k) pool.emplace_back(work, k);
+    work(0);
+    for (auto& t : pool) t.join();
+    for (std::size_t k = 0; k < count; ++k) {
+      const std::size_t i = first + k;
+      if (!done[k].error.empty())
+        throw CliError(done[k].exit_code, o.input + ": scan " + std::to_string(i) + ": " + done[k].error);
+      note_fields_not_written(outputs[i], clouds[k]);
+      input_points += done[k].input_points;
+      points += done[k].points;
+      if (o.json)
+        j.begin_object().value("output", outputs[i]).value("input_points", done[k].input_points)
+            .value("points", done[k].points).value("residual_layer", done[k].residual_layer).end_object();
+      else
+        std::printf("%s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), done[k].points, i + 1, n);
+    }
   }
   files.commit();
   const double bpp = input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;
@@ -172,14 +210,16 @@ void run_decompress(const DecompressOptions& o) {
     // A reference without a viewpoint of its own (a PLY or .bin in the model's frame, say a
     // world-frame scan compressed with --input-frame world) is seen from the model's sensor.
     if (ref.T_cloud_sensor.matrix() == Pose::Identity().matrix()) ref.T_cloud_sensor = cloud.T_cloud_sensor;
-    dist = eval::compare_clouds(ref, cloud);
+    eval::DistanceParams dp;
+    dp.threads = o.threads;
+    dist = eval::compare_clouds(ref, cloud, dp);
     const auto res = estimate_angular_resolution(ref);
     eval::RangeSigma sigma;
     const double alpha = res ? std::max(res->azimuth_rad, res->elevation_rad) : 0.2 * M_PI / 180.0;
     sigma.factor = o.sigma_lambda * std::tan(alpha / 2.0);
     sigma.min_sigma = 1e-3;
     sigma.origin = ref.T_cloud_sensor.translation();
-    inl = eval::inliers_outliers(ref, cloud, sigma);
+    inl = eval::inliers_outliers(ref, cloud, sigma, o.threads);
   }
   if (o.json) {
     Json j;
@@ -247,6 +287,7 @@ void register_decompress(CLI::App& app) {
   sub->add_option("--reference", o->reference, "Compare the reconstruction with this scan (D1 PSNR, inliers)");
   sub->add_option("--reference-format", o->reference_format, "Format of --reference");
   sub->add_option("--sigma-lambda", o->sigma_lambda, "λ of σ = λ tan(α/2) range for inliers/outliers");
+  add_threads_option(*sub, o->threads, "Worker threads (scans of a sequence decoded side by side, the comparison)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   sub->callback([o] { run_decompress(*o); });
 }

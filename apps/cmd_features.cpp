@@ -161,7 +161,7 @@ void register_features(CLI::App& app) {
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
   sub->add_option("--png", o->png, "Draw the range image with interest (red) and coverage (white) points");
   sub->add_flag("--json", o->json, "Print one JSON object");
-  sub->add_option("--threads", o->threads, "Worker threads for descriptors")->check(CLI::Range(1, 64));
+  add_threads_option(*sub, o->threads, "Worker threads for descriptors");
   sub->add_option("--threshold", o->threshold, "Interest value threshold, (0, 1]");
   sub->add_option("--min-distance", o->min_distance, "Minimum 3D distance between interest points, m");
   sub->add_option("--coverage", o->coverage, "Coverage distance, m (0 disables coverage points)");

@@ -1021,7 +1021,7 @@ void register_place(CLI::App& app) {
     s->add_option("--surface-yaws", o->params.surface_yaws, "Yaw candidates of the surface hypotheses (0 = none)")->check(CLI::Range(0, 36));
     s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
     s->add_option("--validation-points", o->params.validation_points, "Validation points a scan (steder2010: 100)")->check(CLI::Range(1, 4096));
-    s->add_option("--threads", o->params.threads, "Worker threads of a query")->check(CLI::Range(1, 64));
+    add_threads_option(*s, o->params.threads, "Worker threads of a query");
     s->add_option("--retrieval", o->retrieval,
                   "First stage: tfidf-alphabet (compression alphabet), tfidf or fabmap (recognition vocabulary); "
                   "default: tfidf-alphabet")

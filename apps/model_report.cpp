@@ -20,7 +20,7 @@ void ModelOptions::add_to(CLI::App& app) {
   app.add_flag("--prune-keep-cover", prune_keep_cover,
                "Pruning keeps an instance that is the last to explain some scan point within sigma (more "
                "inliers, larger models; by default ruhnke2010's likelihood rule alone)");
-  app.add_option("--threads", threads, "Worker threads")->check(CLI::Range(1, 64));
+  add_threads_option(app, threads, "Worker threads");
 }
 
 ModelParams ModelOptions::params() const {
