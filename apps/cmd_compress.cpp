@@ -138,9 +138,7 @@ void run_compress(const CompressOptions& o) {
   CodingOptions coding;
   coding.max_error = max_error;
   coding.target_bpp = o.target_bpp;
-  coding.words = o.words == "on" ? WordsMode::kOn : o.words == "off" ? WordsMode::kOff
-                 : o.words == "auto" ? WordsMode::kAuto
-                 : layered && alphabet_asked ? WordsMode::kAuto : WordsMode::kDefault;
+  coding.words = words_mode == "on" ? WordsMode::kOn : words_mode == "off" ? WordsMode::kOff : WordsMode::kAuto;
   coding.keep_all_points = o.keep_all_points;
   coding.layer_coding = o.layer_coding == "spherical" ? LayerCoding::kSpherical
                         : o.layer_coding == "voxel"   ? LayerCoding::kVoxel
@@ -149,6 +147,7 @@ void run_compress(const CompressOptions& o) {
   coding.quantization = o.quantization;
   coding.threads = mp.threads;
   coding.keep_attributes = !o.drop_attributes;
+  coding.layer_only_references_alphabet = o.one_file;  // a sequence's models all reference its alphabet
   coding.attributes.intensity_error = o.intensity_error;
   const ScanCoder coder(std::move(set.alphabet), coding, !o.save_alphabet.empty() || o.one_file,
                         reuse ? std::move(reuse->bytes) : std::vector<std::uint8_t>{});
@@ -368,7 +367,8 @@ void run_compress(const CompressOptions& o) {
                             : embed   ? std::string("embedded in each model file")
                             : any_words ? std::to_string(alphabet_bytes) + " bytes in " + alphabet_path
                                         : std::to_string(alphabet_file.size()) + " bytes in " + alphabet_path +
-                                              "; no scan's file uses it (the layer alone was smaller), so not counted";
+                                              "; no scan's file uses it (the layer alone was smaller; they decode "
+                                              "without it), so not counted";
   std::printf("alphabet: %zu words, %s\n", alphabet.size(), where.c_str());
   std::printf("total: %llu bytes for %llu points = %.3f bits per point (alphabet included), %.0f ms\n",
               static_cast<unsigned long long>(total_bytes + alphabet_bytes), static_cast<unsigned long long>(total_points),

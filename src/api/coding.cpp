@@ -125,9 +125,12 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
     Alphabet empty;
     if (!with_words) {
       d.model.instances.clear();
-      // A layer-only file embeds an empty alphabet (a few dozen bytes), or keeps referencing
-      // the shared alphabet file (as a sequence file's models must).
-      if (!d.alphabet_hash) d.alphabet = empty;
+      // A layer-only file embeds an empty alphabet (a few dozen bytes), so it decodes alone, or
+      // keeps referencing the shared alphabet file (as a sequence file's models must).
+      if (!d.alphabet_hash || !options_.layer_only_references_alphabet) {
+        d.alphabet = empty;
+        d.alphabet_hash.reset();
+      }
     }
     const Alphabet& alphabet = with_words ? *decoder_alphabet_ : empty;
     const Cloud placed = residual::decoder_word_cloud(d, alphabet, q);

@@ -13,6 +13,7 @@
 
 #include <pcl/point_types.h>
 
+#include "lex3d/codec/codec.hpp"
 #include "lex3d/core/pcl_conversions.hpp"
 #include "lex3d/eval/metrics.hpp"
 #include "lex3d/io/io.hpp"
@@ -125,6 +126,37 @@ TEST(Api, ReusedAlphabetIsReferencedAndNeededToDecode) {
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.status().code(), lex3d::ErrorCode::kBadData);
   EXPECT_NE(e.status().message().find("alphabet"), std::string::npos) << e.status().to_string();
+}
+
+TEST(Api, ALayerOnlyFileDecodesWithoutTheSharedAlphabetUnlessASequenceNeedsIt) {
+  const lex3d::Cloud cloud = sample("newer_college_00.bin");
+  lex3d::AlphabetOptions ao;
+  ao.max_iterations = 20;
+  const lex3d::AlphabetResult learnt = lex3d::learn_alphabet({cloud}, ao);
+  auto alphabet = lex3d::codec::decode_alphabet(learnt.bytes);
+  ASSERT_TRUE(alphabet.ok()) << alphabet.status().to_string();
+  lex3d::CodingOptions co;
+  co.max_error = 0.02;
+  co.words = lex3d::WordsMode::kOff;  // the layer alone, whatever the words would save
+  for (const bool in_sequence : {false, true}) {
+    co.layer_only_references_alphabet = in_sequence;
+    const lex3d::ScanCoder coder(alphabet.value(), co, false, learnt.bytes);
+    auto c = coder.code(cloud, lex3d::Model{}, 1);
+    ASSERT_TRUE(c.ok()) << c.status().to_string();
+    EXPECT_FALSE(c.value().words);
+    auto alone = lex3d::decompress(c.value().bytes);
+    auto with = lex3d::decompress(c.value().bytes, &learnt.bytes);
+    ASSERT_TRUE(with.ok()) << with.status().to_string();
+    EXPECT_EQ(with.value().references_alphabet, in_sequence);
+    if (in_sequence) {
+      ASSERT_FALSE(alone.ok());
+      EXPECT_EQ(alone.status().code(), lex3d::ErrorCode::kInvalidArgument);
+    } else {
+      ASSERT_TRUE(alone.ok()) << alone.status().to_string();
+      ASSERT_EQ(alone.value().cloud.size(), with.value().cloud.size());
+      EXPECT_EQ(lex3d::eval::compare_clouds(alone.value().cloud, with.value().cloud).hausdorff, 0.0);
+    }
+  }
 }
 
 TEST(Api, DeterministicAcrossRunsAndThreadCounts) {

@@ -147,6 +147,12 @@ run(0 compress.reuse compress "${NC}" -o "${WORK}/nc_reuse.lex3dm" --alphabet "$
 # smaller; the bound holds either way.
 run(0 compress.reuse_bounded compress "${NC}" -o "${WORK}/nc_reuse_b.lex3dm" --alphabet "${WORK}/nc.lex3da")
 expect_match(compress.reuse_bounded "${LAST_OUT}" "0\\.0100 m")
+# A file that kept no word decodes without the alphabet; one that kept words needs it.
+if(LAST_OUT MATCHES "no scan's file uses it")
+  run(0 decompress.reuse_layer_only decompress "${WORK}/nc_reuse_b.lex3dm" -o "${WORK}/nc_reuse_lo.ply")
+else()
+  run(2 decompress.reuse_words decompress "${WORK}/nc_reuse_b.lex3dm" -o "${WORK}/nc_reuse_lo.ply")
+endif()
 run(0 decompress.reuse_bounded decompress "${WORK}/nc_reuse_b.lex3dm" -o "${WORK}/nc_reuse_b.ply" --alphabet "${WORK}/nc.lex3da"
     --reference "${NC}" --json)
 string(REGEX MATCH "\"hausdorff_m\":([0-9.e+-]+)" m "${LAST_OUT}")

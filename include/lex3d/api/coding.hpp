@@ -61,6 +61,12 @@ struct CodingOptions {
   bool keep_attributes = true;
   residual::AttributeOptions attributes;
 
+  /// With a shared alphabet (referenced by hash), a file that keeps no instance (the layer
+  /// alone was smaller, `WordsMode::kAuto`) embeds an empty alphabet and decodes without the
+  /// alphabet file. Set this for models that go into a sequence file, which must all reference
+  /// the sequence's alphabet.
+  bool layer_only_references_alphabet = false;
+
   /// Throws std::invalid_argument naming the option and its allowed values.
   void validate() const;
   /// A residual layer is coded (max_error or target_bpp given).
