@@ -481,16 +481,15 @@ StatusOr<Phdr> parse_phdr(const ChunkView& c) {
   return h;
 }
 
-// The PIDX payload (formats/place_db.md §3.4) of entries given as parallel arrays; the
-// norms are computed here, as retrieval computes them.
-std::vector<std::uint8_t> encode_index(const std::vector<std::uint64_t>& offsets, const std::vector<std::uint64_t>& lengths,
-                                       const std::vector<std::string>& names, const std::vector<std::uint32_t>& totals,
-                                       const std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>& inverted) {
-  const std::size_t n = names.size();
+// Per scan the squared norm of its tf-idf vector over `inverted` (word -> (scan, count)), as
+// retrieval computes it; `postings` gets the postings' count.
+std::vector<double> tfidf_norm2(std::size_t n, const std::vector<std::uint32_t>& totals,
+                                const std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>& inverted,
+                                std::uint64_t* postings) {
   std::vector<double> norm2(n, 0.0);
-  std::uint64_t postings = 0;
+  *postings = 0;
   for (std::size_t w = 0; w < inverted.size(); ++w) {
-    postings += inverted[w].size();
+    *postings += inverted[w].size();
     if (inverted[w].empty()) continue;
     const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(inverted[w].size()));
     for (const auto& [s, c] : inverted[w]) {
@@ -498,6 +497,17 @@ std::vector<std::uint8_t> encode_index(const std::vector<std::uint64_t>& offsets
       norm2[s] += v * v;
     }
   }
+  return norm2;
+}
+
+// The PIDX payload (formats/place_db.md §3.4) of entries given as parallel arrays; the
+// norms are computed here, as retrieval computes them.
+std::vector<std::uint8_t> encode_index(const std::vector<std::uint64_t>& offsets, const std::vector<std::uint64_t>& lengths,
+                                       const std::vector<std::string>& names, const std::vector<std::uint32_t>& totals,
+                                       const std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>& inverted) {
+  const std::size_t n = names.size();
+  std::uint64_t postings = 0;
+  const std::vector<double> norm2 = tfidf_norm2(n, totals, inverted, &postings);
   std::uint64_t names_length = 0;
   for (const auto& s : names) names_length += s.size();
   Writer w;
@@ -538,17 +548,8 @@ std::vector<std::uint8_t> encode_index(const std::vector<std::uint64_t>& offsets
 std::vector<std::uint8_t> encode_vindex(const std::vector<std::uint32_t>& totals, std::size_t word_slots,
                                         const std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>& inverted) {
   const std::size_t n = totals.size();
-  std::vector<double> norm2(n, 0.0);
   std::uint64_t postings = 0;
-  for (std::size_t w = 0; w < inverted.size(); ++w) {
-    postings += inverted[w].size();
-    if (inverted[w].empty()) continue;
-    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(inverted[w].size()));
-    for (const auto& [s, c] : inverted[w]) {
-      const double v = static_cast<double>(c) / static_cast<double>(totals[s]) * idf;
-      norm2[s] += v * v;
-    }
-  }
+  const std::vector<double> norm2 = tfidf_norm2(n, totals, inverted, &postings);
   Writer w;
   w.b.reserve(24 + 12 * n + 8 * (word_slots + 1) + 8 * postings);
   w.u32(static_cast<std::uint32_t>(n));
