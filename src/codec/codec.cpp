@@ -48,6 +48,10 @@ constexpr std::uint32_t kLayerCodings = 4;
 /// and the first minor version that has it.
 constexpr std::uint16_t kLaserEdgeMinor = 7;
 constexpr std::size_t kLaserPredictorOffset = 68;
+/// A voxel layer with the mixed octree contexts (model.md §2.7.4) and the first minor
+/// version that has it.
+constexpr std::uint16_t kVoxelMixedMinor = 8;
+constexpr std::size_t kVoxelContextsOffset = 65;
 /// The georeference chunk and the first minor version that has it (model.md §2.9).
 constexpr char kGeorType[] = "GEOR";
 constexpr std::uint16_t kGeorMinor = 5;
@@ -726,6 +730,10 @@ bool laser_edge_layer(const std::vector<std::uint8_t>& payload) {
          ld_u32(payload.data() + kLaserPredictorOffset) >= 2;
 }
 
+bool voxel_mixed_layer(const std::vector<std::uint8_t>& payload) {
+  return layer_coding(payload) == 2 && payload.size() > kVoxelContextsOffset && payload[kVoxelContextsOffset] >= 1;
+}
+
 Quantization quantization_for_word_radius(double word_radius) {
   Quantization q;
   q.word_point_m = 0.0005;
@@ -968,6 +976,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   std::vector<std::uint8_t> out;
   std::uint16_t minor = data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor;
   if (data.residual && laser_edge_layer(*data.residual)) minor = std::max(minor, kLaserEdgeMinor);
+  if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
 
   std::vector<std::uint8_t> mhdr;
@@ -1101,6 +1110,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                                  " needs format version 1." + std::to_string(kLaserEdgeMinor) + ", the header says 1." +
                                  std::to_string(h.minor),
                              c.payload_offset + kLaserPredictorOffset);
+          if (voxel_mixed_layer(*out.residual) && h.minor < kVoxelMixedMinor)
+            return ctx.error("a voxel layer with octree contexts " +
+                                 std::to_string(out.residual->data()[kVoxelContextsOffset]) +
+                                 " needs format version 1." + std::to_string(kVoxelMixedMinor) + ", the header says 1." +
+                                 std::to_string(h.minor),
+                             c.payload_offset + kVoxelContextsOffset);
         }
         return {};
       default: return {};

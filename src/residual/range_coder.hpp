@@ -44,6 +44,21 @@ class RangeEncoder {
       shift_low();
     }
   }
+  /// Codes `bit` with a probability of a 0 of p0 / 4096, p0 in [1, 4095], given by the
+  /// caller (a model whose update is the caller's).
+  void put(std::uint32_t p0, bool bit) {
+    const std::uint32_t bound = (range_ >> kProbBits) * p0;
+    if (!bit) {
+      range_ = bound;
+    } else {
+      low_ += bound;
+      range_ -= bound;
+    }
+    while (range_ < kTop) {
+      range_ <<= 8;
+      shift_low();
+    }
+  }
   /// Flushes and returns the coded bytes; the encoder must not be used afterwards.
   std::vector<std::uint8_t> finish() {
     for (int i = 0; i < 5; ++i) shift_low();
@@ -88,6 +103,22 @@ class RangeDecoder {
       range_ -= bound;
       m.p0 = static_cast<std::uint16_t>(m.p0 - (m.p0 >> kAdaptShift));
       bit = true;
+    }
+    while (range_ < kTop) {
+      range_ <<= 8;
+      code_ = (code_ << 8) | next();
+    }
+    return bit;
+  }
+  /// Decodes a bit coded by RangeEncoder::put(p0, bit).
+  bool get(std::uint32_t p0) {
+    const std::uint32_t bound = (range_ >> kProbBits) * p0;
+    const bool bit = code_ >= bound;
+    if (!bit) {
+      range_ = bound;
+    } else {
+      code_ -= bound;
+      range_ -= bound;
     }
     while (range_ < kTop) {
       range_ <<= 8;

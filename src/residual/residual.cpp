@@ -90,8 +90,10 @@ constexpr double kVoxelSkipRatio = 1.25;
 /// The spherical winner is not coded in full when the voxel trial costs less than this
 /// share of its bits (encoder only). Measured where voxels win: trial 0.60-0.88, in full
 /// 0.56-0.81 (the balm map, scan001, room_scan1 at 4 cm); where they lose, the trial never
-/// went below 1.04.
-constexpr double kSphericalSkipRatio = 0.9;
+/// went below 1.04. With the octree contexts of format 1.8 single scans at 6-20 cm come
+/// close: a balm scan at 10 cm had a trial of 0.84 and lost in full (1.07), while trials
+/// of 0.46-0.77 (kitti00, HDL-32E, balm at 15-20 cm) won in full (0.69-0.84).
+constexpr double kSphericalSkipRatio = 0.8;
 /// Sweep coding: the elevation follows the slope over this many decoded points back.
 constexpr unsigned kSlopeSpan = 7;
 /// Largest |elevation / azimuth| slope the sweep coding extrapolates.
@@ -468,7 +470,7 @@ std::optional<VoxelLayer> voxel_layer(RangeEncoder enc, const std::vector<Eigen:
   std::sort(leaves.begin(), leaves.end());
   leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
   v.voxels = leaves.size();
-  detail::encode_occupancy(enc, leaves, v.depth);
+  detail::encode_occupancy(enc, leaves, v.depth, detail::OccupancyContexts::kMixed);
   v.stream = enc.finish();
   return v;
 }
@@ -537,7 +539,10 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     h.stream_offset += kSweepExtraBytes;
   } else if (h.coding == kCodingVoxel) {
     for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
-    h.depth = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
+    const std::uint32_t depth_field = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
+    h.depth = depth_field & 0xFFU;
+    h.octree_contexts = (depth_field >> 8) & 0xFFU;
+    h.voxel_reserved = depth_field >> 16;
     h.stream_offset += kVoxelExtraBytes;
   } else if (h.coding == kCodingLaser) {
     h.tangential_step = ld_f64(payload + at + kHeadBytes);
@@ -850,7 +855,9 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   if (sweep) put_f64(out, sweep_cell);
   if (use_voxel) {
     for (int a = 0; a < 3; ++a) put_f64(out, voxel->origin[a]);
-    codec::bytes::put_u32(out, static_cast<std::uint32_t>(voxel->depth));
+    // depth u8, contexts u8 (1: §2.7.4), reserved u16
+    codec::bytes::put_u32(out, static_cast<std::uint32_t>(voxel->depth) |
+                                   static_cast<std::uint32_t>(detail::OccupancyContexts::kMixed) << 8);
   }
   out.insert(out.end(), stream.begin(), stream.end());
   fill_stats(use_voxel ? voxel->voxels : counts[best], use_voxel ? 0 : escaped[best], sweep, use_voxel, false, out.size());
@@ -918,9 +925,17 @@ StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Clo
     if (h.depth < 1 || h.depth > static_cast<std::uint32_t>(kMaxVoxelDepth))
       return bad_data("residual layer octree depth " + std::to_string(h.depth) + " is not in [1, 21]",
                       at + kHeadBytes + 24);
+    if (h.octree_contexts > 1)
+      return bad_data("residual layer octree contexts " + std::to_string(h.octree_contexts) + " is unknown (0 or 1 expected)",
+                      at + kHeadBytes + 25);
+    if (h.voxel_reserved != 0)
+      return bad_data("residual layer voxel reserved field is " + std::to_string(h.voxel_reserved) + ", not 0",
+                      at + kHeadBytes + 26);
     if (n_c == 0) return bad_data("residual layer voxel coding holds no voxel", at + 24);
     std::vector<std::uint64_t> leaves;
-    if (!detail::decode_occupancy(dec, static_cast<int>(h.depth), n_c, leaves) || leaves.size() != n_c)
+    if (!detail::decode_occupancy(dec, static_cast<int>(h.depth), n_c, leaves,
+                                  static_cast<detail::OccupancyContexts>(h.octree_contexts)) ||
+        leaves.size() != n_c)
       return bad_data("residual layer octree does not hold the " + std::to_string(n_c) + " voxels its header states",
                       h.stream_offset);
     if (dec.overrun() > 8)

@@ -3,6 +3,7 @@
 
 #include "residual/voxel.hpp"
 
+#include <algorithm>
 #include <array>
 #include <memory>
 
@@ -144,6 +145,147 @@ class OccupancyModels {
   std::vector<BitModel> models_ = std::vector<BitModel>(8 * 64 * 256);
 };
 
+/// squash(d) = 4096 / (1 + e^(-d/256)) at d = -2048, -1920, ..., 2048 (formats/model.md
+/// §2.7.4): the mixer's logistic function, interpolated between these knots.
+constexpr std::int32_t kSquashKnots[33] = {1,    2,    4,    6,    10,   17,   27,   45,   74,   120,  194,
+                                           311,  488,  747,  1102, 1546, 2048, 2550, 2994, 3349, 3608, 3785,
+                                           3902, 3976, 4022, 4051, 4069, 4079, 4086, 4090, 4092, 4094, 4095};
+
+/// The probability of a 1, in 1/4096 and within [1, 4095], of a logit d in 1/256.
+std::int32_t squash(std::int32_t d) {
+  d = std::clamp(d, -2047, 2047) + 2048;
+  const std::int32_t k = d >> 7, f = d & 127;
+  return std::clamp((kSquashKnots[k] * (128 - f) + kSquashKnots[k + 1] * f + 64) >> 7, 1, 4095);
+}
+
+/// stretch(p): the least d in [-2047, 2047] with squash(d) >= p, for p in [0, 4095] (the
+/// inverse of squash, as a table).
+const std::array<std::int16_t, 4096>& stretch_table() {
+  static const std::array<std::int16_t, 4096> table = [] {
+    std::array<std::int16_t, 4096> t{};
+    std::int32_t d = -2047;
+    for (std::int32_t p = 0; p < 4096; ++p) {
+      while (d < 2047 && squash(d) < p) ++d;
+      t[static_cast<std::size_t>(p)] = static_cast<std::int16_t>(d);
+    }
+    return t;
+  }();
+  return table;
+}
+
+/// An adaptive probability of a 1 (in 1/65536) that moves by 1/2, 1/4, 1/8, 1/16 of the
+/// error over its first 1, 2, 4, 8 bits and by 1/32 after 15.
+struct YoungBitModel {
+  std::uint16_t p1 = 32768;
+  std::uint8_t seen = 0;
+  void update(bool bit) {
+    const int shift = seen < 1 ? 1 : seen < 3 ? 2 : seen < 7 ? 3 : seen < 15 ? 4 : 5;
+    if (seen < 15) ++seen;
+    if (bit) p1 = static_cast<std::uint16_t>(p1 + ((65536U - p1) >> shift));
+    else p1 = static_cast<std::uint16_t>(p1 - (p1 >> shift));
+    p1 = std::clamp<std::uint16_t>(p1, 256, 65280);
+  }
+};
+
+/// The occupancy models of §2.7.4: per bit, three context models, each a YoungBitModel,
+/// mixed in the logistic domain with weights that learn per (child, siblings so far).
+class MixedContexts {
+ public:
+  /// Starts a level: forgets the planes of the level before.
+  void begin_level(int level) {
+    const std::size_t size = std::size_t{1} << std::min(level, kPlaneBits);
+    for (auto& axis : plane_key_) axis.assign(size, kNoKey);
+    for (auto& axis : plane_) axis.assign(size, 2);
+    plane_mask_ = size - 1;
+  }
+  /// Starts node (x, y, z) of the level, `faces` its six face neighbours (bit 2a below
+  /// along axis a, 2a+1 above).
+  void begin_node(std::uint32_t x, std::uint32_t y, std::uint32_t z, unsigned faces) {
+    coord_[0] = x;
+    coord_[1] = y;
+    coord_[2] = z;
+    faces_ = faces;
+    for (int a = 0; a < 3; ++a) {
+      const std::size_t at = coord_[a] & plane_mask_;
+      predicted_[a] = plane_key_[a][at] == coord_[a] ? plane_[a][at] : 2U;
+    }
+  }
+  /// The probability of a 0 (in 1/4096) of child i's bit; `so_far` the bits before it,
+  /// `low` which of its lower neighbours on the child level are occupied (bit a: along a).
+  std::uint32_t p0(unsigned i, unsigned so_far, unsigned low) {
+    unsigned near = 0, far = 0, plane = 0;
+    for (unsigned a = 0; a < 3; ++a) {
+      const unsigned side = (i >> a) & 1U;  // 1: the child is in the upper half along a
+      near |= ((faces_ >> (2 * a + side)) & 1U) << a;
+      far |= ((faces_ >> (2 * a + (side ^ 1U))) & 1U) << a;
+    }
+    for (int a = 2; a >= 0; --a) {
+      const unsigned p = predicted_[a];
+      plane = 3 * plane + (p == 2U ? 0U : p == ((i >> a) & 1U) ? 1U : 2U);
+    }
+    const unsigned set = i * 8 + kOnes[so_far & 127U];
+    const unsigned faces = (set * 8 + near) * 8 + low;
+    index_[0] = faces;
+    index_[1] = faces * 8 + far;
+    index_[2] = (set * 27 + plane) * 8 + low;
+    weights_at_ = 3 * set;
+    const auto& st = stretch_table();
+    std::int64_t dot = 0;
+    for (int m = 0; m < 3; ++m) {
+      input_[m] = st[models_[m][index_[m]].p1 >> 4];
+      dot += static_cast<std::int64_t>(weights_[weights_at_ + m]) * input_[m];
+    }
+    p1_ = squash(static_cast<std::int32_t>(std::clamp<std::int64_t>(dot >> 16, -2047, 2047)));  // (>>: floor)
+    return static_cast<std::uint32_t>(4096 - p1_);
+  }
+  /// Learns child i's bit after p0.
+  void update(bool bit) {
+    const std::int32_t error = (bit ? 4096 : 0) - p1_;
+    for (int m = 0; m < 3; ++m) {
+      models_[m][index_[m]].update(bit);
+      std::int32_t& w = weights_[weights_at_ + m];
+      w = std::clamp(w + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
+    }
+  }
+  /// Ends the node, `byte` its children: its plane along each axis is remembered.
+  void end_node(unsigned byte) {
+    for (unsigned a = 0; a < 3; ++a) {
+      unsigned lower = 0, upper = 0;
+      for (unsigned i = 0; i < 8; ++i)
+        if ((byte >> i) & 1U) ((i >> a) & 1U ? upper : lower) = 1;
+      const std::size_t at = coord_[a] & plane_mask_;
+      plane_key_[a][at] = coord_[a];
+      plane_[a][at] = static_cast<std::uint8_t>(lower != 0 && upper != 0 ? 2 : upper);
+    }
+  }
+
+ private:
+  static constexpr int kPlaneBits = 14;
+  /// The set bits of 0..127 (the siblings before a child).
+  static constexpr std::array<std::uint8_t, 128> kOnes = [] {
+    std::array<std::uint8_t, 128> t{};
+    for (unsigned v = 0; v < 128; ++v) t[v] = static_cast<std::uint8_t>((v & 1U) + ((v >> 1) & 1U) + ((v >> 2) & 1U) + ((v >> 3) & 1U) +
+                                                                        ((v >> 4) & 1U) + ((v >> 5) & 1U) + ((v >> 6) & 1U));
+    return t;
+  }();
+  static constexpr std::uint32_t kNoKey = 0xFFFFFFFFU;
+  static constexpr std::int32_t kMaxWeight = 1 << 19;
+  std::array<std::vector<YoungBitModel>, 3> models_{std::vector<YoungBitModel>(4096),
+                                                    std::vector<YoungBitModel>(4096 * 8),
+                                                    std::vector<YoungBitModel>(64 * 27 * 8)};
+  std::vector<std::int32_t> weights_ = std::vector<std::int32_t>(64 * 3, 21845);
+  std::array<std::vector<std::uint32_t>, 3> plane_key_;
+  std::array<std::vector<std::uint8_t>, 3> plane_;
+  std::size_t plane_mask_ = 0;
+  std::uint32_t coord_[3] = {0, 0, 0};
+  unsigned faces_ = 0;
+  unsigned predicted_[3] = {2, 2, 2};
+  std::size_t index_[3] = {0, 0, 0};
+  std::size_t weights_at_ = 0;
+  std::int32_t input_[3] = {0, 0, 0};
+  std::int32_t p1_ = 2048;
+};
+
 /// Which of child i's three lower neighbours on the child level are occupied (bit a: along
 /// axis a), all known to the decoder: a sibling coded before it (in `so_far`, bit j for
 /// child j) or a child of the node's lower neighbour along a (whose occupancy byte is
@@ -183,15 +325,19 @@ void unmorton(std::uint64_t code, std::uint32_t& x, std::uint32_t& y, std::uint3
   z = compact(code >> 2);
 }
 
-void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth) {
+void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth,
+                      OccupancyContexts contexts) {
   const auto levels = levels_of(leaves, depth);
-  OccupancyModels models;
+  const bool mixed = contexts == OccupancyContexts::kMixed;
+  std::unique_ptr<OccupancyModels> models = mixed ? nullptr : std::make_unique<OccupancyModels>();
+  std::unique_ptr<MixedContexts> mix = mixed ? std::make_unique<MixedContexts>() : nullptr;
   LevelOccupancy occupied;
   std::vector<std::uint8_t> bytes;
   for (int l = 0; l < depth; ++l) {
     const auto& nodes = levels[static_cast<std::size_t>(l)];
     const auto& children = levels[static_cast<std::size_t>(l) + 1];
     occupied.assign(nodes);
+    if (mixed) mix->begin_level(l);
     bytes.assign(nodes.size(), 0);
     // (children and nodes are both in Morton order: one walk)
     std::size_t j = 0;
@@ -205,25 +351,42 @@ void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leave
       const unsigned ctx = occupied.neighbours(b, n);
       unsigned low[3];
       occupied.lower_bytes(b, n, bytes, low);
+      if (mixed) {
+        std::uint32_t x = 0, y = 0, z = 0;
+        unmorton(n, x, y, z);
+        mix->begin_node(x, y, z, ctx);
+      }
       unsigned prefix = 1;
       for (unsigned i = 0; i < 8; ++i) {
         const unsigned bit = (byte >> i) & 1U;
         // An occupied node has a child: after seven empty ones, the eighth is not coded.
-        if (!(i == 7 && prefix == 1))
-          enc.put(models.at(lower_children(i, byte & ((1U << i) - 1), low), ctx, prefix), bit != 0);
+        if (!(i == 7 && prefix == 1)) {
+          const unsigned so_far = byte & ((1U << i) - 1);
+          if (mixed) {
+            enc.put(mix->p0(i, so_far, lower_children(i, so_far, low)), bit != 0);
+            mix->update(bit != 0);
+          } else {
+            enc.put(models->at(lower_children(i, so_far, low), ctx, prefix), bit != 0);
+          }
+        }
         prefix = 2 * prefix + bit;
       }
+      if (mixed) mix->end_node(byte);
     }
   }
 }
 
-bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, std::vector<std::uint64_t>& leaves) {
-  OccupancyModels models;
+bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, std::vector<std::uint64_t>& leaves,
+                      OccupancyContexts contexts) {
+  const bool mixed = contexts == OccupancyContexts::kMixed;
+  std::unique_ptr<OccupancyModels> models = mixed ? nullptr : std::make_unique<OccupancyModels>();
+  std::unique_ptr<MixedContexts> mix = mixed ? std::make_unique<MixedContexts>() : nullptr;
   LevelOccupancy occupied;
   std::vector<std::uint64_t> nodes = {0}, children;
   std::vector<std::uint8_t> bytes;
   for (int l = 0; l < depth; ++l) {
     occupied.assign(nodes);
+    if (mixed) mix->begin_level(l);
     children.clear();
     bytes.clear();
     std::size_t b = 0;
@@ -232,15 +395,29 @@ bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, st
       const unsigned ctx = occupied.neighbours(b, n);
       unsigned low[3];
       occupied.lower_bytes(b, n, bytes, low);
+      if (mixed) {
+        std::uint32_t x = 0, y = 0, z = 0;
+        unmorton(n, x, y, z);
+        mix->begin_node(x, y, z, ctx);
+      }
       unsigned prefix = 1, byte = 0;
       for (unsigned i = 0; i < 8; ++i) {
-        const bool bit = (i == 7 && prefix == 1) || dec.get(models.at(lower_children(i, byte, low), ctx, prefix));
+        bool bit = true;
+        if (!(i == 7 && prefix == 1)) {
+          if (mixed) {
+            bit = dec.get(mix->p0(i, byte, lower_children(i, byte, low)));
+            mix->update(bit);
+          } else {
+            bit = dec.get(models->at(lower_children(i, byte, low), ctx, prefix));
+          }
+        }
         prefix = 2 * prefix + (bit ? 1U : 0U);
         if (bit) {
           byte |= 1U << i;
           children.push_back(n * 8 + i);
         }
       }
+      if (mixed) mix->end_node(byte);
       bytes.push_back(static_cast<std::uint8_t>(byte));
       if (children.size() > max_leaves) return false;
     }

@@ -211,11 +211,11 @@ run(0 compress.layer_words compress "${NC}" -o "${WORK}/nc_ew.lex3dm" --max-erro
 expect_match(compress.layer_words "${LAST_OUT}" "\"words_used\":(true|false)")
 run(0 compress.target compress "${NC}" -o "${WORK}/nc_t.lex3dm" --target-bpp 8 --words off --json)
 expect_match(compress.target "${LAST_OUT}" "\"bits_per_point\":([0-7]\\.|8\\.0*[,}])")
-# The voxel coding, forced: a format 1.3 file whose decoded cloud meets the bound.
+# The voxel coding, forced: a format 1.8 file whose decoded cloud meets the bound.
 run(0 compress.voxel compress "${NC}" -o "${WORK}/nc_v.lex3dm" --max-error 0.02 --layer-coding voxel --json)
 expect_match(compress.voxel "${LAST_OUT}" "\"coding\":\"voxel\"")
 run(0 info.voxel info "${WORK}/nc_v.lex3dm")
-expect_match(info.voxel "${LAST_OUT}" "format 1\\.3")
+expect_match(info.voxel "${LAST_OUT}" "format 1\\.8")
 expect_match(info.voxel "${LAST_OUT}" "RESV")
 expect_match(info.voxel "${LAST_OUT}" "voxel coding")
 run(0 decompress.voxel decompress "${WORK}/nc_v.lex3dm" -o "${WORK}/nc_v.ply" --reference "${NC}" --json)

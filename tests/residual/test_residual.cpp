@@ -238,8 +238,8 @@ TEST(ResidualLayer, RealScanThroughTheModelFile) {
     EXPECT_LE(st.explained_points + st.residual_points, cloud.size());
     if (e >= 0.2) EXPECT_GT(st.explained_points, cloud.size() / 4) << "words explain part of the scan at E = " << e;
     const Bytes file = codec::encode_model(d);
-    EXPECT_EQ(file[10], st.voxel ? 3 : st.sweep ? 2 : 1)
-        << "a model with a residual layer is format 1.1, 1.2 with the sweep coding, 1.3 with the voxel coding";
+    EXPECT_EQ(file[10], st.voxel ? 8 : st.sweep ? 2 : 1)
+        << "a model with a residual layer is format 1.1, 1.2 with the sweep coding, 1.8 with the voxel coding";
     const auto decoded = codec::decode_model(file);
     ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
     ASSERT_TRUE(decoded.value().residual.has_value());
@@ -309,11 +309,15 @@ Cloud tilting_scan(std::uint32_t seed = 5, int lines = 100, int beam_step_deg = 
 }
 
 TEST(ResidualSweep, TiltedLinesTakeTheSweepCodingAndKeepTheBound) {
+  // (Against the spherical codings alone: this small room's voxel coding, format 1.8, is
+  // smaller still.)
   const Cloud scan = tilting_scan();
+  residual::LayerOptions spherical;
+  spherical.voxel = false;
   for (double e : {0.005, 0.01}) {
     residual::LayerStats sweep_st, plain_st;
-    const Bytes sweep = residual::encode_layer(scan, Cloud{}, Pose::Identity(), e, &sweep_st);
-    residual::LayerOptions plain_options;
+    const Bytes sweep = residual::encode_layer(scan, Cloud{}, Pose::Identity(), e, &sweep_st, spherical);
+    residual::LayerOptions plain_options = spherical;
     plain_options.sweep = false;
     const Bytes plain = residual::encode_layer(scan, Cloud{}, Pose::Identity(), e, &plain_st, plain_options);
     EXPECT_TRUE(sweep_st.sweep) << "E = " << e;
@@ -332,7 +336,7 @@ TEST(ResidualSweep, TiltedLinesTakeTheSweepCodingAndKeepTheBound) {
     EXPECT_EQ(d.value().size(), sweep_st.residual_points);
     EXPECT_LE(hausdorff(scan, d.value()), e) << "input to decoded, E = " << e;
     EXPECT_LE(hausdorff(d.value(), scan), e) << "decoded to input, E = " << e;
-    EXPECT_EQ(sweep, residual::encode_layer(scan, Cloud{}, Pose::Identity(), e)) << "deterministic";
+    EXPECT_EQ(sweep, residual::encode_layer(scan, Cloud{}, Pose::Identity(), e, nullptr, spherical)) << "deterministic";
   }
   // A spinning lidar's rings keep the previous-point coding (a RESD chunk, format 1.1).
   residual::LayerStats ring_st;
@@ -357,7 +361,9 @@ TEST(ResidualSweep, ModelFileVersionRules) {
   codec::ModelData d;
   d.input_points = scan.size();
   d.alphabet = Alphabet{};
-  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, scan, 0.01);
+  residual::LayerOptions spherical;
+  spherical.voxel = false;
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, scan, 0.01, spherical);
   ASSERT_TRUE(st.sweep);
   const Bytes file = codec::encode_model(d);
   EXPECT_EQ(file[10], 2) << "a sweep-coded layer makes the file format 1.2";
@@ -366,7 +372,7 @@ TEST(ResidualSweep, ModelFileVersionRules) {
   expect_rejected(retype_chunk(file, "RESW", "RESW", 1), "1.2");
   expect_rejected(retype_chunk(file, "RESW", "RESD", 2), "RESW");
   codec::ModelData plain = d;
-  residual::LayerOptions no_sweep;
+  residual::LayerOptions no_sweep = spherical;
   no_sweep.sweep = false;
   residual::add_layer(plain, Alphabet{}, scan, 0.01, no_sweep);
   const Bytes plain_file = codec::encode_model(plain);
@@ -376,7 +382,9 @@ TEST(ResidualSweep, ModelFileVersionRules) {
 
 TEST(ResidualSweep, CorruptPayloadsAreRejectedOrDecodeBounded) {
   const Cloud scan = tilting_scan();
-  const Bytes good = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.01);
+  residual::LayerOptions spherical;
+  spherical.voxel = false;
+  const Bytes good = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.01, nullptr, spherical);
   ASSERT_TRUE(codec::is_sweep_layer(good));
   for (std::size_t n = 0; n < good.size(); n += (n < 64 ? 1 : 89)) {
     const Bytes cut(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n));
@@ -477,8 +485,10 @@ TEST(ResidualVoxel, MortonCodesRoundTrip) {
 }
 
 TEST(ResidualVoxel, OccupancyRoundTripsAndBoundsItsWork) {
-  // Random leaves of octrees of several depths, decoded exactly; a decoder allowed fewer
-  // leaves than coded stops.
+  // Random leaves of octrees of several depths, decoded exactly with both context models;
+  // a decoder allowed fewer leaves than coded stops.
+  using residual::detail::OccupancyContexts;
+  for (const OccupancyContexts contexts : {OccupancyContexts::kFaces, OccupancyContexts::kMixed}) {
   std::mt19937 rng(2);
   for (const int depth : {1, 3, 8, 21}) {
     std::vector<std::uint64_t> leaves;
@@ -488,14 +498,47 @@ TEST(ResidualVoxel, OccupancyRoundTripsAndBoundsItsWork) {
     std::sort(leaves.begin(), leaves.end());
     leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
     RangeEncoder enc;
-    residual::detail::encode_occupancy(enc, leaves, depth);
+    residual::detail::encode_occupancy(enc, leaves, depth, contexts);
     const Bytes bytes = enc.finish();
     std::vector<std::uint64_t> back;
     RangeDecoder dec(bytes.data(), bytes.size());
-    ASSERT_TRUE(residual::detail::decode_occupancy(dec, depth, leaves.size(), back)) << depth;
+    ASSERT_TRUE(residual::detail::decode_occupancy(dec, depth, leaves.size(), back, contexts)) << depth;
     EXPECT_EQ(back, leaves) << depth;
     RangeDecoder short_dec(bytes.data(), bytes.size());
-    EXPECT_FALSE(residual::detail::decode_occupancy(short_dec, depth, leaves.size() - 1, back)) << depth;
+    EXPECT_FALSE(residual::detail::decode_occupancy(short_dec, depth, leaves.size() - 1, back, contexts)) << depth;
+  }
+  }
+}
+
+TEST(ResidualVoxel, MixedContextsCodeSurfacesSmaller) {
+  // The same occupied cells (a floor and two walls of a room map, and a sparse random
+  // sample of it like an airborne cloud's) coded with the contexts of format 1.8 and of
+  // 1.3: both decode exactly, and the mixed contexts need fewer bytes.
+  using residual::detail::OccupancyContexts;
+  const Cloud map = merged_views(3);
+  for (const std::size_t keep_every : {1, 7}) {
+    const double cell = 0.02;
+    std::vector<std::uint64_t> leaves;
+    for (std::size_t i = 0; i < map.size(); i += keep_every) {
+      const Eigen::Vector3f& p = map.points[i];
+      leaves.push_back(residual::detail::morton(static_cast<std::uint32_t>((p.x() + 9.0F) / cell),
+                                                static_cast<std::uint32_t>((p.y() + 13.0F) / cell),
+                                                static_cast<std::uint32_t>((p.z() + 3.0F) / cell)));
+    }
+    std::sort(leaves.begin(), leaves.end());
+    leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
+    std::size_t sizes[2] = {0, 0};
+    for (const OccupancyContexts contexts : {OccupancyContexts::kFaces, OccupancyContexts::kMixed}) {
+      RangeEncoder enc;
+      residual::detail::encode_occupancy(enc, leaves, 11, contexts);
+      const Bytes bytes = enc.finish();
+      sizes[static_cast<int>(contexts)] = bytes.size();
+      std::vector<std::uint64_t> back;
+      RangeDecoder dec(bytes.data(), bytes.size());
+      ASSERT_TRUE(residual::detail::decode_occupancy(dec, 11, leaves.size(), back, contexts));
+      EXPECT_EQ(back, leaves);
+    }
+    EXPECT_LT(sizes[1], sizes[0]) << "every " << keep_every << " point(s): " << leaves.size() << " cells";
   }
 }
 
@@ -566,10 +609,12 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
   const residual::LayerStats st = residual::add_layer(d, Alphabet{}, map, 0.02, voxel_only);
   ASSERT_TRUE(st.voxel);
   const Bytes file = codec::encode_model(d);
-  EXPECT_EQ(file[10], 3);
+  EXPECT_EQ(file[10], 8) << "the voxel coding with the octree contexts of format 1.8";
   ASSERT_TRUE(codec::decode_model(file).ok());
-  // RESV in a file that claims 1.2; a voxel payload in a RESW chunk; a RESW payload in a RESV chunk.
+  // RESV in a file that claims 1.2; its contexts 1 in a file that claims 1.7; a voxel payload
+  // in a RESW chunk; a RESW payload in a RESV chunk.
   expect_rejected(retype_chunk(file, "RESV", "RESV", 2), "1.3");
+  expect_rejected(retype_chunk(file, "RESV", "RESV", 7), "octree contexts 1 needs format version 1.8");
   expect_rejected(retype_chunk(file, "RESV", "RESW", 3), "RESV");
   codec::ModelData sweep = d;
   residual::LayerOptions no_voxel;
@@ -628,6 +673,15 @@ TEST(ResidualVoxel, CorruptPayloadsAreRejectedOrDecodeBounded) {
     EXPECT_TRUE(fails(poke_f64(good, 56, o))) << o;
   }
   for (const std::uint32_t depth : {0U, 22U, 0xFFFFFFFFU}) EXPECT_TRUE(fails(poke_u32(good, 64, depth))) << depth;
+  const std::uint32_t depth = residual::read_layer_header(good.data(), good.size()).value().depth;
+  EXPECT_EQ(good[65], 1) << "contexts 1 (formats/model.md §2.7.4)";
+  EXPECT_TRUE(fails(poke_u32(good, 64, depth | 2U << 8))) << "unknown contexts";
+  EXPECT_TRUE(fails(poke_u32(good, 64, depth | 1U << 8 | 1U << 16))) << "reserved bits";
+  {
+    // Read with the other contexts (0), the stream decodes to something or fails, bounded.
+    const auto d = residual::decode_layer(poke_u32(good, 64, depth), Cloud{}, Pose::Identity(), map.size());
+    if (d.ok()) EXPECT_EQ(d.value().size(), n);
+  }
   Bytes zero = good, many = good;
   for (int i = 0; i < 8; ++i) zero[32 + i] = 0;
   EXPECT_TRUE(fails(zero));
@@ -761,7 +815,7 @@ codec::ModelData golden_residual_model(Cloud& input) {
   return d;
 }
 constexpr double kGoldenMaxError = 0.01;
-constexpr std::size_t kVoxelGoldenPoints = 2880;  // the input points of tiny_residual_voxel_1.3
+constexpr std::size_t kVoxelGoldenPoints = 2880;  // the input points of tiny_residual_voxel_1.3 and _1.8
 
 
 /// Writes `d` (with its layer) as golden file `stem`.lex3dm, with the input and the
@@ -829,7 +883,9 @@ TEST(ResidualGolden, DISABLED_WriteSweepGoldenFile) {
 }
 
 TEST(ResidualGolden, DISABLED_WriteVoxelGoldenFile) {
-  // Format 1.3: a layer of the voxel coding (RESV) over a small map of two views.
+  // Format 1.8: a layer of the voxel coding (RESV, octree contexts 1) over a small map of
+  // two views. (tiny_residual_voxel_1.3, contexts 0, came from the same input with the
+  // format 1.3 writer.)
   Cloud input = merged_views(2, 13);
   input.points.resize(input.size() / 16);  // the first view's lowest rings
   codec::ModelData d;
@@ -841,7 +897,7 @@ TEST(ResidualGolden, DISABLED_WriteVoxelGoldenFile) {
   voxel_only.laser = false;
   const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError, voxel_only);
   ASSERT_TRUE(st.voxel);
-  write_golden("tiny_residual_voxel_1.3", d, input);
+  write_golden("tiny_residual_voxel_1.8", d, input);
 }
 
 TEST(ResidualGolden, Format1_1FileDecodesToTheRecordedCloud) {
@@ -854,6 +910,10 @@ TEST(ResidualGolden, Format1_2SweepFileDecodesToTheRecordedCloud) {
 
 TEST(ResidualGolden, Format1_3VoxelFileDecodesToTheRecordedCloud) {
   check_golden("tiny_residual_voxel_1.3", kVoxelGoldenPoints, 3, "MHDR ALPH INST RESV IEND ");
+}
+
+TEST(ResidualGolden, Format1_8VoxelFileDecodesToTheRecordedCloud) {
+  check_golden("tiny_residual_voxel_1.8", kVoxelGoldenPoints, 8, "MHDR ALPH INST RESV IEND ");
 }
 
 TEST(ResidualVoxel, WordsAndAFarFrameKeepTheBound) {
@@ -873,7 +933,7 @@ TEST(ResidualVoxel, WordsAndAFarFrameKeepTheBound) {
   ASSERT_TRUE(st.voxel);
   EXPECT_GT(st.kept_word_points, 0U);
   const Bytes file = codec::encode_model(d);
-  EXPECT_EQ(file[10], 3) << "a voxel-coded layer makes the file format 1.3";
+  EXPECT_EQ(file[10], 8) << "a voxel-coded layer makes the file format 1.8 (1.3 before its octree contexts)";
   expect_bound(file, input, 0.01);
 }
 
