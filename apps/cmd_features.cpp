@@ -69,7 +69,7 @@ void write_png(const FeatureResult& res, const std::string& path, const std::str
   // Pixels drawn z wide and z * sy tall (sy: the pixel's aspect), so that a narrow image is
   // not a thumbnail; the text is twice the font's size beside an image this wide.
   const int sy = std::clamp(static_cast<int>(std::lround(img.elevation_resolution_rad / img.azimuth_resolution_rad)), 1, 8);
-  const int z = img.width < 1000 ? 2 : 1;
+  const int z = img.width < 1000 ? std::clamp((800 + img.width - 1) / img.width, 2, 64) : 1;
   const int s = 2;
   const int iw = img.width * z, ih = img.height * sy * z;
   float rmax = 1.0F;
@@ -116,7 +116,8 @@ void write_png(const FeatureResult& res, const std::string& path, const std::str
   for (const auto& f : res.features.features)
     if (f.keypoint.kind == FeatureKind::kCoverage) {
       const auto [x, y] = at(f.keypoint);
-      c.fill({x, y, x + z, y + z}, kCoverage);
+      const int d = std::min(z, 3);
+      c.fill({x, y, x + d, y + d}, kCoverage);
     }
   for (const auto& f : res.features.features)  // on top of the coverage points
     if (f.keypoint.kind != FeatureKind::kCoverage) {
@@ -131,7 +132,7 @@ void write_png(const FeatureResult& res, const std::string& path, const std::str
   const double az0 = img.azimuth_max_rad * deg, az1 = (img.azimuth_max_rad - img.width * img.azimuth_resolution_rad) * deg;
   plot::Chart ch(c, area, az0, az1, 0.0, 1.0);
   ch.axes(angle_ticks(std::min(az0, az1), std::max(az0, az1), std::max(2, iw / 110)), plot::Ticks{},
-          "azimuth, deg (left: " + plot::format_tick(az0, 0) + ")", "", false, s);
+          "azimuth, deg", "", false, s);
   const std::vector<double>& e = img.row_edges;
   if (e.size() == static_cast<std::size_t>(img.height) + 1) {
     const double el_top = e.front() * deg, el_bottom = e.back() * deg;
@@ -154,8 +155,10 @@ void write_png(const FeatureResult& res, const std::string& path, const std::str
       widest = std::max(widest, b.width());
       last = y;
     }
-    c.text_up(left - 9 - widest - 8, (area.top + area.bottom) / 2, "elev., deg", plot::kBlack, s, plot::Align::kCentre,
-              plot::Align::kEnd);
+    const std::string label = plot::text_width("elevation, deg", s) <= ih ? "elevation, deg" : "elev., deg";
+    if (plot::text_width(label, s) <= ih + 2 * top - 16)  // else it would run into the title
+      c.text_up(left - 9 - widest - 8, (area.top + area.bottom) / 2, label, plot::kBlack, s, plot::Align::kCentre,
+                plot::Align::kEnd);
   }
 
   // The range colour bar (log scale: the ramp runs over log(1 + range)) and the legend.
@@ -241,7 +244,8 @@ void register_features(CLI::App& app) {
   sub->footer("Examples:\n  lex3d features scan.bin --png features.png --json");
   sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d)")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
-  sub->add_option("--png", o->png, "Draw the range image (colour: range, with a colour bar in metres) with the interest (magenta) and coverage (white) points to this PNG; default: no picture");
+  sub->add_option("--png", o->png, "Draw the range image (colour: range, with a colour bar in metres) with the interest (magenta) and coverage (white) points to this PNG; default: no picture")
+      ->type_name("FILE");
   sub->add_flag("--json", o->json, "Print one JSON object");
   add_threads_option(*sub, o->threads, "Worker threads for descriptors");
   sub->add_option("--threshold", o->threshold, "Interest value threshold, (0, 1]");

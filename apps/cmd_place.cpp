@@ -829,16 +829,12 @@ void run_eval(const PlaceOptions& o) {
     e.radius_m = o.radius;
     e.threshold = p.accept_score;
     e.min_gap_s = o.min_gap;
-    e.scans = scans.size();
-    e.score.assign(e.scans * e.scans, std::nanf(""));
-    e.revisit.assign(e.scans * e.scans, 0);
+    e.set_scans(scans.size());
     for (const auto& r : recs) {
-      for (std::size_t j = 0; j < scans.size(); ++j) {
-        if (!(times[j] <= times[r.query] - o.min_gap)) continue;
-        e.score[r.query * e.scans + j] = 0.0F;
-        e.revisit[r.query * e.scans + j] = planar(clouds[r.query].T_world_cloud, clouds[j].T_world_cloud) <= o.radius;
-      }
-      for (const auto& [j, sc] : r.scores) e.score[r.query * e.scans + j] = static_cast<float>(sc);
+      for (std::size_t j = 0; j < scans.size(); ++j)
+        if (times[j] <= times[r.query] - o.min_gap)
+          e.in_database(r.query, j, planar(clouds[r.query].T_world_cloud, clouds[j].T_world_cloud) <= o.radius);
+      for (const auto& [j, sc] : r.scores) e.set_score(r.query, j, sc);
       if (r.valid && r.score >= p.accept_score) e.accepted.push_back({r.query, r.match});
     }
     e.curve = curve;
@@ -1036,7 +1032,7 @@ void register_place(CLI::App& app) {
   query->callback([o] { run_query(*o); });
 
   CLI::App* ev = sub->add_subcommand("eval", "Evaluate place recognition on a sequence with poses");
-  ev->footer("Examples:\n  lex3d place eval balm/ --poses balm/poses.txt --times balm/times.txt --min-gap 20 --radius 8");
+  ev->footer("Examples:\n  lex3d place eval balm/ --poses balm/poses.txt --times balm/times.txt --min-gap 20 --radius 8 --png balm_eval");
   ev->add_option("dir", o->inputs, "Folder of scans (frames.txt order when present)")->required()->expected(1);
   ev->add_option("--times", o->times, "Time of each scan, seconds (default: 1 s apart)");
   ev->add_option("--min-gap", o->min_gap, "A query's database holds the scans at least this much older, s")->check(CLI::Range(0.0, 1e9));
@@ -1048,7 +1044,8 @@ void register_place(CLI::App& app) {
   ev->add_option("--dump", o->dump, "Write one line a query (best match, distances, scores, pose error) to this file");
   ev->add_option("--png", o->png,
                  "Draw the precision-recall curve (PREFIX_pr.png) and the score matrix (PREFIX_confusion.png); "
-                 "default: no pictures");
+                 "default: no pictures")
+      ->type_name("PREFIX");
   add_vocabulary(ev);
   add_match(ev);
   add_common(ev, *o);

@@ -42,12 +42,33 @@ Rgb blues(double t) {
 
 }  // namespace
 
+void EvalPictures::set_scans(std::size_t n) {
+  scans = n;
+  k = std::max<std::size_t>(1, (n + kMatrixCells - 1) / kMatrixCells);
+  cells = (n + k - 1) / k;
+  score.assign(cells * cells, std::nanf(""));
+  revisit.assign(cells * cells, 0);
+}
+
+void EvalPictures::in_database(std::size_t query, std::size_t scan, bool within_radius) {
+  if (query >= scans || scan >= scans) return;
+  const std::size_t c = query / k * cells + scan / k;
+  if (!std::isfinite(score[c])) score[c] = 0.0F;
+  if (within_radius) revisit[c] = 1;
+}
+
+void EvalPictures::set_score(std::size_t query, std::size_t scan, double s) {
+  if (query >= scans || scan >= scans) return;
+  const std::size_t c = query / k * cells + scan / k;
+  score[c] = std::isfinite(score[c]) ? std::max(score[c], static_cast<float>(s)) : static_cast<float>(s);
+}
+
 Canvas draw_precision_recall(const EvalPictures& e) {
   Canvas c(640, 480);
   const Rect area{78, 52, 612, 408};
   plot::title(c, area, 10, "Precision-recall: " + e.data_name + ", true within " + fmt("%g", e.radius_m) + " m");
   c.text((area.left + area.right) / 2, 32,
-         std::to_string(e.positives) + " queries with a true revisit; the curve runs over the score threshold",
+         std::to_string(e.positives) + (e.positives == 1 ? " query" : " queries") + " with a true revisit; the curve runs over the score threshold",
          plot::kBlack, 1, Align::kCentre);
   // A little beyond [0, 1], so that a curve along precision 1 or recall 0 is not hidden by the frame.
   Chart ch(c, area, -0.02, 1.02, -0.02, 1.02);
@@ -76,12 +97,11 @@ Canvas draw_precision_recall(const EvalPictures& e) {
 
 Canvas draw_score_matrix(const EvalPictures& e) {
   Canvas c(760, 720);
-  const int most = 560;  // pixels of the matrix side at most
+  const int most = static_cast<int>(EvalPictures::kMatrixCells);  // pixels of the matrix side at most
   const std::size_t n = std::max<std::size_t>(e.scans, 1);
-  // Many scans: a cell holds k x k of them (the highest score, a revisit if any is).
-  const std::size_t k = (n + most - 1) / most;
-  const int nb = static_cast<int>((n + k - 1) / k);
-  const int cs = std::max(1, most / nb);
+  const std::size_t k = e.k;
+  const int nb = static_cast<int>(e.cells);
+  const int cs = std::max(1, most / std::max(nb, 1));
   const int side = nb * cs;
   const Rect area{84, 60, 84 + side, 60 + side};
   plot::title(c, {0, 0, c.width(), 0}, 10, "Place scores: " + e.data_name + ", " + std::to_string(e.scans) + " scans");
@@ -96,16 +116,10 @@ Canvas draw_score_matrix(const EvalPictures& e) {
   const bool outline = cs >= 5;  // else a revisit cell is filled
   for (int bi = 0; bi < nb; ++bi)
     for (int bj = 0; bj < nb; ++bj) {
-      bool any = false, revisit = false;
-      double s = 0;
-      for (std::size_t q = bi * k; q < std::min(n, (bi + 1) * k) && q < e.scans; ++q)
-        for (std::size_t j = bj * k; j < std::min(n, (bj + 1) * k) && j < e.scans; ++j) {
-          const float v = e.score[q * e.scans + j];
-          if (!std::isfinite(v)) continue;
-          any = true;
-          s = std::max(s, static_cast<double>(v));
-          revisit = revisit || e.revisit[q * e.scans + j] != 0;
-        }
+      const float v = e.score[static_cast<std::size_t>(bi) * e.cells + static_cast<std::size_t>(bj)];
+      const bool any = std::isfinite(v);
+      const bool revisit = e.revisit[static_cast<std::size_t>(bi) * e.cells + static_cast<std::size_t>(bj)] != 0;
+      const double s = any ? static_cast<double>(v) : 0.0;
       const Rect cell{area.left + bj * cs, area.top + bi * cs, area.left + (bj + 1) * cs, area.top + (bi + 1) * cs};
       c.fill(cell, any ? blues(s / top) : kNotInDb);
       if (revisit) {

@@ -17,11 +17,16 @@ struct EvalPictures {
   double threshold = 0.0;       ///< the acceptance threshold on the score
   double min_gap_s = 0.0;       ///< a query's database holds the scans this much older
   std::size_t scans = 0;
-  /// score[q * scans + j]: the score of database scan j for query q (0 when not verified);
-  /// NaN where j is not in q's database.
-  std::vector<float> score;
-  /// revisit[q * scans + j]: j is in q's database and within radius_m of it.
-  std::vector<std::uint8_t> revisit;
+  /// The score matrix in cells of k x k scans (k = 1 up to kMatrixCells scans), so that its
+  /// memory stays bounded however long the sequence: set_scans first, then for every query
+  /// its database scans (in_database) and their scores (set_score).
+  static constexpr std::size_t kMatrixCells = 560;
+  std::size_t k = 1, cells = 0;
+  std::vector<float> score;           ///< cells x cells, the highest score; NaN: no database scan
+  std::vector<std::uint8_t> revisit;  ///< cells x cells, 1: a database scan within radius_m
+  void set_scans(std::size_t n);
+  void in_database(std::size_t query, std::size_t scan, bool within_radius);
+  void set_score(std::size_t query, std::size_t scan, double s);
   /// (query, database scan) of each accepted best match (score at the threshold or above).
   std::vector<std::array<std::size_t, 2>> accepted;
   std::vector<std::array<double, 3>> curve;  ///< threshold, precision, recall; thresholds falling

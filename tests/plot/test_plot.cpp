@@ -199,3 +199,73 @@ TEST(Plot, LinesClipAndMarkersCentre) {
   EXPECT_EQ(r.right, 29);
   EXPECT_EQ(r.top, 22);
 }
+
+// --- the pictures of place eval ---
+
+#include "place_pictures.hpp"
+
+TEST(PlacePictures, LongSequencesShareCells) {
+  lex3d::cli::EvalPictures e;
+  e.set_scans(1200);  // more scans than matrix pixels: 3 x 3 scans a cell
+  EXPECT_EQ(e.k, 3U);
+  EXPECT_EQ(e.cells, 400U);
+  EXPECT_EQ(e.score.size(), 400U * 400U);
+  e.in_database(1000, 10, false);
+  EXPECT_EQ(e.score[333 * 400 + 3], 0.0F);
+  e.set_score(1000, 10, 0.2);
+  e.set_score(1001, 11, 0.4);
+  e.set_score(1002, 9, 0.1);
+  EXPECT_FLOAT_EQ(e.score[333 * 400 + 3], 0.4F);  // the highest of the cell
+  EXPECT_TRUE(std::isnan(e.score[333 * 400 + 4]));
+  e.in_database(1000, 12, true);
+  EXPECT_EQ(e.revisit[333 * 400 + 4], 1);
+  e.in_database(5000, 12, true);  // out of range: ignored
+  const Canvas c = lex3d::cli::draw_score_matrix(e);
+  EXPECT_EQ(c.width(), 760);
+  EXPECT_EQ(c.height(), 720);
+}
+
+TEST(PlacePictures, ScoreMatrixMarksRevisits) {
+  lex3d::cli::EvalPictures e;
+  e.radius_m = 4;
+  e.threshold = 0.25;
+  e.set_scans(4);  // 140-pixel cells
+  e.in_database(3, 0, true);
+  e.in_database(3, 1, false);
+  e.set_score(3, 1, 0.5);
+  const Canvas c = lex3d::cli::draw_score_matrix(e);
+  // Row 3, column 0: white (score 0) inside an orange outline; column 1: the darkest blue;
+  // row 0: no database (grey).
+  const int left = 84, top = 60, cs = 140;
+  const Rgb centre0 = c.pixel(left + cs / 2, top + 3 * cs + cs / 2);
+  EXPECT_EQ(centre0, kWhite);
+  const Rgb edge0 = c.pixel(left + 1, top + 3 * cs + cs / 2);
+  EXPECT_GT(edge0.r, 200);
+  EXPECT_LT(edge0.b, 60);
+  const Rgb centre1 = c.pixel(left + cs + cs / 2, top + 3 * cs + cs / 2);
+  EXPECT_LT(centre1.r, 60);
+  EXPECT_GT(centre1.b, centre1.r);
+  const Rgb none = c.pixel(left + cs / 2, top + cs / 2);
+  EXPECT_EQ(none.r, none.b);
+  EXPECT_GT(none.r, 150);
+  EXPECT_LT(none.r, 255);
+}
+
+TEST(PlacePictures, OperatingPointWhereItsRecallAndPrecisionMap) {
+  lex3d::cli::EvalPictures e;
+  e.method = "m";
+  e.curve = {{1.01, 1.0, 0.0}, {0.5, 1.0, 0.5}, {0.2, 0.5, 0.75}};
+  e.precision = 0.5;
+  e.recall = 0.75;
+  const Canvas c = lex3d::cli::draw_precision_recall(e);
+  Canvas blank(640, 480);
+  Chart ch(blank, {78, 52, 612, 408}, -0.02, 1.02, -0.02, 1.02);
+  const int x = static_cast<int>(std::lround(ch.px(0.75))), y = static_cast<int>(std::lround(ch.py(0.5)));
+  const Rgb mark = c.pixel(x, y);
+  EXPECT_GT(mark.b, 150);
+  EXPECT_LT(mark.r, 100);
+  // The curve passes through (0.5, 1.0) in red.
+  const Rgb on = c.pixel(static_cast<int>(std::lround(ch.px(0.25))), static_cast<int>(std::lround(ch.py(1.0))));
+  EXPECT_GT(on.r, 150);
+  EXPECT_LT(on.g, 80);
+}
