@@ -18,6 +18,7 @@
 #include "allocator.hpp"
 #include "cli_common.hpp"
 #include "json.hpp"
+#include "place_pictures.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/place/gravity.hpp"
 #include "lex3d/place/place.hpp"
@@ -42,7 +43,7 @@ struct PlaceOptions {
   std::string poses;
   std::string times;
   std::string format = "auto";
-  std::string png = "place_eval";
+  std::string png;  // --png PREFIX: no pictures without it
   std::string dump;
   std::string cache;
   std::string model_alphabet;
@@ -579,19 +580,15 @@ struct QueryRecord {
   PlaceMatch best;
 };
 
-double planar(const Pose& a, const Pose& b) { return (a.translation() - b.translation()).head<2>().norm(); }
-
-void draw_line(std::vector<std::uint8_t>& img, int w, int h, int x0, int y0, int x1, int y1, std::array<std::uint8_t, 3> c) {
-  const int n = std::max(std::abs(x1 - x0), std::abs(y1 - y0)) + 1;
-  for (int i = 0; i <= n; ++i) {
-    const int x = x0 + (x1 - x0) * i / n, y = y0 + (y1 - y0) * i / n;
-    if (x < 0 || y < 0 || x >= w || y >= h) continue;
-    const std::size_t k = 3 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x));
-    img[k] = c[0];
-    img[k + 1] = c[1];
-    img[k + 2] = c[2];
+std::string retrieval_name(PlaceRetrieval r) {
+  switch (r) {
+    case PlaceRetrieval::kTfidf: return "tfidf";
+    case PlaceRetrieval::kFabmap: return "fabmap";
+    default: return "tfidf-alphabet";
   }
 }
+
+double planar(const Pose& a, const Pose& b) { return (a.translation() - b.translation()).head<2>().norm(); }
 
 void run_eval(const PlaceOptions& o) {
   // Scans: frames.txt order when present, else the sorted .bin/.pcd/.ply files.
@@ -634,8 +631,10 @@ void run_eval(const PlaceOptions& o) {
     outs.input(o.cache, "--cache");
   }
   outs.output(o.dump, "--dump");
-  outs.output(o.png + "_confusion.png", "--png");
-  outs.output(o.png + "_pr.png", "--png");
+  if (!o.png.empty()) {
+    outs.output(o.png + "_confusion.png", "--png");
+    outs.output(o.png + "_pr.png", "--png");
+  }
   std::vector<Cloud> clouds;
   {
     // Point clouds and lex3d model files (decoded on the fly), one pose a scan.
@@ -821,40 +820,32 @@ void run_eval(const PlaceOptions& o) {
   for (const auto& s : scans) bytes_all += static_cast<double>(stored_bytes(s));
   const double kb_per_scan = bytes_all / 1024.0 / static_cast<double>(scans.size());
 
-  // PNGs: confusion matrix (score in red, ground-truth revisit within radius in blue/green)
-  // and the precision-recall curve.
-  {
-    const int n = static_cast<int>(scans.size()), cs = 4;
-    const int w = n * cs;
-    std::vector<std::uint8_t> img(static_cast<std::size_t>(w) * static_cast<std::size_t>(w) * 3, 0);
+  // PNGs (--png): the precision-recall curve and the score matrix.
+  if (!o.png.empty()) {
+    EvalPictures e;
+    const fs::path folder(o.inputs[0]);
+    e.data_name = (folder.filename().empty() ? folder.parent_path() : folder).filename().string();
+    e.method = "lex3d, " + retrieval_name(p.retrieval) + " retrieval";
+    e.radius_m = o.radius;
+    e.threshold = p.accept_score;
+    e.min_gap_s = o.min_gap;
+    e.set_scans(scans.size());
     for (const auto& r : recs) {
-      for (std::size_t j = 0; j < scans.size(); ++j) {
-        if (!(times[j] <= times[r.query] - o.min_gap)) continue;
-        const bool near = planar(clouds[r.query].T_world_cloud, clouds[j].T_world_cloud) <= o.radius;
-        double s = 0;
-        for (const auto& [jj, sc] : r.scores)
-          if (jj == j) s = sc;
-        for (int dy = 0; dy < cs; ++dy)
-          for (int dx = 0; dx < cs; ++dx) {
-            const std::size_t k = 3 * (static_cast<std::size_t>(static_cast<int>(r.query) * cs + dy) * static_cast<std::size_t>(w) +
-                                       static_cast<std::size_t>(static_cast<int>(j) * cs + dx));
-            img[k] = static_cast<std::uint8_t>(std::min(255.0, s * 2 * 255.0));
-            img[k + 1] = near ? 90 : 20;
-            img[k + 2] = near ? 140 : 20;
-          }
-      }
+      for (std::size_t j = 0; j < scans.size(); ++j)
+        if (times[j] <= times[r.query] - o.min_gap)
+          e.in_database(r.query, j, planar(clouds[r.query].T_world_cloud, clouds[j].T_world_cloud) <= o.radius);
+      for (const auto& [j, sc] : r.scores) e.set_score(r.query, j, sc);
+      if (r.valid && r.score >= p.accept_score) e.accepted.push_back({r.query, r.match});
     }
-    throw_if_error(io::write_png_rgb(outs.staged(o.png + "_confusion.png"), w, w, img));
-    const int W = 320, H = 320, m = 20;
-    std::vector<std::uint8_t> pr(static_cast<std::size_t>(W) * H * 3, 255);
-    draw_line(pr, W, H, m, H - m, W - m, H - m, {0, 0, 0});
-    draw_line(pr, W, H, m, H - m, m, m, {0, 0, 0});
-    for (std::size_t i = 1; i < curve.size(); ++i) {
-      auto px = [&](double rc) { return m + static_cast<int>(rc * (W - 2 * m)); };
-      auto py = [&](double pc) { return H - m - static_cast<int>(pc * (H - 2 * m)); };
-      draw_line(pr, W, H, px(curve[i - 1][2]), py(curve[i - 1][1]), px(curve[i][2]), py(curve[i][1]), {200, 0, 0});
-    }
-    throw_if_error(io::write_png_rgb(outs.staged(o.png + "_pr.png"), W, H, pr));
+    e.curve = curve;
+    e.recall_at_precision_1 = recall_at_p1;
+    e.precision = precision;
+    e.recall = recall;
+    e.positives = pos;
+    const plot::Canvas pr = draw_precision_recall(e);
+    throw_if_error(io::write_png_rgb(outs.staged(o.png + "_pr.png"), pr.width(), pr.height(), pr.rgb()));
+    const plot::Canvas cm = draw_score_matrix(e);
+    throw_if_error(io::write_png_rgb(outs.staged(o.png + "_confusion.png"), cm.width(), cm.height(), cm.rgb()));
   }
 
   std::vector<std::array<double, 3>> by_distance;  // radius, tp, positives
@@ -945,7 +936,8 @@ void run_eval(const PlaceOptions& o) {
   for (const auto& d : by_distance) std::printf("  %.0fm %g/%g", d[0], d[1], d[2]);
   std::printf("\nfalse positives against threshold:");
   for (const auto& f : fp_by_thr) std::printf("  %.2f:%g", f[0], f[1]);
-  std::printf("\nwrote %s_confusion.png %s_pr.png\n", o.png.c_str(), o.png.c_str());
+  std::printf("\n");
+  if (!o.png.empty()) std::printf("wrote %s_pr.png %s_confusion.png\n", o.png.c_str(), o.png.c_str());
 }
 
 void add_common(CLI::App* sub, PlaceOptions& o) {
@@ -1040,7 +1032,7 @@ void register_place(CLI::App& app) {
   query->callback([o] { run_query(*o); });
 
   CLI::App* ev = sub->add_subcommand("eval", "Evaluate place recognition on a sequence with poses");
-  ev->footer("Examples:\n  lex3d place eval balm/ --poses balm/poses.txt --times balm/times.txt --min-gap 20 --radius 8");
+  ev->footer("Examples:\n  lex3d place eval balm/ --poses balm/poses.txt --times balm/times.txt --min-gap 20 --radius 8 --png balm_eval");
   ev->add_option("dir", o->inputs, "Folder of scans (frames.txt order when present)")->required()->expected(1);
   ev->add_option("--times", o->times, "Time of each scan, seconds (default: 1 s apart)");
   ev->add_option("--min-gap", o->min_gap, "A query's database holds the scans at least this much older, s")->check(CLI::Range(0.0, 1e9));
@@ -1050,7 +1042,10 @@ void register_place(CLI::App& app) {
   ev->add_option("--iterations", o->iterations, "Candidate words drawn at most when learning")->check(CLI::Range(1, 1000000));
   ev->add_option("--cache", o->cache, "Place database of the scans: read when it exists (no learning, no feature extraction), else written");
   ev->add_option("--dump", o->dump, "Write one line a query (best match, distances, scores, pose error) to this file");
-  ev->add_option("--png", o->png, "Prefix of the PNGs written (PREFIX_confusion.png, PREFIX_pr.png)");
+  ev->add_option("--png", o->png,
+                 "Draw the precision-recall curve (PREFIX_pr.png) and the score matrix (PREFIX_confusion.png); "
+                 "default: no pictures")
+      ->type_name("PREFIX");
   add_vocabulary(ev);
   add_match(ev);
   add_common(ev, *o);
