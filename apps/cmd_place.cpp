@@ -814,8 +814,6 @@ void run_eval(const PlaceOptions& o) {
     qms.push_back(r.query_ms);
     qcpu.push_back(r.query_cpu_ms);
   }
-  const double per_scan_kb = scans.empty() ? 0.0 : 0.0;
-  (void)per_scan_kb;
   double bytes_all = 0;
   for (const auto& s : scans) bytes_all += static_cast<double>(stored_bytes(s));
   const double kb_per_scan = bytes_all / 1024.0 / static_cast<double>(scans.size());
