@@ -63,7 +63,7 @@ Word LearnScan::cut_word(std::size_t feature, double point_spacing) const {
 double LearnScan::evaluate(const Word& word, std::int32_t word_id) {
   const PreparedScan& sc = *scan_;
   const int dim = sc.features.descriptor_dim;
-  if (!sc.features.empty() && static_cast<int>(word.descriptor.size()) != dim)
+  if (sc.features.size() > 0 && static_cast<int>(word.descriptor.size()) != dim)
     throw std::invalid_argument("LearnScan::evaluate: a word of " + std::to_string(word.descriptor.size()) +
                                 " descriptor values for a scan of " + std::to_string(dim));
   auto& ch = pending_->changes;
