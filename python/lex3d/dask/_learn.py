@@ -34,12 +34,16 @@ class LearnShard:
         self.cpu0 = time.process_time()
 
     def load(self):
-        """Reads the scans; their point counts. A scan that cannot be read raises ValueError
-        (or OSError) naming it."""
+        """Reads the scans: {"points": their point counts}, or {"error": the one-line message
+        naming the first scan that cannot be read or is not a scan, "code": 2, as `lex3d learn`}
+        (returned, not raised: an exception from an actor means a lost worker to the driver)."""
         from lex3d._lex3d import learning
-        self.scans = [learning.LearnScan(p, word_radius=self.word_radius, threads=self.threads, what=p)
-                      for p in self.paths]
-        return [s.points for s in self.scans]
+        try:
+            self.scans = [learning.LearnScan(p, word_radius=self.word_radius, threads=self.threads, what=p)
+                          for p in self.paths]
+        except (ValueError, OSError) as e:
+            return {"error": str(e), "code": 2}
+        return {"points": [s.points for s in self.scans]}
 
     def set_word_radius(self, index):
         return self.scans[index - self.first].set_word_radius()
@@ -148,7 +152,9 @@ class _Shards:
         f = self.client.submit(LearnShard, self.paths[j], self.ranges[j][0], self.word_radius, self.threads,
                                actor=True, pure=False)
         self.actors[j] = f.result()
-        self.one(j, "load")
+        loaded = self.one(j, "load")
+        if "error" in loaded:  # the scan was read before: it changed since
+            raise CompressError(loaded["code"], loaded["error"])
         self.one(j, "prepare", self.radius)
         self.rebuilt += 1
         return self.one(j, "replay", list(words))
@@ -222,12 +228,13 @@ candidate. Raises CompressError when
         raise CompressError(3, "the Dask cluster has no workers")
     shards = _Shards(client, scans, workers, word_radius, threads)
     shards.start()
-    try:
-        points = [p for part in shards.all("load") for p in part]
-    except (ValueError, OSError) as e:
-        raise CompressError(2, str(e)) from None
+    loaded = shards.all("load")
     if shards.rebuild_pending:
         raise CompressError(3, "a worker died while the scans were being read")
+    for part in loaded:
+        if "error" in part:
+            raise CompressError(part["code"], part["error"])
+    points = [p for part in loaded for p in part["points"]]
     # One word radius for the set: the first scan with points (learn_word_radius).
     first = next((i for i, p in enumerate(points) if p > 0), None)
     if word_radius > 0.0:
