@@ -168,3 +168,16 @@ def test_command_on_a_running_scheduler(client, tmp_path):
     assert r.returncode == 3 and "cannot reach the Dask scheduler" in r.stderr
     r = run_command("learn", SCANS[0])
     assert r.returncode == 1 and "-o/--output" in r.stderr
+
+
+@pytest.mark.skipif(not os.environ.get("LEX3D_DASK"), reason="LEX3D_DASK not set (run through ctest)")
+def test_the_lex3d_dask_command(client, tmp_path):
+    exe = os.environ["LEX3D_DASK"]
+    r = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("usage: lex3d-dask")
+    assert "compress" in r.stdout and "learn" in r.stdout
+    r = subprocess.run([exe, "learn", SCANS[1], "-o", str(tmp_path / "a.lex3da"), "--iterations", "20",
+                        "--scheduler", client.scheduler.address], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("learned ") and "on 2 workers" in r.stdout
+    assert (tmp_path / "a.lex3da").read_bytes() == lex3d.learn_alphabet([SCANS[1]], iterations=20)
