@@ -176,8 +176,8 @@ def test_the_lex3d_dask_command(client, tmp_path):
     r = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.startswith("usage: lex3d-dask")
     assert "compress" in r.stdout and "learn" in r.stdout
-    r = subprocess.run([exe, "learn", SCANS[1], "-o", str(tmp_path / "a.lex3da"), "--iterations", "20",
+    r = subprocess.run([exe, "learn", *SCANS[1:], "-o", str(tmp_path / "a.lex3da"), "--iterations", "20",
                         "--scheduler", client.scheduler.address], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith("learned ") and "on 2 workers" in r.stdout
-    assert (tmp_path / "a.lex3da").read_bytes() == lex3d.learn_alphabet([SCANS[1]], iterations=20)
+    assert r.stdout.startswith("learned ") and "from 2 scans" in r.stdout and "on 2 workers" in r.stdout
+    assert (tmp_path / "a.lex3da").read_bytes() == lex3d.learn_alphabet(SCANS[1:], iterations=20)

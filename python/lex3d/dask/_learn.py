@@ -248,6 +248,7 @@ candidate. Raises CompressError when
     if shards.rebuild_pending:
         raise CompressError(3, "a worker died while the scans were being prepared")
     prepare_s = time.perf_counter() - wall0
+    prepare_cpu = sum(st["cpu_s"] for st in shards.all("stats") if st is not None)
     spacing = learning.point_spacing(radius)
     dim = prepared[0][3] if prepared else 0
 
@@ -322,7 +323,13 @@ candidate. Raises CompressError when
         write_once(output, alphabet, job)
     except OSError as e:
         raise CompressError(3, f"{output}: cannot write the alphabet: {e.strerror}") from None
-    stats = [shards.one(j, "stats") for j in range(len(shards.actors))]
+    stats = []
+    for j in range(len(shards.actors)):
+        try:
+            stats.append(shards.one(j, "stats"))
+        except shards.lost:  # the alphabet is written; a worker lost now costs only its figures
+            pass
+    stats = stats or [{"cpu_s": 0.0, "peak_rss_mb": 0.0}]
     wall = time.perf_counter() - wall0
     return {
         "alphabet": output, "alphabet_bytes": len(alphabet), "scans": n, "points": sum(points),
@@ -333,6 +340,7 @@ candidate. Raises CompressError when
         "wall_s": wall, "prepare_s": prepare_s, "learn_s": learn_s,
         "candidates": loop.candidates,
         "worker_cpu_s": sum(s["cpu_s"] for s in stats),
+        "worker_cpu_prepare_s": prepare_cpu,
         "worker_peak_rss_mb": max(s["peak_rss_mb"] for s in stats),
         "driver_peak_rss_mb": _peak_rss_mb(),
         "bytes_to_workers": shards.sent, "bytes_from_workers": shards.returned,
