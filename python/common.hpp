@@ -45,5 +45,6 @@ py::array_t<double> from_pose(const Pose& T);
 void warn(const std::string& message);
 
 void bind_place(py::module_& m);
+void bind_learning(py::module_& m);
 
 }  // namespace lex3d::python

@@ -189,6 +189,7 @@ and "rgb" ((M, 3) uint8).
 Raises ValueError for a malformed, truncated or corrupt file (the message names the byte offset)
 or a missing or mismatched alphabet.)");
   lex3d::python::bind_place(m);
+  lex3d::python::bind_learning(m);
   m.def("learn_alphabet", &learn_alphabet, py::arg("clouds"), py::kw_only(), py::arg("word_radius") = 0.0,
         py::arg("iterations") = lex3d::LearnParams{}.max_iterations,
         py::arg("patience") = lex3d::LearnParams{}.patience, py::arg("seed") = lex3d::LearnParams{}.seed,

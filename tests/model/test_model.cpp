@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "lex3d/eval/metrics.hpp"
+#include "lex3d/model/learn.hpp"
 #include "lex3d/model/model.hpp"
 #include "features/point_hash.hpp"
 #include "model/point_grid.hpp"
@@ -114,6 +115,73 @@ TEST(Learner, DeterministicForASeedAndAnyThreadCount) {
   p.seed = 99;
   const LearnResult other = learn_alphabet({c}, p);
   EXPECT_FALSE(same_words(a.alphabet, other.alphabet));
+}
+
+TEST(Learner, ScansInTwoGroupsGiveTheAlphabetOfOneProcess) {
+  // The loop run as a distributed learner runs it: two groups of LearnScans, each group's
+  // changes gathered separately (the second group first), summed in scan order.
+  const std::vector<Cloud> clouds = {test::load_or_fail(test::sample("kitti00_000000.bin")),
+                                     test::load_or_fail(test::sample("newer_college_00.bin")), Cloud{}};
+  LearnParams p = quick_params();
+  p.max_iterations = 50;
+  p.seed = 5;
+  const double radius = learn_word_radius(p.model, &clouds[0]);
+  std::vector<LearnScan> scans;
+  for (const auto& c : clouds) scans.emplace_back(prepare_scan(c, p.model, radius), 1);
+  std::vector<std::size_t> features, points;
+  std::vector<double> log_ls;
+  for (const auto& s : scans) {
+    features.push_back(s.feature_count());
+    points.push_back(s.point_count());
+    log_ls.push_back(s.log_likelihood());
+  }
+  LearnDecisions loop(p, features, points, log_ls);
+  Alphabet alphabet;
+  const double spacing = p.model.word_spacing_factor * radius;
+  while (const LearnCandidate* c = loop.next()) {
+    Word w = scans[c->scan].cut_word(c->feature, spacing);
+    std::vector<double> deltas(scans.size(), 0.0);
+    if (LearnDecisions::evaluates(w)) {
+      deltas[2] = scans[2].evaluate(w, static_cast<std::int32_t>(alphabet.size()));
+      for (std::size_t s = 0; s < 2; ++s) deltas[s] = scans[s].evaluate(w, static_cast<std::int32_t>(alphabet.size()));
+    }
+    double delta = 0.0;
+    for (const double d : deltas) delta += d;
+    if (loop.accepts(w, delta)) {
+      std::vector<double> after(scans.size());
+      after[2] = scans[2].commit(true);
+      after[0] = scans[0].commit(true);
+      after[1] = scans[1].commit(true);
+      loop.accept(w, after[0] + after[1] + after[2]);
+      alphabet.words.push_back(std::move(w));
+    } else {
+      for (auto& s : scans) s.commit(false);
+      loop.reject();
+    }
+  }
+  const LearnResult one = learn_alphabet(clouds, p);
+  ASSERT_GT(one.alphabet.size(), 2U);
+  EXPECT_TRUE(same_words(alphabet, one.alphabet));
+  EXPECT_EQ(loop.bic_history(), one.bic_history);
+  EXPECT_EQ(loop.accepted_history(), one.accepted_history);
+  EXPECT_EQ(loop.iteration(), 50);
+}
+
+TEST(Learner, StepsRefuseWhatTheyCannotDo) {
+  const Cloud c = test::load_or_fail(test::sample("newer_college_00.bin"));
+  LearnScan s(prepare_scan(c, ModelParams{}, 0.5), 1);
+  EXPECT_THROW((void)s.cut_word(s.feature_count(), 0.0), std::out_of_range);
+  EXPECT_THROW((void)s.commit(true), std::logic_error);  // nothing evaluated
+  EXPECT_DOUBLE_EQ(s.commit(false), s.log_likelihood());
+  Word w = s.cut_word(0, 0.0);
+  w.descriptor.pop_back();
+  EXPECT_THROW((void)s.evaluate(w, 0), std::invalid_argument);
+  EXPECT_THROW(LearnDecisions(LearnParams{}, {1, 2}, {3}, {0.0, 0.0}), std::invalid_argument);
+  LearnParams bad;
+  bad.patience = 0;
+  EXPECT_THROW(LearnDecisions(bad, {}, {}, {}), std::invalid_argument);
+  // No candidates: the loop is over before it starts.
+  EXPECT_EQ(LearnDecisions(LearnParams{}, {0}, {0}, {0.0}).next(), nullptr);
 }
 
 namespace {

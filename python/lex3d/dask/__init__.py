@@ -1,7 +1,9 @@
-"""lex3d on a Dask cluster: many scans compressed with one shared alphabet.
+"""lex3d on a Dask cluster: many scans compressed with one shared alphabet, and that alphabet
+learned over many scans.
 
     python3 -m lex3d.dask compress SCANS_DIR -o out/drive.lex3dm --max-error 0.02 --words on
     python3 -m lex3d.dask compress @files.txt -o out/d.lex3dm --alphabet a.lex3da --scheduler tcp://host:8786
+    python3 -m lex3d.dask learn SCANS_DIR -o fleet.lex3da --seed 1
 
 From Python:
 
@@ -17,8 +19,13 @@ content hash, and each worker codes whole scans: the files are byte for byte tho
 that stopped it; the other scans complete. Each file is written to a temporary name and
 renamed, so a worker that dies leaves no partial file, and a retried scan whose file is already
 there with the same bytes is not written again.
+
+learn keeps each worker's share of the scans prepared in a Dask actor; the driver runs the BIC
+decisions on the per-scan likelihood changes the workers return, and the alphabet is byte for
+byte that of `lex3d learn SCANS -o A --seed S` (lex3d.dask._learn).
 """
 
 from ._compress import CompressError, compress, expand_inputs, numbered_output
+from ._learn import learn
 
-__all__ = ["compress", "CompressError", "expand_inputs", "numbered_output"]
+__all__ = ["compress", "learn", "CompressError", "expand_inputs", "numbered_output"]

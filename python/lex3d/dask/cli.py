@@ -1,10 +1,12 @@
-"""python3 -m lex3d.dask compress SCAN|FOLDER|@LIST... -o OUT.lex3dm [options]
+"""lex3d-dask (python3 -m lex3d.dask) compress|learn SCAN|FOLDER|@LIST... -o OUT [options]
 
-Codes the scans on a Dask cluster (--scheduler ADDRESS, or a LocalCluster of --workers
-processes on this machine), writes OUT_000.lex3dm ... (the files `lex3d compress SCANS
---alphabet A -o OUT` writes), OUT.manifest.jsonl and, when it learns one, the alphabet.
-Exit codes: 0 every scan coded, 1 usage, 2 a scan (or more) could not be coded (the others
-are, and the manifest names the failed ones), 3 I/O (an output folder, the scheduler).
+Runs lex3d's work over many scans on a Dask cluster (--scheduler ADDRESS, or a LocalCluster of
+--workers processes on this machine). compress writes OUT_000.lex3dm ... (the files `lex3d
+compress SCANS --alphabet A -o OUT` writes), OUT.manifest.jsonl and, when it learns one, the
+alphabet; learn writes the alphabet `lex3d learn SCANS -o OUT` writes.
+Exit codes: 0 done, 1 usage, 2 bad data (compress: a scan or more could not be coded, the
+others are and the manifest names the failed ones; learn: a scan could not be read), 3 I/O
+(an output folder, the scheduler).
 """
 
 import argparse
@@ -27,8 +29,17 @@ class _Parser(argparse.ArgumentParser):
 AUTO_MAX_ERROR = 0.01
 
 
+def _cluster_options(c):
+    c.add_argument("--scheduler", help="address of a running scheduler (tcp://host:8786); default: a LocalCluster")
+    c.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="worker processes of the LocalCluster (default: the CPUs), one thread each")
+    c.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the scheduler")
+    c.add_argument("--no-progress", action="store_true")
+    c.add_argument("--json", action="store_true", help="the summary as one JSON object on stdout")
+
+
 def _parser():
-    p = _Parser(prog="python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
+    p = _Parser(prog=os.path.basename(sys.argv[0]) if sys.argv[0].endswith("lex3d-dask") else "python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     c = sub.add_parser("compress", help="code scans with one shared alphabet on a Dask cluster")
@@ -48,12 +59,16 @@ def _parser():
     c.add_argument("--keep-all-points", action="store_true")
     c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
     c.add_argument("--manifest", help="default OUT.manifest.jsonl")
-    c.add_argument("--scheduler", help="address of a running scheduler (tcp://host:8786); default: a LocalCluster")
-    c.add_argument("--workers", type=int, default=os.cpu_count() or 1,
-                   help="worker processes of the LocalCluster (default: the CPUs), one thread each")
-    c.add_argument("--timeout", type=float, default=10.0, help="seconds to reach the scheduler")
-    c.add_argument("--no-progress", action="store_true")
-    c.add_argument("--json", action="store_true", help="the summary as one JSON object on stdout")
+    _cluster_options(c)
+    ln = sub.add_parser("learn", help="learn one alphabet over many scans on a Dask cluster")
+    ln.add_argument("inputs", nargs="+", help="scan files, folders of scans, or @LIST (one path a line)")
+    ln.add_argument("-o", "--output", required=True, help="the alphabet file to write (.lex3da)")
+    ln.add_argument("--iterations", type=int, default=400, help="candidate words drawn at most (as lex3d learn)")
+    ln.add_argument("--patience", type=int, default=100, help="stop after this many rejections in a row")
+    ln.add_argument("--seed", type=int, default=1, help="seed of the candidate order")
+    ln.add_argument("--word-radius", type=float, default=0.0, help="metres; 0 derives it from the first scan")
+    ln.add_argument("--threads", type=int, default=1, help="threads a worker (the alphabet does not depend on it)")
+    _cluster_options(ln)
     return p
 
 
@@ -75,8 +90,45 @@ def _client(args):
     return client, cluster
 
 
+def _learn_main(args):
+    from ._learn import learn
+    client = cluster = None
+    try:
+        client, cluster = _client(args)
+        summary = learn(args.inputs, args.output, client=client, iterations=args.iterations, patience=args.patience,
+                        seed=args.seed, word_radius=args.word_radius, threads=args.threads,
+                        progress=not args.no_progress and sys.stderr.isatty())
+    except CompressError as e:
+        print(f"lex3d-dask: {e}", file=sys.stderr)
+        return e.code
+    except KeyboardInterrupt:
+        print("lex3d-dask: interrupted (no alphabet written)", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    if args.json:
+        print(json.dumps(summary))
+        return 0
+    s = summary
+    print(f"learned {s['words']} words ({s['word_points']} points, radius {s['word_radius_m']:.3f} m) from "
+          f"{s['scans']} scans, {s['points']} points, on {s['workers']} workers in {s['wall_s']:.1f} s "
+          f"(prepare {s['prepare_s']:.1f} s, BIC loop {s['learn_s']:.1f} s)")
+    print(f"  candidates {s['accepted']} accepted, {s['rejected']} rejected; BIC {s['bic_initial']:.6g} -> "
+          f"{s['bic_final']:.6g}")
+    print(f"  worker CPU {s['worker_cpu_s']:.1f} s, worker peak memory {s['worker_peak_rss_mb']:.0f} MB, driver peak "
+          f"memory {s['driver_peak_rss_mb']:.0f} MB, sent to workers {s['bytes_to_workers']} bytes, returned "
+          f"{s['bytes_from_workers']} bytes" + (f", {s['rebuilt_shards']} shards rebuilt" if s["rebuilt_shards"] else ""))
+    print(f"  wrote {s['alphabet']}")
+    return 0
+
+
 def main(argv=None):
     args = _parser().parse_args(argv)
+    if args.command == "learn":
+        return _learn_main(args)
     options = {"layer_coding": args.layer_coding, "threads": args.threads}
     explicit_error = args.max_error not in ("auto", "none")
     if explicit_error:
