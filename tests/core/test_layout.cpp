@@ -19,7 +19,7 @@ std::vector<Eigen::Vector3f> scan(std::uint32_t lasers, std::uint32_t columns, b
   std::vector<double> elevation(lasers);
   for (std::uint32_t l = 0; l < lasers; ++l)
     elevation[l] = (-25.0 + 30.0 * ((l * 7) % lasers) / lasers) * M_PI / 180.0;
-  std::vector<Eigen::Vector3f> p(static_cast<std::size_t>(lasers) * columns);
+  std::vector<Eigen::Vector3f> p(static_cast<std::size_t>(lasers) * columns, Eigen::Vector3f::Zero());  // Eigen leaves a vector uninitialised
   for (std::uint32_t c = 0; c < columns; ++c)
     for (std::uint32_t l = 0; l < lasers; ++l) {
       const double az = -2.0 * M_PI * c / columns;
