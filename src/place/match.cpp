@@ -616,13 +616,16 @@ void check_distance(const PlaceScan& query, const PlaceScan& candidate, PlaceMat
 
 }  // namespace
 
-DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const Pose& T0, const PlaceParams& params) {
+namespace {
+
+// dense_align with the pixel locators of the two coarse images built by the caller.
+DenseAlignment dense_align_located(const PlaceScan& query, const PlaceScan& match, const PixelLocator& locate_q,
+                                   const PixelLocator& locate_m, const Pose& T0, const PlaceParams& params) {
   DenseAlignment out;
   out.T_match_query = T0;
   if (query.dense_points.empty() || match.dense_points.empty()) return out;
   const Eigen::Isometry3f Sm = match.coarse.T_cloud_sensor.inverse().cast<float>();
   const Eigen::Isometry3f Sq = query.coarse.T_cloud_sensor.inverse().cast<float>();
-  const PixelLocator locate_m(match.coarse), locate_q(query.coarse);
   const std::size_t nq = query.dense_points.size(), nm = match.dense_points.size();
   const std::size_t stride_q = std::max<std::size_t>(1, nq / static_cast<std::size_t>(params.dense_points));
   const std::size_t stride_m = std::max<std::size_t>(1, nm / static_cast<std::size_t>(params.dense_points));
@@ -683,8 +686,9 @@ DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const
   return out;
 }
 
-DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from,
-                                   const PlaceParams& params) {
+// dense_consistency with the pixel locator of `to`'s coarse image.
+DenseConsistency dense_consistency_located(const PlaceScan& from, const PlaceScan& to, const PixelLocator& locate_to,
+                                           const Pose& T_to_from, const PlaceParams& params) {
   DenseConsistency out;
   const RangeImage& img = to.coarse;
   if (from.dense_points.empty() || img.empty()) return out;
@@ -697,9 +701,10 @@ DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, c
   for (std::size_t i = 0; i < n; i += stride) {
     ++out.points;
     const Eigen::Vector3f p = T * from.dense_points[i];
-    float fx = 0, fy = 0, r = 0;
-    if (!img.project(p, fx, fy, r)) continue;
-    const int xi = img.wrap_x(static_cast<int>(std::floor(fx))), yi = static_cast<int>(std::floor(fy));
+    int fxi = 0, yi = 0;
+    float r = 0;
+    if (!locate_to.locate(p, fxi, yi, r)) continue;
+    const int xi = img.wrap_x(fxi);
     if (xi < 0 || yi < 0 || yi >= img.height) continue;
     const std::size_t ci = img.index(xi, yi);
     if (img.state[ci] == PixelState::kUnobserved) continue;
@@ -736,7 +741,9 @@ DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, c
   return out;
 }
 
-double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from, const PlaceParams& params) {
+// validation_score with the pixel locator of `to`'s coarse image.
+double validation_score_located(const PlaceScan& from, const PlaceScan& to, const PixelLocator& locate_to,
+                                const Pose& T_to_from, const PlaceParams& params) {
   const RangeImage& img = to.coarse;
   const std::size_t n = std::min<std::size_t>(from.validation.size(), static_cast<std::size_t>(params.validation_points));
   if (n == 0 || img.empty()) return 0.0;
@@ -746,10 +753,9 @@ double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& 
   double sum = 0.0;
   for (std::size_t k = 0; k < n; ++k) {
     const Eigen::Vector3f p = T * from.features[from.validation[k]].position;
-    float x = 0, y = 0, r = 0;
-    if (!img.project(p, x, y, r)) continue;
-    const int xi = static_cast<int>(std::floor(x));
-    const int yi = static_cast<int>(std::floor(y));
+    int xi = 0, yi = 0;
+    float r = 0;
+    if (!locate_to.locate(p, xi, yi, r)) continue;
     bool any = false;
     float best = -1.0F;
     for (int dy = -e; dy <= e; ++dy) {
@@ -771,6 +777,46 @@ double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& 
     sum += best >= 0.0F ? static_cast<double>(best) : -params.penalty;  // N' empty: -p
   }
   return std::max(0.0, sum) / static_cast<double>(n);  // eq. 10
+}
+
+// refine_match with the pixel locators of the two coarse images.
+void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, const PixelLocator& locate_q,
+                          const PixelLocator& locate_m, PlaceMatch& m, const PlaceParams& params) {
+  if (!m.valid) return;
+  const DenseAlignment a = dense_align_located(query, candidate, locate_q, locate_m, m.T_feature, params);
+  m.dense_rms_m = a.rms_m;
+  m.dense_used = a.used;
+  m.T_match_query = a.T_match_query;
+  const Pose T_query_match = m.T_match_query.inverse();
+  m.dense_q = dense_consistency_located(query, candidate, locate_m, m.T_match_query, params);
+  m.dense_m = dense_consistency_located(candidate, query, locate_q, T_query_match, params);
+  m.score_query_in_match = validation_score_located(query, candidate, locate_m, m.T_match_query, params);
+  m.score_match_in_query = validation_score_located(candidate, query, locate_q, T_query_match, params);
+  m.score = std::min(m.score_query_in_match, m.score_match_in_query);
+  m.dense_refined = true;
+  check_distance(query, candidate, m, params);
+  if (params.max_conflict < 1.0 && std::max(m.dense_q.conflict_share(), m.dense_m.conflict_share()) > params.max_conflict) {
+    m.rejected_conflict = true;
+    m.valid = false;
+  }
+}
+
+}  // namespace
+
+DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const Pose& T0, const PlaceParams& params) {
+  const PixelLocator locate_q(query.coarse), locate_m(match.coarse);
+  return dense_align_located(query, match, locate_q, locate_m, T0, params);
+}
+
+DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from,
+                                   const PlaceParams& params) {
+  const PixelLocator locate_to(to.coarse);
+  return dense_consistency_located(from, to, locate_to, T_to_from, params);
+}
+
+double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from, const PlaceParams& params) {
+  const PixelLocator locate_to(to.coarse);
+  return validation_score_located(from, to, locate_to, T_to_from, params);
 }
 
 PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const PlaceParams& params) {
@@ -802,6 +848,7 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     for (const auto& x : refined) dup = dup || close_poses(x.T, h.T);
     if (!dup) refined.push_back(h);
   }
+  const PixelLocator locate_q(query.coarse), locate_m(candidate.coarse);
   bool first = true;
   for (const auto& h : refined) {
     if (h.inliers < static_cast<std::size_t>(params.min_inliers)) continue;
@@ -825,8 +872,8 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     }
     if (m.valid) check_distance(query, candidate, m, params);
     if (m.valid) {
-      m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
-      m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
+      m.score_query_in_match = validation_score_located(query, candidate, locate_m, m.T_match_query, params);
+      m.score_match_in_query = validation_score_located(candidate, query, locate_q, m.T_match_query.inverse(), params);
       m.score = std::min(m.score_query_in_match, m.score_match_in_query);
     }
     const bool better = first || (m.valid && (!out.valid || m.score > out.score ||
@@ -835,27 +882,14 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     first = false;
   }
   out.T_feature = out.T_match_query;
-  if (out.valid && params.dense_iterations > 0) refine_match(query, candidate, out, params);
+  if (out.valid && params.dense_iterations > 0) refine_match_located(query, candidate, locate_q, locate_m, out, params);
   return out;
 }
 
 void refine_match(const PlaceScan& query, const PlaceScan& candidate, PlaceMatch& m, const PlaceParams& params) {
   if (!m.valid) return;
-  const DenseAlignment a = dense_align(query, candidate, m.T_feature, params);
-  m.dense_rms_m = a.rms_m;
-  m.dense_used = a.used;
-  m.T_match_query = a.T_match_query;
-  m.dense_q = dense_consistency(query, candidate, m.T_match_query, params);
-  m.dense_m = dense_consistency(candidate, query, m.T_match_query.inverse(), params);
-  m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
-  m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
-  m.score = std::min(m.score_query_in_match, m.score_match_in_query);
-  m.dense_refined = true;
-  check_distance(query, candidate, m, params);
-  if (params.max_conflict < 1.0 && std::max(m.dense_q.conflict_share(), m.dense_m.conflict_share()) > params.max_conflict) {
-    m.rejected_conflict = true;
-    m.valid = false;
-  }
+  const PixelLocator locate_q(query.coarse), locate_m(candidate.coarse);
+  refine_match_located(query, candidate, locate_q, locate_m, m, params);
 }
 
 }  // namespace lex3d

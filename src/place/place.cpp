@@ -10,6 +10,7 @@
 #include <string>
 
 #include "lex3d/place/place.hpp"
+#include "lex3d/range/pixel_locator.hpp"
 #include "place/internal.hpp"
 
 namespace lex3d {
@@ -246,11 +247,13 @@ RangeImage make_coarse_image(const RangeImage& fine, const PlaceStorageParams& s
   const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   c.state.assign(pixels, PixelState::kUnobserved);
   c.range.assign(pixels, std::numeric_limits<float>::quiet_NaN());
+  // The pixel of floor() of c.project(dir), found from border tables.
+  const PixelLocator locator(c);
   auto cell = [&](const Eigen::Vector3f& dir, std::size_t& idx) {
-    float x = 0, y = 0, r = 0;
-    if (!c.project(dir, x, y, r)) return false;
-    const int xi = c.wrap_x(static_cast<int>(std::floor(x)));
-    const int yi = static_cast<int>(std::floor(y));
+    int x = 0, yi = 0;
+    float r = 0;
+    if (!locator.locate(dir, x, yi, r)) return false;
+    const int xi = c.wrap_x(x);
     if (xi < 0 || !c.in_image(xi, yi)) return false;
     idx = c.index(xi, yi);
     return true;
