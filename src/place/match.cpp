@@ -108,6 +108,9 @@ class Matcher {
     for (const auto& f : q.features) gq_.push_back(Rq_ * f.position.cast<double>());
     for (const auto& f : m.features) gm_.push_back(Rm_ * f.position.cast<double>());
     for (const auto k : q.validation) gv_.push_back(gq_[k].cast<float>());
+    mx_.reserve(gm_.size());
+    for (std::size_t j = 0; j < gm_.size(); ++j) mx_.emplace_back(gm_[j].x(), static_cast<std::uint32_t>(j));
+    std::sort(mx_.begin(), mx_.end());
     build_grid();
   }
 
@@ -140,18 +143,26 @@ class Matcher {
   [[nodiscard]] std::vector<std::pair<std::size_t, std::size_t>> pairs(const Pose& G) const {
     std::vector<std::pair<std::size_t, std::size_t>> out;
     const double d2max = p_.inlier_distance * p_.inlier_distance;
+    // Only match features within the inlier distance in x can be within it in 3-D; the window
+    // is a thousandth wider, far beyond the rounding of the distances.
+    const double reach = p_.inlier_distance * 1.001;
+    const std::size_t nm = gm_.size();
     for (std::size_t i = 0; i < gq_.size(); ++i) {
       const Eigen::Vector3d x = G * gq_[i];
+      // The nearest within d2max; of equally near ones the highest index.
       double best = d2max;
-      std::size_t bj = gm_.size();
-      for (std::size_t j = 0; j < gm_.size(); ++j) {
+      std::size_t bj = nm;
+      auto it = std::lower_bound(mx_.begin(), mx_.end(), x.x() - reach,
+                                 [](const std::pair<double, std::uint32_t>& e, double v) { return e.first < v; });
+      for (; it != mx_.end() && it->first <= x.x() + reach; ++it) {
+        const std::size_t j = it->second;
         const double d2 = (x - gm_[j]).squaredNorm();
-        if (d2 <= best) {
+        if (d2 < best || (d2 == best && (bj == nm || j > bj))) {
           best = d2;
           bj = j;
         }
       }
-      if (bj < gm_.size()) out.emplace_back(i, bj);
+      if (bj < nm) out.emplace_back(i, bj);
     }
     return out;
   }
@@ -549,6 +560,7 @@ class Matcher {
   Eigen::Matrix3d Rq_, Rm_;
   std::vector<Eigen::Vector3d> gq_, gm_;
   std::vector<Eigen::Vector3f> gv_;  // upright query features in validation order
+  std::vector<std::pair<double, std::uint32_t>> mx_;  // (x of gm_[j], j), sorted
   double cell_ = 0.25;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   std::array<int, 3> dims_{0, 0, 0};
