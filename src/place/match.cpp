@@ -32,12 +32,15 @@ std::vector<Correspondence> correspondences(const PlaceScan& query, const PlaceS
   if (nm < 2 || dim <= 0 || dim != cand.descriptor_dim) return out;
   const auto ud = static_cast<std::size_t>(dim);
   const float r2 = static_cast<float>(ratio * ratio);
+  std::vector<float> dist(nm);
   for (std::size_t i = 0; i < nq; ++i) {
     const float* a = query.descriptors.data() + i * ud;
+    // The same values as descriptor_distance_sq of each pair, a row at a time.
+    descriptor_distances_sq(a, cand.descriptors.data(), nm, dim, dist.data());
     float b1 = std::numeric_limits<float>::infinity(), b2 = b1;
     std::size_t j1 = 0;
     for (std::size_t j = 0; j < nm; ++j) {
-      const float d = descriptor_distance_sq(a, cand.descriptors.data() + j * ud, dim);
+      const float d = dist[j];
       if (d < b1) {
         b2 = b1;
         b1 = d;
@@ -589,13 +592,14 @@ int nearest_dense(const PlaceScan& to, const PixelLocator& locator, const Eigen:
   if (!locator.locate(T_sensor_cloud * x, xi, yi, r)) return -1;
   int best = -1;
   float bd = max_d2;
+  const int xs[3] = {img.wrap_x(xi - 1), img.wrap_x(xi), img.wrap_x(xi + 1)};
   for (int dy = -1; dy <= 1; ++dy) {
     const int yy = yi + dy;
     if (yy < 0 || yy >= img.height) continue;
-    for (int dx = -1; dx <= 1; ++dx) {
-      const int xx = img.wrap_x(xi + dx);
+    const std::int32_t* row = to.dense_index.data() + img.index(0, yy);
+    for (const int xx : xs) {
       if (xx < 0) continue;
-      const std::int32_t k = to.dense_index[img.index(xx, yy)];
+      const std::int32_t k = row[xx];
       if (k < 0) continue;
       const float d2 = (to.dense_points[static_cast<std::size_t>(k)] - x).squaredNorm();
       if (d2 < bd) {

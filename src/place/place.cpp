@@ -172,11 +172,14 @@ void make_dense_points(PlaceScan& scan) {
     cos_el[static_cast<std::size_t>(y)] = std::cos(el);
     sin_el[static_cast<std::size_t>(y)] = std::sin(el);
   }
-  std::vector<Eigen::Vector3f> pts(c.state.size(), Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+  // Only the valid pixels' points are set and read.
+  std::vector<Eigen::Vector3f> pts(c.state.size());
+  std::size_t valid = 0;
   for (int y = 0; y < c.height; ++y)
     for (int x = 0; x < c.width; ++x) {
       const std::size_t i = c.index(x, y);
       if (c.state[i] != PixelState::kValid) continue;
+      ++valid;
       const auto ux = static_cast<std::size_t>(x), uy = static_cast<std::size_t>(y);
       const Eigen::Vector3f ray(static_cast<float>(cos_el[uy] * cos_az[ux]), static_cast<float>(cos_el[uy] * sin_az[ux]),
                                 static_cast<float>(sin_el[uy]));
@@ -187,14 +190,16 @@ void make_dense_points(PlaceScan& scan) {
   // ray gives across one pixel (tan 75° ≈ 3.7 pixel footprints), plus a quantisation step.
   const auto px = static_cast<float>(std::max(c.azimuth_resolution_rad, c.elevation_resolution_rad));
   scan.dense_index.assign(c.state.size(), -1);
+  scan.dense_points.reserve(valid);
+  scan.dense_normals.reserve(valid);
   const Eigen::Matrix3f R = c.T_cloud_sensor.linear().cast<float>();
   const Eigen::Vector3f t = c.T_cloud_sensor.translation().cast<float>();
-  auto neighbour = [&](int x, int y, float r, Eigen::Vector3f& out) {
+  auto neighbour = [&](int x, int y, float r, float tolerance, Eigen::Vector3f& out) {
     const int xx = c.wrap_x(x);
     if (xx < 0 || y < 0 || y >= c.height) return false;
     const std::size_t j = c.index(xx, y);
     if (c.state[j] != PixelState::kValid) return false;
-    if (std::abs(c.range[j] - r) > 3.7F * px * r + 0.05F) return false;
+    if (std::abs(c.range[j] - r) > tolerance) return false;
     out = pts[j];
     return true;
   };
@@ -203,9 +208,10 @@ void make_dense_points(PlaceScan& scan) {
       const std::size_t i = c.index(x, y);
       if (c.state[i] != PixelState::kValid) continue;
       const float r = c.range[i];
+      const float tol = 3.7F * px * r + 0.05F;
       Eigen::Vector3f l, rr, u, d;
-      const bool hl = neighbour(x - 1, y, r, l), hr = neighbour(x + 1, y, r, rr);
-      const bool hu = neighbour(x, y - 1, r, u), hd = neighbour(x, y + 1, r, d);
+      const bool hl = neighbour(x - 1, y, r, tol, l), hr = neighbour(x + 1, y, r, tol, rr);
+      const bool hu = neighbour(x, y - 1, r, tol, u), hd = neighbour(x, y + 1, r, tol, d);
       if (!(hl || hr) || !(hu || hd)) continue;
       const Eigen::Vector3f a = (hr ? rr : pts[i]) - (hl ? l : pts[i]);
       const Eigen::Vector3f b = (hd ? d : pts[i]) - (hu ? u : pts[i]);
