@@ -121,16 +121,18 @@ class Matcher {
   [[nodiscard]] Pose to_gravity(const Pose& T) const { return rotation_pose(Rm_) * T * rotation_pose(Rq_.transpose()); }
 
   /// Query features that land in a cell within about inlier_distance of a match feature.
+  /// With `from` and `inliers`: the count of the first `from` points is known to be `inliers`.
   [[nodiscard]] Hypothesis evaluate(const Pose& G, std::size_t limit = std::numeric_limits<std::size_t>::max(),
-                                    std::size_t need = 0) const {
+                                    std::size_t need = 0, std::size_t from = 0, std::size_t inliers = 0) const {
     Hypothesis h;
     h.T = G;
+    h.inliers = inliers;
     const std::size_t n = std::min(limit, gv_.size());
     if (grid_.empty()) return h;
     // In grid units, single precision: the hot loop of hypothesis counting.
     const Eigen::Matrix3f R = G.linear().cast<float>() / static_cast<float>(cell_);
     const Eigen::Vector3f t = ((G.translation() - origin_) / cell_).cast<float>();
-    for (std::size_t k = 0; k < n; ++k) {
+    for (std::size_t k = from; k < n; ++k) {
       // Stop early when even all remaining points could not reach `need`.
       if (h.inliers + (n - k) < need) break;
       const Eigen::Vector3f u = R * gv_[k] + t;
@@ -501,7 +503,9 @@ class Matcher {
           const Hypothesis hp = evaluate(G, probe, need);
           if (hp.inliers < need) continue;
           best_probe = std::max(best_probe, hp.inliers);
-          out.push_back(evaluate(G));
+          // A probe that reaches `need` counted all its points (it stops early only when it
+          // cannot): the whole count goes on from there.
+          out.push_back(evaluate(G, std::numeric_limits<std::size_t>::max(), 0, probe, hp.inliers));
         }
       }
     }
