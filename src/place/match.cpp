@@ -10,6 +10,9 @@
 #include <array>
 
 #include <Eigen/Geometry>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "lex3d/place/place.hpp"
 #include "lex3d/range/pixel_locator.hpp"
@@ -111,6 +114,11 @@ class Matcher {
     for (const auto& f : q.features) gq_.push_back(Rq_ * f.position.cast<double>());
     for (const auto& f : m.features) gm_.push_back(Rm_ * f.position.cast<double>());
     for (const auto k : q.validation) gv_.push_back(gq_[k].cast<float>());
+    for (const auto& v : gv_) {
+      vx_.push_back(v.x());
+      vy_.push_back(v.y());
+      vz_.push_back(v.z());
+    }
     mx_.reserve(gm_.size());
     for (std::size_t j = 0; j < gm_.size(); ++j) mx_.emplace_back(gm_[j].x(), static_cast<std::uint32_t>(j));
     std::sort(mx_.begin(), mx_.end());
@@ -132,15 +140,56 @@ class Matcher {
     // In grid units, single precision: the hot loop of hypothesis counting.
     const Eigen::Matrix3f R = G.linear().cast<float>() / static_cast<float>(cell_);
     const Eigen::Vector3f t = ((G.translation() - origin_) / cell_).cast<float>();
-    for (std::size_t k = from; k < n; ++k) {
-      // Stop early when even all remaining points could not reach `need`.
-      if (h.inliers + (n - k) < need) break;
-      const Eigen::Vector3f u = R * gv_[k] + t;
-      if (!(u.x() >= 0 && u.y() >= 0 && u.z() >= 0)) continue;
-      const auto x = static_cast<int>(u.x()), y = static_cast<int>(u.y()), z = static_cast<int>(u.z());
-      if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
-      if (cell_set(cell_index(x, y, z))) ++h.inliers;
+    // Stopping early (when even all remaining points could not reach `need`) is checked every
+    // four points: a count that stops is below `need` either way, a count that does not is exact.
+    std::size_t count = inliers;
+    std::size_t k = from;
+    auto add = [&](float ux, float uy, float uz, int x, int y, int z) {
+      if (!(ux >= 0 && uy >= 0 && uz >= 0)) return;
+      if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return;
+      if (cell_set(cell_index(x, y, z))) ++count;
+    };
+#if defined(__SSE2__)
+    // Four points at a time, each coordinate summed as R * g + t sums it: r0·x + (r1·y + r2·z),
+    // then + t (the same float operations in the same order, so the same cells).
+    const auto row = [&](int i, __m128& a, __m128& b, __m128& c, __m128& d) {
+      a = _mm_set1_ps(R(i, 0));
+      b = _mm_set1_ps(R(i, 1));
+      c = _mm_set1_ps(R(i, 2));
+      d = _mm_set1_ps(t(i));
+    };
+    __m128 a0, a1, a2, at, b0, b1, b2, bt, c0, c1, c2, ct;
+    row(0, a0, a1, a2, at);
+    row(1, b0, b1, b2, bt);
+    row(2, c0, c1, c2, ct);
+    for (; k + 4 <= n; k += 4) {
+      if (count + (n - k) < need) break;
+      const __m128 x = _mm_loadu_ps(vx_.data() + k), y = _mm_loadu_ps(vy_.data() + k), z = _mm_loadu_ps(vz_.data() + k);
+      const __m128 ux = _mm_add_ps(_mm_add_ps(_mm_mul_ps(a0, x), _mm_add_ps(_mm_mul_ps(a1, y), _mm_mul_ps(a2, z))), at);
+      const __m128 uy = _mm_add_ps(_mm_add_ps(_mm_mul_ps(b0, x), _mm_add_ps(_mm_mul_ps(b1, y), _mm_mul_ps(b2, z))), bt);
+      const __m128 uz = _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, x), _mm_add_ps(_mm_mul_ps(c1, y), _mm_mul_ps(c2, z))), ct);
+      const __m128 zero = _mm_setzero_ps();
+      const int inside = _mm_movemask_ps(
+          _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(ux, zero), _mm_cmpge_ps(uy, zero)), _mm_cmpge_ps(uz, zero)));
+      if (inside == 0) continue;
+      alignas(16) float fx[4], fy[4], fz[4];
+      alignas(16) std::int32_t ix[4], iy[4], iz[4];
+      _mm_store_ps(fx, ux);
+      _mm_store_ps(fy, uy);
+      _mm_store_ps(fz, uz);
+      _mm_store_si128(reinterpret_cast<__m128i*>(ix), _mm_cvttps_epi32(ux));
+      _mm_store_si128(reinterpret_cast<__m128i*>(iy), _mm_cvttps_epi32(uy));
+      _mm_store_si128(reinterpret_cast<__m128i*>(iz), _mm_cvttps_epi32(uz));
+      for (int l = 0; l < 4; ++l)
+        if ((inside >> l) & 1) add(fx[l], fy[l], fz[l], ix[l], iy[l], iz[l]);
     }
+#endif
+    for (; k < n; ++k) {
+      if (count + (n - k) < need) break;
+      const Eigen::Vector3f u = R * gv_[k] + t;
+      add(u.x(), u.y(), u.z(), static_cast<int>(u.x()), static_cast<int>(u.y()), static_cast<int>(u.z()));
+    }
+    h.inliers = count;
     return h;
   }
 
@@ -567,6 +616,7 @@ class Matcher {
   Eigen::Matrix3d Rq_, Rm_;
   std::vector<Eigen::Vector3d> gq_, gm_;
   std::vector<Eigen::Vector3f> gv_;  // upright query features in validation order
+  std::vector<float> vx_, vy_, vz_;  // the same, a coordinate an array
   std::vector<std::pair<double, std::uint32_t>> mx_;  // (x of gm_[j], j), sorted
   double cell_ = 0.25;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
