@@ -162,6 +162,10 @@ class Matcher {
     row(0, a0, a1, a2, at);
     row(1, b0, b1, b2, bt);
     row(2, c0, c1, c2, ct);
+    const __m128i dim_x = _mm_set1_epi32(dims_[0]), dim_y = _mm_set1_epi32(dims_[1]), dim_z = _mm_set1_epi32(dims_[2]);
+    const auto in_grid = [](__m128i j, __m128i d) {
+      return _mm_and_si128(_mm_cmpgt_epi32(j, _mm_set1_epi32(-1)), _mm_cmpgt_epi32(d, j));
+    };
     for (; k + 4 <= n; k += 4) {
       if (count + (n - k) < need) break;
       const __m128 x = _mm_loadu_ps(vx_.data() + k), y = _mm_loadu_ps(vy_.data() + k), z = _mm_loadu_ps(vz_.data() + k);
@@ -172,16 +176,18 @@ class Matcher {
       const int inside = _mm_movemask_ps(
           _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(ux, zero), _mm_cmpge_ps(uy, zero)), _mm_cmpge_ps(uz, zero)));
       if (inside == 0) continue;
-      alignas(16) float fx[4], fy[4], fz[4];
+      // The cells, and whether they are in the grid (0 <= cell < dims; below 0 only for a
+      // coordinate beyond the int range), as add() decides it.
+      const __m128i jx = _mm_cvttps_epi32(ux), jy = _mm_cvttps_epi32(uy), jz = _mm_cvttps_epi32(uz);
+      const __m128i ok = _mm_and_si128(_mm_and_si128(in_grid(jx, dim_x), in_grid(jy, dim_y)), in_grid(jz, dim_z));
+      const int cells = inside & _mm_movemask_ps(_mm_castsi128_ps(ok));
+      if (cells == 0) continue;
       alignas(16) std::int32_t ix[4], iy[4], iz[4];
-      _mm_store_ps(fx, ux);
-      _mm_store_ps(fy, uy);
-      _mm_store_ps(fz, uz);
-      _mm_store_si128(reinterpret_cast<__m128i*>(ix), _mm_cvttps_epi32(ux));
-      _mm_store_si128(reinterpret_cast<__m128i*>(iy), _mm_cvttps_epi32(uy));
-      _mm_store_si128(reinterpret_cast<__m128i*>(iz), _mm_cvttps_epi32(uz));
+      _mm_store_si128(reinterpret_cast<__m128i*>(ix), jx);
+      _mm_store_si128(reinterpret_cast<__m128i*>(iy), jy);
+      _mm_store_si128(reinterpret_cast<__m128i*>(iz), jz);
       for (int l = 0; l < 4; ++l)
-        if ((inside >> l) & 1) add(fx[l], fy[l], fz[l], ix[l], iy[l], iz[l]);
+        if (((cells >> l) & 1) != 0 && cell_set(cell_index(ix[l], iy[l], iz[l]))) ++count;
     }
 #endif
     for (; k < n; ++k) {
