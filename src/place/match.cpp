@@ -10,7 +10,7 @@
 #include <array>
 
 #include <Eigen/Geometry>
-#if defined(__SSE2__)
+#if defined(__SSE2__) && !defined(__FMA__)
 #include <emmintrin.h>
 #endif
 
@@ -149,9 +149,10 @@ class Matcher {
       if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return;
       if (cell_set(cell_index(x, y, z))) ++count;
     };
-#if defined(__SSE2__)
+#if defined(__SSE2__) && !defined(__FMA__)
     // Four points at a time, each coordinate summed as R * g + t sums it: r0·x + (r1·y + r2·z),
-    // then + t (the same float operations in the same order, so the same cells).
+    // then + t (the same float operations in the same order, so the same cells; a build with
+    // FMA may fuse the scalar expression, so it keeps the scalar loop).
     const auto row = [&](int i, __m128& a, __m128& b, __m128& c, __m128& d) {
       a = _mm_set1_ps(R(i, 0));
       b = _mm_set1_ps(R(i, 1));
