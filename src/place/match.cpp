@@ -10,6 +10,9 @@
 #include <array>
 
 #include <Eigen/Geometry>
+#if defined(__SSE2__) && !defined(__FMA__)
+#include <emmintrin.h>
+#endif
 
 #include "lex3d/place/place.hpp"
 #include "lex3d/range/pixel_locator.hpp"
@@ -32,12 +35,15 @@ std::vector<Correspondence> correspondences(const PlaceScan& query, const PlaceS
   if (nm < 2 || dim <= 0 || dim != cand.descriptor_dim) return out;
   const auto ud = static_cast<std::size_t>(dim);
   const float r2 = static_cast<float>(ratio * ratio);
+  std::vector<float> dist(nm);
   for (std::size_t i = 0; i < nq; ++i) {
     const float* a = query.descriptors.data() + i * ud;
+    // The same values as descriptor_distance_sq of each pair, a row at a time.
+    descriptor_distances_sq(a, cand.descriptors.data(), nm, dim, dist.data());
     float b1 = std::numeric_limits<float>::infinity(), b2 = b1;
     std::size_t j1 = 0;
     for (std::size_t j = 0; j < nm; ++j) {
-      const float d = descriptor_distance_sq(a, cand.descriptors.data() + j * ud, dim);
+      const float d = dist[j];
       if (d < b1) {
         b2 = b1;
         b1 = d;
@@ -108,6 +114,14 @@ class Matcher {
     for (const auto& f : q.features) gq_.push_back(Rq_ * f.position.cast<double>());
     for (const auto& f : m.features) gm_.push_back(Rm_ * f.position.cast<double>());
     for (const auto k : q.validation) gv_.push_back(gq_[k].cast<float>());
+    for (const auto& v : gv_) {
+      vx_.push_back(v.x());
+      vy_.push_back(v.y());
+      vz_.push_back(v.z());
+    }
+    mx_.reserve(gm_.size());
+    for (std::size_t j = 0; j < gm_.size(); ++j) mx_.emplace_back(gm_[j].x(), static_cast<std::uint32_t>(j));
+    std::sort(mx_.begin(), mx_.end());
     build_grid();
   }
 
@@ -115,24 +129,74 @@ class Matcher {
   [[nodiscard]] Pose to_gravity(const Pose& T) const { return rotation_pose(Rm_) * T * rotation_pose(Rq_.transpose()); }
 
   /// Query features that land in a cell within about inlier_distance of a match feature.
+  /// With `from` and `inliers`: the count of the first `from` points is known to be `inliers`.
   [[nodiscard]] Hypothesis evaluate(const Pose& G, std::size_t limit = std::numeric_limits<std::size_t>::max(),
-                                    std::size_t need = 0) const {
+                                    std::size_t need = 0, std::size_t from = 0, std::size_t inliers = 0) const {
     Hypothesis h;
     h.T = G;
+    h.inliers = inliers;
     const std::size_t n = std::min(limit, gv_.size());
     if (grid_.empty()) return h;
     // In grid units, single precision: the hot loop of hypothesis counting.
     const Eigen::Matrix3f R = G.linear().cast<float>() / static_cast<float>(cell_);
     const Eigen::Vector3f t = ((G.translation() - origin_) / cell_).cast<float>();
-    for (std::size_t k = 0; k < n; ++k) {
-      // Stop early when even all remaining points could not reach `need`.
-      if (h.inliers + (n - k) < need) break;
-      const Eigen::Vector3f u = R * gv_[k] + t;
-      if (!(u.x() >= 0 && u.y() >= 0 && u.z() >= 0)) continue;
-      const auto x = static_cast<int>(u.x()), y = static_cast<int>(u.y()), z = static_cast<int>(u.z());
-      if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
-      if (cell_set(cell_index(x, y, z))) ++h.inliers;
+    // Stopping early (when even all remaining points could not reach `need`) is checked every
+    // four points: a count that stops is below `need` either way, a count that does not is exact.
+    std::size_t count = inliers;
+    std::size_t k = from;
+    auto add = [&](float ux, float uy, float uz, int x, int y, int z) {
+      if (!(ux >= 0 && uy >= 0 && uz >= 0)) return;
+      if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return;
+      if (cell_set(cell_index(x, y, z))) ++count;
+    };
+#if defined(__SSE2__) && !defined(__FMA__)
+    // Four points at a time, each coordinate summed as R * g + t sums it: r0·x + (r1·y + r2·z),
+    // then + t (the same float operations in the same order, so the same cells; a build with
+    // FMA may fuse the scalar expression, so it keeps the scalar loop).
+    const auto row = [&](int i, __m128& a, __m128& b, __m128& c, __m128& d) {
+      a = _mm_set1_ps(R(i, 0));
+      b = _mm_set1_ps(R(i, 1));
+      c = _mm_set1_ps(R(i, 2));
+      d = _mm_set1_ps(t(i));
+    };
+    __m128 a0, a1, a2, at, b0, b1, b2, bt, c0, c1, c2, ct;
+    row(0, a0, a1, a2, at);
+    row(1, b0, b1, b2, bt);
+    row(2, c0, c1, c2, ct);
+    const __m128i dim_x = _mm_set1_epi32(dims_[0]), dim_y = _mm_set1_epi32(dims_[1]), dim_z = _mm_set1_epi32(dims_[2]);
+    const auto in_grid = [](__m128i j, __m128i d) {
+      return _mm_and_si128(_mm_cmpgt_epi32(j, _mm_set1_epi32(-1)), _mm_cmpgt_epi32(d, j));
+    };
+    for (; k + 4 <= n; k += 4) {
+      if (count + (n - k) < need) break;
+      const __m128 x = _mm_loadu_ps(vx_.data() + k), y = _mm_loadu_ps(vy_.data() + k), z = _mm_loadu_ps(vz_.data() + k);
+      const __m128 ux = _mm_add_ps(_mm_add_ps(_mm_mul_ps(a0, x), _mm_add_ps(_mm_mul_ps(a1, y), _mm_mul_ps(a2, z))), at);
+      const __m128 uy = _mm_add_ps(_mm_add_ps(_mm_mul_ps(b0, x), _mm_add_ps(_mm_mul_ps(b1, y), _mm_mul_ps(b2, z))), bt);
+      const __m128 uz = _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, x), _mm_add_ps(_mm_mul_ps(c1, y), _mm_mul_ps(c2, z))), ct);
+      const __m128 zero = _mm_setzero_ps();
+      const int inside = _mm_movemask_ps(
+          _mm_and_ps(_mm_and_ps(_mm_cmpge_ps(ux, zero), _mm_cmpge_ps(uy, zero)), _mm_cmpge_ps(uz, zero)));
+      if (inside == 0) continue;
+      // The cells, and whether they are in the grid (0 <= cell < dims; below 0 only for a
+      // coordinate beyond the int range), as add() decides it.
+      const __m128i jx = _mm_cvttps_epi32(ux), jy = _mm_cvttps_epi32(uy), jz = _mm_cvttps_epi32(uz);
+      const __m128i ok = _mm_and_si128(_mm_and_si128(in_grid(jx, dim_x), in_grid(jy, dim_y)), in_grid(jz, dim_z));
+      const int cells = inside & _mm_movemask_ps(_mm_castsi128_ps(ok));
+      if (cells == 0) continue;
+      alignas(16) std::int32_t ix[4], iy[4], iz[4];
+      _mm_store_si128(reinterpret_cast<__m128i*>(ix), jx);
+      _mm_store_si128(reinterpret_cast<__m128i*>(iy), jy);
+      _mm_store_si128(reinterpret_cast<__m128i*>(iz), jz);
+      for (int l = 0; l < 4; ++l)
+        if (((cells >> l) & 1) != 0 && cell_set(cell_index(ix[l], iy[l], iz[l]))) ++count;
     }
+#endif
+    for (; k < n; ++k) {
+      if (count + (n - k) < need) break;
+      const Eigen::Vector3f u = R * gv_[k] + t;
+      add(u.x(), u.y(), u.z(), static_cast<int>(u.x()), static_cast<int>(u.y()), static_cast<int>(u.z()));
+    }
+    h.inliers = count;
     return h;
   }
 
@@ -140,18 +204,26 @@ class Matcher {
   [[nodiscard]] std::vector<std::pair<std::size_t, std::size_t>> pairs(const Pose& G) const {
     std::vector<std::pair<std::size_t, std::size_t>> out;
     const double d2max = p_.inlier_distance * p_.inlier_distance;
+    // Only match features within the inlier distance in x can be within it in 3-D; the window
+    // is a thousandth wider, far beyond the rounding of the distances.
+    const double reach = p_.inlier_distance * 1.001;
+    const std::size_t nm = gm_.size();
     for (std::size_t i = 0; i < gq_.size(); ++i) {
       const Eigen::Vector3d x = G * gq_[i];
+      // The nearest within d2max; of equally near ones the highest index.
       double best = d2max;
-      std::size_t bj = gm_.size();
-      for (std::size_t j = 0; j < gm_.size(); ++j) {
+      std::size_t bj = nm;
+      auto it = std::lower_bound(mx_.begin(), mx_.end(), x.x() - reach,
+                                 [](const std::pair<double, std::uint32_t>& e, double v) { return e.first < v; });
+      for (; it != mx_.end() && it->first <= x.x() + reach; ++it) {
+        const std::size_t j = it->second;
         const double d2 = (x - gm_[j]).squaredNorm();
-        if (d2 <= best) {
+        if (d2 < best || (d2 == best && (bj == nm || j > bj))) {
           best = d2;
           bj = j;
         }
       }
-      if (bj < gm_.size()) out.emplace_back(i, bj);
+      if (bj < nm) out.emplace_back(i, bj);
     }
     return out;
   }
@@ -487,7 +559,9 @@ class Matcher {
           const Hypothesis hp = evaluate(G, probe, need);
           if (hp.inliers < need) continue;
           best_probe = std::max(best_probe, hp.inliers);
-          out.push_back(evaluate(G));
+          // A probe that reaches `need` counted all its points (it stops early only when it
+          // cannot): the whole count goes on from there.
+          out.push_back(evaluate(G, std::numeric_limits<std::size_t>::max(), 0, probe, hp.inliers));
         }
       }
     }
@@ -549,6 +623,8 @@ class Matcher {
   Eigen::Matrix3d Rq_, Rm_;
   std::vector<Eigen::Vector3d> gq_, gm_;
   std::vector<Eigen::Vector3f> gv_;  // upright query features in validation order
+  std::vector<float> vx_, vy_, vz_;  // the same, a coordinate an array
+  std::vector<std::pair<double, std::uint32_t>> mx_;  // (x of gm_[j], j), sorted
   double cell_ = 0.25;
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   std::array<int, 3> dims_{0, 0, 0};
@@ -577,13 +653,14 @@ int nearest_dense(const PlaceScan& to, const PixelLocator& locator, const Eigen:
   if (!locator.locate(T_sensor_cloud * x, xi, yi, r)) return -1;
   int best = -1;
   float bd = max_d2;
+  const int xs[3] = {img.wrap_x(xi - 1), img.wrap_x(xi), img.wrap_x(xi + 1)};
   for (int dy = -1; dy <= 1; ++dy) {
     const int yy = yi + dy;
     if (yy < 0 || yy >= img.height) continue;
-    for (int dx = -1; dx <= 1; ++dx) {
-      const int xx = img.wrap_x(xi + dx);
+    const std::int32_t* row = to.dense_index.data() + img.index(0, yy);
+    for (const int xx : xs) {
       if (xx < 0) continue;
-      const std::int32_t k = to.dense_index[img.index(xx, yy)];
+      const std::int32_t k = row[xx];
       if (k < 0) continue;
       const float d2 = (to.dense_points[static_cast<std::size_t>(k)] - x).squaredNorm();
       if (d2 < bd) {
@@ -616,13 +693,16 @@ void check_distance(const PlaceScan& query, const PlaceScan& candidate, PlaceMat
 
 }  // namespace
 
-DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const Pose& T0, const PlaceParams& params) {
+namespace {
+
+// dense_align with the pixel locators of the two coarse images built by the caller.
+DenseAlignment dense_align_located(const PlaceScan& query, const PlaceScan& match, const PixelLocator& locate_q,
+                                   const PixelLocator& locate_m, const Pose& T0, const PlaceParams& params) {
   DenseAlignment out;
   out.T_match_query = T0;
   if (query.dense_points.empty() || match.dense_points.empty()) return out;
   const Eigen::Isometry3f Sm = match.coarse.T_cloud_sensor.inverse().cast<float>();
   const Eigen::Isometry3f Sq = query.coarse.T_cloud_sensor.inverse().cast<float>();
-  const PixelLocator locate_m(match.coarse), locate_q(query.coarse);
   const std::size_t nq = query.dense_points.size(), nm = match.dense_points.size();
   const std::size_t stride_q = std::max<std::size_t>(1, nq / static_cast<std::size_t>(params.dense_points));
   const std::size_t stride_m = std::max<std::size_t>(1, nm / static_cast<std::size_t>(params.dense_points));
@@ -683,8 +763,9 @@ DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const
   return out;
 }
 
-DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from,
-                                   const PlaceParams& params) {
+// dense_consistency with the pixel locator of `to`'s coarse image.
+DenseConsistency dense_consistency_located(const PlaceScan& from, const PlaceScan& to, const PixelLocator& locate_to,
+                                           const Pose& T_to_from, const PlaceParams& params) {
   DenseConsistency out;
   const RangeImage& img = to.coarse;
   if (from.dense_points.empty() || img.empty()) return out;
@@ -697,9 +778,10 @@ DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, c
   for (std::size_t i = 0; i < n; i += stride) {
     ++out.points;
     const Eigen::Vector3f p = T * from.dense_points[i];
-    float fx = 0, fy = 0, r = 0;
-    if (!img.project(p, fx, fy, r)) continue;
-    const int xi = img.wrap_x(static_cast<int>(std::floor(fx))), yi = static_cast<int>(std::floor(fy));
+    int fxi = 0, yi = 0;
+    float r = 0;
+    if (!locate_to.locate(p, fxi, yi, r)) continue;
+    const int xi = img.wrap_x(fxi);
     if (xi < 0 || yi < 0 || yi >= img.height) continue;
     const std::size_t ci = img.index(xi, yi);
     if (img.state[ci] == PixelState::kUnobserved) continue;
@@ -736,7 +818,9 @@ DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, c
   return out;
 }
 
-double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from, const PlaceParams& params) {
+// validation_score with the pixel locator of `to`'s coarse image.
+double validation_score_located(const PlaceScan& from, const PlaceScan& to, const PixelLocator& locate_to,
+                                const Pose& T_to_from, const PlaceParams& params) {
   const RangeImage& img = to.coarse;
   const std::size_t n = std::min<std::size_t>(from.validation.size(), static_cast<std::size_t>(params.validation_points));
   if (n == 0 || img.empty()) return 0.0;
@@ -746,10 +830,9 @@ double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& 
   double sum = 0.0;
   for (std::size_t k = 0; k < n; ++k) {
     const Eigen::Vector3f p = T * from.features[from.validation[k]].position;
-    float x = 0, y = 0, r = 0;
-    if (!img.project(p, x, y, r)) continue;
-    const int xi = static_cast<int>(std::floor(x));
-    const int yi = static_cast<int>(std::floor(y));
+    int xi = 0, yi = 0;
+    float r = 0;
+    if (!locate_to.locate(p, xi, yi, r)) continue;
     bool any = false;
     float best = -1.0F;
     for (int dy = -e; dy <= e; ++dy) {
@@ -771,6 +854,46 @@ double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& 
     sum += best >= 0.0F ? static_cast<double>(best) : -params.penalty;  // N' empty: -p
   }
   return std::max(0.0, sum) / static_cast<double>(n);  // eq. 10
+}
+
+// refine_match with the pixel locators of the two coarse images.
+void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, const PixelLocator& locate_q,
+                          const PixelLocator& locate_m, PlaceMatch& m, const PlaceParams& params) {
+  if (!m.valid) return;
+  const DenseAlignment a = dense_align_located(query, candidate, locate_q, locate_m, m.T_feature, params);
+  m.dense_rms_m = a.rms_m;
+  m.dense_used = a.used;
+  m.T_match_query = a.T_match_query;
+  const Pose T_query_match = m.T_match_query.inverse();
+  m.dense_q = dense_consistency_located(query, candidate, locate_m, m.T_match_query, params);
+  m.dense_m = dense_consistency_located(candidate, query, locate_q, T_query_match, params);
+  m.score_query_in_match = validation_score_located(query, candidate, locate_m, m.T_match_query, params);
+  m.score_match_in_query = validation_score_located(candidate, query, locate_q, T_query_match, params);
+  m.score = std::min(m.score_query_in_match, m.score_match_in_query);
+  m.dense_refined = true;
+  check_distance(query, candidate, m, params);
+  if (params.max_conflict < 1.0 && std::max(m.dense_q.conflict_share(), m.dense_m.conflict_share()) > params.max_conflict) {
+    m.rejected_conflict = true;
+    m.valid = false;
+  }
+}
+
+}  // namespace
+
+DenseAlignment dense_align(const PlaceScan& query, const PlaceScan& match, const Pose& T0, const PlaceParams& params) {
+  const PixelLocator locate_q(query.coarse), locate_m(match.coarse);
+  return dense_align_located(query, match, locate_q, locate_m, T0, params);
+}
+
+DenseConsistency dense_consistency(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from,
+                                   const PlaceParams& params) {
+  const PixelLocator locate_to(to.coarse);
+  return dense_consistency_located(from, to, locate_to, T_to_from, params);
+}
+
+double validation_score(const PlaceScan& from, const PlaceScan& to, const Pose& T_to_from, const PlaceParams& params) {
+  const PixelLocator locate_to(to.coarse);
+  return validation_score_located(from, to, locate_to, T_to_from, params);
 }
 
 PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const PlaceParams& params) {
@@ -802,6 +925,7 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     for (const auto& x : refined) dup = dup || close_poses(x.T, h.T);
     if (!dup) refined.push_back(h);
   }
+  const PixelLocator locate_q(query.coarse), locate_m(candidate.coarse);
   bool first = true;
   for (const auto& h : refined) {
     if (h.inliers < static_cast<std::size_t>(params.min_inliers)) continue;
@@ -825,8 +949,8 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     }
     if (m.valid) check_distance(query, candidate, m, params);
     if (m.valid) {
-      m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
-      m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
+      m.score_query_in_match = validation_score_located(query, candidate, locate_m, m.T_match_query, params);
+      m.score_match_in_query = validation_score_located(candidate, query, locate_q, m.T_match_query.inverse(), params);
       m.score = std::min(m.score_query_in_match, m.score_match_in_query);
     }
     const bool better = first || (m.valid && (!out.valid || m.score > out.score ||
@@ -835,27 +959,14 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
     first = false;
   }
   out.T_feature = out.T_match_query;
-  if (out.valid && params.dense_iterations > 0) refine_match(query, candidate, out, params);
+  if (out.valid && params.dense_iterations > 0) refine_match_located(query, candidate, locate_q, locate_m, out, params);
   return out;
 }
 
 void refine_match(const PlaceScan& query, const PlaceScan& candidate, PlaceMatch& m, const PlaceParams& params) {
   if (!m.valid) return;
-  const DenseAlignment a = dense_align(query, candidate, m.T_feature, params);
-  m.dense_rms_m = a.rms_m;
-  m.dense_used = a.used;
-  m.T_match_query = a.T_match_query;
-  m.dense_q = dense_consistency(query, candidate, m.T_match_query, params);
-  m.dense_m = dense_consistency(candidate, query, m.T_match_query.inverse(), params);
-  m.score_query_in_match = validation_score(query, candidate, m.T_match_query, params);
-  m.score_match_in_query = validation_score(candidate, query, m.T_match_query.inverse(), params);
-  m.score = std::min(m.score_query_in_match, m.score_match_in_query);
-  m.dense_refined = true;
-  check_distance(query, candidate, m, params);
-  if (params.max_conflict < 1.0 && std::max(m.dense_q.conflict_share(), m.dense_m.conflict_share()) > params.max_conflict) {
-    m.rejected_conflict = true;
-    m.valid = false;
-  }
+  const PixelLocator locate_q(query.coarse), locate_m(candidate.coarse);
+  refine_match_located(query, candidate, locate_q, locate_m, m, params);
 }
 
 }  // namespace lex3d

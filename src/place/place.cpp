@@ -10,6 +10,7 @@
 #include <string>
 
 #include "lex3d/place/place.hpp"
+#include "lex3d/range/pixel_locator.hpp"
 #include "place/internal.hpp"
 
 namespace lex3d {
@@ -171,11 +172,14 @@ void make_dense_points(PlaceScan& scan) {
     cos_el[static_cast<std::size_t>(y)] = std::cos(el);
     sin_el[static_cast<std::size_t>(y)] = std::sin(el);
   }
-  std::vector<Eigen::Vector3f> pts(c.state.size(), Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+  // Only the valid pixels' points are set and read.
+  std::vector<Eigen::Vector3f> pts(c.state.size());
+  std::size_t valid = 0;
   for (int y = 0; y < c.height; ++y)
     for (int x = 0; x < c.width; ++x) {
       const std::size_t i = c.index(x, y);
       if (c.state[i] != PixelState::kValid) continue;
+      ++valid;
       const auto ux = static_cast<std::size_t>(x), uy = static_cast<std::size_t>(y);
       const Eigen::Vector3f ray(static_cast<float>(cos_el[uy] * cos_az[ux]), static_cast<float>(cos_el[uy] * sin_az[ux]),
                                 static_cast<float>(sin_el[uy]));
@@ -186,14 +190,16 @@ void make_dense_points(PlaceScan& scan) {
   // ray gives across one pixel (tan 75° ≈ 3.7 pixel footprints), plus a quantisation step.
   const auto px = static_cast<float>(std::max(c.azimuth_resolution_rad, c.elevation_resolution_rad));
   scan.dense_index.assign(c.state.size(), -1);
+  scan.dense_points.reserve(valid);
+  scan.dense_normals.reserve(valid);
   const Eigen::Matrix3f R = c.T_cloud_sensor.linear().cast<float>();
   const Eigen::Vector3f t = c.T_cloud_sensor.translation().cast<float>();
-  auto neighbour = [&](int x, int y, float r, Eigen::Vector3f& out) {
+  auto neighbour = [&](int x, int y, float r, float tolerance, Eigen::Vector3f& out) {
     const int xx = c.wrap_x(x);
     if (xx < 0 || y < 0 || y >= c.height) return false;
     const std::size_t j = c.index(xx, y);
     if (c.state[j] != PixelState::kValid) return false;
-    if (std::abs(c.range[j] - r) > 3.7F * px * r + 0.05F) return false;
+    if (std::abs(c.range[j] - r) > tolerance) return false;
     out = pts[j];
     return true;
   };
@@ -202,9 +208,10 @@ void make_dense_points(PlaceScan& scan) {
       const std::size_t i = c.index(x, y);
       if (c.state[i] != PixelState::kValid) continue;
       const float r = c.range[i];
+      const float tol = 3.7F * px * r + 0.05F;
       Eigen::Vector3f l, rr, u, d;
-      const bool hl = neighbour(x - 1, y, r, l), hr = neighbour(x + 1, y, r, rr);
-      const bool hu = neighbour(x, y - 1, r, u), hd = neighbour(x, y + 1, r, d);
+      const bool hl = neighbour(x - 1, y, r, tol, l), hr = neighbour(x + 1, y, r, tol, rr);
+      const bool hu = neighbour(x, y - 1, r, tol, u), hd = neighbour(x, y + 1, r, tol, d);
       if (!(hl || hr) || !(hu || hd)) continue;
       const Eigen::Vector3f a = (hr ? rr : pts[i]) - (hl ? l : pts[i]);
       const Eigen::Vector3f b = (hd ? d : pts[i]) - (hu ? u : pts[i]);
@@ -246,11 +253,13 @@ RangeImage make_coarse_image(const RangeImage& fine, const PlaceStorageParams& s
   const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   c.state.assign(pixels, PixelState::kUnobserved);
   c.range.assign(pixels, std::numeric_limits<float>::quiet_NaN());
+  // The pixel of floor() of c.project(dir), found from border tables.
+  const PixelLocator locator(c);
   auto cell = [&](const Eigen::Vector3f& dir, std::size_t& idx) {
-    float x = 0, y = 0, r = 0;
-    if (!c.project(dir, x, y, r)) return false;
-    const int xi = c.wrap_x(static_cast<int>(std::floor(x)));
-    const int yi = static_cast<int>(std::floor(y));
+    int x = 0, yi = 0;
+    float r = 0;
+    if (!locator.locate(dir, x, yi, r)) return false;
+    const int xi = c.wrap_x(x);
     if (xi < 0 || !c.in_image(xi, yi)) return false;
     idx = c.index(xi, yi);
     return true;

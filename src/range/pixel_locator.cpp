@@ -60,8 +60,6 @@ PixelLocator::PixelLocator(const RangeImage& img) : img_(&img) {
 
   az_max_ = img.azimuth_max_rad;
   inv_res_az_ = static_cast<float>(1.0 / res_az);
-  inv_res_el_ = static_cast<float>(1.0 / res_el);
-  top_el_ = static_cast<float>(e.front());
   const double margin_az = pixel_margin(static_cast<double>(w) + 1.0) * res_az;
   margin_sin_az_sq_ = std::sin(margin_az) * std::sin(margin_az);
   col_edge_.resize(static_cast<std::size_t>(w) + 1);
@@ -74,6 +72,20 @@ PixelLocator::PixelLocator(const RangeImage& img) : img_(&img) {
   row_sin_in_hi_.resize(static_cast<std::size_t>(h));
   row_sin_in_lo_.resize(static_cast<std::size_t>(h));
   for (std::size_t y = 0; y <= static_cast<std::size_t>(h); ++y) row_sin_[y] = std::sin(e[y]);
+  // Row guesses by the sine itself: buckets of equal width in sine, each starting at the row
+  // that holds its lower end (a few rows a bucket at most; the walk in locate_fast finishes).
+  const double span = row_sin_.front() - row_sin_.back();
+  if (!(span > 0.0)) return;
+  const std::size_t buckets = 8 * static_cast<std::size_t>(h);
+  sin_lo_ = row_sin_.back();
+  sin_scale_ = static_cast<double>(buckets) / span;
+  row_guess_.resize(buckets);
+  int row = h - 1;
+  for (std::size_t b = 0; b < buckets; ++b) {
+    const double sb = sin_lo_ + static_cast<double>(b) / sin_scale_;
+    while (row > 0 && !(sb < row_sin_[static_cast<std::size_t>(row)])) --row;
+    row_guess_[b] = row;
+  }
   for (std::size_t y = 0; y < static_cast<std::size_t>(h); ++y) {
     const double m = margin_el * (e[y] - e[y + 1]);
     row_sin_in_hi_[y] = std::sin(e[y] - m);
@@ -102,10 +114,8 @@ PixelLocator::Result PixelLocator::locate_fast(const Eigen::Vector3f& p, int& x,
   const double s = std::clamp(static_cast<double>(p.z()) / r, -1.0, 1.0);
   const int h = img_->height;
   if (!(s < row_sin_.front() && s > row_sin_.back())) return Result::kUndecided;
-  const float hxy = std::sqrt(static_cast<float>(hxy2));
-  float g = (top_el_ - atan2_guess(p.z(), hxy)) * inv_res_el_;
-  g = std::clamp(g, 0.0F, static_cast<float>(h - 1));
-  int row = static_cast<int>(g);
+  const auto b = std::min(static_cast<std::size_t>((s - sin_lo_) * sin_scale_), row_guess_.size() - 1);
+  int row = row_guess_[b];
   while (row > 0 && !(s < row_sin_[static_cast<std::size_t>(row)])) --row;
   while (row < h - 1 && !(s > row_sin_[static_cast<std::size_t>(row) + 1])) ++row;
   const auto ru = static_cast<std::size_t>(row);

@@ -5,8 +5,9 @@
 /// RangeImage::project computes a point's azimuth and elevation (atan2, asin, fmod in double
 /// precision); callers that look up neighbours only need the integer pixel. PixelLocator
 /// keeps the image's column borders as unit vectors and its row borders as sines of the
-/// elevation, guesses the pixel from a cheap float arctangent and confirms it by comparing the
-/// point against the two borders on each axis. A point closer to a border than a small margin
+/// elevation, guesses the column from a cheap float arctangent and the row from a table over the
+/// sine of the elevation, and confirms both by comparing the point against the two borders on
+/// each axis. A point closer to a border than a small margin
 /// (a thousandth of a pixel or more) goes through RangeImage::project instead, so the pixel
 /// returned is always floor() of project's coordinates.
 
@@ -51,13 +52,14 @@ class PixelLocator {
   bool fast_ = false;
   double az_max_ = 0.0;
   float inv_res_az_ = 0.0F;       // columns a radian, for the guess
-  float inv_res_el_ = 0.0F;       // rows a radian, for the guess
-  float top_el_ = 0.0F;           // row_edges[0], for the guess
   double margin_sin_az_sq_ = 0.0; // sin²(margin angle) of the column borders
   std::vector<Eigen::Vector2d> col_edge_;  // width+1 unit vectors: border k at az_max - k·res
   std::vector<double> row_sin_;            // height+1: sin(row_edges[y])
   std::vector<double> row_sin_in_hi_;      // height: sin(row_edges[y] - margin of row y)
   std::vector<double> row_sin_in_lo_;      // height: sin(row_edges[y+1] + margin of row y)
+  double sin_lo_ = 0.0;                    // row_sin_.back()
+  double sin_scale_ = 0.0;                 // buckets a unit of sine
+  std::vector<int> row_guess_;             // the row of each bucket's lower end
 };
 
 }  // namespace lex3d
