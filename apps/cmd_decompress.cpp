@@ -13,6 +13,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/eval/metrics.hpp"
+#include "lex3d/io/rosbag.hpp"
 #include "lex3d/lex3d.hpp"
 #include "lex3d/residual/residual.hpp"
 
@@ -45,7 +46,10 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   OutputSet files;
   files.input(o.input, "model");
   std::vector<std::string> outputs;
-  for (std::size_t i = 0; i < s.model_files.size(); ++i) {
+  const bool bag = is_bag_output(o.output);  // one bag, a message a scan (stamped from its name)
+  std::vector<io::BagScan> bag_scans;
+  if (bag) files.output(o.output, "-o");
+  for (std::size_t i = 0; i < s.model_files.size() && !bag; ++i) {
     // A file that keeps its scans' names (sequence 1.1) writes OUT_<name>; else OUT_000...
     outputs.push_back(s.names.empty() ? numbered_output(o.output, i, s.model_files.size())
                                       : named_output(o.output, s.names[i], s.model_files.size()));
@@ -61,10 +65,17 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
     if (!cloud.ok()) throw CliError(2, o.input + ": scan " + std::to_string(i) + ": " + cloud.status().to_string());
     cloud.value().georef = d.value().georef;  // written in true coordinates
     set_current_file(o.input + " scan " + std::to_string(i));
-    throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud.value()));
-    note_fields_not_written(outputs[i], cloud.value());
+    if (bag) outputs.push_back(o.output);
+    if (bag) {
+      bag_scans.emplace_back();
+      if (!s.names.empty()) stamp_from_name(s.names[i], bag_scans.back().stamp_sec, bag_scans.back().stamp_nsec);
+    } else {
+      throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud.value()));
+      note_fields_not_written(outputs[i], cloud.value());
+    }
     input_points += d.value().input_points;
     points += cloud.value().size();
+    if (bag) bag_scans.back().cloud = std::move(cloud.value());
     if (o.json)
       j.begin_object().value("output", outputs[i]).value("input_points", d.value().input_points)
           .value("points", cloud.value().size()).value("residual_layer", d.value().residual.has_value()).end_object();
@@ -72,6 +83,7 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
       std::printf("%s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), cloud.value().size(), i + 1,
                   s.model_files.size());
   }
+  if (bag) throw_if_error(io::write_bag(files.staged(o.output), bag_scans));
   files.commit();
   const double bpp = input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {
@@ -235,7 +247,7 @@ void register_decompress(CLI::App& app) {
                                                    "or every scan of a sequence file");
   sub->footer("Examples:\n  lex3d decompress scan.lex3dm -o scan.pcd --reference scan.bin\n  lex3d decompress drive.lex3dq -o drive.ply                (one file a scan)\n  lex3d decompress scan.lex3dm --octomap scan.bt --resolution 0.1");
   sub->add_option("model", o->input, "lex3d model file or sequence file")->required();
-  sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz)");
+  sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz; .bag: ROS PointCloud2 messages, every scan of a sequence in one bag)");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references");
   sub->add_option("--octomap", o->octomap, "Also write an OctoMap occupancy tree (.bt)");
   sub->add_option("--resolution", o->resolution, "OctoMap resolution, m")->check(CLI::Range(1e-3, 100.0));
