@@ -190,7 +190,11 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
     r.cloud.columns = m.width;
   }
   out.set_layout(organised || fr != nullptr, organised, organised);
-  out.reserve(static_cast<std::size_t>(std::uint64_t{m.width} * m.height));
+  const auto n = static_cast<std::size_t>(std::uint64_t{m.width} * m.height);
+  out.reserve(n);
+  if (ft != nullptr) r.cloud.time.reserve(n);
+  if (organised || fr != nullptr) r.cloud.ring.reserve(n);
+  if (organised) r.cloud.column.reserve(n);
   const bool swap = false;
   for (std::uint32_t row = 0; row < m.height; ++row) {
     const std::uint8_t* base = m.data + static_cast<std::size_t>(row) * m.row_step;

@@ -295,6 +295,7 @@ StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& top
                                           " messages; lex3d reads sensor_msgs/PointCloud2 and Ouster packets "
                                           "(ouster_ros/PacketMsg)"));
   if (!s.ok()) return s;
+  if (out.scans.empty()) return bad_data(detail::msg(path, "topic " + chosen->name + " holds no message"));
   return out;
 }
 
