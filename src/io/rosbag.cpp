@@ -47,7 +47,7 @@ bool rosbag_supported() noexcept { return false; }
 namespace {
 Status unsupported(const std::string& path) {
   return bad_data(detail::msg(path, "a ROS bag, and this lex3d was built without ROS bag support (install "
-                                    "librosbag-storage-dev and libsensor-msgs-dev and configure with LEX3D_WITH_ROSBAG=ON)"));
+                                    "librosbag-storage-dev and libsensor-msgs-dev, then configure again)"));
 }
 }  // namespace
 

@@ -2,7 +2,7 @@
 /// \file
 /// ROS 1 bag files (format 2.0): the point clouds of one topic read as scans, and scans
 /// written back as `sensor_msgs/PointCloud2` messages. Built on the ROS bag library when
-/// lex3d is configured with LEX3D_WITH_ROSBAG (on when the library is found); without it,
+/// lex3d is configured with LEX3D_WITH_ROSBAG (AUTO: on when the library is found); without it,
 /// every function but is_rosbag and rosbag_supported returns kBadData naming the file
 /// ("built without ROS bag support"). No ROS header is included here.
 ///
