@@ -1,5 +1,6 @@
 #include "cli_common.hpp"
 
+#include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
 
 #include <CLI/CLI.hpp>
@@ -186,7 +187,7 @@ namespace {
 bool is_cloud_extension(std::string ext) {
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return ext == ".pcd" || ext == ".ply" || ext == ".bin" || ext == ".xyz" || ext == ".txt" || ext == ".las" ||
-         ext == ".laz" || ext == ".asc" || ext == ".csv" || ext == ".3d" || ext == ".pcap";
+         ext == ".laz" || ext == ".asc" || ext == ".csv" || ext == ".3d" || ext == ".pcap" || ext == ".bag";
 }
 
 const char* extension_of_kind(const std::string& kind) {
@@ -220,7 +221,7 @@ void check_output_kind(const std::string& path, const std::string& option, const
   if (kind == "cloud") {
     if (lex3d_ext)
       throw CliError(1, option + " " + path + ": a point cloud is written here, but " + ext +
-                            " is a lex3d file extension (give .pcd, .ply, .bin, .xyz or .las)");
+                            " is a lex3d file extension (give .pcd, .ply, .bin, .xyz, .las or .bag)");
     return;
   }
   if (is_cloud_extension(ext) || ext == ".bt" || ext == ".png" || (lex3d_ext && ext != extension_of_kind(kind)))
@@ -240,6 +241,7 @@ std::string lex3d_file_kind(const std::vector<std::uint8_t>& bytes) {
 
 std::string ScanLoader::stem(std::size_t i) const {
   const Entry& e = entries_.at(i);
+  if (!e.stem.empty()) return e.stem;
   std::string s = std::filesystem::path(e.path).stem().string();
   if (e.turns) s += "_turn" + std::to_string(e.turn);
   return s;
@@ -255,8 +257,12 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
   for (const auto& path : paths) {
     check_input_file(path);
     const bool log = options.format == io::Format::kPcap || (options.format == io::Format::kAuto && io::is_sensor_log(path));
+    if (!log && options.format == io::Format::kAuto && io::is_rosbag(path)) {
+      add_bag(path, options);
+      continue;
+    }
     if (!log) {
-      entries_.push_back({path, path, nullptr, 0});
+      entries_.push_back({path, path, nullptr, 0, ""});
       continue;
     }
     auto r = io::read_sensor_log(path, options);
@@ -264,12 +270,42 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
     auto turns = std::make_shared<const std::vector<Cloud>>(std::move(r.value().scans));
     const auto& ids = r.value().frame_ids;
     for (std::size_t k = 0; k < turns->size(); ++k)
-      entries_.push_back({path, path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]) + ")", turns, k});
+      entries_.push_back({path, path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]) + ")", turns, k, ""});
   }
   if (points_in_world && poses_path.empty())
     throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");
   if (poses_path.empty()) return;
   poses_ = read_scan_poses(poses_path, entries_.size());
+}
+
+void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options) {
+  set_current_file(path);
+  auto r = io::read_bag(path, options.bag_topic, options);
+  if (!r.ok()) throw CliError(r.status().code() == ErrorCode::kOutOfMemory ? 4 : 2, r.status().to_string());
+  io::BagScans& bag = r.value();
+  // never drop silently: the fields not kept and what the reader noticed
+  if (!bag.dropped_fields.empty()) {
+    std::string list;
+    for (const auto& f : bag.dropped_fields) list += (list.empty() ? "" : ", ") + f;
+    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z, intensity, ring, time and colour): %s\n",
+                 path.c_str(), list.c_str());
+  }
+  for (const auto& n : bag.notes) std::fprintf(stderr, "note: %s: %s\n", path.c_str(), n.c_str());
+  if (bag.non_finite_dropped > 0)
+    std::fprintf(stderr, "note: %s: %zu points with a NaN or infinite coordinate dropped\n", path.c_str(), bag.non_finite_dropped);
+  if (bag.incomplete_frames > 0)
+    std::fprintf(stderr, "note: %s: %zu incomplete frame(s) dropped\n", path.c_str(), bag.incomplete_frames);
+  auto scans = std::make_shared<std::vector<Cloud>>();
+  for (auto& s : bag.scans) scans->push_back(std::move(s.cloud));
+  const std::shared_ptr<const std::vector<Cloud>> shared = scans;
+  const std::string stem = std::filesystem::path(path).stem().string();
+  for (std::size_t k = 0; k < bag.scans.size(); ++k) {
+    char stamp[32];
+    std::snprintf(stamp, sizeof stamp, "%u.%09u", bag.scans[k].stamp_sec, bag.scans[k].stamp_nsec);
+    const char* what = bag.type == "sensor_msgs/PointCloud2" ? " message " : " frame ";
+    entries_.push_back({path, path + " " + bag.topic + what + std::to_string(k) + " (stamp " + stamp + ")", shared, k,
+                        stem + "_" + stamp});
+  }
 }
 
 std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans) {
@@ -350,6 +386,26 @@ Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option
   std::string rest;
   if (in >> rest) throw CliError(1, option + " expects three numbers x,y,z, got '" + text + "'");
   return v;
+}
+
+bool is_bag_output(const std::string& output) {
+  std::string ext = std::filesystem::path(output).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".bag";
+}
+
+bool stamp_from_name(const std::string& name, std::uint32_t& sec, std::uint32_t& nsec) {
+  const std::size_t cut = name.find_last_of('_');
+  const std::string s = cut == std::string::npos ? name : name.substr(cut + 1);
+  const std::size_t dot = s.find('.');
+  if (dot == std::string::npos || dot == 0 || dot > 10 || s.size() - dot - 1 != 9) return false;
+  for (std::size_t i = 0; i < s.size(); ++i)
+    if (i != dot && (s[i] < '0' || s[i] > '9')) return false;
+  const unsigned long long a = std::stoull(s.substr(0, dot));
+  if (a > 0xFFFFFFFFULL) return false;
+  sec = static_cast<std::uint32_t>(a);
+  nsec = static_cast<std::uint32_t>(std::stoul(s.substr(dot + 1)));
+  return true;
 }
 
 void note_fields_not_written(const std::string& output, const Cloud& cloud, const io::WriteOptions& options) {

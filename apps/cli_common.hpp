@@ -123,8 +123,9 @@ std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format 
 
 /// The scans of load_scans one at a time, for commands that need only one in memory: the
 /// poses are read (and their count checked) when it is made, a scan when it is asked for.
-/// A raw lidar log (pcap) counts as one scan a complete turn: it is decoded when the loader
-/// is made and its turns are kept in memory.
+/// A raw lidar log (pcap) counts as one scan a complete turn, a ROS bag as one a message of
+/// its topic (options.bag_topic): it is decoded when the loader is made and its scans are
+/// kept in memory.
 class ScanLoader {
  public:
   ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path, bool points_in_world);
@@ -135,16 +136,19 @@ class ScanLoader {
   [[nodiscard]] Cloud load(std::size_t i) const;
   /// What scan i is: its file, or "<file> turn <k>" for a raw log's turn.
   [[nodiscard]] const std::string& name(std::size_t i) const { return entries_.at(i).name; }
-  /// A short name of scan i for a file: its file's stem, "<stem>_turn<k>" for a raw log's turn.
+  /// A short name of scan i for a file: its file's stem, "<stem>_turn<k>" for a raw log's turn,
+  /// "<stem>_<sec>.<nsec>" (its stamp) for a ROS bag's message.
   [[nodiscard]] std::string stem(std::size_t i) const;
 
  private:
   struct Entry {
     std::string path;
     std::string name;
-    std::shared_ptr<const std::vector<Cloud>> turns;  // raw log: its turns
+    std::shared_ptr<const std::vector<Cloud>> turns;  // raw log or ROS bag: its scans
     std::size_t turn = 0;
+    std::string stem;  // ROS bag: "<stem>_<sec>.<nsec>", the message's stamp
   };
+  void add_bag(const std::string& path, const io::ReadOptions& options);
   std::vector<Entry> entries_;
   io::ReadOptions options_;
   std::vector<Pose> poses_;  // empty: no poses file
@@ -164,6 +168,13 @@ int all_cores();
 /// `--threads N` on a command, the same on every one: worker threads, 0 = every core (the
 /// default); `threads` is set to the resolved count, never 0. The outputs do not depend on it.
 void add_threads_option(CLI::App& app, int& threads, const std::string& what);
+
+/// True when `output` names a ROS bag (`.bag`): every scan goes into it, one message each.
+bool is_bag_output(const std::string& output);
+
+/// A scan's stamp from its stored name ("<stem>_<sec>.<nsec>", as ScanLoader::stem gives a
+/// bag's message); false when the name holds none.
+bool stamp_from_name(const std::string& name, std::uint32_t& sec, std::uint32_t& nsec);
 
 /// Registration of each subcommand (one file each).
 void register_info(CLI::App& app);

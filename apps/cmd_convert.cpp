@@ -3,9 +3,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 
 #include "cli_common.hpp"
+#include "lex3d/io/rosbag.hpp"
 
 namespace lex3d::cli {
 
@@ -17,12 +19,17 @@ struct ConvertOptions {
   std::string format = "auto";
   std::string metadata;
   std::string sensor_model;
+  std::string topic;
 };
 
 void run_convert(const ConvertOptions& o) {
-  const ScanLoader loader({o.input}, read_options(parse_format_option(o.format), o.metadata, o.sensor_model), "", false);
+  io::ReadOptions options = read_options(parse_format_option(o.format), o.metadata, o.sensor_model);
+  options.bag_topic = o.topic;
+  const ScanLoader loader({o.input}, options, "", false);
   std::vector<std::string> outputs;
-  for (std::size_t i = 0; i < loader.size(); ++i) outputs.push_back(numbered_output(o.output, i, loader.size()));
+  const bool bag = is_bag_output(o.output);  // one bag, a message a scan
+  for (std::size_t i = 0; i < loader.size(); ++i) outputs.push_back(bag ? o.output : numbered_output(o.output, i, loader.size()));
+  if (bag) outputs.resize(std::min<std::size_t>(outputs.size(), 1));
   OutputSet files;
   files.input(o.input, "input");
   files.input(o.metadata, "--metadata");
@@ -30,13 +37,22 @@ void run_convert(const ConvertOptions& o) {
     files.output(out, "output");
     check_output_kind(out, "output", "cloud");
   }
+  std::vector<io::BagScan> bag_scans;
   for (std::size_t i = 0; i < loader.size(); ++i) {
-    const Cloud cloud = loader.load(i);
-    throw_if_error(io::write_cloud(files.staged(outputs[i]), cloud));
-    note_fields_not_written(outputs[i], cloud);
-    std::printf("%s -> %s: %zu points%s\n", loader.name(i).c_str(), outputs[i].c_str(), cloud.size(),
+    Cloud cloud = loader.load(i);
+    const std::string& out = bag ? o.output : outputs[i];
+    if (bag) {
+      bag_scans.emplace_back();
+      stamp_from_name(loader.stem(i), bag_scans.back().stamp_sec, bag_scans.back().stamp_nsec);
+    } else {
+      throw_if_error(io::write_cloud(files.staged(out), cloud));
+      note_fields_not_written(out, cloud);
+    }
+    std::printf("%s -> %s: %zu points%s\n", loader.name(i).c_str(), out.c_str(), cloud.size(),
                 cloud.rows > 0 ? (" (" + std::to_string(cloud.rows) + " x " + std::to_string(cloud.columns) + " organised)").c_str() : "");
+    if (bag) bag_scans.back().cloud = std::move(cloud);
   }
+  if (bag) throw_if_error(io::write_bag(files.staged(o.output), bag_scans));
   files.commit();
 }
 
@@ -47,10 +63,11 @@ void register_convert(CLI::App& app) {
   CLI::App* sub = app.add_subcommand("convert", "Convert a point cloud or raw lidar log (one file a turn) to PCD, PLY, .bin or text");
   sub->footer("Examples:\n  lex3d convert capture.pcap turns.pcd                  (one organised PCD a turn)\n  lex3d convert scan.bin scan.ply");
   sub->add_option("input", o->input, "Point cloud or raw lidar log (.pcap)")->required();
-  sub->add_option("output", o->output, "Output (.pcd, .ply, .bin, .xyz/.txt); numbered _000, _001... for several turns")->required();
+  sub->add_option("output", o->output, "Output (.pcd, .ply, .bin, .xyz/.txt; numbered _000, _001... for several turns), or .bag: one ROS bag, a PointCloud2 message a scan")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
   sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
   sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e");
+  sub->add_option("--topic", o->topic, "The topic of a ROS bag to read (default: its only point cloud topic)");
   sub->callback([o] { run_convert(*o); });
 }
 

@@ -15,6 +15,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/timer.hpp"
 #include "lex3d/eval/metrics.hpp"
+#include "lex3d/io/rosbag.hpp"
 #include "lex3d/lex3d.hpp"
 #include "lex3d/residual/residual.hpp"
 
@@ -48,7 +49,10 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   OutputSet files;
   files.input(o.input, "model");
   std::vector<std::string> outputs;
-  for (std::size_t i = 0; i < s.model_files.size(); ++i) {
+  const bool bag = is_bag_output(o.output);  // one bag, a message a scan (stamped from its name)
+  std::vector<io::BagScan> bag_scans;
+  if (bag) files.output(o.output, "-o");
+  for (std::size_t i = 0; i < s.model_files.size() && !bag; ++i) {
     // A file that keeps its scans' names (sequence 1.1) writes OUT_<name>; else OUT_000...
     outputs.push_back(s.names.empty() ? numbered_output(o.output, i, s.model_files.size())
                                       : named_output(o.output, s.names[i], s.model_files.size()));
@@ -57,8 +61,9 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   Json j;
   j.begin_object().value("sequence", o.input).value("scans", s.model_files.size()).begin_array("files");
   std::uint64_t input_points = 0, points = 0;
-  // Scans are decoded and written `threads` at a time (each on one thread, into its own staged
-  // file); what is printed follows the scan order. Memory holds one batch of clouds.
+  // Scans are decoded `threads` at a time (each on one thread); what is printed follows the
+  // scan order. Point-cloud files are written by their thread into their own staged file and
+  // memory holds one batch of clouds; a bag gathers every scan and is written at the end.
   struct Decoded {
     std::uint64_t input_points = 0;
     std::size_t points = 0;
@@ -68,8 +73,10 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   };
   const std::size_t n = s.model_files.size();
   const std::size_t batch = static_cast<std::size_t>(std::max(1, o.threads));
+  if (bag) outputs.assign(n, o.output);
   std::vector<std::string> staged(n);
-  for (std::size_t i = 0; i < n; ++i) staged[i] = files.staged(outputs[i]);
+  if (!bag)
+    for (std::size_t i = 0; i < n; ++i) staged[i] = files.staged(outputs[i]);
   for (std::size_t first = 0; first < n; first += batch) {
     const std::size_t count = std::min(batch, n - first);
     std::vector<Decoded> done(count);
@@ -81,11 +88,13 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
       auto cloud = residual::decode_cloud(d.value());
       if (!cloud.ok()) return void(done[k].error = cloud.status().to_string());
       cloud.value().georef = d.value().georef;  // written in true coordinates
-      const Status w = io::write_cloud(staged[i], cloud.value());
-      if (!w.ok()) {
-        done[k].exit_code = exit_code_for(w.code());
-        done[k].error = outputs[i] + ": " + w.to_string();
-        return;
+      if (!bag) {
+        const Status w = io::write_cloud(staged[i], cloud.value());
+        if (!w.ok()) {
+          done[k].exit_code = exit_code_for(w.code());
+          done[k].error = outputs[i] + ": " + w.to_string();
+          return;
+        }
       }
       done[k].input_points = d.value().input_points;
       done[k].points = cloud.value().size();
@@ -100,7 +109,6 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
       const std::size_t i = first + k;
       if (!done[k].error.empty())
         throw CliError(done[k].exit_code, o.input + ": scan " + std::to_string(i) + ": " + done[k].error);
-      note_fields_not_written(outputs[i], clouds[k]);
       input_points += done[k].input_points;
       points += done[k].points;
       if (o.json)
@@ -108,8 +116,16 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
             .value("points", done[k].points).value("residual_layer", done[k].residual_layer).end_object();
       else
         std::printf("%s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), done[k].points, i + 1, n);
+      if (bag) {
+        bag_scans.emplace_back();
+        if (!s.names.empty()) stamp_from_name(s.names[i], bag_scans.back().stamp_sec, bag_scans.back().stamp_nsec);
+        bag_scans.back().cloud = std::move(clouds[k]);
+      } else {
+        note_fields_not_written(outputs[i], clouds[k]);
+      }
     }
   }
+  if (bag) throw_if_error(io::write_bag(files.staged(o.output), bag_scans));
   files.commit();
   const double bpp = input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {
@@ -275,7 +291,7 @@ void register_decompress(CLI::App& app) {
                                                    "or every scan of a sequence file");
   sub->footer("Examples:\n  lex3d decompress scan.lex3dm -o scan.pcd --reference scan.bin\n  lex3d decompress drive.lex3dq -o drive.ply                (one file a scan)\n  lex3d decompress scan.lex3dm --octomap scan.bt --resolution 0.1");
   sub->add_option("model", o->input, "lex3d model file or sequence file")->required();
-  sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz)");
+  sub->add_option("-o,--output", o->output, "Point cloud to write (.pcd, .ply, .bin, .xyz; .bag: ROS PointCloud2 messages, every scan of a sequence in one bag)");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references");
   sub->add_option("--octomap", o->octomap, "Also write an OctoMap occupancy tree (.bt)");
   sub->add_option("--resolution", o->resolution, "OctoMap resolution, m")->check(CLI::Range(1e-3, 100.0));

@@ -11,6 +11,7 @@
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
+#include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
 #include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
@@ -265,6 +266,26 @@ bool info_lex3d_file(const InfoOptions& o) {
 }
 
 // A raw lidar log: the sensor, its lasers and columns, and the turns found.
+/// A ROS bag: its topics, their message types and counts.
+void info_bag(const InfoOptions& o) {
+  auto r = io::read_bag_info(o.path);
+  if (!r.ok()) throw CliError(exit_code_for(r.status().code()), r.status().to_string());
+  const io::BagInfo& b = r.value();
+  if (o.json) {
+    Json j;
+    j.begin_object().value("file", o.path).value("format", "rosbag").value("bytes", b.file_bytes);
+    j.value("messages", b.messages).value("start_s", b.start_s).value("end_s", b.end_s).begin_array("topics");
+    for (const auto& t : b.topics) j.begin_object().value("topic", t.name).value("type", t.type).value("messages", t.messages).end_object();
+    j.end_array().end_object();
+    std::cout << j.str() << "\n";
+    return;
+  }
+  std::printf("file           %s\nformat         ROS bag 2.0, %llu bytes\n", o.path.c_str(), static_cast<unsigned long long>(b.file_bytes));
+  std::printf("messages       %llu over %.3f s\n", static_cast<unsigned long long>(b.messages), b.end_s - b.start_s);
+  for (const auto& t : b.topics)
+    std::printf("topic          %-32s %-28s %8llu messages\n", t.name.c_str(), t.type.c_str(), static_cast<unsigned long long>(t.messages));
+}
+
 void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
   auto r = io::read_sensor_log(o.path, ro);
   if (!r.ok()) throw CliError(exit_code_for(r.status().code()), r.status().to_string());
@@ -317,6 +338,11 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
 void run_info(const InfoOptions& o) {
   if (o.format == "auto" && info_lex3d_file(o)) return;
   const io::ReadOptions ro = read_options(parse_format_option(o.format), o.metadata, o.sensor_model);
+  if (ro.format == io::Format::kAuto && io::is_rosbag(o.path)) {
+    check_input_file(o.path);
+    info_bag(o);
+    return;
+  }
   if (ro.format == io::Format::kPcap || (ro.format == io::Format::kAuto && io::is_sensor_log(o.path))) {
     info_sensor_log(o, ro);
     return;

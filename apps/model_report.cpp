@@ -40,6 +40,7 @@ void ScanSetOptions::add_to(CLI::App& app) {
   app.add_option("--format", format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
   app.add_option("--metadata", metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
   app.add_option("--sensor-model", sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e (default: detected)");
+  app.add_option("--topic", topic, "The topic of a ROS bag to read (default: its only PointCloud2 or Ouster packet topic)");
   app.add_option("--poses", poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
   app.add_option("--input-frame", input_frame,
                  "Frame of the scans' points: sensor (each scan in its own sensor frame), or world (already in "
@@ -60,8 +61,9 @@ std::vector<Cloud> ScanSetOptions::load(const std::vector<std::string>& inputs) 
 }
 
 ScanLoader ScanSetOptions::loader(const std::vector<std::string>& inputs) const {
-  return ScanLoader(inputs, read_options(parse_format_option(format), metadata, sensor_model), poses,
-                    input_frame == "world");
+  io::ReadOptions options = read_options(parse_format_option(format), metadata, sensor_model);
+  options.bag_topic = topic;
+  return ScanLoader(inputs, options, poses, input_frame == "world");
 }
 
 void ScanSetOptions::record_inputs(OutputSet& files, const std::vector<std::string>& inputs) const {

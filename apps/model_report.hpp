@@ -33,6 +33,7 @@ struct ScanSetOptions {
   std::string format = "auto";
   std::string metadata;      ///< --metadata: an Ouster capture's metadata JSON
   std::string sensor_model;  ///< --sensor-model: a Velodyne capture's model
+  std::string topic;         ///< --topic: a ROS bag's topic
   std::string poses;
   std::string input_frame = "sensor";  ///< "world": the points are in the frame of the poses
   int iterations = LearnParams{}.max_iterations;

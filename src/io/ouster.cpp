@@ -220,7 +220,12 @@ Status decode_ouster(const std::string& path, const std::string& metadata_path,
                      const std::vector<Datagram>& datagrams, SensorLog& log) {
   auto text = read_file(metadata_path, 64ULL << 20);
   if (!text.ok()) return text.status();
-  const std::vector<std::uint8_t>& tb = text.value();
+  return decode_ouster_packets(path, metadata_path, text.value(), datagrams, false, log);
+}
+
+Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
+                             const std::vector<std::uint8_t>& tb, const std::vector<Datagram>& datagrams,
+                             bool by_size, SensorLog& log) {
   const json j = json::parse(tb.begin(), tb.end(), nullptr, false);
   if (j.is_discarded()) {
     const std::string s(tb.begin(), tb.end());
@@ -249,7 +254,7 @@ Status decode_ouster(const std::string& path, const std::string& metadata_path,
 
   // Which datagrams are lidar packets: those to the metadata's lidar port, else those of
   // the expected size, else those to Ouster's default port 7502 (to report a mismatch).
-  const int port = m.udp_port_lidar;
+  const int port = by_size ? 0 : m.udp_port_lidar;
   std::vector<const Datagram*> packets;
   std::size_t on_default_port = 0, default_port_size = 0;
   for (const auto& d : datagrams) {

@@ -24,6 +24,7 @@
 
 #include "io/internal.hpp"
 #include "lex3d/io/io.hpp"
+#include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
 
 namespace lex3d::io {
@@ -184,9 +185,30 @@ StatusOr<ReadResult> read_log_first_turn(const std::string& path, const ReadOpti
   return r;
 }
 
+/// A ROS bag's first scan on the topic options.bag_topic (read_bag).
+StatusOr<ReadResult> read_bag_first_scan(const std::string& path, const ReadOptions& options) {
+  auto bag = read_bag(path, options.bag_topic, options);
+  if (!bag.ok()) return bag.status();
+  BagScans& b = bag.value();
+  if (b.scans.empty()) return bad_data(detail::msg(path, "topic " + b.topic + " holds no message"));
+  ReadResult r;
+  r.encoding = "ROS bag " + b.topic + " (" + b.type + ")";
+  r.sensor = b.sensor;
+  r.scans_in_file = b.scans.size();
+  r.no_return_dropped = b.no_return_dropped;
+  r.non_finite_dropped = b.non_finite_dropped;
+  r.dropped_fields = b.dropped_fields;
+  r.notes = b.notes;
+  r.cloud = std::move(b.scans.front().cloud);
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) r.file_bytes = static_cast<std::uint64_t>(st.st_size);
+  return r;
+}
+
 StatusOr<ReadResult> read_cloud_impl(const std::string& path, const ReadOptions& options) {
   if (options.format == Format::kPcap || (options.format == Format::kAuto && is_sensor_log(path)))
     return read_log_first_turn(path, options);
+  if (options.format == Format::kAuto && is_rosbag(path)) return read_bag_first_scan(path, options);
   auto file = read_file(path);
   if (!file.ok()) return file.status();
   const std::vector<std::uint8_t>& bytes = file.value();

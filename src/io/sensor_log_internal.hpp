@@ -40,6 +40,13 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
 Status decode_ouster(const std::string& path, const std::string& metadata_path,
                      const std::vector<Datagram>& datagrams, SensorLog& log);
 
+/// The same with the metadata's bytes given (`metadata_path` names them in messages); with
+/// `by_size` the lidar packets are the datagrams of the metadata's packet size, whatever
+/// their ports (packets recorded without their UDP headers, as in a ROS bag).
+Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
+                             const std::vector<std::uint8_t>& metadata, const std::vector<Datagram>& datagrams,
+                             bool by_size, SensorLog& log);
+
 /// True when the payload looks like a Velodyne data packet (1206 bytes, first block flag).
 bool is_velodyne_packet(const std::vector<std::uint8_t>& payload);
 

@@ -22,6 +22,7 @@
 
 #include "io/internal.hpp"
 #include "lex3d/io/io.hpp"
+#include "lex3d/io/rosbag.hpp"
 
 namespace lex3d::io {
 
@@ -465,6 +466,12 @@ Status write_cloud(const std::string& path, const Cloud& cloud, const WriteOptio
   }
   const WriteOptions& options = own_colors ? with_rgb : options_in;
   try {
+    if (options.format == Format::kAuto && detail::extension_lower(path) == ".bag") {  // one PointCloud2 message
+      std::vector<BagScan> one(1);
+      one[0].cloud = cloud;
+      if (!own_colors && !options.colors.empty() && options.colors.size() == cloud.size()) one[0].cloud.rgb = options.colors;
+      return write_bag(path, one);
+    }
     return write_cloud_impl(path, cloud, options);
   } catch (const std::bad_alloc&) {
     return out_of_memory(msg(path, "out of memory building the file"));

@@ -60,6 +60,8 @@ struct ReadOptions {
   /// For kPcap (Velodyne): "vlp16" or "hdl32e" to override the model the packets announce
   /// (and the packet timing check); empty: detected.
   std::string sensor_model;
+  /// For a ROS bag (io/rosbag.hpp): the topic to read; empty: its only point cloud topic.
+  std::string bag_topic;
 };
 
 struct ReadResult {

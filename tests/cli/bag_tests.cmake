@@ -1,0 +1,119 @@
+# The lex3d command on ROS bags: info, compress, decompress and convert to and from bags,
+# and the bad inputs (a missing topic, inconsistent PointCloud2 fields, a truncated bag):
+# exit 2, one line naming the file, no output written.
+# Run by CTest as: cmake -DLEX3D=... -DMAKE_BAGS=... -DSHARED=... -DWORK=... -P bag_tests.cmake
+
+file(REMOVE_RECURSE "${WORK}")
+file(MAKE_DIRECTORY "${WORK}")
+execute_process(COMMAND "${MAKE_BAGS}" "${WORK}" RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "cannot write the test bags (${rc})")
+endif()
+
+function(run expected name)
+  execute_process(COMMAND "${LEX3D}" ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 120)
+  set(LAST_OUT "${out}" PARENT_SCOPE)
+  set(LAST_ERR "${err}" PARENT_SCOPE)
+  if(NOT "${rc}" STREQUAL "${expected}")
+    message(SEND_ERROR "[${name}] exit ${rc}, expected ${expected}\nstdout: ${out}\nstderr: ${err}")
+    return()
+  endif()
+  if(NOT expected EQUAL 0)
+    string(REGEX MATCHALL "\n" newlines "${err}")
+    list(LENGTH newlines n)
+    if(NOT n EQUAL 1 OR NOT err MATCHES "^lex3d: ")
+      message(SEND_ERROR "[${name}] stderr is not one 'lex3d: ...' line: '${err}'")
+    endif()
+  endif()
+  message(STATUS "[${name}] ok (exit ${rc})")
+endfunction()
+
+function(expect_match name text regex)
+  if(NOT "${text}" MATCHES "${regex}")
+    message(SEND_ERROR "[${name}] output does not match '${regex}':\n${text}")
+  endif()
+endfunction()
+
+function(expect_absent name)
+  foreach(f ${ARGN})
+    if(EXISTS "${f}")
+      message(SEND_ERROR "[${name}] ${f} was written")
+    endif()
+  endforeach()
+  file(GLOB tmp "${WORK}/.lex3d-*")
+  if(tmp)
+    message(SEND_ERROR "[${name}] temporary files left: ${tmp}")
+  endif()
+endfunction()
+
+set(DRIVE "${WORK}/drive.bag")
+
+# --- info lists the topics
+run(0 info.topics info "${DRIVE}")
+expect_match(info.topics "${LAST_OUT}" "/points +sensor_msgs/PointCloud2 +3 messages")
+expect_match(info.topics "${LAST_OUT}" "/note +std_msgs/String +1 messages")
+run(0 info.json info --json "${DRIVE}")
+expect_match(info.json "${LAST_OUT}" "\"topic\":\"/points\",\"type\":\"sensor_msgs/PointCloud2\",\"messages\":3")
+
+# --- compress: one scan a message, names from the stamps; the reflectivity field is reported
+run(0 compress.bag compress "${DRIVE}" --topic /points -o "${WORK}/drive.lex3dq" --one-file)
+expect_match(compress.bag "${LAST_OUT}" "total: [0-9]+ bytes for 1200 points")
+expect_match(compress.bag "${LAST_ERR}" "fields not kept.*reflectivity")
+expect_match(compress.bag "${LAST_OUT}" "kept intensity")
+expect_match(compress.bag "${LAST_OUT}" "kept time")
+run(0 compress.default_topic compress "${DRIVE}" -o "${WORK}/drive_default.lex3dq" --one-file)
+
+# --- decompress into a bag (one message a scan, stamped as read) and read it again
+run(0 decompress.bag decompress "${WORK}/drive.lex3dq" -o "${WORK}/back.bag")
+run(0 info.back info "${WORK}/back.bag")
+expect_match(info.back "${LAST_OUT}" "/points +sensor_msgs/PointCloud2 +3 messages")
+expect_match(info.back "${LAST_OUT}" "messages +3 over 0.200 s")
+run(0 decompress.pcd decompress "${WORK}/drive.lex3dq" -o "${WORK}/back.pcd")
+expect_match(decompress.pcd "${LAST_OUT}" "back_drive_1700000000.100000000.pcd")
+run(0 compress.again compress "${WORK}/back.bag" -o "${WORK}/again.lex3dq" --one-file)
+expect_match(compress.again "${LAST_OUT}" "total: [0-9]+ bytes for 1200 points")
+
+# --- convert: a bag to clouds and clouds into one bag; an organised cloud stays organised
+run(0 convert.organised convert "${WORK}/organised.bag" "${WORK}/organised.pcd")
+expect_match(convert.organised "${LAST_OUT}" "30 points \\(4 x 8 organised\\)")
+run(0 convert.to_bag convert "${DRIVE}" "${WORK}/copy.bag")
+run(0 info.copy info --json "${WORK}/copy.bag")
+expect_match(info.copy "${LAST_OUT}" "\"messages\":3")
+
+# --- bad input: exit 2, one line naming the file, nothing written
+run(2 bad.topic compress "${DRIVE}" --topic /velodyne_points -o "${WORK}/x.lex3dq" --one-file)
+expect_match(bad.topic "${LAST_ERR}" "drive.bag: no topic '/velodyne_points' in the bag; it holds /note \\(std_msgs/String, 1\\), /points \\(sensor_msgs/PointCloud2, 3\\)")
+expect_absent(bad.topic "${WORK}/x.lex3dq")
+run(2 bad.topic_type compress "${DRIVE}" --topic /note -o "${WORK}/x.lex3dq" --one-file)
+expect_match(bad.topic_type "${LAST_ERR}" "/note holds std_msgs/String messages")
+foreach(case point_step row_step bigendian data_size datatype)
+  run(2 bad.${case} compress "${WORK}/${case}.bag" -o "${WORK}/${case}.lex3dq" --one-file)
+  expect_match(bad.${case} "${LAST_ERR}" "${case}.bag: message 1 on /points: ")
+  expect_absent(bad.${case} "${WORK}/${case}.lex3dq")
+endforeach()
+expect_match(bad.datatype "${LAST_ERR}" "unknown datatype 11")
+run(2 bad.convert convert "${WORK}/row_step.bag" "${WORK}/row_step.pcd")
+expect_absent(bad.convert "${WORK}/row_step.pcd")
+
+execute_process(COMMAND head -c 6000 "${DRIVE}" OUTPUT_FILE "${WORK}/truncated.bag")
+run(2 bad.truncated compress "${WORK}/truncated.bag" -o "${WORK}/truncated.lex3dq" --one-file)
+expect_match(bad.truncated "${LAST_ERR}" "truncated.bag: .*(truncated|corrupt)")
+expect_absent(bad.truncated "${WORK}/truncated.lex3dq")
+run(2 bad.truncated_info info "${WORK}/truncated.bag")
+file(WRITE "${WORK}/fake.bag" "#ROSBAG V2.0\nnothing else\n")
+run(2 bad.fake info "${WORK}/fake.bag")
+expect_match(bad.fake "${LAST_ERR}" "fake.bag: ")
+
+# --- the shared Ouster bag (raw packets + metadata), when the data set is present
+set(OUSTER "${SHARED}/rosbag/ouster_512x10_raw.bag")
+if(EXISTS "${OUSTER}")
+  run(0 ouster.info info "${OUSTER}")
+  expect_match(ouster.info "${LAST_OUT}" "/os_node0/lidar_packets +ouster_ros/PacketMsg +32 messages")
+  run(0 ouster.compress compress "${OUSTER}" -o "${WORK}/ouster.lex3dq" --one-file --json)
+  expect_match(ouster.compress "${LAST_OUT}" "\"source\":\"metadata\",\"lasers\":128,\"columns\":512")
+  run(0 ouster.convert convert "${OUSTER}" "${WORK}/ouster.pcd")
+  expect_match(ouster.convert "${LAST_OUT}" "\\(128 x 512 organised\\)")
+else()
+  message(STATUS "[ouster] skipped: no ${OUSTER}")
+endif()
+
