@@ -475,6 +475,18 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
   return t;
 }
 
+/// sums[k] += exp(i (a + k b)) for every k (by rotation, in plain arithmetic).
+void rotate_sum(double a, double b, std::vector<std::complex<double>>& sums) {
+  double er = std::cos(a), ei = std::sin(a);
+  const double rr = std::cos(b), ri = std::sin(b);
+  for (auto& s : sums) {
+    s = {s.real() + er, s.imag() + ei};
+    const double t = er * rr - ei * ri;
+    ei = er * ri + ei * rr;
+    er = t;
+  }
+}
+
 /// The azimuth grid of points whose lasers are known but not their columns. The step first
 /// from the median gap between azimuth-neighbouring points of a laser (the firing
 /// interval), then the column count near it whose grid the lasers' farthest points follow
@@ -487,7 +499,8 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
 /// circular mean and each point's column its nearest grid step. False when the lasers hold
 /// too few points.
 bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring, std::uint32_t lasers,
-                      std::vector<std::uint32_t>& column, std::uint32_t& columns, std::vector<double>& tangential) {
+                      std::vector<std::uint32_t>& column, std::uint32_t& columns, std::vector<double>& tangential,
+                      bool refine = true) {
   std::vector<std::vector<std::uint32_t>> of(lasers);
   for (std::size_t i = 0; i < p.size(); ++i) of[ring[i]].push_back(static_cast<std::uint32_t>(i));
   std::vector<double> rho(p.size()), az(p.size());
@@ -509,9 +522,9 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
   if (!(w0 >= 16 && w0 <= kMaxLaserColumns)) return false;
   using Complex = std::complex<double>;
   // The column count: within 6 % of the median gap's, on each laser's farthest quarter
-  // (at most 256 points; a sideways offset moves them least).
+  // (4096 points over all the lasers; a sideways offset moves them least).
   std::uint32_t w = static_cast<std::uint32_t>(w0);
-  {
+  if (refine) {
     const auto w_lo = static_cast<std::uint32_t>(std::max(16.0, std::floor(0.94 * w0)));
     const auto w_hi = static_cast<std::uint32_t>(std::min<double>(kMaxLaserColumns, std::ceil(1.06 * w0)));
     std::vector<double> score(w_hi - w_lo + 1, 0.0);
@@ -524,46 +537,35 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
                        [&](std::uint32_t x, std::uint32_t y) { return rho[x] > rho[y]; });
       far.resize(quarter);
       std::sort(far.begin(), far.end());
-      const double stride = std::max(1.0, static_cast<double>(far.size()) / 256.0);
+      const double stride = std::max(1.0, static_cast<double>(far.size()) / std::max(16.0, 4096.0 / lasers));
       std::fill(sums.begin(), sums.end(), Complex(0.0, 0.0));
       for (double k = 0; k < static_cast<double>(far.size()); k += stride) {
         const double a = az[far[static_cast<std::size_t>(k)]];
-        Complex e = std::polar(1.0, static_cast<double>(w_lo) * a);
-        const Complex r = std::polar(1.0, a);
-        for (auto& s : sums) {
-          s += e;
-          e *= r;
-        }
+        rotate_sum(static_cast<double>(w_lo) * a, a, sums);
       }
       for (std::size_t k = 0; k < sums.size(); ++k) score[k] += std::abs(sums[k]);
     }
     const auto best = static_cast<std::size_t>(std::max_element(score.begin(), score.end()) - score.begin());
-    if (score[best] > 0.0) w = w_lo + static_cast<std::uint32_t>(best);
+    if (score[best] > 0.0 && refine) w = w_lo + static_cast<std::uint32_t>(best);
   }
   columns = w;
   const double step = kTwoPi / static_cast<double>(w);
-  // Per laser: the sideways offset (2 mm steps within 0.2 m, then 0.05 mm steps around the
-  // best) and the grid's phase, on at most 512 of its points 1 m or more from the axis.
+  // Per laser: the sideways offset (4 mm steps within 0.2 m, then 0.1 mm steps around the
+  // best) and the grid's phase, on at most 256 of its points 1 m or more from the axis.
   tangential.assign(lasers, 0.0);
   std::vector<double> phase(lasers, 0.0);
   const auto coherence = [&](const std::vector<double>& phi, const std::vector<double>& x, double d0, double dd,
                              std::size_t count, std::vector<Complex>& sums) {
     sums.assign(count, Complex(0.0, 0.0));
-    for (std::size_t k = 0; k < phi.size(); ++k) {
-      Complex e = std::polar(1.0, phi[k] - static_cast<double>(w) * d0 * x[k]);
-      const Complex r = std::polar(1.0, -static_cast<double>(w) * dd * x[k]);
-      for (auto& s : sums) {
-        s += e;
-        e *= r;
-      }
-    }
+    for (std::size_t k = 0; k < phi.size(); ++k)
+      rotate_sum(phi[k] - static_cast<double>(w) * d0 * x[k], -static_cast<double>(w) * dd * x[k], sums);
   };
   for (std::uint32_t l = 0; l < lasers; ++l) {
     std::vector<double> phi, x;
     std::vector<std::uint32_t> use;
     for (std::uint32_t i : of[l])
       if (rho[i] >= 1.0) use.push_back(i);
-    const double stride = std::max(1.0, static_cast<double>(use.size()) / 512.0);
+    const double stride = std::max(1.0, static_cast<double>(use.size()) / 256.0);
     for (double k = 0; k < static_cast<double>(use.size()); k += stride) {
       const std::uint32_t i = use[static_cast<std::size_t>(k)];
       phi.push_back(static_cast<double>(w) * az[i]);
@@ -578,8 +580,14 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
       phase[l] = std::atan2(ss, sc) / static_cast<double>(w);
       continue;
     }
-    constexpr double kMaxOffset = 0.2, kCoarse = 0.002, kFine = 0.00005;
-    constexpr std::size_t kCoarseCount = 201, kFineCount = 81;
+    std::vector<Complex> none;
+    coherence(phi, x, 0.0, 0.0, 1, none);
+    if (!refine) {
+      phase[l] = std::arg(none[0]) / static_cast<double>(w);
+      continue;
+    }
+    constexpr double kMaxOffset = 0.2, kCoarse = 0.004, kFine = 0.0001;
+    constexpr std::size_t kCoarseCount = 101, kFineCount = 81;
     std::vector<Complex> sums;
     coherence(phi, x, -kMaxOffset, kCoarse, kCoarseCount, sums);
     std::size_t best = 0;
@@ -591,15 +599,13 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
     for (std::size_t k = 1; k < sums.size(); ++k)
       if (std::norm(sums[k]) > std::norm(sums[best])) best = k;
     const double d = coarse - kFine * 40.0 + kFine * static_cast<double>(best);
-    std::vector<Complex> none;
-    coherence(phi, x, 0.0, 0.0, 1, none);
     // n R² of random phases is about exponential with mean 1: the best of the candidates
     // tried beats no offset by chance by about ln(candidates).
     const double m = static_cast<double>(phi.size());
     const double gain = (std::norm(sums[best]) - std::norm(none[0])) / m;
     const bool offset = gain > 2.0 * std::log(static_cast<double>(kCoarseCount * kFineCount));
-    tangential[l] = offset ? d : 0.0;
-    phase[l] = std::arg(offset ? sums[best] : none[0]) / static_cast<double>(w);
+    tangential[l] = offset && refine ? d : 0.0;
+    phase[l] = std::arg(tangential[l] != 0.0 ? sums[best] : none[0]) / static_cast<double>(w);
   }
   column.resize(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) {
@@ -848,10 +854,17 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
   }
   if (T.size() < 2) return false;
 
-  // Rounds: nearest cone, refit, merge, drop.
+  // Rounds: nearest cone, refit, merge, drop (on at most 32768 of the points, evenly
+  // spread; the last assignment on all of them).
   ring.assign(n, 0);
   std::vector<double> dist(n, 0.0);
-  const auto assign = [&](bool first) {
+  std::vector<std::uint32_t> work, all(n);
+  std::iota(all.begin(), all.end(), 0U);
+  {
+    const double stride = std::max(1.0, static_cast<double>(n) / 32768.0);
+    for (double k = 0; k < static_cast<double>(n); k += stride) work.push_back(static_cast<std::uint32_t>(k));
+  }
+  const auto assign = [&](bool first, const std::vector<std::uint32_t>& points) {
     // cones in slope order; a point looks near where its slope from its cone's height falls
     const std::size_t m = T.size();
     double h_ref = 0.0;
@@ -860,7 +873,7 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       std::nth_element(hs.begin(), hs.begin() + static_cast<std::ptrdiff_t>(m / 2), hs.end());
       h_ref = hs[m / 2];
     }
-    for (std::size_t i = 0; i < n; ++i) {
+    for (std::uint32_t i : points) {
       const double r = std::max(rho[i], 1e-3);
       const std::size_t prev = std::min<std::size_t>(ring[i], m - 1);
       const double h = first ? h_ref : H[prev];
@@ -879,11 +892,11 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       dist[i] = best_d;
     }
   };
-  assign(true);
-  for (int round = 0; round < 8; ++round) {
+  assign(true, work);
+  for (int round = 0; round < 12; ++round) {
     const std::size_t m = T.size();
     std::vector<double> sr(m, 0), sz(m, 0), srr(m, 0), srz(m, 0), cnt(m, 0), r0(m, 1e30), r1(m, 0);
-    for (std::size_t i = 0; i < n; ++i) {
+    for (std::uint32_t i : work) {
       if (!(rho[i] >= kNear)) continue;
       const std::uint16_t l = ring[i];
       sr[l] += rho[i];
@@ -894,7 +907,7 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       r0[l] = std::min(r0[l], rho[i]);
       r1[l] = std::max(r1[l], rho[i]);
     }
-    const double min_points = std::max(16.0, 0.01 * static_cast<double>(n) / static_cast<double>(m));
+    const double min_points = std::max(16.0 * static_cast<double>(work.size()) / static_cast<double>(n), 0.01 * static_cast<double>(work.size()) / static_cast<double>(m));
     std::vector<double> s(m, 0.0);
     std::vector<std::size_t> keep;
     for (std::size_t l = 0; l < m; ++l) {
@@ -910,7 +923,7 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
     if (keep.size() < 2) return false;
     // each kept cone's RMS distance (in z) from its points
     std::vector<double> se(m, 0.0);
-    for (std::size_t i = 0; i < n; ++i) {
+    for (std::uint32_t i : work) {
       if (!(rho[i] >= kNear)) continue;
       const std::uint16_t l = ring[i];
       const double d = p[i].z() - H[l] - T[l] * rho[i];
@@ -936,12 +949,20 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       n0.push_back(r0[l]);
       n1.push_back(r1[l]);
     }
+    const bool merged = nT.size() != m;
     T.swap(nT);
     H.swap(nH);
     if (T.size() > kMaxLasers) return false;
-    assign(true);
-    assign(false);
+    std::vector<std::uint16_t> before(work.size());
+    for (std::size_t k = 0; k < work.size(); ++k) before[k] = ring[work[k]];
+    assign(true, work);
+    assign(false, work);
+    std::size_t changed = 0;
+    for (std::size_t k = 0; k < work.size(); ++k) changed += before[k] != ring[work[k]] ? 1 : 0;
+    if (!merged && changed == 0) break;
   }
+  assign(true, all);
+  assign(false, all);
   lasers = static_cast<std::uint32_t>(T.size());
   if (lasers < 2) return false;
   double se = 0.0;
@@ -950,6 +971,37 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
   // (ring numbers from the top, as sensors number their beams)
   for (auto& r : ring) r = static_cast<std::uint16_t>(lasers - 1 - r);
   return true;
+}
+
+/// Roughly what a laser assignment and its table would cost the coder: per point,
+/// log2(1 + x / 1 cm) of its distance off its beam and of the change of its beam length
+/// from its laser's previous point (in column order, up to kMaxColumnGap columns back; a
+/// point that starts a scan line pays for its whole beam length).
+double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring,
+                       const std::vector<std::uint32_t>& column, const LaserTable& table) {
+  const Beams beams(table, Pose::Identity());
+  const std::size_t n = p.size();
+  std::vector<double> along(n), cost(n);
+  constexpr double kScale = 0.01;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto b = beams.beam(ring[i], column[i], 0);
+    const Eigen::Vector3d v = p[i] - b.o;
+    along[i] = v.dot(b.u);
+    cost[i] = std::log2(1.0 + (v - along[i] * b.u).norm() / kScale);
+  }
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0U);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    return ring[x] != ring[y] ? ring[x] < ring[y] : column[x] != column[y] ? column[x] < column[y] : x < y;
+  });
+  double total = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::uint32_t i = order[k];
+    const bool follows = k > 0 && ring[order[k - 1]] == ring[i] && column[i] - column[order[k - 1]] <= kMaxColumnGap;
+    const double change = follows ? along[i] - along[order[k - 1]] : along[i];
+    total += cost[i] + std::log2(1.0 + std::abs(change) / kScale);
+  }
+  return total;
 }
 
 }  // namespace
@@ -1010,22 +1062,56 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       a.source = std::string("estimated from the points' order (") + (layout->firing_major ? "firing" : "row") +
                  " by " + (layout->firing_major ? "firing" : "row") + ", " + std::to_string(layout->lasers) + " lasers)";
     } else if (a.ring.empty()) {
+      // Two estimates of the lasers: as cones (estimate_cones: beams from different
+      // heights, as a HDL-64E's; the grid's step by coherence, sideways offsets fitted) and
+      // as elevation peaks seen from one height (estimate_rings; the median gap's step, no
+      // sideways offsets); each with its grid and table, and the one whose scan lines the
+      // coder would find cheaper (assignment_cost) is kept.
+      struct Candidate {
+        std::vector<std::uint16_t> ring;
+        std::vector<std::uint32_t> column;
+        std::uint32_t lasers = 0, columns = 0;
+        LaserTable table;
+        double cost = std::numeric_limits<double>::infinity();
+      };
+      std::array<Candidate, 2> cand;
       double z_rms = 0.0;
-      if (!estimate_cones(p, a.ring, lasers, z_rms) && !estimate_rings(p, a.ring, lasers)) return std::nullopt;
-      a.source = "estimated from the points (lasers by elevation, columns by azimuth)";
+      for (std::size_t k = 0; k < cand.size(); ++k) {
+        Candidate& c = cand[k];
+        bool found = false;
+        if (k == 0) found = estimate_cones(p, c.ring, c.lasers, z_rms);
+        else found = estimate_rings(p, c.ring, c.lasers);
+        std::vector<double> tangential;
+        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) continue;
+        auto t = estimate_table(p, c.ring, c.column, c.lasers, c.columns, tangential);
+        if (!t || !storable(*t)) continue;
+        c.table = std::move(*t);
+        c.cost = assignment_cost(p, c.ring, c.column, c.table);
+      }
+      std::size_t pick = 0;
+      for (std::size_t k = 1; k < cand.size(); ++k)
+        if (cand[k].cost < cand[pick].cost) pick = k;
+      if (!std::isfinite(cand[pick].cost)) return std::nullopt;
+      a.ring = std::move(cand[pick].ring);
+      a.column = std::move(cand[pick].column);
+      a.table = std::move(cand[pick].table);
+      a.source = pick == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
+                           : "estimated from the points (lasers by elevation, columns by azimuth)";
       a.from_elevations = true;
     } else if (a.column.empty()) {
       a.source = "estimated from the input's lasers (columns by azimuth)";
     } else {
       a.source = "estimated from the input's lasers and columns";
     }
-    std::vector<double> tangential;
-    if (a.column.empty() && !estimate_columns(p, a.ring, lasers, a.column, columns, tangential)) return std::nullopt;
-    if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
-    if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
-    auto t = estimate_table(p, a.ring, a.column, lasers, columns, tangential);
-    if (!t) return std::nullopt;
-    a.table = std::move(*t);
+    if (!a.from_elevations) {
+      std::vector<double> tangential;
+      if (a.column.empty() && !estimate_columns(p, a.ring, lasers, a.column, columns, tangential)) return std::nullopt;
+      if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
+      if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
+      auto t = estimate_table(p, a.ring, a.column, lasers, columns, tangential);
+      if (!t) return std::nullopt;
+      a.table = std::move(*t);
+    }
   }
   a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
   // Lasers in the order of their elevations, top first, so that a laser's neighbour in the
