@@ -976,7 +976,8 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
 /// Roughly what a laser assignment and its table would cost the coder: per point,
 /// log2(1 + x / 1 cm) of its distance off its beam and of the change of its beam length
 /// from its laser's previous point (in column order, up to kMaxColumnGap columns back; a
-/// point that starts a scan line pays for its whole beam length).
+/// point that starts a scan line pays for its whole beam length), plus the occupancy of
+/// the range image (lasers × columns pixels, each filled or not: their binary entropy).
 double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring,
                        const std::vector<std::uint32_t>& column, const LaserTable& table) {
   const Beams beams(table, Pose::Identity());
@@ -1001,7 +1002,47 @@ double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<
     const double change = follows ? along[i] - along[order[k - 1]] : along[i];
     total += cost[i] + std::log2(1.0 + std::abs(change) / kScale);
   }
+  const double pixels = static_cast<double>(table.lasers()) * static_cast<double>(table.columns);
+  const double fill = std::min(1.0, static_cast<double>(n) / std::max(1.0, pixels));
+  if (fill > 0.0 && fill < 1.0)
+    total += pixels * -(fill * std::log2(fill) + (1.0 - fill) * std::log2(1.0 - fill));
   return total;
+}
+
+/// The table's shift unit, its lasers in elevation order (top first) and the points' RMS
+/// distance from their beams. False when the table cannot be stored.
+bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssignment& a) {
+  const std::size_t n = input.size();
+  a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
+  // Lasers in the order of their elevations, top first, so that a laser's neighbour in the
+  // table is its neighbour in the range image.
+  {
+    const std::uint32_t nl = a.table.lasers();
+    std::vector<std::uint32_t> by(nl);
+    std::iota(by.begin(), by.end(), 0U);
+    std::stable_sort(by.begin(), by.end(),
+                     [&](std::uint32_t x, std::uint32_t y) { return a.table.elevation[x] > a.table.elevation[y]; });
+    std::vector<std::uint16_t> rank(nl);
+    for (std::uint32_t k = 0; k < nl; ++k) rank[by[k]] = static_cast<std::uint16_t>(k);
+    for (auto* f : table_fields(a.table)) {
+      std::vector<std::int64_t> sorted(nl);
+      for (std::uint32_t k = 0; k < nl; ++k) sorted[k] = (*f)[by[k]];
+      *f = std::move(sorted);
+    }
+    for (auto& r : a.ring) r = r < nl ? rank[r] : r;
+  }
+  if (!storable(a.table)) return false;
+  // How far the points lie from their beams.
+  const Beams beams(a.table, T_cloud_sensor);
+  const Pose T_head_cloud = beams.T_cloud_head.inverse();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto b = beams.beam(a.ring[i], a.column[i], 0);
+    const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
+    sum += (v - v.dot(b.u) * b.u).squaredNorm();
+  }
+  a.fit_rms = std::sqrt(sum / static_cast<double>(n));
+  return true;
 }
 
 }  // namespace
@@ -1092,6 +1133,19 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       for (std::size_t k = 1; k < cand.size(); ++k)
         if (cand[k].cost < cand[pick].cost) pick = k;
       if (!std::isfinite(cand[pick].cost)) return std::nullopt;
+      const std::size_t other = 1 - pick;
+      if (std::isfinite(cand[other].cost)) {
+        // the runner-up, finished as below (lasers in elevation order, its fit)
+        LaserAssignment b;
+        b.ring = std::move(cand[other].ring);
+        b.column = std::move(cand[other].column);
+        b.table = std::move(cand[other].table);
+        b.source = other == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
+                              : "estimated from the points (lasers by elevation, columns by azimuth)";
+        b.from_elevations = true;
+        if (finish_assignment(input, T_cloud_sensor, b))
+          a.alternative = std::make_shared<const LaserAssignment>(std::move(b));
+      }
       a.ring = std::move(cand[pick].ring);
       a.column = std::move(cand[pick].column);
       a.table = std::move(cand[pick].table);
@@ -1113,35 +1167,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       a.table = std::move(*t);
     }
   }
-  a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
-  // Lasers in the order of their elevations, top first, so that a laser's neighbour in the
-  // table is its neighbour in the range image.
-  {
-    const std::uint32_t nl = a.table.lasers();
-    std::vector<std::uint32_t> by(nl);
-    std::iota(by.begin(), by.end(), 0U);
-    std::stable_sort(by.begin(), by.end(),
-                     [&](std::uint32_t x, std::uint32_t y) { return a.table.elevation[x] > a.table.elevation[y]; });
-    std::vector<std::uint16_t> rank(nl);
-    for (std::uint32_t k = 0; k < nl; ++k) rank[by[k]] = static_cast<std::uint16_t>(k);
-    for (auto* f : table_fields(a.table)) {
-      std::vector<std::int64_t> sorted(nl);
-      for (std::uint32_t k = 0; k < nl; ++k) sorted[k] = (*f)[by[k]];
-      *f = std::move(sorted);
-    }
-    for (auto& r : a.ring) r = r < nl ? rank[r] : r;
-  }
-  if (!storable(a.table)) return std::nullopt;
-  // How far the points lie from their beams.
-  const Beams beams(a.table, T_cloud_sensor);
-  const Pose T_head_cloud = beams.T_cloud_head.inverse();
-  double sum = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto b = beams.beam(a.ring[i], a.column[i], 0);
-    const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
-    sum += (v - v.dot(b.u) * b.u).squaredNorm();
-  }
-  a.fit_rms = std::sqrt(sum / static_cast<double>(n));
+  if (!finish_assignment(input, T_cloud_sensor, a)) return std::nullopt;
   return a;
 }
 
