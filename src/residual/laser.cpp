@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <complex>
 #include <cstring>
 #include <limits>
 #include <numeric>
@@ -361,8 +362,20 @@ std::pair<double, double> circular_mean(double sum_cos, double sum_sin, std::siz
 /// means are the tighter.
 std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring,
                                          const std::vector<std::uint32_t>& column, std::uint32_t lasers,
-                                         std::uint32_t columns) {
+                                         std::uint32_t columns, const std::vector<double>& tangential = {}) {
   if (lasers < 1 || lasers > kMaxLasers || columns < 1 || columns > kMaxLaserColumns) return std::nullopt;
+  // A beam d sideways of the spin axis reaches a point at horizontal range ρ with its
+  // direction asin(d / ρ) off the point's azimuth, and sqrt(ρ² - d²) along it.
+  const auto sideways = [&](std::uint16_t l) { return l < tangential.size() ? tangential[l] : 0.0; };
+  const auto beam_rho = [&](std::uint32_t i) {
+    const double d = sideways(ring[i]), r = std::hypot(p[i].x(), p[i].y());
+    return d == 0.0 ? r : std::sqrt(std::max(0.0, r * r - d * d));
+  };
+  const auto beam_azimuth = [&](std::uint32_t i) {
+    const double d = sideways(ring[i]), r = std::hypot(p[i].x(), p[i].y());
+    const double a = std::atan2(p[i].y(), p[i].x());
+    return d == 0.0 || !(r > 0.0) ? a : a - std::asin(std::clamp(d / r, -1.0, 1.0));
+  };
   std::vector<std::vector<std::uint32_t>> of(lasers);
   for (std::size_t i = 0; i < p.size(); ++i) of[ring[i]].push_back(static_cast<std::uint32_t>(i));
   LaserTable t;
@@ -384,7 +397,7 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
       for (std::uint32_t i : of[l]) {
         const double rho = std::hypot(p[i].x(), p[i].y());
         if (!(rho > 1e-3)) continue;
-        const double a = std::atan2(p[i].y(), p[i].x()) - dir * kTwoPi * static_cast<double>(column[i]) / columns;
+        const double a = beam_azimuth(i) - dir * kTwoPi * static_cast<double>(column[i]) / columns;
         sc += std::cos(a);
         ss += std::sin(a);
         ++n;
@@ -405,12 +418,12 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
   for (std::uint32_t l = 0; l < lasers; ++l) {
     std::vector<std::uint32_t> use;
     for (std::uint32_t i : of[l])
-      if (std::hypot(p[i].x(), p[i].y()) > 1e-3) use.push_back(i);
+      if (beam_rho(i) > 1e-3) use.push_back(i);
     double z0 = 0.0, slope = 0.0;
     for (int pass = 0; pass < 2 && !use.empty(); ++pass) {
       double sr = 0, sz = 0, srr = 0, srz = 0;
       for (std::uint32_t i : use) {
-        const double r = std::hypot(p[i].x(), p[i].y());
+        const double r = beam_rho(i);
         sr += r;
         sz += p[i].z();
         srr += r * r;
@@ -424,21 +437,21 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
       } else {
         // too few points or one range: the elevation through the sensor origin
         double s = 0;
-        for (std::uint32_t i : use) s += p[i].z() / std::hypot(p[i].x(), p[i].y());
+        for (std::uint32_t i : use) s += p[i].z() / beam_rho(i);
         slope = s / n;
         z0 = 0.0;
       }
       if (std::abs(z0) > 10.0) {  // a wild fit: through the origin instead
         z0 = 0.0;
         double s = 0;
-        for (std::uint32_t i : use) s += p[i].z() / std::hypot(p[i].x(), p[i].y());
+        for (std::uint32_t i : use) s += p[i].z() / beam_rho(i);
         slope = s / n;
       }
       if (pass == 1) break;
       std::vector<double> dev(use.size());
       for (std::size_t j = 0; j < use.size(); ++j) {
         const Eigen::Vector3d& q = p[use[j]];
-        dev[j] = std::abs(q.z() - z0 - slope * std::hypot(q.x(), q.y()));
+        dev[j] = std::abs(q.z() - z0 - slope * beam_rho(use[j]));
       }
       std::vector<double> sorted = dev;
       std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
@@ -451,45 +464,154 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
     // z = z0 + tan(φ) ρ: a beam from (0, 0, z0) at elevation φ.
     t.elevation[l] = angle_units(std::atan(slope));
     t.z_offset[l] = length_units(z0);
+    // A sideways offset: the origin d across the beam, as §2.8 stores it (the origin at
+    // the column's azimuth + π/2, radial offset d, the beam turned back by π/2).
+    if (sideways(static_cast<std::uint16_t>(l)) != 0.0) {
+      t.column_azimuth[l] += angle_units(kPi / 2.0);
+      t.beam_azimuth[l] = angle_units(-kPi / 2.0);
+      t.radial_offset[l] = length_units(sideways(static_cast<std::uint16_t>(l)));
+    }
   }
   return t;
 }
 
-/// The azimuth grid of points whose lasers are known but not their columns: the step is
-/// the median gap between azimuth-neighbouring points of a laser (the firing interval),
-/// the grid's phase per laser the circular mean of the azimuths modulo the step, and each
-/// point's column its nearest grid step. False when the lasers hold too few points.
+/// sums[k] += exp(i (a + k b)) for every k (by rotation, in plain arithmetic).
+void rotate_sum(double a, double b, std::vector<std::complex<double>>& sums) {
+  double er = std::cos(a), ei = std::sin(a);
+  const double rr = std::cos(b), ri = std::sin(b);
+  for (auto& s : sums) {
+    s = {s.real() + er, s.imag() + ei};
+    const double t = er * rr - ei * ri;
+    ei = er * ri + ei * rr;
+    er = t;
+  }
+}
+
+/// The azimuth grid of points whose lasers are known but not their columns. The step first
+/// from the median gap between azimuth-neighbouring points of a laser (the firing
+/// interval), then the column count near it whose grid the lasers' farthest points follow
+/// best (the largest sum over lasers of the resultant length of their azimuths' phases on
+/// the grid: reported azimuths rounded to a coarser unit than the step make the median
+/// gap a few per cent off). Per laser, the beam's sideways offset d from the spin axis
+/// (a tangential offset moves a point's azimuth by asin(d / ρ), more the nearer it is) is
+/// the d whose corrected phases are the most coherent, taken where that beats no offset by
+/// more than chance would over the candidates tried; the grid's phase per laser is their
+/// circular mean and each point's column its nearest grid step. False when the lasers hold
+/// too few points.
 bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring, std::uint32_t lasers,
-                      std::vector<std::uint32_t>& column, std::uint32_t& columns) {
-  std::vector<std::vector<double>> az(lasers);
-  for (std::size_t i = 0; i < p.size(); ++i) az[ring[i]].push_back(std::atan2(p[i].y(), p[i].x()));
+                      std::vector<std::uint32_t>& column, std::uint32_t& columns, std::vector<double>& tangential,
+                      bool refine = true) {
+  std::vector<std::vector<std::uint32_t>> of(lasers);
+  for (std::size_t i = 0; i < p.size(); ++i) of[ring[i]].push_back(static_cast<std::uint32_t>(i));
+  std::vector<double> rho(p.size()), az(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    rho[i] = std::hypot(p[i].x(), p[i].y());
+    az[i] = std::atan2(p[i].y(), p[i].x());
+  }
   std::vector<double> gaps;
-  for (auto& a : az) {
-    std::vector<double> s = a;
+  for (const auto& idx : of) {
+    std::vector<double> s;
+    for (std::uint32_t i : idx) s.push_back(az[i]);
     std::sort(s.begin(), s.end());
     for (std::size_t k = 1; k < s.size(); ++k)
       if (s[k] - s[k - 1] > 1e-7) gaps.push_back(s[k] - s[k - 1]);
   }
   if (gaps.size() < 64) return false;
   std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
-  const double median = gaps[gaps.size() / 2];
-  const double w = std::round(kTwoPi / median);
-  if (!(w >= 16 && w <= kMaxLaserColumns)) return false;
-  columns = static_cast<std::uint32_t>(w);
-  const double step = kTwoPi / w;
-  std::vector<double> phase(lasers, 0.0);
-  for (std::uint32_t l = 0; l < lasers; ++l) {
-    double sc = 0, ss = 0;
-    for (double a : az[l]) {
-      const double f = kTwoPi * (a / step - std::floor(a / step));
-      sc += std::cos(f);
-      ss += std::sin(f);
+  const double w0 = std::round(kTwoPi / gaps[gaps.size() / 2]);
+  if (!(w0 >= 16 && w0 <= kMaxLaserColumns)) return false;
+  using Complex = std::complex<double>;
+  // The column count: within 6 % of the median gap's, on each laser's farthest quarter
+  // (4096 points over all the lasers; a sideways offset moves them least).
+  std::uint32_t w = static_cast<std::uint32_t>(w0);
+  if (refine) {
+    const auto w_lo = static_cast<std::uint32_t>(std::max(16.0, std::floor(0.94 * w0)));
+    const auto w_hi = static_cast<std::uint32_t>(std::min<double>(kMaxLaserColumns, std::ceil(1.06 * w0)));
+    std::vector<double> score(w_hi - w_lo + 1, 0.0);
+    std::vector<Complex> sums(score.size());
+    for (const auto& idx : of) {
+      std::vector<std::uint32_t> far = idx;
+      const std::size_t quarter = far.size() / 4;
+      if (quarter < 8) continue;
+      std::nth_element(far.begin(), far.begin() + static_cast<std::ptrdiff_t>(quarter), far.end(),
+                       [&](std::uint32_t x, std::uint32_t y) { return rho[x] > rho[y]; });
+      far.resize(quarter);
+      std::sort(far.begin(), far.end());
+      const double stride = std::max(1.0, static_cast<double>(far.size()) / std::max(16.0, 4096.0 / lasers));
+      std::fill(sums.begin(), sums.end(), Complex(0.0, 0.0));
+      for (double k = 0; k < static_cast<double>(far.size()); k += stride) {
+        const double a = az[far[static_cast<std::size_t>(k)]];
+        rotate_sum(static_cast<double>(w_lo) * a, a, sums);
+      }
+      for (std::size_t k = 0; k < sums.size(); ++k) score[k] += std::abs(sums[k]);
     }
-    phase[l] = circular_mean(sc, ss, az[l].size()).first / kTwoPi * step;
+    const auto best = static_cast<std::size_t>(std::max_element(score.begin(), score.end()) - score.begin());
+    if (score[best] > 0.0 && refine) w = w_lo + static_cast<std::uint32_t>(best);
+  }
+  columns = w;
+  const double step = kTwoPi / static_cast<double>(w);
+  // Per laser: the sideways offset (4 mm steps within 0.2 m, then 0.1 mm steps around the
+  // best) and the grid's phase, on at most 256 of its points 1 m or more from the axis.
+  tangential.assign(lasers, 0.0);
+  std::vector<double> phase(lasers, 0.0);
+  const auto coherence = [&](const std::vector<double>& phi, const std::vector<double>& x, double d0, double dd,
+                             std::size_t count, std::vector<Complex>& sums) {
+    sums.assign(count, Complex(0.0, 0.0));
+    for (std::size_t k = 0; k < phi.size(); ++k)
+      rotate_sum(phi[k] - static_cast<double>(w) * d0 * x[k], -static_cast<double>(w) * dd * x[k], sums);
+  };
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    std::vector<double> phi, x;
+    std::vector<std::uint32_t> use;
+    for (std::uint32_t i : of[l])
+      if (rho[i] >= 1.0) use.push_back(i);
+    const double stride = std::max(1.0, static_cast<double>(use.size()) / 256.0);
+    for (double k = 0; k < static_cast<double>(use.size()); k += stride) {
+      const std::uint32_t i = use[static_cast<std::size_t>(k)];
+      phi.push_back(static_cast<double>(w) * az[i]);
+      x.push_back(1.0 / rho[i]);
+    }
+    if (phi.empty()) {
+      double sc = 0, ss = 0;
+      for (std::uint32_t i : of[l]) {
+        sc += std::cos(static_cast<double>(w) * az[i]);
+        ss += std::sin(static_cast<double>(w) * az[i]);
+      }
+      phase[l] = std::atan2(ss, sc) / static_cast<double>(w);
+      continue;
+    }
+    std::vector<Complex> none;
+    coherence(phi, x, 0.0, 0.0, 1, none);
+    if (!refine) {
+      phase[l] = std::arg(none[0]) / static_cast<double>(w);
+      continue;
+    }
+    constexpr double kMaxOffset = 0.2, kCoarse = 0.004, kFine = 0.0001;
+    constexpr std::size_t kCoarseCount = 101, kFineCount = 81;
+    std::vector<Complex> sums;
+    coherence(phi, x, -kMaxOffset, kCoarse, kCoarseCount, sums);
+    std::size_t best = 0;
+    for (std::size_t k = 1; k < sums.size(); ++k)
+      if (std::norm(sums[k]) > std::norm(sums[best])) best = k;
+    const double coarse = -kMaxOffset + kCoarse * static_cast<double>(best);
+    coherence(phi, x, coarse - kFine * 40.0, kFine, kFineCount, sums);
+    best = 0;
+    for (std::size_t k = 1; k < sums.size(); ++k)
+      if (std::norm(sums[k]) > std::norm(sums[best])) best = k;
+    const double d = coarse - kFine * 40.0 + kFine * static_cast<double>(best);
+    // n R² of random phases is about exponential with mean 1: the best of the candidates
+    // tried beats no offset by chance by about ln(candidates).
+    const double m = static_cast<double>(phi.size());
+    const double gain = (std::norm(sums[best]) - std::norm(none[0])) / m;
+    const bool offset = gain > 2.0 * std::log(static_cast<double>(kCoarseCount * kFineCount));
+    tangential[l] = offset && refine ? d : 0.0;
+    phase[l] = std::arg(tangential[l] != 0.0 ? sums[best] : none[0]) / static_cast<double>(w);
   }
   column.resize(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) {
-    double a = std::atan2(p[i].y(), p[i].x()) - phase[ring[i]];
+    const double d = tangential[ring[i]];
+    double a = az[i] - phase[ring[i]];
+    if (d != 0.0 && rho[i] > 0.0) a -= std::asin(std::clamp(d / rho[i], -1.0, 1.0));
     a -= kTwoPi * std::floor(a / kTwoPi);  // [0, 2π)
     auto c = static_cast<std::int64_t>(std::llround(a / step));
     if (c >= static_cast<std::int64_t>(columns)) c -= columns;
@@ -640,6 +762,289 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
   return true;
 }
 
+
+/// Lasers of points that know none, as cones: laser l's beams start at height h_l on the
+/// spin axis and rise at tan t_l, so its points lie on z = h_l + t_l·ρ. Seeds: every point
+/// votes, for each origin height h in [-0.5, 0.5] m, for the slope (z - h) / ρ it would
+/// have from there; the slopes (0.01° bins) that most points share at their best height
+/// are the seeds, far more of them than there are lasers (a wall at one range votes along
+/// a whole diagonal). Rounds of giving every point to the cone that passes nearest it (in
+/// z at its range) and refitting each cone to its points then pull the seeds of one laser
+/// onto the same cone; cones that coincide over their points' ranges (within three times
+/// their points' RMS distance) are merged, cones left with too few points dropped. This
+/// keeps lasers whose beams start at different heights (a HDL-64E's two blocks) whole where
+/// elevations seen from one height split or merge them. `z_rms`: the points' RMS distance
+/// (in z) from their cones.
+bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint16_t>& ring, std::uint32_t& lasers,
+                    double& z_rms) {
+  const std::size_t n = p.size();
+  if (n < 256) return false;
+  constexpr double kNear = 1.0;
+  std::vector<double> rho(n);
+  for (std::size_t i = 0; i < n; ++i) rho[i] = std::hypot(p[i].x(), p[i].y());
+  std::vector<std::uint32_t> far;
+  for (std::size_t i = 0; i < n; ++i)
+    if (rho[i] >= kNear) far.push_back(static_cast<std::uint32_t>(i));
+  if (far.size() < 128) return false;
+  if (far.size() > 16384) {
+    std::vector<std::uint32_t> sample;
+    const double stride = static_cast<double>(far.size()) / 16384.0;
+    for (std::size_t k = 0; k < 16384; ++k) sample.push_back(far[static_cast<std::size_t>(static_cast<double>(k) * stride)]);
+    far.swap(sample);
+  }
+  // The vote: heights every 2 cm, slopes in bins of 0.01° (in tan) within ±60°.
+  constexpr int kHeights = 51;
+  constexpr double kHeightStep = 0.02, kHeightLow = -0.5;
+  const double bin = std::tan(0.01 * kPi / 180.0);
+  const double t_max = std::tan(60.0 * kPi / 180.0);
+  double lo = t_max, hi = -t_max;
+  for (std::uint32_t i : far)
+    for (double h : {kHeightLow, -kHeightLow}) {
+      const double t = std::clamp((p[i].z() - h) / rho[i], -t_max, t_max);
+      lo = std::min(lo, t);
+      hi = std::max(hi, t);
+    }
+  lo -= 4 * bin;
+  const auto bins = static_cast<std::size_t>((hi - lo) / bin) + 8;
+  std::vector<float> votes(kHeights * bins, 0.0F);
+  for (int k = 0; k < kHeights; ++k) {
+    const double h = kHeightLow + kHeightStep * k;
+    float* row = votes.data() + static_cast<std::size_t>(k) * bins;
+    for (std::uint32_t i : far) {
+      const double t = (p[i].z() - h) / rho[i];
+      if (t < -t_max || t > t_max) continue;
+      row[static_cast<std::size_t>((t - lo) / bin)] += 1.0F;
+    }
+  }
+  // Each slope's best height (votes smoothed over 5 bins), then peaks as in estimate_rings.
+  std::vector<double> profile(bins, 0.0), height(bins, 0.0);
+  for (int k = 0; k < kHeights; ++k) {
+    const float* row = votes.data() + static_cast<std::size_t>(k) * bins;
+    for (std::size_t b = 2; b + 2 < bins; ++b) {
+      const double s = (row[b - 2] + 2.0 * row[b - 1] + 3.0 * row[b] + 2.0 * row[b + 1] + row[b + 2]) / 9.0;
+      if (s > profile[b]) {
+        profile[b] = s;
+        height[b] = kHeightLow + kHeightStep * k;
+      }
+    }
+  }
+  double occupied = 0, sum = 0;
+  for (double c : profile)
+    if (c > 0) {
+      occupied += 1;
+      sum += c;
+    }
+  const double floor_count = 0.25 * sum / std::max(1.0, occupied);
+  std::vector<double> T, H;
+  std::size_t last = 0;
+  for (std::size_t b = 1; b + 1 < bins; ++b) {
+    if (!(profile[b] >= floor_count && profile[b] >= profile[b - 1] && profile[b] > profile[b + 1])) continue;
+    const double t = lo + (static_cast<double>(b) + 0.5) * bin;
+    if (!T.empty() && b - last < 8) {
+      if (profile[b] > profile[last]) {
+        T.back() = t;
+        H.back() = height[b];
+        last = b;
+      }
+      continue;
+    }
+    T.push_back(t);
+    H.push_back(height[b]);
+    last = b;
+  }
+  if (T.size() < 2) return false;
+
+  // Rounds: nearest cone, refit, merge, drop (on at most 32768 of the points, evenly
+  // spread; the last assignment on all of them).
+  ring.assign(n, 0);
+  std::vector<double> dist(n, 0.0);
+  std::vector<std::uint32_t> work, all(n);
+  std::iota(all.begin(), all.end(), 0U);
+  {
+    const double stride = std::max(1.0, static_cast<double>(n) / 32768.0);
+    for (double k = 0; k < static_cast<double>(n); k += stride) work.push_back(static_cast<std::uint32_t>(k));
+  }
+  const auto assign = [&](bool first, const std::vector<std::uint32_t>& points) {
+    // cones in slope order; a point looks near where its slope from its cone's height falls
+    const std::size_t m = T.size();
+    double h_ref = 0.0;
+    if (first) {
+      std::vector<double> hs = H;
+      std::nth_element(hs.begin(), hs.begin() + static_cast<std::ptrdiff_t>(m / 2), hs.end());
+      h_ref = hs[m / 2];
+    }
+    for (std::uint32_t i : points) {
+      const double r = std::max(rho[i], 1e-3);
+      const std::size_t prev = std::min<std::size_t>(ring[i], m - 1);
+      const double h = first ? h_ref : H[prev];
+      const auto pos = static_cast<std::size_t>(std::lower_bound(T.begin(), T.end(), (p[i].z() - h) / r) - T.begin());
+      const std::size_t w = first ? 12 : 4;
+      std::size_t best = first ? std::min(pos, m - 1) : prev;
+      double best_d = std::abs(p[i].z() - H[best] - T[best] * r);
+      for (std::size_t l = pos > w ? pos - w : 0; l < std::min(m, pos + w); ++l) {
+        const double d = std::abs(p[i].z() - H[l] - T[l] * r);
+        if (d < best_d) {
+          best_d = d;
+          best = l;
+        }
+      }
+      ring[i] = static_cast<std::uint16_t>(best);
+      dist[i] = best_d;
+    }
+  };
+  assign(true, work);
+  for (int round = 0; round < 12; ++round) {
+    const std::size_t m = T.size();
+    std::vector<double> sr(m, 0), sz(m, 0), srr(m, 0), srz(m, 0), cnt(m, 0), r0(m, 1e30), r1(m, 0);
+    for (std::uint32_t i : work) {
+      if (!(rho[i] >= kNear)) continue;
+      const std::uint16_t l = ring[i];
+      sr[l] += rho[i];
+      sz[l] += p[i].z();
+      srr[l] += rho[i] * rho[i];
+      srz[l] += rho[i] * p[i].z();
+      cnt[l] += 1;
+      r0[l] = std::min(r0[l], rho[i]);
+      r1[l] = std::max(r1[l], rho[i]);
+    }
+    const double min_points = std::max(16.0 * static_cast<double>(work.size()) / static_cast<double>(n), 0.01 * static_cast<double>(work.size()) / static_cast<double>(m));
+    std::vector<double> s(m, 0.0);
+    std::vector<std::size_t> keep;
+    for (std::size_t l = 0; l < m; ++l) {
+      if (cnt[l] < min_points) continue;
+      const double den = cnt[l] * srr[l] - sr[l] * sr[l];
+      if (den > 1e-6 * cnt[l] * srr[l]) {
+        T[l] = (cnt[l] * srz[l] - sr[l] * sz[l]) / den;
+        H[l] = (sz[l] - T[l] * sr[l]) / cnt[l];
+      }
+      if (!(std::abs(H[l]) <= 1.0 && std::abs(T[l]) <= t_max)) continue;
+      keep.push_back(l);
+    }
+    if (keep.size() < 2) return false;
+    // each kept cone's RMS distance (in z) from its points
+    std::vector<double> se(m, 0.0);
+    for (std::uint32_t i : work) {
+      if (!(rho[i] >= kNear)) continue;
+      const std::uint16_t l = ring[i];
+      const double d = p[i].z() - H[l] - T[l] * rho[i];
+      se[l] += d * d;
+    }
+    for (std::size_t l : keep) s[l] = std::sqrt(se[l] / cnt[l]);
+    std::stable_sort(keep.begin(), keep.end(), [&](std::size_t x, std::size_t y) { return T[x] < T[y]; });
+    std::vector<double> nT, nH, ns, n0, n1;
+    for (std::size_t l : keep) {
+      if (!nT.empty()) {
+        const double a = std::min(n0.back(), r0[l]), b = std::max(n1.back(), r1[l]);
+        const double dt = T[l] - nT.back(), dh = H[l] - nH.back();
+        const double apart = std::max(std::abs(dt * a + dh), std::abs(dt * b + dh));
+        if (apart < 3.0 * std::max(ns.back(), s[l]) + 1e-4) {
+          n0.back() = a;
+          n1.back() = b;
+          continue;
+        }
+      }
+      nT.push_back(T[l]);
+      nH.push_back(H[l]);
+      ns.push_back(s[l]);
+      n0.push_back(r0[l]);
+      n1.push_back(r1[l]);
+    }
+    const bool merged = nT.size() != m;
+    T.swap(nT);
+    H.swap(nH);
+    if (T.size() > kMaxLasers) return false;
+    std::vector<std::uint16_t> before(work.size());
+    for (std::size_t k = 0; k < work.size(); ++k) before[k] = ring[work[k]];
+    assign(true, work);
+    assign(false, work);
+    std::size_t changed = 0;
+    for (std::size_t k = 0; k < work.size(); ++k) changed += before[k] != ring[work[k]] ? 1 : 0;
+    if (!merged && changed == 0) break;
+  }
+  assign(true, all);
+  assign(false, all);
+  lasers = static_cast<std::uint32_t>(T.size());
+  if (lasers < 2) return false;
+  double se = 0.0;
+  for (std::size_t i = 0; i < n; ++i) se += dist[i] * dist[i];
+  z_rms = std::sqrt(se / static_cast<double>(n));
+  // (ring numbers from the top, as sensors number their beams)
+  for (auto& r : ring) r = static_cast<std::uint16_t>(lasers - 1 - r);
+  return true;
+}
+
+/// Roughly what a laser assignment and its table would cost the coder: per point,
+/// log2(1 + x / 1 cm) of its distance off its beam and of the change of its beam length
+/// from its laser's previous point (in column order, up to kMaxColumnGap columns back; a
+/// point that starts a scan line pays for its whole beam length), plus the occupancy of
+/// the range image (lasers × columns pixels, each filled or not: their binary entropy).
+double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring,
+                       const std::vector<std::uint32_t>& column, const LaserTable& table) {
+  const Beams beams(table, Pose::Identity());
+  const std::size_t n = p.size();
+  std::vector<double> along(n), cost(n);
+  constexpr double kScale = 0.01;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto b = beams.beam(ring[i], column[i], 0);
+    const Eigen::Vector3d v = p[i] - b.o;
+    along[i] = v.dot(b.u);
+    cost[i] = std::log2(1.0 + (v - along[i] * b.u).norm() / kScale);
+  }
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0U);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    return ring[x] != ring[y] ? ring[x] < ring[y] : column[x] != column[y] ? column[x] < column[y] : x < y;
+  });
+  double total = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::uint32_t i = order[k];
+    const bool follows = k > 0 && ring[order[k - 1]] == ring[i] && column[i] - column[order[k - 1]] <= kMaxColumnGap;
+    const double change = follows ? along[i] - along[order[k - 1]] : along[i];
+    total += cost[i] + std::log2(1.0 + std::abs(change) / kScale);
+  }
+  const double pixels = static_cast<double>(table.lasers()) * static_cast<double>(table.columns);
+  const double fill = std::min(1.0, static_cast<double>(n) / std::max(1.0, pixels));
+  if (fill > 0.0 && fill < 1.0)
+    total += pixels * -(fill * std::log2(fill) + (1.0 - fill) * std::log2(1.0 - fill));
+  return total;
+}
+
+/// The table's shift unit, its lasers in elevation order (top first) and the points' RMS
+/// distance from their beams. False when the table cannot be stored.
+bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssignment& a) {
+  const std::size_t n = input.size();
+  a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
+  // Lasers in the order of their elevations, top first, so that a laser's neighbour in the
+  // table is its neighbour in the range image.
+  {
+    const std::uint32_t nl = a.table.lasers();
+    std::vector<std::uint32_t> by(nl);
+    std::iota(by.begin(), by.end(), 0U);
+    std::stable_sort(by.begin(), by.end(),
+                     [&](std::uint32_t x, std::uint32_t y) { return a.table.elevation[x] > a.table.elevation[y]; });
+    std::vector<std::uint16_t> rank(nl);
+    for (std::uint32_t k = 0; k < nl; ++k) rank[by[k]] = static_cast<std::uint16_t>(k);
+    for (auto* f : table_fields(a.table)) {
+      std::vector<std::int64_t> sorted(nl);
+      for (std::uint32_t k = 0; k < nl; ++k) sorted[k] = (*f)[by[k]];
+      *f = std::move(sorted);
+    }
+    for (auto& r : a.ring) r = r < nl ? rank[r] : r;
+  }
+  if (!storable(a.table)) return false;
+  // How far the points lie from their beams.
+  const Beams beams(a.table, T_cloud_sensor);
+  const Pose T_head_cloud = beams.T_cloud_head.inverse();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto b = beams.beam(a.ring[i], a.column[i], 0);
+    const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
+    sum += (v - v.dot(b.u) * b.u).squaredNorm();
+  }
+  a.fit_rms = std::sqrt(sum / static_cast<double>(n));
+  return true;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -698,50 +1103,71 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       a.source = std::string("estimated from the points' order (") + (layout->firing_major ? "firing" : "row") +
                  " by " + (layout->firing_major ? "firing" : "row") + ", " + std::to_string(layout->lasers) + " lasers)";
     } else if (a.ring.empty()) {
-      if (!estimate_rings(p, a.ring, lasers)) return std::nullopt;
-      a.source = "estimated from the points (lasers by elevation, columns by azimuth)";
+      // Two estimates of the lasers: as cones (estimate_cones: beams from different
+      // heights, as a HDL-64E's; the grid's step by coherence, sideways offsets fitted) and
+      // as elevation peaks seen from one height (estimate_rings; the median gap's step, no
+      // sideways offsets); each with its grid and table, and the one whose scan lines the
+      // coder would find cheaper (assignment_cost) is kept.
+      struct Candidate {
+        std::vector<std::uint16_t> ring;
+        std::vector<std::uint32_t> column;
+        std::uint32_t lasers = 0, columns = 0;
+        LaserTable table;
+        double cost = std::numeric_limits<double>::infinity();
+      };
+      std::array<Candidate, 2> cand;
+      double z_rms = 0.0;
+      for (std::size_t k = 0; k < cand.size(); ++k) {
+        Candidate& c = cand[k];
+        bool found = false;
+        if (k == 0) found = estimate_cones(p, c.ring, c.lasers, z_rms);
+        else found = estimate_rings(p, c.ring, c.lasers);
+        std::vector<double> tangential;
+        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) continue;
+        auto t = estimate_table(p, c.ring, c.column, c.lasers, c.columns, tangential);
+        if (!t || !storable(*t)) continue;
+        c.table = std::move(*t);
+        c.cost = assignment_cost(p, c.ring, c.column, c.table);
+      }
+      std::size_t pick = 0;
+      for (std::size_t k = 1; k < cand.size(); ++k)
+        if (cand[k].cost < cand[pick].cost) pick = k;
+      if (!std::isfinite(cand[pick].cost)) return std::nullopt;
+      const std::size_t other = 1 - pick;
+      if (std::isfinite(cand[other].cost)) {
+        // the runner-up, finished as below (lasers in elevation order, its fit)
+        LaserAssignment b;
+        b.ring = std::move(cand[other].ring);
+        b.column = std::move(cand[other].column);
+        b.table = std::move(cand[other].table);
+        b.source = other == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
+                              : "estimated from the points (lasers by elevation, columns by azimuth)";
+        b.from_elevations = true;
+        if (finish_assignment(input, T_cloud_sensor, b))
+          a.alternative = std::make_shared<const LaserAssignment>(std::move(b));
+      }
+      a.ring = std::move(cand[pick].ring);
+      a.column = std::move(cand[pick].column);
+      a.table = std::move(cand[pick].table);
+      a.source = pick == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
+                           : "estimated from the points (lasers by elevation, columns by azimuth)";
       a.from_elevations = true;
     } else if (a.column.empty()) {
       a.source = "estimated from the input's lasers (columns by azimuth)";
     } else {
       a.source = "estimated from the input's lasers and columns";
     }
-    if (a.column.empty() && !estimate_columns(p, a.ring, lasers, a.column, columns)) return std::nullopt;
-    if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
-    if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
-    auto t = estimate_table(p, a.ring, a.column, lasers, columns);
-    if (!t) return std::nullopt;
-    a.table = std::move(*t);
-  }
-  a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
-  // Lasers in the order of their elevations, top first, so that a laser's neighbour in the
-  // table is its neighbour in the range image.
-  {
-    const std::uint32_t nl = a.table.lasers();
-    std::vector<std::uint32_t> by(nl);
-    std::iota(by.begin(), by.end(), 0U);
-    std::stable_sort(by.begin(), by.end(),
-                     [&](std::uint32_t x, std::uint32_t y) { return a.table.elevation[x] > a.table.elevation[y]; });
-    std::vector<std::uint16_t> rank(nl);
-    for (std::uint32_t k = 0; k < nl; ++k) rank[by[k]] = static_cast<std::uint16_t>(k);
-    for (auto* f : table_fields(a.table)) {
-      std::vector<std::int64_t> sorted(nl);
-      for (std::uint32_t k = 0; k < nl; ++k) sorted[k] = (*f)[by[k]];
-      *f = std::move(sorted);
+    if (!a.from_elevations) {
+      std::vector<double> tangential;
+      if (a.column.empty() && !estimate_columns(p, a.ring, lasers, a.column, columns, tangential)) return std::nullopt;
+      if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
+      if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
+      auto t = estimate_table(p, a.ring, a.column, lasers, columns, tangential);
+      if (!t) return std::nullopt;
+      a.table = std::move(*t);
     }
-    for (auto& r : a.ring) r = r < nl ? rank[r] : r;
   }
-  if (!storable(a.table)) return std::nullopt;
-  // How far the points lie from their beams.
-  const Beams beams(a.table, T_cloud_sensor);
-  const Pose T_head_cloud = beams.T_cloud_head.inverse();
-  double sum = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto b = beams.beam(a.ring[i], a.column[i], 0);
-    const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
-    sum += (v - v.dot(b.u) * b.u).squaredNorm();
-  }
-  a.fit_rms = std::sqrt(sum / static_cast<double>(n));
+  if (!finish_assignment(input, T_cloud_sensor, a)) return std::nullopt;
   return a;
 }
 

@@ -5,6 +5,7 @@
 // reproduce a point within the bound, a small tangential correction — costs bits.
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -44,6 +45,9 @@ struct LaserAssignment {
   std::string source;                  ///< "sensor metadata", "rings and columns of the input", "estimated"
   double fit_rms = 0.0;                ///< RMS distance of the points from their beams, metres
   bool from_elevations = false;        ///< lasers estimated from the points' elevations alone
+  /// Lasers estimated from the points: the other estimate (cones or elevation peaks), for
+  /// the caller to code too and keep the smaller.
+  std::shared_ptr<const LaserAssignment> alternative;
 };
 
 /// The laser table and every point's laser and column: from the cloud's geometry, rings and

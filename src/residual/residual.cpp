@@ -676,6 +676,15 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         exact ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
     laser = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, max_error, check_error,
                                 options.thin, shares, threads);
+    // Lasers estimated two ways from the points: the other estimate coded too, the smaller kept.
+    if (const auto alt = lasers_of->alternative) {
+      auto other = detail::laser_layer(head, input.points, coded, *alt, T_cloud_sensor, max_error, check_error,
+                                       options.thin, shares, threads);
+      if (other && (!laser || other->stream.size() < laser->stream.size())) {
+        laser = std::move(other);
+        lasers_of = *alt;
+      }
+    }
   }
   const bool others = !laser || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);

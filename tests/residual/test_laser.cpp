@@ -453,3 +453,56 @@ TEST(ResidualLaserGolden, Format1_4FileDecodesToTheRecordedCloud) {
 
 }  // namespace
 }  // namespace lex3d
+
+namespace lex3d {
+namespace {
+
+/// A HDL-64E-type scan in firing order with no ring field: two blocks of lasers whose beams
+/// start at different heights (so that lasers of the two blocks interleave in elevation),
+/// each beam a few centimetres sideways of the spin axis, per-laser azimuth offsets of
+/// several degrees, a room of varying radius and a ground plane.
+Cloud offset_block_scan(std::uint32_t per_block, std::uint32_t columns, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> azimuth_jitter(-6.0, 6.0), keep(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 0.003);
+  struct Laser {
+    double elevation, z0, azimuth, sideways;
+  };
+  std::vector<Laser> lasers;
+  for (std::uint32_t k = 0; k < per_block; ++k) {
+    const double f = static_cast<double>(k) / (per_block - 1);
+    lasers.push_back({(-10.0 + 12.0 * f) * M_PI / 180.0, 0.20 + 0.01 * f, azimuth_jitter(rng) * M_PI / 180.0,
+                      k % 2 ? 0.026 : -0.026});
+    lasers.push_back({(-24.0 + 13.95 * f) * M_PI / 180.0, 0.11 + 0.01 * f, azimuth_jitter(rng) * M_PI / 180.0,
+                      k % 2 ? -0.026 : 0.026});
+  }
+  Cloud c;
+  for (std::uint32_t col = 0; col < columns; ++col)
+    for (const Laser& l : lasers) {
+      if (keep(rng) < 0.05) continue;  // no return
+      const double beta = 2.0 * M_PI * col / columns + l.azimuth;
+      const double wall = 14.0 + 5.0 * std::sin(3.0 * beta) + 2.0 * std::cos(7.0 * beta);
+      double s = wall / std::cos(l.elevation);
+      if (l.elevation < 0.0) s = std::min(s, (-1.73 - l.z0) / std::sin(l.elevation));
+      s += noise(rng);
+      const Eigen::Vector3d o(-l.sideways * std::sin(beta), l.sideways * std::cos(beta), l.z0);
+      const Eigen::Vector3d u(std::cos(l.elevation) * std::cos(beta), std::cos(l.elevation) * std::sin(beta),
+                              std::sin(l.elevation));
+      c.points.push_back((o + s * u).cast<float>());
+    }
+  c.intensity.clear();
+  return c;
+}
+
+TEST(ResidualLaser, BeamsFromTwoHeightsAndSidewaysKeepTheirLasers) {
+  const Cloud scan = offset_block_scan(24, 1500, 21);
+  residual::LayerStats st;
+  const Bytes layer = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.01, &st, only(true));
+  ASSERT_TRUE(st.laser);
+  EXPECT_EQ(st.lasers, 48U) << "neither split nor merged across the two blocks";
+  EXPECT_EQ(st.columns, 1500U);
+  expect_layer_bound(layer, scan, Pose::Identity(), 0.01);
+}
+
+}  // namespace
+}  // namespace lex3d
