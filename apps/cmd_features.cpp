@@ -111,7 +111,7 @@ void write_png(const FeatureResult& res, const std::string& path, const std::str
       c.fill({left + x * z, top + y * sy * z, left + (x + 1) * z, top + (y + 1) * sy * z}, col);
     }
   auto at = [&](const auto& kp) {
-    return std::array<int, 2>{left + static_cast<int>(std::floor(kp.x * z)), top + static_cast<int>(std::floor(kp.y)) * sy * z + sy * z / 2};
+    return std::array<int, 2>{left + static_cast<int>(std::floor(kp.x * static_cast<float>(z))), top + static_cast<int>(std::floor(kp.y)) * sy * z + sy * z / 2};
   };
   for (const auto& f : res.features.features)
     if (f.keypoint.kind == FeatureKind::kCoverage) {
