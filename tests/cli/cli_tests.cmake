@@ -6,32 +6,7 @@ file(REMOVE_RECURSE "${WORK}")
 file(MAKE_DIRECTORY "${WORK}")
 set(failures 0)
 
-# run(<expected exit> <name> args...): runs lex3d, checks the exit code and, on
-# failure, that stderr is exactly one line starting with "lex3d: ".
-function(run expected name)
-  execute_process(COMMAND "${LEX3D}" ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err
-                  TIMEOUT 120)
-  set(LAST_OUT "${out}" PARENT_SCOPE)
-  set(LAST_ERR "${err}" PARENT_SCOPE)
-  if(NOT "${rc}" STREQUAL "${expected}")
-    message(SEND_ERROR "[${name}] exit ${rc}, expected ${expected}\nstdout: ${out}\nstderr: ${err}")
-    return()
-  endif()
-  if(NOT expected EQUAL 0)
-    string(REGEX MATCHALL "\n" newlines "${err}")
-    list(LENGTH newlines n)
-    if(NOT n EQUAL 1 OR NOT err MATCHES "^lex3d: ")
-      message(SEND_ERROR "[${name}] stderr is not one 'lex3d: ...' line: '${err}'")
-    endif()
-  endif()
-  message(STATUS "[${name}] ok (exit ${rc})")
-endfunction()
-
-function(expect_match name text regex)
-  if(NOT "${text}" MATCHES "${regex}")
-    message(SEND_ERROR "[${name}] output does not match '${regex}':\n${text}")
-  endif()
-endfunction()
+include("${CMAKE_CURRENT_LIST_DIR}/cli_common.cmake")
 
 # png_size(<name> <file> <width var> <height var>): the PNG signature and IHDR chunk, checked;
 # the picture's size in pixels (0 x 0 when not a PNG).

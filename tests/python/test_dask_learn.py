@@ -24,16 +24,6 @@ CLI = os.environ.get("LEX3D_CLI")
 SCANS = [str(SAMPLES / "kitti00_000000.bin"), str(SAMPLES / "newer_college_00.bin"), str(SAMPLES / "room_scan1.pcd")]
 
 
-@pytest.fixture(scope="module")
-def client():
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                       dashboard_address=":0")
-    c = distributed.Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
-
-
 def balm(count):
     folder = SHARED / "balm"
     if not folder.is_dir():
