@@ -35,6 +35,9 @@ constexpr std::int64_t kMaxLengthUnits = 64 * 65536;
 /// Predictors 2 and 3: left and upper pixels more than this many range steps apart mark
 /// an edge, where a flag says which of them predicts (formats/model.md §2.8.2).
 constexpr std::int64_t kEdgeSteps = 16;
+/// Layers of this many points or more choose their range-step share and predictor on a
+/// quarter of the turn's columns and code only the winner in full.
+constexpr std::size_t kLaserTrialMinPoints = 32768;
 /// A left neighbour further than this many columns back does not predict.
 constexpr std::uint32_t kMaxColumnGap = 4;
 
@@ -1191,7 +1194,11 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
                                      const std::vector<std::int64_t>& shift, const std::vector<Beams::Trig>& beam_of,
                                      const std::vector<Eigen::Vector3d>& offset, double max_error, double bound,
                                      bool thin, double share, const std::vector<std::uint32_t>& predictors,
-                                     int threads) {
+                                     int threads, const std::vector<std::uint32_t>* js = nullptr,
+                                     std::vector<std::size_t>* sizes = nullptr) {
+  // The points coded: positions `js` in `order` (a trial on some columns), else all of them.
+  const std::size_t m = js ? js->size() : order.size();
+  const auto J = [js](std::size_t t) -> std::size_t { return js ? (*js)[t] : t; };
   const double qr = 2.0 * share * bound;
   const double qt = std::sqrt(std::max(0.0, 2.0 * (1.0 - share * share))) * bound * 0.99;
   if (!(qt > 0.0)) return std::nullopt;
@@ -1202,22 +1209,23 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     std::int64_t k = 0, k1 = 0, k2 = 0;
     Eigen::Vector3f decoded;
   };
-  std::vector<Coded> q(coded.size());  // by position in `order`
-  std::vector<std::uint8_t> failed(order.size(), 0);
-  parallel_for(order.size(), threads, [&](std::size_t j) {
+  std::vector<Coded> q(m);  // by position t among the points coded (J(t) in `order`)
+  std::vector<std::uint8_t> failed(m, 0);
+  parallel_for(m, threads, [&](std::size_t t) {
+    const std::size_t j = J(t);
     const std::uint32_t i = coded[order[j]];
     const Eigen::Vector3d truth = input[i].cast<double>();
     const Beams::Beam b = beams.beam(a.ring[i], beam_of[j]);
     const Eigen::Vector3d& v = offset[j];
-    Coded& c = q[j];
+    Coded& c = q[t];
     if (!quantise(v.dot(b.u), qr, c.k)) {
-      failed[j] = 1;
+      failed[t] = 1;
       return;
     }
     c.decoded = beams.point(b, c.k, 0, 0, qr, qt);
     if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
     if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) {
-      failed[j] = 1;
+      failed[t] = 1;
       return;
     }
     c.decoded = beams.point(b, c.k, c.k1, c.k2, qr, qt);
@@ -1234,20 +1242,20 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
             found = true;
           }
         }
-    if (!found) failed[j] = 1;
+    if (!found) failed[t] = 1;
   }, 4096);
   if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
 
   // Thinning: a point that a point decoded before it explains is not coded.
-  std::vector<std::uint32_t> kept(order.size());  // positions in `order`
+  std::vector<std::uint32_t> kept(m);  // positions t
   std::iota(kept.begin(), kept.end(), 0U);
   if (thin) {
-    PointBallGrid seen(bound, order.size());
+    PointBallGrid seen(bound, m);
     kept.clear();
-    for (std::uint32_t j = 0; j < order.size(); ++j) {
-      if (seen.any_within(input[coded[order[j]]].cast<double>())) continue;
-      seen.insert(q[j].decoded);
-      kept.push_back(j);
+    for (std::uint32_t t = 0; t < m; ++t) {
+      if (seen.any_within(input[coded[order[J(t)]]].cast<double>())) continue;
+      seen.insert(q[t].decoded);
+      kept.push_back(t);
     }
   }
 
@@ -1255,7 +1263,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   std::vector<std::uint16_t> kept_ring(kept.size());
   std::vector<std::uint32_t> kept_column(kept.size());
   for (std::size_t k = 0; k < kept.size(); ++k) {
-    const std::uint32_t i = coded[order[kept[k]]];
+    const std::uint32_t i = coded[order[J(kept[k])]];
     kept_ring[k] = a.ring[i];
     kept_column[k] = a.column[i];
   }
@@ -1269,7 +1277,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     out.range_step = qr;
     out.coded = kept.size();
     out.sources.resize(kept.size());
-    for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[kept[k]]];
+    for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[J(kept[k])]];
     RangeEncoder enc = head;
     const auto ring_at = [&](std::size_t k) { return kept_ring[k]; };
     const auto column_at = [&](std::size_t k) { return kept_column[k]; };
@@ -1298,7 +1306,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
       while (end < kept.size() && column_at(end) == column) ++end;
       const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
       pc.column_delta.put(enc, pc.column_ctx(), dc);
-      const std::int64_t s = shift[kept[at]];
+      const std::int64_t s = shift[J(kept[at])];
       pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
       pc.set_shift(s);
       pc.start_column(column, dc);
@@ -1355,6 +1363,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
     streams[pi] = std::move(out);
   }, 1);
+  if (sizes)
+    for (const auto& o : streams) sizes->push_back(o ? o->stream.size() : std::numeric_limits<std::size_t>::max());
   std::optional<LaserLayer> best;
   for (auto& o : streams)
     if (o && (!best || o->stream.size() < best->stream.size())) best = std::move(o);
@@ -1457,12 +1467,45 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   // OS-2-128 scan 8 % and the OS-1-32 scan 4 % smaller than predictor 3, the OS-0-128,
   // OS-0-32, HDL-32E and VLP-16 scans 1-6 % larger. Predictors 0 and 1 (no edge flags)
   // are still decoded; 2 or 3 coded each of these scans and a KITTI and balm scan smaller.
-  // (several shares side by side, one thread each; one share with all the threads)
+  // With several shares (an estimated table), a large layer makes the choice on a quarter
+  // of the turn (every fourth of 32 column blocks), each share and predictor coded there,
+  // and codes only the winner in full; a small one codes every share in full (several side
+  // by side, one thread each). (With one share the trial would save nothing: the
+  // quantisation, not the stream, is most of a coding's work.)
+  const auto predictors_of = [](std::size_t share) {
+    return share == 0 ? std::vector<std::uint32_t>{2, 3} : std::vector<std::uint32_t>{3};
+  };
+  if (shares.size() > 1 && order.size() >= kLaserTrialMinPoints && table.columns >= 32) {
+    std::vector<std::uint32_t> js;  // positions in `order` of the trial's columns
+    const std::uint32_t block = table.columns / 32;
+    for (std::size_t j = 0; j < order.size(); ++j)
+      if ((a.column[coded[order[j]]] / block) % 4 == 0) js.push_back(static_cast<std::uint32_t>(j));
+    std::vector<std::vector<std::size_t>> bytes(shares.size());
+    parallel_for(shares.size(), threads, [&](std::size_t t) {
+      (void)code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin, shares[t],
+                       predictors_of(t), shares.size() > 1 ? 1 : threads, &js, &bytes[t]);
+    }, 1);
+    std::size_t pick_share = 0, pick = 0;
+    std::size_t least = std::numeric_limits<std::size_t>::max();
+    for (std::size_t t = 0; t < shares.size(); ++t)
+      for (std::size_t k = 0; k < bytes[t].size(); ++k)
+        if (bytes[t][k] < least) {
+          least = bytes[t][k];
+          pick_share = t;
+          pick = k;
+        }
+    if (least != std::numeric_limits<std::size_t>::max()) {
+      auto best = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin,
+                             shares[pick_share], {predictors_of(pick_share)[pick]}, threads);
+      if (best) return best;
+    }
+    // (the sample did not code, or the whole turn did not: a point beyond what a share can code)
+  }
   std::vector<std::optional<LaserLayer>> tries(shares.size());
   const int inner = shares.size() > 1 ? 1 : threads;
   parallel_for(tries.size(), threads, [&](std::size_t t) {
     tries[t] = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin, shares[t],
-                          t == 0 ? std::vector<std::uint32_t>{2, 3} : std::vector<std::uint32_t>{3}, inner);
+                          predictors_of(t), inner);
   }, 1);
   std::optional<LaserLayer> best;
   for (auto& t : tries)
