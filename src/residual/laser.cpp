@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <memory>
 #include <complex>
 #include <cstring>
 #include <limits>
@@ -1407,24 +1408,42 @@ std::vector<std::uint32_t> pixel_order(const std::vector<std::uint32_t>& coded, 
 
 }  // namespace
 
-std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
-                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
-                                      const Pose& T_cloud_sensor, double max_error, double bound, bool thin,
-                                      const std::vector<double>& shares, int threads) {
+namespace {
+
+/// One laser assignment made ready to code: its beams, the pixel order, each column's
+/// azimuth shift and every point's beam and offset from the beam's origin.
+struct Prepared {
+  const LaserAssignment* a = nullptr;
+  Beams beams;
+  std::vector<std::uint32_t> order;
+  std::vector<std::int64_t> shift;
+  std::vector<Beams::Trig> beam_of;
+  std::vector<Eigen::Vector3d> offset;
+  Prepared(const LaserAssignment& assignment, const Pose& T_cloud_sensor)
+      : a(&assignment), beams(assignment.table, T_cloud_sensor) {}
+};
+
+std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
+                                        const LaserAssignment& a, const Pose& T_cloud_sensor, int threads) {
   const LaserTable& table = a.table;
-  if (!storable(table)) return std::nullopt;
-  const Beams beams(table, T_cloud_sensor);
+  if (!storable(table)) return nullptr;
+  auto prepared = std::make_unique<Prepared>(a, T_cloud_sensor);
+  const Beams& beams = prepared->beams;
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
 
   // Column by column, lasers in order, then input order.
-  std::vector<std::uint32_t> order = pixel_order(coded, a);
+  std::vector<std::uint32_t>& order = prepared->order;
+  order = pixel_order(coded, a);
   // Each column's azimuth shift: the median of its points' azimuths off their beams (a
   // sensor whose firings do not fall on an even grid), in the table's shift units.
   // Every point's beam (its azimuths' cosines and sines) and its offset from the beam's
   // origin (head frame), first unshifted: a column whose shift comes out 0 keeps them.
-  std::vector<std::int64_t> shift(coded.size(), 0);  // by position in `order`
-  std::vector<Beams::Trig> beam_of(order.size());
-  std::vector<Eigen::Vector3d> offset(order.size());
+  std::vector<std::int64_t>& shift = prepared->shift;  // by position in `order`
+  std::vector<Beams::Trig>& beam_of = prepared->beam_of;
+  std::vector<Eigen::Vector3d>& offset = prepared->offset;
+  shift.assign(coded.size(), 0);
+  beam_of.resize(order.size());
+  offset.resize(order.size());
   parallel_for(order.size(), threads, [&](std::size_t j) {
     const std::uint32_t i = coded[order[j]];
     beam_of[j] = beams.trig(a.ring[i], a.column[i], 0);
@@ -1461,55 +1480,87 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
       offset[j] = T_head_cloud * input[i].cast<double>() - beams.beam(a.ring[i], beam_of[j]).o;
     }, 4096);
   }
+  return prepared;
+}
 
+}  // namespace
+
+std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
+                                      const std::vector<std::uint32_t>& coded,
+                                      const std::vector<const LaserAssignment*>& candidates, const Pose& T_cloud_sensor,
+                                      double max_error, double bound, bool thin, const std::vector<double>& shares,
+                                      int threads, std::size_t* chosen) {
+  std::vector<std::unique_ptr<Prepared>> prepared;
+  for (const LaserAssignment* a : candidates) prepared.push_back(prepare_layer(input, coded, *a, T_cloud_sensor, threads));
+  const auto code = [&](const Prepared& p, double share, std::vector<std::uint32_t> predictors, int inner,
+                        const std::vector<std::uint32_t>* js = nullptr, std::vector<std::size_t>* sizes = nullptr) {
+    return code_laser(head, input, coded, *p.a, p.beams, p.order, p.shift, p.beam_of, p.offset, max_error, bound, thin,
+                      share, predictors, inner, js, sizes);
+  };
   // Each share with predictor 3 (left neighbour, a flag at edges), the first also with
   // predictor 2 (median edge detector, a flag at edges): at 14 mm predictor 2 coded the
   // OS-2-128 scan 8 % and the OS-1-32 scan 4 % smaller than predictor 3, the OS-0-128,
   // OS-0-32, HDL-32E and VLP-16 scans 1-6 % larger. Predictors 0 and 1 (no edge flags)
   // are still decoded; 2 or 3 coded each of these scans and a KITTI and balm scan smaller.
-  // With several shares (an estimated table), a large layer makes the choice on a quarter
-  // of the turn (every fourth of 32 column blocks), each share and predictor coded there,
-  // and codes only the winner in full; a small one codes every share in full (several side
-  // by side, one thread each). (With one share the trial would save nothing: the
-  // quantisation, not the stream, is most of a coding's work.)
   const auto predictors_of = [](std::size_t share) {
     return share == 0 ? std::vector<std::uint32_t>{2, 3} : std::vector<std::uint32_t>{3};
   };
-  if (shares.size() > 1 && order.size() >= kLaserTrialMinPoints && table.columns >= 32) {
-    std::vector<std::uint32_t> js;  // positions in `order` of the trial's columns
-    const std::uint32_t block = table.columns / 32;
-    for (std::size_t j = 0; j < order.size(); ++j)
-      if ((a.column[coded[order[j]]] / block) % 4 == 0) js.push_back(static_cast<std::uint32_t>(j));
-    std::vector<std::vector<std::size_t>> bytes(shares.size());
-    parallel_for(shares.size(), threads, [&](std::size_t t) {
-      (void)code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin, shares[t],
-                       predictors_of(t), shares.size() > 1 ? 1 : threads, &js, &bytes[t]);
-    }, 1);
-    std::size_t pick_share = 0, pick = 0;
-    std::size_t least = std::numeric_limits<std::size_t>::max();
-    for (std::size_t t = 0; t < shares.size(); ++t)
-      for (std::size_t k = 0; k < bytes[t].size(); ++k)
-        if (bytes[t][k] < least) {
-          least = bytes[t][k];
-          pick_share = t;
-          pick = k;
+  // With several shares (an estimated table) or several candidate assignments, a large
+  // layer makes the choice on a quarter of the turn (every fourth of 32 column blocks):
+  // each candidate, share and predictor is coded there, and only the one with the fewest
+  // bits a sampled point is coded in full. A small layer codes every share of every
+  // candidate in full (the shares side by side, one thread each). (With one share and one
+  // candidate the trial would save nothing: the quantisation, not the stream, is most of
+  // a coding's work.)
+  const bool several = shares.size() > 1 || candidates.size() > 1;
+  if (several && coded.size() >= kLaserTrialMinPoints) {
+    struct Pick {
+      double bits = std::numeric_limits<double>::infinity();
+      std::size_t candidate = 0, share = 0;
+      std::uint32_t predictor = 0;
+    } pick;
+    for (std::size_t c = 0; c < prepared.size(); ++c) {
+      if (!prepared[c] || prepared[c]->a->table.columns < 32) continue;
+      const Prepared& p = *prepared[c];
+      std::vector<std::uint32_t> js;  // positions in `order` of the trial's columns
+      const std::uint32_t block = p.a->table.columns / 32;
+      for (std::size_t j = 0; j < p.order.size(); ++j)
+        if ((p.a->column[coded[p.order[j]]] / block) % 4 == 0) js.push_back(static_cast<std::uint32_t>(j));
+      if (js.empty()) continue;
+      std::vector<std::vector<std::size_t>> bytes(shares.size());
+      parallel_for(shares.size(), threads, [&](std::size_t t) {
+        (void)code(p, shares[t], predictors_of(t), shares.size() > 1 ? 1 : threads, &js, &bytes[t]);
+      }, 1);
+      for (std::size_t t = 0; t < shares.size(); ++t)
+        for (std::size_t k = 0; k < bytes[t].size(); ++k) {
+          if (bytes[t][k] == std::numeric_limits<std::size_t>::max()) continue;
+          const double bits = 8.0 * static_cast<double>(bytes[t][k]) / static_cast<double>(js.size());
+          if (bits < pick.bits) pick = {bits, c, t, predictors_of(t)[k]};
         }
-    if (least != std::numeric_limits<std::size_t>::max()) {
-      auto best = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin,
-                             shares[pick_share], {predictors_of(pick_share)[pick]}, threads);
-      if (best) return best;
     }
-    // (the sample did not code, or the whole turn did not: a point beyond what a share can code)
+    if (std::isfinite(pick.bits)) {
+      auto best = code(*prepared[pick.candidate], shares[pick.share], {pick.predictor}, threads);
+      if (best) {
+        if (chosen) *chosen = pick.candidate;
+        return best;
+      }
+    }
+    // (no sample coded, or the whole turn did not: a point beyond what a share can code)
   }
-  std::vector<std::optional<LaserLayer>> tries(shares.size());
-  const int inner = shares.size() > 1 ? 1 : threads;
-  parallel_for(tries.size(), threads, [&](std::size_t t) {
-    tries[t] = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin, shares[t],
-                          predictors_of(t), inner);
-  }, 1);
   std::optional<LaserLayer> best;
-  for (auto& t : tries)
-    if (t && (!best || t->stream.size() < best->stream.size())) best = std::move(t);
+  for (std::size_t c = 0; c < prepared.size(); ++c) {
+    if (!prepared[c]) continue;
+    std::vector<std::optional<LaserLayer>> tries(shares.size());
+    const int inner = shares.size() > 1 ? 1 : threads;
+    parallel_for(tries.size(), threads, [&](std::size_t t) {
+      tries[t] = code(*prepared[c], shares[t], predictors_of(t), inner);
+    }, 1);
+    for (auto& t : tries)
+      if (t && (!best || t->stream.size() < best->stream.size())) {
+        best = std::move(t);
+        if (chosen) *chosen = c;
+      }
+  }
   return best;
 }
 
