@@ -1055,7 +1055,7 @@ bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssi
 // assign_lasers
 // ---------------------------------------------------------------------------------------
 
-std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate) {
+std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate, int threads) {
   const std::size_t n = input.size();
   if (n == 0) return std::nullopt;
   LaserAssignment a;
@@ -1119,20 +1119,21 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         LaserTable table;
         double cost = std::numeric_limits<double>::infinity();
       };
+      // (the two side by side where there are two threads)
       std::array<Candidate, 2> cand;
-      double z_rms = 0.0;
-      for (std::size_t k = 0; k < cand.size(); ++k) {
+      parallel_for(cand.size(), threads, [&](std::size_t k) {
         Candidate& c = cand[k];
         bool found = false;
+        double z_rms = 0.0;
         if (k == 0) found = estimate_cones(p, c.ring, c.lasers, z_rms);
         else found = estimate_rings(p, c.ring, c.lasers);
         std::vector<double> tangential;
-        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) continue;
+        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) return;
         auto t = estimate_table(p, c.ring, c.column, c.lasers, c.columns, tangential);
-        if (!t || !storable(*t)) continue;
+        if (!t || !storable(*t)) return;
         c.table = std::move(*t);
         c.cost = assignment_cost(p, c.ring, c.column, c.table);
-      }
+      }, 1);
       std::size_t pick = 0;
       for (std::size_t k = 1; k < cand.size(); ++k)
         if (cand[k].cost < cand[pick].cost) pick = k;

@@ -54,9 +54,10 @@ struct LaserAssignment {
 /// columns when it has them, else estimated from its points (in the sensor frame given by
 /// `T_cloud_sensor`): columns from the azimuths of a laser's points, and, with `estimate`,
 /// lasers from the points' elevations. nullopt when the cloud does not look like a spinning
-/// lidar's scan.
+/// lidar's scan. `threads`: the two estimates side by side with 2 or more (the result does
+/// not depend on it).
 [[nodiscard]] std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor,
-                                                           bool estimate);
+                                                           bool estimate, int threads = 1);
 
 /// A coded sensor-geometry layer: the fields after the ones every coding has, and the stream.
 struct LaserLayer {

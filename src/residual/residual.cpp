@@ -666,7 +666,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // smallest of its range-step shares and laser estimates kept (laser_layer).
   std::optional<detail::LaserLayer> laser;
   std::optional<detail::LaserAssignment> lasers_of;
-  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true);
+  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true, threads);
   bool exact_table = false;
   if (lasers_of) {
     // A table read from the sensor reproduces the beams: the whole budget along them.
