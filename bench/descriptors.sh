@@ -8,9 +8,10 @@
 # 2. place recognition on balm (bench/place.sh protocol: every scan against the scans at least
 #    20 s older, true within 4 m and 8 m): first-stage recall (a true revisit among the 8
 #    candidates), recall at 100 % precision, accepted with a wrong transform, median pose error,
-#    and the time to describe a scan (whole place preparation, 2 threads); with the default
-#    first stage (tf-idf over the alphabet's words, the same for both descriptors) and with a
-#    recognition vocabulary learned on each descriptor (`--vocabulary-words 4096 --retrieval tfidf`).
+#    with the default first stage (tf-idf over the alphabet's words, the same for both
+#    descriptors) and with a recognition vocabulary learned on each descriptor
+#    (`--vocabulary-words 4096 --retrieval tfidf`);
+# 3. the CPU time to describe a scan for a query (place query's prepare_cpu_ms, 10 balm scans).
 # Usage: bench/descriptors.sh [BUILD_DIR]
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -48,4 +49,14 @@ for descriptor in patch vdlsd; do
       --cache "$out/$descriptor-voc.lex3dp" 2>/dev/null |
       grep -E "^descriptor|recall at 100|first stage|accepted|median error"
   done
+done
+
+echo "== time to describe a scan for place recognition (place query --json prepare_cpu_ms, 2 threads; median of 10 balm scans) =="
+frames=($(sed -n '1~9p' "$data/frames.txt" | head -10))
+for descriptor in patch vdlsd; do
+  "$build/lex3d" place build "$out/t-$descriptor.lex3dp" "$data/${frames[0]}" --descriptor "$descriptor" >/dev/null 2>&1
+  for f in "${frames[@]}"; do
+    "$build/lex3d" place query "$out/t-$descriptor.lex3dp" "$data/$f" --json 2>/dev/null |
+      sed -n 's/.*"prepare_cpu_ms":\([0-9.]*\).*/\1/p'
+  done | sort -g | awk -v d="$descriptor" '{v[NR] = $1} END {printf "  %-6s prepare CPU median %.0f ms (min %.0f, max %.0f; %d scans)\n", d, (v[5] + v[6]) / 2, v[1], v[NR], NR}'
 done
