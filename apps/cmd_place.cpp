@@ -683,7 +683,8 @@ void run_eval(const PlaceOptions& o) {
     PlaceDatabase c = read_db(o.cache);
     if (c.storage().descriptor != o.storage.descriptor)
       throw CliError(2, o.cache + ": its features are described with " + to_string(c.storage().descriptor) + ", not " +
-                            to_string(o.storage.descriptor) + " (--descriptor)");    if (c.size() != clouds.size()) throw CliError(2, o.cache + ": holds " + std::to_string(c.size()) + " scans, not " + std::to_string(clouds.size()));
+                            to_string(o.storage.descriptor) + " (--descriptor)");
+    if (c.size() != clouds.size()) throw CliError(2, o.cache + ": holds " + std::to_string(c.size()) + " scans, not " + std::to_string(clouds.size()));
     for (std::size_t i = 0; i < c.size(); ++i) {
       if (c.name(i) != names[i]) throw CliError(2, o.cache + ": scan " + std::to_string(i) + " is " + c.name(i));
       auto s = c.read_scan(i);
