@@ -65,7 +65,19 @@ struct PlaceOptions {
   int vocabulary_words = 0;            // --vocabulary-words N (0: none learned)
   int vocabulary_scans = 1000;         // --vocabulary-scans
   int list_retrieved = 0;              // --list-retrieved N
+  std::string descriptor;              // --descriptor patch|vdlsd (empty: build/eval patch, query/add the database's)
 };
+
+PlaceDescriptor parse_descriptor(const std::string& s) {
+  return s == "vdlsd" ? PlaceDescriptor::kVdlsd : PlaceDescriptor::kPatch;
+}
+
+// A database described with another descriptor than --descriptor asks for: a bad-data error.
+void check_descriptor(const PlaceOptions& o, const std::string& path, const PlaceDatabase& db) {
+  if (o.descriptor.empty() || parse_descriptor(o.descriptor) == db.storage().descriptor) return;
+  throw CliError(2, path + ": its features are described with " + to_string(db.storage().descriptor) + ", not " +
+                        o.descriptor + " (--descriptor)");
+}
 
 PlaceRetrieval parse_retrieval(const std::string& s) {
   if (s == "tfidf-alphabet") return PlaceRetrieval::kTfidfAlphabet;
@@ -282,13 +294,18 @@ void add_inputs(PlaceFileWriter& w, const PlaceInputs* inputs, const Alphabet& a
   if (inputs == nullptr) return;
   ProgressBar bar("adding scans");
   Stopwatch sw;
+  std::size_t empty = 0;
   for (std::size_t i = 0; i < inputs->size(); ++i) {
     const PlaceScan s = describe(inputs->load(i), inputs->name(i), alphabet, storage, gravity);
+    empty += s.empty_descriptors;
     put(w.add(s));
     ++st.added;
     bar.update(static_cast<long>(i + 1), static_cast<long>(inputs->size()), inputs->name(i));
   }
   st.prepare_ms = sw.elapsed_ms();
+  bar.finish();
+  if (empty > 0)
+    std::fprintf(stderr, "note: %zu stored features had too few points around them for a VD-LSD (stored empty)\n", empty);
 }
 
 // Writes a whole new database file (format 2.0) to a temporary name and renames it over
@@ -312,10 +329,12 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
     throw_if_error(f.value()->write_at(p.offset, p.bytes.data(), p.bytes.size()));
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
-  PlaceFileWriter w(storage, &alphabet, alphabet.descriptor_dim);
-  if (vocabulary != nullptr && vocabulary->descriptor_dim != alphabet.descriptor_dim)
+  const int dim = detail::stored_descriptor_dim(storage, &alphabet);
+  PlaceFileWriter w(storage, &alphabet, dim);
+  if (vocabulary != nullptr && vocabulary->descriptor_dim != dim)
     throw CliError(2, "the recognition vocabulary's descriptors have " + std::to_string(vocabulary->descriptor_dim) +
-                          " values, the alphabet's " + std::to_string(alphabet.descriptor_dim));
+                          " values, the database's " + to_string(storage.descriptor) + " descriptors " +
+                          std::to_string(dim));
   w.set_vocabulary(std::move(vocabulary));
   put(w.begin());
   if (from != nullptr)
@@ -442,6 +461,7 @@ void run_add(const PlaceOptions& o) {
   auto file = io::PositionalFile::open_existing(o.db);
   if (!file.ok()) throw CliError(3, file.status().to_string());
   const PlaceDatabase db = read_db(o.db);
+  check_descriptor(o, o.db, db);
   const PlaceFileInfo& fi = db.file_info();
   // In place when the format allows it (2.x) and earlier indexes left behind by appends
   // are under a quarter of the file; otherwise a compact new file replaces it.
@@ -494,6 +514,7 @@ void run_query(const PlaceOptions& o) {
   Stopwatch open_sw;
   const PlaceDatabase db = read_db(o.db);
   const double open_ms = open_sw.elapsed_ms();
+  check_descriptor(o, o.db, db);
   const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
@@ -660,6 +681,9 @@ void run_eval(const PlaceOptions& o) {
     // The scans as a database stores them (a database of these scans, written by an earlier
     // eval with the same --cache): skips learning and feature extraction.
     PlaceDatabase c = read_db(o.cache);
+    if (c.storage().descriptor != o.storage.descriptor)
+      throw CliError(2, o.cache + ": its features are described with " + to_string(c.storage().descriptor) + ", not " +
+                            to_string(o.storage.descriptor) + " (--descriptor)");
     if (c.size() != clouds.size()) throw CliError(2, o.cache + ": holds " + std::to_string(c.size()) + " scans, not " + std::to_string(clouds.size()));
     for (std::size_t i = 0; i < c.size(); ++i) {
       if (c.name(i) != names[i]) throw CliError(2, o.cache + ": scan " + std::to_string(i) + " is " + c.name(i));
@@ -684,7 +708,8 @@ void run_eval(const PlaceOptions& o) {
   const auto scans = cached.empty() ? describe_all(clouds.size(), [&](std::size_t i) { return clouds[i]; }, names,
                                                    alphabet, o.storage, &prep_ms, o.gravity, &sources)
                                     : cached;
-  std::size_t from_points = 0, from_none = 0;
+  std::size_t from_points = 0, from_none = 0, empty_descriptors = 0;
+  for (const auto& s : scans) empty_descriptors += s.empty_descriptors;
   for (const GravitySource g : sources) {
     from_points += g == GravitySource::kPoints ? 1 : 0;
     from_none += g == GravitySource::kNone ? 1 : 0;
@@ -767,6 +792,17 @@ void run_eval(const PlaceOptions& o) {
   };
   std::size_t tp = 0, fp = 0, pos = 0;
   counts(p.accept_score, o.radius, tp, fp, pos);
+  // First stage: queries with a revisit within the radius that have one among their candidates.
+  std::size_t retrieved_true = 0;
+  for (const auto& r : recs) {
+    if (!(r.nearest_m <= o.radius)) continue;
+    for (const auto& sc : r.scores)
+      if (planar(clouds[r.query].T_world_cloud, clouds[sc.first].T_world_cloud) <= o.radius) {
+        ++retrieved_true;
+        break;
+      }
+  }
+  const double retrieval_recall = pos > 0 ? static_cast<double>(retrieved_true) / static_cast<double>(pos) : 0.0;
   const double precision = tp + fp > 0 ? static_cast<double>(tp) / static_cast<double>(tp + fp) : 1.0;
   const double recall = pos > 0 ? static_cast<double>(tp) / static_cast<double>(pos) : 0.0;
   // PR curve over thresholds at the distinct scores.
@@ -907,7 +943,8 @@ void run_eval(const PlaceOptions& o) {
     j.value("median_translation_error_m", median(et)).value("median_rotation_error_deg", median(er));
     j.value("median_query_ms", median(qms)).value("median_query_cpu_ms", median(qcpu)).value("kb_per_scan", kb_per_scan);
     j.value("alphabet_words", alphabet.size()).value("learn_ms", learn_ms).value("prepare_ms", prep_ms);
-    j.value("query_total_ms", query_total_ms);
+    j.value("query_total_ms", query_total_ms).value("descriptor", to_string(o.storage.descriptor));
+    j.value("empty_descriptors", empty_descriptors).value("retrieval_recall", retrieval_recall);
     j.begin_array("recall_by_distance");
     for (const auto& d : by_distance) j.begin_object().value("radius_m", d[0]).value("tp", d[1]).value("positives", d[2]).end_object();
     j.end_array().begin_array("false_positives_by_threshold");
@@ -918,6 +955,11 @@ void run_eval(const PlaceOptions& o) {
   }
   std::printf("scans %zu, queries with a database %zu, with a true revisit within %.1f m: %zu\n", scans.size(), recs.size(),
               o.radius, pos);
+  std::printf("descriptor %s", to_string(o.storage.descriptor));
+  if (cached.empty() && !scans.empty())
+    std::printf(", scans described in %.1f ms each (learning excluded; %zu features with an empty descriptor)",
+                prep_ms / static_cast<double>(scans.size()), empty_descriptors);
+  std::printf("\n");
   if (o.gravity == "points" || o.gravity == "none")
     std::printf("up direction: --gravity %s (poses used as ground truth only): %zu scans from their points, %zu none%s\n",
                 o.gravity.c_str(), from_points, from_none, cached.empty() ? "" : " (scans from --cache: as it was made)");
@@ -925,6 +967,8 @@ void run_eval(const PlaceOptions& o) {
   if (p.max_conflict < 1.0) std::printf("transforms with more than %.3f of the points in free space rejected (--max-conflict)\n", p.max_conflict);
   std::printf("threshold %.2f: TP %zu FP %zu  precision %.3f recall %.3f\n", p.accept_score, tp, fp, precision, recall);
   std::printf("max F1 %.3f, recall at 100%% precision %.3f\n", max_f1, recall_at_p1);
+  std::printf("first stage (%s): a true revisit among the %d candidates for %zu of %zu queries (recall %.3f)\n",
+              retrieval_name(p.retrieval).c_str(), p.top_k, retrieved_true, pos, retrieval_recall);
   std::printf("accepted: %zu with the right transform (within 1 m, 5 deg), %zu with a wrong one, any distance\n",
               right_pose, wrong_pose);
   std::printf("accepted true matches: median error %.3f m, %.2f deg (%zu)\n", median(et), median(er), et.size());
@@ -939,6 +983,10 @@ void run_eval(const PlaceOptions& o) {
 }
 
 void add_common(CLI::App* sub, PlaceOptions& o) {
+  sub->add_option("--descriptor", o.descriptor,
+                  "Descriptor of the stored features: patch (range-image patch) or vdlsd (collier2012's VD-LSD); "
+                  "build and eval: default patch; query and add: must be the database's")
+      ->check(CLI::IsMember({"patch", "vdlsd"}));
   sub->add_option("--format", o.format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
   sub->add_option("--model-alphabet", o.model_alphabet,
                   "Alphabet file of .lex3dm inputs that reference one (inputs may be lex3d model .lex3dm and "
@@ -977,7 +1025,10 @@ void register_place(CLI::App& app) {
   };
   add_vocabulary(build);
   add_common(build, *o);
-  build->callback([o] { run_build(*o); });
+  build->callback([o] {
+    o->storage.descriptor = parse_descriptor(o->descriptor);
+    run_build(*o);
+  });
 
   CLI::App* add = sub->add_subcommand("add", "Add scans to a place database");
   add->footer("Examples:\n  lex3d place add map.lex3dp today/*.bin --poses today_poses.txt");
@@ -1048,7 +1099,10 @@ void register_place(CLI::App& app) {
   add_match(ev);
   add_common(ev, *o);
   ev->get_option("--poses")->required();
-  ev->callback([o] { run_eval(*o); });
+  ev->callback([o] {
+    o->storage.descriptor = parse_descriptor(o->descriptor);
+    run_eval(*o);
+  });
 }
 
 }  // namespace lex3d::cli

@@ -37,8 +37,18 @@
 
 namespace lex3d {
 
+/// The descriptor of a database's stored features (PHDR descriptor_kind, formats/place_db.md §3.1).
+enum class PlaceDescriptor : std::uint8_t {
+  kPatch = 0,  ///< the features module's range-image patch (steder2010), which the alphabet's words share
+  kVdlsd = 1,  ///< VD-LSD (collier2012 §3.1; features/vdlsd.hpp): 64 values; the words stay the patch's
+};
+/// "patch", "vdlsd".
+[[nodiscard]] const char* to_string(PlaceDescriptor d) noexcept;
+
 /// What a database stores of each scan; fixed for a database (saved with it).
 struct PlaceStorageParams {
+  /// Descriptor of the stored features (what correspondences and the recognition vocabulary use).
+  PlaceDescriptor descriptor = PlaceDescriptor::kPatch;
   /// Interest-point features kept per scan, strongest first; [1, 4096].
   int max_features = 160;
   /// Bits per descriptor value (values in [-1, 1], uniform quantiser); 4 or 8.
@@ -175,6 +185,11 @@ struct PlaceScan {
   /// Bag of words: (word id, instance count), sorted by word id.
   std::vector<std::pair<std::uint32_t, std::uint32_t>> words;
   std::vector<PlaceFeature> features;
+  /// What the descriptors are (the database's PlaceStorageParams::descriptor).
+  PlaceDescriptor descriptor = PlaceDescriptor::kPatch;
+  /// Features whose VD-LSD support held too few points (stored with the empty descriptor;
+  /// counted when the scan is described, not stored).
+  std::size_t empty_descriptors = 0;
   int descriptor_dim = 0;
   int descriptor_bits = 8;
   /// Quantised descriptors, features.size() x descriptor_dim codes (one per byte in memory).
@@ -524,6 +539,8 @@ class PlaceFileWriter {
 };
 
 namespace detail {
+/// Values of a stored descriptor: the alphabet's for kPatch (0 without one), 64 for kVdlsd.
+int stored_descriptor_dim(const PlaceStorageParams& storage, const Alphabet* alphabet) noexcept;
 /// Quantises descriptors (values in [-1, 1]) to `bits` per value and back.
 std::uint8_t quantise_descriptor_value(float v, int bits) noexcept;
 float dequantise_descriptor_value(std::uint8_t code, int bits) noexcept;
