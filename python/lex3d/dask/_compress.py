@@ -56,6 +56,17 @@ def expand_inputs(items):
     return scans
 
 
+def job_paths(inputs, output):
+    """The scans of `inputs` (expand_inputs) and `output` as a path; CompressError (3) when
+    the output's folder does not exist."""
+    scans = expand_inputs(inputs)
+    output = os.fspath(output)
+    out_dir = os.path.dirname(output) or "."
+    if not os.path.isdir(out_dir):
+        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
+    return scans, output
+
+
 def numbered_output(output, index, count):
     """OUT for one scan; OUT's stem + "_<index>" (3 digits at least) + extension for several,
     as `lex3d compress` names its files."""
@@ -167,12 +178,8 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     import lex3d
     from distributed import as_completed
 
-    scans = expand_inputs(inputs)
+    scans, output = job_paths(inputs, output)
     n = len(scans)
-    output = os.fspath(output)
-    out_dir = os.path.dirname(output) or "."
-    if not os.path.isdir(out_dir):
-        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
     stem = os.path.splitext(output)[0]
     manifest = os.fspath(manifest) if manifest else stem + ".manifest.jsonl"
     words = _uses_words(options)
@@ -329,7 +336,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     finally:
         if done:
             bar.update(done, failed, final=True)
-        _remove_temporaries(out_dir, job)
+        _remove_temporaries(os.path.dirname(output) or ".", job)
         if os.path.exists(tmp_manifest):
             os.unlink(tmp_manifest)
     wall = time.perf_counter() - wall0

@@ -18,7 +18,7 @@ import os
 import pickle
 import time
 
-from ._compress import CompressError, _peak_rss_mb, expand_inputs, write_once
+from ._compress import CompressError, _peak_rss_mb, job_paths, write_once
 from ._progress import ProgressLine
 
 
@@ -171,12 +171,8 @@ candidate. Raises CompressError when
     the job cannot run (code 1 usage, 2 a scan that cannot be read, 3 I/O)."""
     from lex3d._lex3d import learning
 
-    scans = expand_inputs(inputs)
+    scans, output = job_paths(inputs, output)
     n = len(scans)
-    output = os.fspath(output)
-    out_dir = os.path.dirname(output) or "."
-    if not os.path.isdir(out_dir):
-        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
     try:
         out_stat = os.stat(output)
     except OSError:
