@@ -23,6 +23,7 @@
 /// estimates it from the scan's points, and failing that the sensor's z axis is used.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -238,6 +239,15 @@ struct PlaceScan {
 /// image instead of two and without the neighbourhoods prepare_scan finds for coding.
 [[nodiscard]] PlaceScan make_place_scan(const Cloud& cloud, const Alphabet& alphabet, const PlaceStorageParams& storage,
                                         const ModelParams& params, std::string name = {});
+
+/// The alphabet a place database is built with when none is given (`lex3d place build`,
+/// lex3d.PlaceDatabase.build): learn_alphabet(`params`) on k = min(scan_count, learn_scans)
+/// scans spread evenly over the set, scan(i * scan_count / k) for i < k, each read when
+/// asked for (none when scan_count is 0: then the alphabet learn_alphabet gives for no scans).
+/// Throws std::invalid_argument when learn_scans is 0 or `params` is invalid.
+[[nodiscard]] Alphabet learn_place_alphabet(std::size_t scan_count, const std::function<Cloud(std::size_t)>& scan,
+                                            std::size_t learn_scans, const LearnParams& params,
+                                            const std::function<void(const LearnProgress&)>& progress = {});
 
 /// Bytes of one scan in the database format (its SCAN chunk, framing included).
 [[nodiscard]] std::size_t stored_bytes(const PlaceScan& scan);
