@@ -91,6 +91,10 @@ struct PackedWord {
   [[nodiscard]] std::size_t size() const noexcept { return x.size(); }
 };
 
+/// The alphabet's words packed for the kernels, in word order.
+std::vector<PackedWord> pack_words(const Alphabet& alphabet);
+
+
 class ScanState {
  public:
   explicit ScanState(const PreparedScan& scan, int threads = 1);

@@ -31,8 +31,7 @@ struct Quantization {
 /// rotations 1/32 rad, word points 0.5 mm. A reconstructed point then moves by at most
 /// √3/2 · (δ/32 + δ/32 + 0.5 mm) ≈ 0.054 δ (formats/model.md §3): with δ = 8 beam spacings
 /// at the median range, under half a beam spacing there, and far below the words' own fit
-/// error. Measured against 2 mm / 1 mrad on kitti00, balm, newer_college and both indoor
-/// kinds: 25-35 % smaller model files, D1 PSNR within 0.06 dB, inliers within 0.3 points.
+/// error (against fixed 2 mm / 1 mrad steps: bench/README.md, "Model files").
 /// δ <= 0 (no words): 2 mm / 1 mrad.
 [[nodiscard]] Quantization quantization_for_word_radius(double word_radius);
 

@@ -30,9 +30,8 @@ struct ModelParams {
   /// supports); 1 keeps the nearest descriptor alone (ruhnke2010 §III-C); [1, 64].
   int fit_candidates = 5;
   /// Rounds of point-to-point ICP that fit each kept instance's pose to the scan after
-  /// pruning (0 keeps the feature frames); [0, 50]. On kitti00 (known alphabet) 0 / 1 / 2 /
-  /// 5 rounds give 67.0 / 70.0 / 70.3 / 70.5 % inliers, and the ICP stage takes 0 / 5 / 9 /
-  /// 16 ms of one core; on balm the rounds change inliers by under 1 %.
+  /// pruning (0 keeps the feature frames); [0, 50]. What the rounds gain and cost:
+  /// bench/README.md, "Model files".
   int refine_iterations = 2;
   /// ICP pairs a word point with a scan point at most this many word radii away; (0, 1].
   double refine_reach_factor = 0.3;
@@ -42,10 +41,8 @@ struct ModelParams {
   int threads = 2;
   /// Pruning keeps an instance that is the only one with a word point within σ of some
   /// scan point (that point's inlier), even where ruhnke2010's rule would drop it (its
-  /// removal does not lower the likelihood). On balm/000000 the likelihood rule alone
-  /// leaves 7 % of the points without a word point within σ (inliers 83.4 % against
-  /// 90.5 %, compression rate 5.7 % against 7.6 %); on kitti00 model files grow 27 %
-  /// for +1.3 dB D1 PSNR. false (the default): ruhnke2010's rule only.
+  /// removal does not lower the likelihood): more inliers for larger files (measured in
+  /// bench/README.md, "Model files"). false (the default): ruhnke2010's rule only.
   bool prune_keeps_sole_cover = false;
   void validate() const;
 };
