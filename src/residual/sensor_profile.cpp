@@ -118,7 +118,7 @@ StatusOr<SensorProfile> parse_json(std::string_view text, const std::string& ori
     };
     static constexpr Spec kSpecs[] = {{"elevation_deg", &ProfileLaser::elevation_deg, -90.0, 90.0, true},
                                       {"azimuth_deg", &ProfileLaser::azimuth_deg, -180.0, 180.0, false},
-                                      {"fire_us", &ProfileLaser::fire_us, 0.0, 1e6, false},
+                                      {"fire_us", &ProfileLaser::fire_us, -1e6, 1e6, false},
                                       {"z_offset", &ProfileLaser::z_offset, -10.0, 10.0, false},
                                       {"horiz_offset", &ProfileLaser::horiz_offset, -10.0, 10.0, false}};
     ProfileLaser laser;
@@ -379,8 +379,14 @@ StatusOr<ProfileFit> apply_sensor_profile(Cloud& cloud, const SensorProfile& pro
     if (variants[k].coherence > variants[pick].coherence + 1e-9) pick = k;
   const Variant& v = variants[pick];
   const double azimuth0 = v.phase / W;
+  // Each laser's columns renumbered by the whole steps of its azimuth offset, so that a
+  // column holds the points of one azimuth whatever their laser (destaggered, as the range
+  // image's neighbours across lasers are then neighbours in space).
   std::vector<double> col_az(L);
-  for (std::size_t l = 0; l < L; ++l) col_az[l] = column_azimuth(lasers[l], v);
+  for (std::size_t l = 0; l < L; ++l) {
+    const double a = column_azimuth(lasers[l], v);
+    col_az[l] = a - std::round(a * W / kTwoPi) * (kTwoPi / W);
+  }
 
   // Then each point's laser and column by its distance from the beam: the lasers whose
   // cones lie within half a column's width of the nearest are tried across the beam too.
@@ -417,9 +423,16 @@ StatusOr<ProfileFit> apply_sensor_profile(Cloud& cloud, const SensorProfile& pro
   fit.median_off_beam_m = sorted[n / 2];
   fit.direction = v.direction;
   fit.firing_times = v.fire;
-  std::vector<bool> hit(L, false);
-  for (std::size_t i = 0; i < n; ++i) hit[ring[i]] = true;
-  fit.lasers_hit = static_cast<std::size_t>(std::count(hit.begin(), hit.end(), true));
+  // A laser counts as hit with a hundredth of a laser's share of the points (a few stray
+  // points do not make a laser of a sparser sensor).
+  std::vector<std::size_t> per_laser(L, 0);
+  for (std::size_t i = 0; i < n; ++i) ++per_laser[ring[i]];
+  const std::size_t least = std::max<std::size_t>(1, n / (100 * L));
+  fit.lasers_hit = static_cast<std::size_t>(
+      std::count_if(per_laser.begin(), per_laser.end(), [&](std::size_t c) { return c >= least; }));
+  if (n >= 100 * L && 2 * fit.lasers_hit < L)
+    return bad(what, "only " + std::to_string(fit.lasers_hit) + " of the " + std::to_string(L) +
+                         " lasers of sensor profile " + name + " have points: the scan has fewer lasers than the profile");
   if (!(fit.median_off_beam_m <= fit.limit_m)) {
     std::ostringstream m;
     m.setf(std::ios::fixed);

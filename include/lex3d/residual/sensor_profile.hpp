@@ -21,7 +21,7 @@ namespace lex3d::residual {
 struct ProfileLaser {
   double elevation_deg = 0.0;  ///< beam elevation, degrees, [-90, 90]
   double azimuth_deg = 0.0;    ///< azimuth offset from the column's azimuth, degrees, in the spin direction, [-180, 180]
-  double fire_us = 0.0;        ///< firing time within a firing sequence, microseconds, [0, 1e6]
+  double fire_us = 0.0;        ///< firing time within a firing sequence, microseconds, [-1e6, 1e6] (relative)
   double z_offset = 0.0;       ///< height of the beam origin, metres, [-10, 10]
   double horiz_offset = 0.0;   ///< beam origin's offset across the beam (to its left seen from above), metres, [-10, 10]
 };
@@ -55,7 +55,7 @@ struct ProfileFit {
 
 /// Largest median distance of a scan's points from their beams, in range steps of the
 /// profile, for the profile to be taken as the scan's sensor.
-inline constexpr double kOffBeamSteps = 4.0;
+inline constexpr double kOffBeamSteps = 1.0;
 
 /// Assigns every point of `cloud` (sensor at cloud.T_cloud_sensor) to the laser of
 /// `profile` whose beam passes nearest it and to the column of the azimuth grid it falls
@@ -63,8 +63,9 @@ inline constexpr double kOffBeamSteps = 4.0;
 /// The grid's phase and direction and whether the points' azimuths include the firing
 /// times are taken from the points (the most coherent grid). `what` names the scan in (empty: none)
 /// messages. kBadData (nothing changed) when the scan's own laser count (a ring field, an
-/// organised cloud's rows) differs from the profile's, or when the median distance of the
-/// points from their beams exceeds kOffBeamSteps range steps. An empty cloud is left as it
+/// organised cloud's rows) differs from the profile's, when fewer than half the profile's
+/// lasers get a hundredth of a laser's share of the points (a scan of fewer lasers), or when
+/// the median distance of the points from their beams exceeds kOffBeamSteps range steps. An empty cloud is left as it
 /// is. Deterministic.
 [[nodiscard]] StatusOr<ProfileFit> apply_sensor_profile(Cloud& cloud, const SensorProfile& profile,
                                                         const std::string& what);
