@@ -388,6 +388,29 @@ StatusOr<ProfileFit> apply_sensor_profile(Cloud& cloud, const SensorProfile& pro
     col_az[l] = a - std::round(a * W / kTwoPi) * (kTwoPi / W);
   }
 
+  // A real sensor's firings drift from a regular grid as its spin rate varies over a turn:
+  // the grid's local phase in each of `sectors` sectors of the turn (the circular mean over
+  // the points there, lasers by height), in columns, is taken off before a point's column is
+  // rounded and its distance across the beam measured.
+  const std::uint32_t sectors = std::max<std::uint32_t>(1, std::min<std::uint32_t>(64, columns / 8));
+  const auto grid_position = [&](std::size_t i, std::size_t l) {
+    return v.direction * (beam_azimuth(i, lasers[l], v.side_sign) - col_az[l] - azimuth0) * W / kTwoPi;
+  };
+  const auto sector_of = [&](double g) {
+    double f = std::fmod(g / W, 1.0);
+    if (f < 0) f += 1.0;
+    return std::min<std::uint32_t>(sectors - 1, static_cast<std::uint32_t>(f * sectors));
+  };
+  std::vector<std::complex<double>> drift_sum(sectors, 0.0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(rho[i] > 0.5)) continue;
+    const double g = grid_position(i, ring[i]);
+    drift_sum[sector_of(g)] += std::polar(1.0, kTwoPi * g);
+  }
+  std::vector<double> drift(sectors, 0.0);
+  for (std::uint32_t k = 0; k < sectors; ++k)
+    if (std::abs(drift_sum[k]) > 0.0) drift[k] = std::arg(drift_sum[k]) / kTwoPi;
+
   // Then each point's laser and column by its distance from the beam: the lasers whose
   // cones lie within half a column's width of the nearest are tried across the beam too.
   std::vector<std::uint32_t> column(n);
@@ -404,7 +427,8 @@ StatusOr<ProfileFit> apply_sensor_profile(Cloud& cloud, const SensorProfile& pro
     double best = std::numeric_limits<double>::infinity();
     for (std::size_t l = 0; l < L; ++l) {
       if (vert[l] > reach) continue;
-      const double g = v.direction * (beam_azimuth(i, lasers[l], v.side_sign) - col_az[l] - azimuth0) * W / kTwoPi;
+      double g = grid_position(i, l);
+      g -= drift[sector_of(g)];
       const double c = std::round(g);
       const double t = (g - c) * (kTwoPi / W) * rbs[l];
       const double d2 = vert[l] * vert[l] + t * t;
