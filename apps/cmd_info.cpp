@@ -21,6 +21,22 @@ namespace lex3d::cli {
 
 namespace {
 
+/// The voxel coding's context model (formats/model.md §2.7).
+const char* octree_contexts_name(std::uint32_t contexts) {
+  return contexts == 1 ? "mixed (§2.7.4, format 1.8)" : "face (§2.7.1, format 1.3)";
+}
+
+/// The sensor-geometry coding's range predictor (formats/model.md §2.8.2).
+const char* range_predictor_name(std::uint32_t predictor) {
+  switch (predictor) {
+    case 0: return "left neighbour";
+    case 1: return "median edge detector";
+    case 2: return "median edge detector with edge flags";
+    case 3: return "left neighbour with edge flags";
+    default: return "unknown predictor";
+  }
+}
+
 const char* layer_coding_name(std::uint32_t coding) {
   return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : "previous-point";
 }
@@ -206,7 +222,16 @@ bool info_lex3d_file(const InfoOptions& o) {
           .value("bytes", layer_bytes);
     if (layer && layer->coding == 3)
       j.value("tangential_step_m", layer->tangential_step).value("lasers", static_cast<std::uint64_t>(layer->lasers))
-          .value("columns", static_cast<std::uint64_t>(layer->columns));
+          .value("columns", static_cast<std::uint64_t>(layer->columns))
+          .value("range_predictor", range_predictor_name(layer->predictor))
+          .value("laser_table", "stored in the layer (its source is reported by compress --json, not stored)");
+    if (layer && layer->coding == 2) {
+      j.value("octree_depth", static_cast<std::uint64_t>(layer->depth)).value("octree_contexts", octree_contexts_name(layer->octree_contexts));
+      j.begin_array("octree_origin_m");
+      for (double c : layer->origin) j.value({}, c);
+      j.end_array();
+    }
+    if (layer && layer->coding == 1) j.value("direction_cell_rad", layer->cell);
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
     if (fi.kind == "model") {
@@ -241,8 +266,14 @@ bool info_lex3d_file(const InfoOptions& o) {
                     static_cast<unsigned long long>(layer->coded_points), layer->coding == 2 ? "voxels" : "points",
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
       if (layer && layer->coding == 3)
-        std::printf("laser table    %u lasers, %u columns a turn; step across the beams %.4g m\n", layer->lasers,
-                    layer->columns, layer->tangential_step);
+        std::printf("laser table    %u lasers, %u columns a turn, stored in the layer (its source is reported by "
+                    "compress --json, not stored); step across the beams %.4g m; ranges predicted by the %s\n",
+                    layer->lasers, layer->columns, layer->tangential_step, range_predictor_name(layer->predictor));
+      if (layer && layer->coding == 2)
+        std::printf("octree         %u levels of %.4g m cells from (%.4g, %.4g, %.4g) m, %s contexts\n", layer->depth,
+                    layer->step, layer->origin[0], layer->origin[1], layer->origin[2],
+                    octree_contexts_name(layer->octree_contexts));
+      if (layer && layer->coding == 1) std::printf("sweep          direction cell %.4g rad\n", layer->cell);
     }
     if (translation_step)
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);
