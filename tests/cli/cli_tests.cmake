@@ -745,6 +745,16 @@ expect_match(sensor.info_text "${LAST_OUT}" "laser table +16 lasers, 720 columns
 run(0 voxel.info compress "${SAMPLES}/room_scan1.pcd" -o "${WORK}/room_voxel.lex3dm" --layer-coding voxel --max-error 0.02)
 run(0 voxel.info info "${WORK}/room_voxel.lex3dm")
 expect_match(voxel.info "${LAST_OUT}" "octree +[0-9]+ levels of [0-9.]+ m cells from .* (mixed|face) \\(")
+# convert writes the profile's lasers as the ring field; info SCAN --sensor reports the fit
+run(0 sensor.convert convert "${PROF}/scene16.bin" "${WORK}/scene16_ring.pcd" --sensor "${PROF}/scene16.json")
+run(0 sensor.convert_info info --json "${WORK}/scene16_ring.pcd")
+expect_match(sensor.convert_info "${LAST_OUT}" "\"has_rings\":true")
+run(0 sensor.info_scan info "${PROF}/scene16.bin" --sensor "${PROF}/scene16.json")
+expect_match(sensor.info_scan "${LAST_OUT}" "16 of 16 lasers hit, points a median 0.00 mm")
+run(2 sensor.convert_other convert "${SAMPLES}/kitti00_000000.bin" "${WORK}/kitti_ring.pcd" --sensor "${PROF}/scene16.json")
+if(EXISTS "${WORK}/kitti_ring.pcd")
+  message(SEND_ERROR "[sensor.convert_other] an output was written")
+endif()
 # a profile without a layer, bad profiles and a profile of another sensor: nothing written
 run(1 sensor.no_layer compress "${PROF}/scene16.bin" -o "${WORK}/sp_none.lex3dm" --max-error none --sensor "${PROF}/scene16.json")
 file(WRITE "${WORK}/sp_missing.json" "{\"columns\": 720, \"lasers\": [{\"elevation_deg\": 1}]}")
