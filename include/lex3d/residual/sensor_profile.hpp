@@ -55,7 +55,7 @@ struct ProfileFit {
 
 /// Largest median distance of a scan's points from their beams, in range steps of the
 /// profile, for the profile to be taken as the scan's sensor.
-inline constexpr double kOffBeamSteps = 1.0;
+inline constexpr double kOffBeamSteps = 2.0;
 
 /// Assigns every point of `cloud` (sensor at cloud.T_cloud_sensor) to the laser of
 /// `profile` whose beam passes nearest it and to the column of the azimuth grid it falls
