@@ -46,6 +46,16 @@ io::ReadOptions read_options(io::Format format, const std::string& metadata, con
   return opt;
 }
 
+residual::SensorProfile read_sensor_profile(const std::string& path) {
+  check_input_file(path);
+  auto bytes = io::read_file(path, 16ULL << 20);  // the largest vendor tables are a few hundred KB
+  if (!bytes.ok()) throw CliError(bytes.status().code() == ErrorCode::kOutOfMemory ? 4 : 2, bytes.status().to_string());
+  const std::vector<std::uint8_t>& b = bytes.value();
+  auto profile = residual::parse_sensor_profile(std::string_view(reinterpret_cast<const char*>(b.data()), b.size()), path);
+  if (!profile.ok()) throw CliError(2, profile.status().to_string());
+  return std::move(profile).value();
+}
+
 io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
   set_current_file(path);
   check_input_file(path);

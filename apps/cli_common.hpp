@@ -11,6 +11,7 @@
 
 #include "lex3d/core/status.hpp"
 #include "lex3d/io/io.hpp"
+#include "lex3d/residual/sensor_profile.hpp"
 
 namespace CLI {
 class App;
@@ -46,6 +47,10 @@ io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& option
 
 /// Options of raw lidar logs (--metadata, --sensor-model) on top of `format`.
 io::ReadOptions read_options(io::Format format, const std::string& metadata, const std::string& sensor_model);
+
+/// Reads a sensor profile (--sensor; formats/sensor_profile.md) or throws CliError (2 bad
+/// or missing data, naming the file).
+residual::SensorProfile read_sensor_profile(const std::string& path);
 
 /// Refuses (exit 2) an input that is not a regular file or a directory: a pipe, FIFO, device
 /// or socket is never opened (a FIFO without a writer would block, /dev/zero never ends).

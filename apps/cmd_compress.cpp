@@ -44,6 +44,7 @@ struct CompressOptions {
   bool json = false;
   double intensity_error = 0.0;  ///< 0: intensities kept losslessly
   bool drop_attributes = false;
+  std::string sensor;  ///< --sensor: a sensor profile (formats/sensor_profile.md)
   ScanSetOptions scan_set;
   ModelOptions model;
 };
@@ -94,6 +95,8 @@ void run_compress(const CompressOptions& o) {
   OutputSet files;
   o.scan_set.record_inputs(files, o.inputs);
   files.input(o.alphabet, "--alphabet");
+  files.input(o.sensor, "--sensor");
+  if (!o.sensor.empty() && !layered) throw CliError(1, "--sensor is used by the residual layer: drop --max-error none");
   for (const auto& out : outputs) {
     files.output(out, "-o");
     check_output_kind(out, "-o", o.one_file ? "sequence" : "model");
@@ -149,6 +152,7 @@ void run_compress(const CompressOptions& o) {
   coding.keep_attributes = !o.drop_attributes;
   coding.layer_only_references_alphabet = o.one_file;  // a sequence's models all reference its alphabet
   coding.attributes.intensity_error = o.intensity_error;
+  if (!o.sensor.empty()) coding.sensor_profile = read_sensor_profile(o.sensor);
   const ScanCoder coder(std::move(set.alphabet), coding, !o.save_alphabet.empty() || o.one_file,
                         reuse ? std::move(reuse->bytes) : std::vector<std::uint8_t>{});
   const Alphabet& alphabet = coder.alphabet();
@@ -285,6 +289,14 @@ void run_compress(const CompressOptions& o) {
               .value("columns", static_cast<std::uint64_t>(coded.layer.columns))
               .value("fit_rms_m", coded.layer.laser_table_rms)
               .end_object();
+        if (coded.profile_fit)
+          j.begin_object("sensor_profile")
+              .value("file", o.sensor)
+              .value("lasers_hit", static_cast<std::uint64_t>(coded.profile_fit->lasers_hit))
+              .value("median_off_beam_m", coded.profile_fit->median_off_beam_m)
+              .value("direction", static_cast<std::int64_t>(coded.profile_fit->direction))
+              .value("firing_times", coded.profile_fit->firing_times)
+              .end_object();
         j.end_object();
       }
       j.begin_array("attributes");
@@ -308,6 +320,10 @@ void run_compress(const CompressOptions& o) {
                   d.model.instances.size(), bytes.size(), bpp);
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);
       std::printf("\n");
+      if (coded.profile_fit)
+        std::printf("  sensor profile %s: %zu of %zu lasers hit, points a median %.2f mm from the beams; layer coded %s\n",
+                    o.sensor.c_str(), coded.profile_fit->lasers_hit, coded.profile_fit->lasers,
+                    coded.profile_fit->median_off_beam_m * 1e3, coded.layer.laser ? "by sensor geometry" : "otherwise (smaller)");
       for (const auto& a : coded.attributes)
         std::printf("  kept %-10s %8zu bytes %7.3f bits/pt  %s\n", a.name.c_str(), a.bytes,
                     d.input_points ? 8.0 * static_cast<double>(a.bytes) / static_cast<double>(d.input_points) : 0.0,
@@ -440,6 +456,10 @@ void register_compress(CLI::App& app) {
       ->capture_default_str();
   sub->add_flag("--drop-attributes", o->drop_attributes,
                 "Keep positions only: no intensity, ring, time or colour (they are listed as dropped)");
+  sub->add_option("--sensor", o->sensor,
+                  "Sensor profile of the scans' lidar (its laser table: JSON as bench/sensors/*.json, or a Velodyne "
+                  "db.xml; formats/sensor_profile.md): the sensor-geometry coding takes each point's laser and column "
+                  "from it; scans that do not fit it are refused");
   sub->add_flag("--json", o->json, "Print one JSON object");
   o->scan_set.add_to(*sub);
   o->model.add_to(*sub);

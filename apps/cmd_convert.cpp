@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <optional>
 
 #include "cli_common.hpp"
 #include "lex3d/io/rosbag.hpp"
@@ -20,6 +21,7 @@ struct ConvertOptions {
   std::string metadata;
   std::string sensor_model;
   std::string topic;
+  std::string sensor;  ///< --sensor: a sensor profile whose lasers become the ring field
 };
 
 void run_convert(const ConvertOptions& o) {
@@ -33,6 +35,9 @@ void run_convert(const ConvertOptions& o) {
   OutputSet files;
   files.input(o.input, "input");
   files.input(o.metadata, "--metadata");
+  files.input(o.sensor, "--sensor");
+  std::optional<residual::SensorProfile> profile;
+  if (!o.sensor.empty()) profile = read_sensor_profile(o.sensor);
   for (const auto& out : outputs) {
     files.output(out, "output");
     check_output_kind(out, "output", "cloud");
@@ -40,6 +45,14 @@ void run_convert(const ConvertOptions& o) {
   std::vector<io::BagScan> bag_scans;
   for (std::size_t i = 0; i < loader.size(); ++i) {
     Cloud cloud = loader.load(i);
+    if (profile) {
+      const bool had_rings = cloud.has_rings();
+      auto fit = residual::apply_sensor_profile(cloud, *profile, loader.name(i));
+      if (!fit.ok()) throw CliError(2, fit.status().to_string());
+      std::fprintf(stderr, "note: %s: ring field %s the lasers of %s (%zu of %zu hit, points a median %.2f mm from the beams)\n",
+                   loader.name(i).c_str(), had_rings ? "replaced by" : "from", o.sensor.c_str(), fit.value().lasers_hit,
+                   fit.value().lasers, fit.value().median_off_beam_m * 1e3);
+    }
     const std::string& out = bag ? o.output : outputs[i];
     if (bag) {
       bag_scans.emplace_back();
@@ -68,6 +81,8 @@ void register_convert(CLI::App& app) {
   sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
   sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e");
   sub->add_option("--topic", o->topic, "The topic of a ROS bag to read (default: its only point cloud topic)");
+  sub->add_option("--sensor", o->sensor,
+                  "Sensor profile (formats/sensor_profile.md): write each point's laser by its table as the ring field");
   sub->callback([o] { run_convert(*o); });
 }
 

@@ -21,6 +21,22 @@ namespace lex3d::cli {
 
 namespace {
 
+/// The voxel coding's context model (formats/model.md §2.7).
+const char* octree_contexts_name(std::uint32_t contexts) {
+  return contexts == 1 ? "mixed (§2.7.4, format 1.8)" : "face (§2.7.1, format 1.3)";
+}
+
+/// The sensor-geometry coding's range predictor (formats/model.md §2.8.2).
+const char* range_predictor_name(std::uint32_t predictor) {
+  switch (predictor) {
+    case 0: return "left neighbour";
+    case 1: return "median edge detector";
+    case 2: return "median edge detector with edge flags";
+    case 3: return "left neighbour with edge flags";
+    default: return "unknown predictor";
+  }
+}
+
 const char* layer_coding_name(std::uint32_t coding) {
   return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : "previous-point";
 }
@@ -31,6 +47,7 @@ struct InfoOptions {
   std::string format = "auto";
   std::string metadata;      // an Ouster capture's metadata JSON
   std::string sensor_model;  // a Velodyne capture's model
+  std::string sensor;        // a sensor profile to fit the scan to
   bool json = false;
 };
 
@@ -206,7 +223,16 @@ bool info_lex3d_file(const InfoOptions& o) {
           .value("bytes", layer_bytes);
     if (layer && layer->coding == 3)
       j.value("tangential_step_m", layer->tangential_step).value("lasers", static_cast<std::uint64_t>(layer->lasers))
-          .value("columns", static_cast<std::uint64_t>(layer->columns));
+          .value("columns", static_cast<std::uint64_t>(layer->columns))
+          .value("range_predictor", range_predictor_name(layer->predictor))
+          .value("laser_table", "stored in the layer (its source is reported by compress --json, not stored)");
+    if (layer && layer->coding == 2) {
+      j.value("octree_depth", static_cast<std::uint64_t>(layer->depth)).value("octree_contexts", octree_contexts_name(layer->octree_contexts));
+      j.begin_array("octree_origin_m");
+      for (double c : layer->origin) j.value({}, c);
+      j.end_array();
+    }
+    if (layer && layer->coding == 1) j.value("direction_cell_rad", layer->cell);
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
     if (fi.kind == "model") {
@@ -241,8 +267,14 @@ bool info_lex3d_file(const InfoOptions& o) {
                     static_cast<unsigned long long>(layer->coded_points), layer->coding == 2 ? "voxels" : "points",
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
       if (layer && layer->coding == 3)
-        std::printf("laser table    %u lasers, %u columns a turn; step across the beams %.4g m\n", layer->lasers,
-                    layer->columns, layer->tangential_step);
+        std::printf("laser table    %u lasers, %u columns a turn, stored in the layer (its source is reported by "
+                    "compress --json, not stored); step across the beams %.4g m; ranges predicted by the %s\n",
+                    layer->lasers, layer->columns, layer->tangential_step, range_predictor_name(layer->predictor));
+      if (layer && layer->coding == 2)
+        std::printf("octree         %u levels of %.4g m cells from (%.4g, %.4g, %.4g) m, %s contexts\n", layer->depth,
+                    layer->step, layer->origin[0], layer->origin[1], layer->origin[2],
+                    octree_contexts_name(layer->octree_contexts));
+      if (layer && layer->coding == 1) std::printf("sweep          direction cell %.4g rad\n", layer->cell);
     }
     if (translation_step)
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);
@@ -349,6 +381,14 @@ void run_info(const InfoOptions& o) {
   }
   const io::ReadResult r = load_cloud(o.path, ro);
   const Cloud& c = r.cloud;
+  // How the scan fits a sensor profile (its lasers hit, the points' distance from the beams).
+  std::optional<residual::ProfileFit> fit;
+  if (!o.sensor.empty()) {
+    Cloud fitted = c;
+    auto f = residual::apply_sensor_profile(fitted, read_sensor_profile(o.sensor), o.path);
+    if (!f.ok()) throw CliError(2, f.status().to_string());
+    fit = f.value();
+  }
   const Bounds b = compute_bounds(c);
   std::vector<float> ranges;
   ranges.reserve(c.size());
@@ -385,6 +425,15 @@ void run_info(const InfoOptions& o) {
           .value("elevation", res->elevation_rad * rad2deg)
           .end_object();
     j.value("has_world_pose", c.has_world_pose);
+    if (fit)
+      j.begin_object("sensor_profile")
+          .value("file", o.sensor)
+          .value("lasers", static_cast<std::uint64_t>(fit->lasers))
+          .value("lasers_hit", static_cast<std::uint64_t>(fit->lasers_hit))
+          .value("median_off_beam_m", fit->median_off_beam_m)
+          .value("direction", static_cast<std::int64_t>(fit->direction))
+          .value("firing_times", fit->firing_times)
+          .end_object();
     if (c.georef) georef_json(j, *c.georef);
     if (!r.dropped_fields.empty()) {
       j.begin_array("fields_not_kept");
@@ -406,6 +455,11 @@ void run_info(const InfoOptions& o) {
     std::printf("no-return      %zu (%s)\n", r.no_return_dropped,
                 c.no_return_directions.empty() ? "not points" : "kept as max-range directions");
   if (c.rows > 0) std::printf("organised      %u rows x %u columns\n", c.rows, c.columns);
+  if (fit)
+    std::printf("sensor profile %s: %zu of %zu lasers hit, points a median %.2f mm from the beams (azimuths %s with "
+                "the column%s)\n",
+                o.sensor.c_str(), fit->lasers_hit, fit->lasers, fit->median_off_beam_m * 1e3,
+                fit->direction > 0 ? "grow" : "fall", fit->firing_times ? ", firing times included" : "");
   if (b.valid)
     std::printf("bounds         [%.3f %.3f %.3f] .. [%.3f %.3f %.3f] m\n", static_cast<double>(b.min.x()),
                 static_cast<double>(b.min.y()), static_cast<double>(b.min.z()), static_cast<double>(b.max.x()),
@@ -431,6 +485,8 @@ void register_info(CLI::App& app) {
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
   sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
   sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e");
+  sub->add_option("--sensor", o->sensor,
+                  "A point cloud: how it fits this sensor profile (formats/sensor_profile.md); exit 2 if it does not");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references (for its counts)");
   sub->add_flag("--json", o->json, "Print one JSON object");
   sub->callback([o] { run_info(*o); });

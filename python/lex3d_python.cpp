@@ -14,7 +14,9 @@
 #include <vector>
 
 #include "common.hpp"
+#include "lex3d/io/io.hpp"
 #include "lex3d/lex3d.hpp"
+#include "lex3d/residual/sensor_profile.hpp"
 
 namespace py = pybind11;
 
@@ -43,7 +45,8 @@ lex3d::LayerCoding layer_coding(const std::string& s) {
 py::object compress(const py::object& points, const py::object& intensity, std::optional<double> max_error,
                     std::optional<double> target_bpp, const std::optional<std::string>& words,
                     const std::string& coding, bool keep_all_points, const std::optional<py::bytes>& alphabet,
-                    double word_radius, int iterations, std::uint64_t seed, int threads, bool report) {
+                    double word_radius, int iterations, std::uint64_t seed, int threads, bool report,
+                    const py::object& sensor) {
   // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept).
   const bool from_file = lex3d::python::is_path(points);
   if (from_file && !intensity.is_none()) throw py::value_error("intensity goes with an array of points, not a path");
@@ -61,6 +64,16 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   o.max_iterations = iterations;
   o.seed = seed;
   o.threads = threads;
+  if (!sensor.is_none()) {  // a sensor profile file (formats/sensor_profile.md)
+    if (!lex3d::python::is_path(sensor)) throw py::value_error("sensor must be the path of a sensor profile file");
+    const std::string path = lex3d::python::path_of(sensor);
+    auto bytes = lex3d::io::read_file(path, 16ULL << 20);
+    if (!bytes.ok()) raise(bytes.status());
+    const auto& b = bytes.value();
+    auto profile = lex3d::residual::parse_sensor_profile(std::string_view(reinterpret_cast<const char*>(b.data()), b.size()), path);
+    if (!profile.ok()) raise(profile.status());
+    o.sensor_profile = std::move(profile).value();
+  }
   o.validate();
   std::optional<lex3d::StatusOr<lex3d::CompressResult>> r;
   {
@@ -161,6 +174,7 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("layer_coding") = "auto", py::arg("keep_all_points") = false, py::arg("alphabet") = py::none(),
         py::arg("word_radius") = 0.0, py::arg("iterations") = lex3d::LearnParams{}.max_iterations,
         py::arg("seed") = lex3d::LearnParams{}.seed, py::arg("threads") = 2, py::arg("report") = false,
+        py::arg("sensor") = py::none(),
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. Or a path
@@ -177,7 +191,10 @@ word_radius: metres, 0 derives it from the scan. iterations, seed: the learner's
 threads: worker threads, [1, 64]; the bytes do not depend on it.
 report: return (bytes, info) with info a dict: points, bytes, bits_per_point, max_error (None
     without a layer), words, instances, alphabet_words, attributes (kept), dropped_attributes.
-Raises ValueError for a bad array or option, or an alphabet that does not decode.)");
+sensor: path of a sensor profile (formats/sensor_profile.md: JSON or a Velodyne db.xml), the
+    lidar's laser table for the residual layer; needs max_error or target_bpp.
+Raises ValueError for a bad array or option, an alphabet that does not decode, a bad profile or a
+scan that does not fit it.)");
   m.def("decompress", &decompress, py::arg("data"), py::arg("alphabet") = py::none(), py::kw_only(),
         py::arg("attributes") = false,
         R"(Decodes a model file (bytes) into an (M, 3) float32 array of points (metres).

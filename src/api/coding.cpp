@@ -27,6 +27,8 @@ void CodingOptions::validate() const {
   if (!step_ok(quantization.translation_m) || !step_ok(quantization.rotation_rad))
     throw std::invalid_argument("quantization steps must be 0 (derived) or in [1e-6, 0.1]");
   if (threads < 1 || threads > 64) throw std::invalid_argument("threads must be in [1, 64], got " + std::to_string(threads));
+  if (sensor_profile && !layered())
+    throw std::invalid_argument("a sensor profile is used by the residual layer: give max_error or target_bpp");
   attributes.validate();
 }
 
@@ -111,6 +113,20 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
     c.dropped = attribute_fields(cloud);  // words alone: the decoded points stand for no input point
     return c;
   }
+  // A sensor profile gives the layer every point's laser and column (and the scan's beam
+  // layout); the attributes stay those of the input.
+  std::optional<residual::ProfileFit> profile_fit;
+  Cloud profiled;
+  if (options_.sensor_profile) {
+    profiled.points = cloud.points;
+    profiled.T_cloud_sensor = cloud.T_cloud_sensor;
+    profiled.rows = cloud.rows;
+    profiled.ring = cloud.ring;
+    auto fit = residual::apply_sensor_profile(profiled, *options_.sensor_profile, "");
+    if (!fit.ok()) return fit.status();
+    profile_fit = fit.value();
+  }
+  const Cloud& layer_input = options_.sensor_profile ? profiled : cloud;
   const residual::AttributeOptions* attributes = options_.keep_attributes ? &options_.attributes : nullptr;
   residual::LayerOptions layer_options = options_.layer_options();
   layer_options.threads = threads;
@@ -135,7 +151,7 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
     const Alphabet& alphabet = with_words ? *decoder_alphabet_ : empty;
     const Cloud placed = residual::decoder_word_cloud(d, alphabet, q);
     auto encode = [&](double e, residual::LayerStats* st) {
-      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, st, layer_options);
+      d.residual = residual::encode_layer(layer_input, placed, d.T_cloud_sensor, e, st, layer_options);
       return codec::encode_model(d, q);
     };
     // The final bound's layer also says which input point each decoded point stands for:
@@ -143,7 +159,7 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
     auto encode_with_attributes = [&](double e, residual::LayerStats& st, std::vector<residual::AttributeField>& kept) {
       residual::LayerOptions lo = layer_options;
       lo.track_sources = true;
-      d.residual = residual::encode_layer(cloud, placed, d.T_cloud_sensor, e, &st, lo);
+      d.residual = residual::encode_layer(layer_input, placed, d.T_cloud_sensor, e, &st, lo);
       std::vector<std::uint8_t> payload = residual::encode_attributes(cloud, st.sources, *attributes, &kept);
       if (!payload.empty()) d.attributes = std::move(payload);
       st.sources.clear();
@@ -151,6 +167,7 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
       return codec::encode_model(d, q);
     };
     CodedScan c;
+    c.profile_fit = profile_fit;
     c.words = with_words;
     c.max_error = max_error;
     c.instances = d.model.instances.size();

@@ -546,8 +546,10 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     h.stream_offset += kVoxelExtraBytes;
   } else if (h.coding == kCodingLaser) {
     h.tangential_step = ld_f64(payload + at + kHeadBytes);
-    h.lasers = codec::bytes::ld_u32(payload + at + kHeadBytes + 8);
-    h.columns = codec::bytes::ld_u32(payload + at + kHeadBytes + 12);
+    // after the step across the beams and the shift unit (f64 each), as laser_layer writes them
+    h.lasers = codec::bytes::ld_u32(payload + at + kHeadBytes + 16);
+    h.columns = codec::bytes::ld_u32(payload + at + kHeadBytes + 20);
+    h.predictor = codec::bytes::ld_u32(payload + at + kHeadBytes + 28);
     h.stream_offset += detail::kLaserFieldBytes;
   }
   return h;

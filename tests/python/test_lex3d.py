@@ -144,3 +144,39 @@ def test_corrupt_and_truncated_files_raise_value_error(small):
     flipped[len(data) // 2] ^= 0x40
     with pytest.raises(ValueError):
         lex3d.decompress(bytes(flipped))
+
+
+PROFILE = pathlib.Path(__file__).parents[1] / "data" / "profile"
+
+
+def test_a_sensor_profile_gives_the_laser_table_and_keeps_the_bound():
+    scan = np.fromfile(PROFILE / "scene16.bin", dtype="<f4").reshape(-1, 4)
+    points = scan[:, :3]
+    data = lex3d.compress(points, max_error=0.014, sensor=PROFILE / "scene16.json")
+    back = lex3d.decompress(data)
+    d_in, _ = cKDTree(back).query(points)
+    d_out, _ = cKDTree(points).query(back)
+    assert max(d_in.max(), d_out.max()) <= 0.014 * (1 + 1e-6)
+    if not CLI:
+        return
+    # the same bytes as the command with --sensor
+    with tempfile.TemporaryDirectory() as tmp:
+        out = pathlib.Path(tmp) / "s.lex3dm"
+        subprocess.run([CLI, "compress", str(PROFILE / "scene16.bin"), "-o", str(out),
+                        "--max-error", "0.014", "--sensor", str(PROFILE / "scene16.json"), "--drop-attributes"],
+                       check=True, capture_output=True)
+        assert out.read_bytes() == data
+
+
+def test_a_bad_or_foreign_sensor_profile_raises_value_error(tmp_path):
+    points = np.fromfile(PROFILE / "scene16.bin", dtype="<f4").reshape(-1, 4)[:, :3]
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"range_step": 0.002, "lasers": [{"elevation_deg": "x"}]}')
+    with pytest.raises(ValueError, match="bad.json: lasers\\[0\\].elevation_deg is string"):
+        lex3d.compress(points, max_error=0.014, sensor=bad)
+    other = tmp_path / "other.json"
+    other.write_text('{"range_step": 0.002, "columns": 720, "lasers": [{"elevation_deg": -20}, {"elevation_deg": 7}]}')
+    with pytest.raises(ValueError, match="other.json"):
+        lex3d.compress(points, max_error=0.014, sensor=other)
+    with pytest.raises(ValueError):
+        lex3d.compress(points, sensor=PROFILE / "scene16.json")  # no residual layer

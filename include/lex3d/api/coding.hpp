@@ -16,6 +16,7 @@
 #include "lex3d/model/model.hpp"
 #include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
+#include "lex3d/residual/sensor_profile.hpp"
 
 namespace lex3d {
 
@@ -61,6 +62,13 @@ struct CodingOptions {
   bool keep_attributes = true;
   residual::AttributeOptions attributes;
 
+  /// The scan's laser table as its user knows it (formats/sensor_profile.md): the
+  /// sensor-geometry coding takes every point's laser and column from it
+  /// (residual::apply_sensor_profile) instead of estimating them; a scan whose points do not
+  /// fit it is kBadData. Needs a residual layer. The input's own fields (a ring field
+  /// included) are kept as they are.
+  std::optional<residual::SensorProfile> sensor_profile;
+
   /// With a shared alphabet (referenced by hash), a file that keeps no instance (the layer
   /// alone was smaller, `WordsMode::kAuto`) embeds an empty alphabet and decodes without the
   /// alphabet file. Set this for models that go into a sequence file, which must all reference
@@ -88,6 +96,7 @@ struct CodedScan {
   std::size_t instances = 0;         ///< instances in the file
   std::vector<residual::AttributeField> attributes;  ///< fields kept (an ATTR chunk)
   std::vector<std::string> dropped;                  ///< fields the input has and the file does not keep
+  std::optional<residual::ProfileFit> profile_fit;   ///< how the points fit CodingOptions::sensor_profile
 };
 
 /// The per-point fields `cloud` has, by name ("ring", "intensity", "time", "rgb").

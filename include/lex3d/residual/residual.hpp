@@ -100,6 +100,7 @@ struct LayerHeader {
   double tangential_step = 0.0;    ///< sensor-geometry coding: step across the beams, metres
   std::uint32_t lasers = 0;        ///< sensor-geometry coding: lasers of the table
   std::uint32_t columns = 0;       ///< sensor-geometry coding: columns a turn
+  std::uint32_t predictor = 0;     ///< sensor-geometry coding: range predictor 0-3 (formats/model.md §2.8.2)
   std::uint64_t fields_offset = 0; ///< where max_error starts (8 in an RESW payload)
   std::uint64_t stream_offset = 0; ///< where the range-coded stream starts
 };
