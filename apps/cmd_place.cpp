@@ -1008,6 +1008,12 @@ void register_place(CLI::App& app) {
     s->add_option("--dense-iterations", o->params.dense_iterations, "Dense alignment iterations (0 = none)")->check(CLI::Range(0, 100));
     s->add_option("--dense-points", o->params.dense_points, "Dense points a scan at most")->check(CLI::Range(16, 1000000));
     s->add_option("--dense-candidates", o->params.dense_candidates, "Candidates aligned densely")->check(CLI::Range(1, 1000000));
+    s->add_option("--dense-hypotheses", o->params.dense_hypotheses,
+                  "Transforms of a candidate aligned densely in turn while the aligned one fails the free-space or distance check")
+        ->check(CLI::Range(1, 100));
+    s->add_option("--more-candidates", o->params.more_candidates,
+                  "Further candidates verified when none of the first --candidates is accepted (0 = none)")
+        ->check(CLI::Range(0, 1000000));
     s->add_option("--surface-yaws", o->params.surface_yaws, "Yaw candidates of the surface hypotheses (0 = none)")->check(CLI::Range(0, 36));
     s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
     s->add_option("--validation-points", o->params.validation_points, "Validation points a scan (steder2010: 100)")->check(CLI::Range(1, 4096));

@@ -145,6 +145,17 @@ struct PlaceParams {
   /// PlaceDatabase::query aligns densely only its best this many candidates (by the score
   /// of the feature transform); [1, 1e6].
   int dense_candidates = 3;
+  /// Transforms of a candidate that dense alignment may try, best feature-stage score first:
+  /// when the aligned transform fails the free-space or distance check, the candidate's next
+  /// valid transform (distinct, score above 0) is aligned and checked instead; 1 = the best
+  /// only; [1, 100]. Between scans several metres apart the feature-stage score separates a
+  /// right transform from a wrong one poorly (few interest points repeat, a shift along a
+  /// corridor overlays walls as well), while the free-space check of the aligned scans does.
+  int dense_hypotheses = 3;
+  /// When none of the top_k candidates is accepted (score >= accept_score), the next this
+  /// many (by retrieval rank) are verified as well, the best dense_candidates of them aligned
+  /// densely; 0 = none; [0, 1e6]. A query that found its place pays nothing more.
+  int more_candidates = 8;
   /// Worker threads over candidates; [1, 64]. Results do not depend on it.
   int threads = 1;
   /// First stage (retrieval of the top_k candidates).
@@ -239,6 +250,19 @@ struct DenseConsistency {
   }
 };
 
+/// A valid feature-stage transform of a candidate other than the best one (what dense
+/// alignment tries when the best fails the free-space or distance check).
+struct PlaceAlternative {
+  Pose T_match_query = Pose::Identity();
+  double score = 0.0;
+  double score_query_in_match = 0.0;
+  double score_match_in_query = 0.0;
+  std::size_t inliers = 0;
+  std::size_t descriptor_inliers = 0;
+  double rms_inlier_m = 0.0;
+  double sensor_distance_m = 0.0;
+};
+
 /// The result of matching a query against one scan.
 struct PlaceMatch {
   std::size_t scan = 0;                 ///< database index
@@ -262,6 +286,11 @@ struct PlaceMatch {
   DenseConsistency dense_q;             ///< query points in the match's image
   DenseConsistency dense_m;             ///< match points in the query's image
   bool dense_refined = false;           ///< T_match_query and the scores come from dense alignment
+  /// Feature-stage transforms after the best, best score first (at most
+  /// PlaceParams::dense_hypotheses - 1); dense alignment falls back on them in turn.
+  std::vector<PlaceAlternative> alternatives;
+  /// Transforms aligned densely (1 + the alternatives tried; 0 = not aligned).
+  std::size_t dense_tried = 0;
   bool valid = false;                   ///< a transform with at least min_inliers was found
 };
 
