@@ -1011,6 +1011,9 @@ void register_place(CLI::App& app) {
     s->add_option("--dense-hypotheses", o->params.dense_hypotheses,
                   "Transforms of a candidate aligned densely in turn while the aligned one fails the free-space or distance check")
         ->check(CLI::Range(1, 100));
+    s->add_option("--dense-score-ratio", o->params.dense_score_ratio,
+                  "Align a transform densely only when its feature-stage score reaches this share of --threshold")
+        ->check(CLI::Range(0.0, 1.0));
     s->add_option("--more-candidates", o->params.more_candidates,
                   "Further candidates verified when none of the first --candidates is accepted (0 = none)")
         ->check(CLI::Range(0, 1000000));

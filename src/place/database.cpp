@@ -202,8 +202,14 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
     if (a.dense_refined != b.dense_refined) return a.dense_refined;
     return order(a, b);
   };
+  // The second round tries the surface hypotheses alone: candidates ranked lower share fewer
+  // words with the query, and their interest points repeat less, so feature hypotheses rarely
+  // find them (and they are most of a candidate's cost).
+  PlaceParams surface_only = coarse;
+  surface_only.hypotheses_per_size = 1;
+  surface_only.gravity_pairs = 0;
   // One round: verifies candidates [from, to) and aligns the best dense_candidates of them.
-  auto round = [&](std::size_t from, std::size_t to) {
+  auto round = [&](std::size_t from, std::size_t to, const PlaceParams& verify) {
     parallel_for(
         to - from, params.threads,
         [&](std::size_t k) {
@@ -220,7 +226,7 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
           } else {
             cand[i] = &added_[s - index_.scans];
           }
-          PlaceMatch m = match_scans(query, *cand[i], coarse);
+          PlaceMatch m = match_scans(query, *cand[i], verify);
           m.scan = s;
           m.retrieval_similarity = cands[i].second;
           all[i] = std::move(m);
@@ -243,10 +249,10 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
     return !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
   };
   const std::size_t n1 = std::min(k1, cands.size());
-  round(0, n1);
+  round(0, n1, coarse);
   r.retrieved = n1;
   if (!accepted() && cands.size() > n1) {
-    round(n1, cands.size());
+    round(n1, cands.size(), surface_only);
     r.retrieved = cands.size();
   }
   for (const double d : decode_ms) {

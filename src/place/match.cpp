@@ -883,6 +883,12 @@ void align_and_check(const PlaceScan& query, const PlaceScan& candidate, const P
 void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, const PixelLocator& locate_q,
                           const PixelLocator& locate_m, PlaceMatch& m, const PlaceParams& params) {
   if (!m.valid) return;
+  const double min_score = params.dense_score_ratio * params.accept_score;
+  if (m.score < min_score) {
+    m.rejected_score = true;
+    m.valid = false;
+    return;
+  }
   const PlaceMatch feature_stage = m;
   align_and_check(query, candidate, locate_q, locate_m, m, params);
   m.dense_tried = 1;
@@ -890,6 +896,7 @@ void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, co
                                                   static_cast<std::size_t>(params.dense_hypotheses) - 1);
   for (std::size_t k = 0; k < tries && !m.valid; ++k) {
     const PlaceAlternative& a = feature_stage.alternatives[k];
+    if (a.score < min_score) break;  // best first: the rest score lower still
     PlaceMatch c = feature_stage;
     c.T_match_query = a.T_match_query;
     c.T_feature = a.T_match_query;
