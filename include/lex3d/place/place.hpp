@@ -153,13 +153,16 @@ struct PlaceParams {
   /// corridor overlays walls as well), while the free-space check of the aligned scans does.
   int dense_hypotheses = 3;
   /// A transform is aligned densely only when its feature-stage score reaches this share of
-  /// accept_score (a candidate whose best does not is marked invalid, rejected_score); [0, 1]. Dense alignment is most of a query's cost;
-  /// on balm (8 m protocol) no transform that ended right had scored below 0.52 of
-  /// accept_score before it, while 40 % of the aligned ones that ended wrong had.
+  /// accept_score (a candidate whose best does not is marked invalid, rejected_score); [0, 1].
+  /// Dense alignment is most of a query's cost. On balm (8 m protocol, 720 alignments made
+  /// without this floor) none of the 65 that ended right had scored below 0.52 of accept_score
+  /// before it; 305 of the 655 that ended wrong had scored below 0.4 of it.
   double dense_score_ratio = 0.4;
   /// When none of the top_k candidates is accepted (score >= accept_score), the next this
-  /// many (by retrieval rank) are verified as well, the best dense_candidates of them aligned
-  /// densely; 0 = none; [0, 1e6]. A query that found its place pays nothing more.
+  /// many (by retrieval rank) are verified as well, with the surface hypotheses only (lower
+  /// ranks share fewer words with the query: their interest points rarely repeat), the best
+  /// dense_candidates of them aligned densely; 0 = none; [0, 1e6]. A query that found its
+  /// place pays nothing more.
   int more_candidates = 8;
   /// Worker threads over candidates; [1, 64]. Results do not depend on it.
   int threads = 1;
@@ -333,7 +336,7 @@ struct PlaceQueryResult {
   std::vector<PlaceMatch> matches;
   /// True when the best score reaches PlaceParams::accept_score; false = unknown place.
   bool accepted = false;
-  std::size_t retrieved = 0;  ///< candidates from the inverted index
+  std::size_t retrieved = 0;  ///< candidates verified (top_k, and more_candidates more when none of those was accepted)
   double retrieval_ms = 0.0;
   double verification_ms = 0.0;  ///< includes decode_ms
   double decode_ms = 0.0;        ///< reading the candidates' stored entries (summed over threads)
