@@ -538,7 +538,7 @@ void run_query(const PlaceOptions& o) {
         j.value("accepted", m.valid && m.score >= p.accept_score).value("inliers", m.inliers);
         j.value("similarity", m.retrieval_similarity).value("sensor_distance_m", m.sensor_distance_m);
         j.value("rejected_distance", m.rejected_distance).value("rejected_ground", m.rejected_ground);
-        j.value("rejected_conflict", m.rejected_conflict);
+        j.value("rejected_conflict", m.rejected_conflict).value("rejected_score", m.rejected_score);
         pose_json(j, m.T_match_query);
         j.end_object();
       }
@@ -558,6 +558,7 @@ void run_query(const PlaceOptions& o) {
                   : m.rejected_distance ? "  (rejected: sensors farther apart than --max-distance)"
                   : m.rejected_ground   ? "  (rejected: ground-vehicle check)"
                   : m.rejected_conflict ? "  (rejected: points in the other scan's free space)"
+                  : m.rejected_score    ? "  (rejected: scored too low to be aligned densely)"
                                         : "  (no transform)");
     }
     std::fflush(stdout);
