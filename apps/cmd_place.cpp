@@ -567,7 +567,7 @@ void run_query(const PlaceOptions& o) {
         j.value("accepted", m.valid && m.score >= p.accept_score).value("inliers", m.inliers);
         j.value("similarity", m.retrieval_similarity).value("sensor_distance_m", m.sensor_distance_m);
         j.value("rejected_distance", m.rejected_distance).value("rejected_ground", m.rejected_ground);
-        j.value("rejected_conflict", m.rejected_conflict);
+        j.value("rejected_conflict", m.rejected_conflict).value("rejected_score", m.rejected_score);
         pose_json(j, m.T_match_query);
         j.end_object();
       }
@@ -587,6 +587,7 @@ void run_query(const PlaceOptions& o) {
                   : m.rejected_distance ? "  (rejected: sensors farther apart than --max-distance)"
                   : m.rejected_ground   ? "  (rejected: ground-vehicle check)"
                   : m.rejected_conflict ? "  (rejected: points in the other scan's free space)"
+                  : m.rejected_score    ? "  (rejected: scored too low to be aligned densely)"
                                         : "  (no transform)");
     }
     std::fflush(stdout);
@@ -1065,6 +1066,15 @@ void register_place(CLI::App& app) {
     s->add_option("--dense-iterations", o->params.dense_iterations, "Dense alignment iterations (0 = none)")->check(CLI::Range(0, 100));
     s->add_option("--dense-points", o->params.dense_points, "Dense points a scan at most")->check(CLI::Range(16, 1000000));
     s->add_option("--dense-candidates", o->params.dense_candidates, "Candidates aligned densely")->check(CLI::Range(1, 1000000));
+    s->add_option("--dense-hypotheses", o->params.dense_hypotheses,
+                  "Transforms of a candidate aligned densely in turn while the aligned one fails the free-space or distance check")
+        ->check(CLI::Range(1, 100));
+    s->add_option("--dense-score-ratio", o->params.dense_score_ratio,
+                  "Align a transform densely only when its feature-stage score reaches this share of --threshold")
+        ->check(CLI::Range(0.0, 1.0));
+    s->add_option("--more-candidates", o->params.more_candidates,
+                  "Further candidates verified when none of the first --candidates is accepted (0 = none)")
+        ->check(CLI::Range(0, 1000000));
     s->add_option("--surface-yaws", o->params.surface_yaws, "Yaw candidates of the surface hypotheses (0 = none)")->check(CLI::Range(0, 36));
     s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
     s->add_option("--validation-points", o->params.validation_points, "Validation points a scan (steder2010: 100)")->check(CLI::Range(1, 4096));

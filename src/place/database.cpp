@@ -2,6 +2,7 @@
 // inverted index word id -> scans, tf-idf retrieval and verified queries.
 
 #include <algorithm>
+#include <iterator>
 #include <cmath>
 #include <cstring>
 #include <list>
@@ -174,48 +175,24 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   PlaceQueryResult r;
   Stopwatch sw;
   r.retrieval = resolve(params.retrieval);
-  const auto cands = retrieve(query, static_cast<std::size_t>(params.top_k), r.retrieval, params,
+  // The first round verifies the top_k candidates; when none is accepted, a second round
+  // verifies the next more_candidates (retrieved with the first, in rank order).
+  const std::size_t k1 = static_cast<std::size_t>(params.top_k);
+  const std::size_t k2 = k1 + static_cast<std::size_t>(params.more_candidates);
+  const auto cands = retrieve(query, k2, r.retrieval, params,
                               r.retrieval == PlaceRetrieval::kFabmap ? &r.new_place_probability : nullptr);
-  r.retrieved = cands.size();
   r.retrieval_ms = sw.lap_ms();
-  r.matches.resize(cands.size());
   // Candidates' entries are decoded here (stored ones) and kept for the dense step.
   std::vector<std::shared_ptr<const PlaceScan>> held(cands.size());
   std::vector<const PlaceScan*> cand(cands.size(), nullptr);
   std::vector<Status> errors(cands.size());
   std::vector<double> decode_ms(cands.size(), 0.0);
+  std::vector<PlaceMatch> all(cands.size());
   PlaceParams coarse = params;
   coarse.dense_iterations = 0;
-  parallel_for(
-      cands.size(), params.threads,
-      [&](std::size_t i) {
-        const std::size_t s = cands[i].first;
-        if (s < index_.scans) {
-          auto x = decoded(s, decode_ms[i]);
-          if (!x.ok()) {
-            errors[i] = x.status();
-            return;
-          }
-          held[i] = std::move(x).value();
-          cand[i] = held[i].get();
-        } else {
-          cand[i] = &added_[s - index_.scans];
-        }
-        PlaceMatch m = match_scans(query, *cand[i], coarse);
-        m.scan = s;
-        m.retrieval_similarity = cands[i].second;
-        r.matches[i] = std::move(m);
-      },
-      1);
-  for (const auto& e : errors)
-    if (!e.ok()) throw PlaceDataError(e);
-  for (const double d : decode_ms) {
-    r.decode_ms += d;
-    r.decoded += d > 0.0 ? 1 : 0;
-  }
   auto by_index = [&](std::size_t s) -> const PlaceScan& {
     for (std::size_t i = 0; i < cands.size(); ++i)
-      if (cands[i].first == s) return *cand[i];
+      if (cands[i].first == s && cand[i] != nullptr) return *cand[i];
     throw std::logic_error("PlaceDatabase::query: candidate not found");
   };
   auto order = [](const PlaceMatch& a, const PlaceMatch& b) {
@@ -223,19 +200,69 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
     if (a.score != b.score) return a.score > b.score;
     return a.scan < b.scan;
   };
-  std::stable_sort(r.matches.begin(), r.matches.end(), order);
-  if (params.dense_iterations > 0) {
-    const std::size_t nd = std::min(r.matches.size(), static_cast<std::size_t>(params.dense_candidates));
+  // Densely aligned candidates first: their scores are not comparable with the others'.
+  auto dense_first = [&](const PlaceMatch& a, const PlaceMatch& b) {
+    if (a.dense_refined != b.dense_refined) return a.dense_refined;
+    return order(a, b);
+  };
+  // The second round tries the surface hypotheses alone: candidates ranked lower share fewer
+  // words with the query, and their interest points repeat less, so feature hypotheses rarely
+  // find them (and they are most of a candidate's cost).
+  PlaceParams surface_only = coarse;
+  surface_only.hypotheses_per_size = 1;
+  surface_only.gravity_pairs = 0;
+  // One round: verifies candidates [from, to) and aligns the best dense_candidates of them.
+  auto round = [&](std::size_t from, std::size_t to, const PlaceParams& verify) {
     parallel_for(
-        nd, params.threads, [&](std::size_t i) { refine_match(query, by_index(r.matches[i].scan), r.matches[i], params); },
+        to - from, params.threads,
+        [&](std::size_t k) {
+          const std::size_t i = from + k;
+          const std::size_t s = cands[i].first;
+          if (s < index_.scans) {
+            auto x = decoded(s, decode_ms[i]);
+            if (!x.ok()) {
+              errors[i] = x.status();
+              return;
+            }
+            held[i] = std::move(x).value();
+            cand[i] = held[i].get();
+          } else {
+            cand[i] = &added_[s - index_.scans];
+          }
+          PlaceMatch m = match_scans(query, *cand[i], verify);
+          m.scan = s;
+          m.retrieval_similarity = cands[i].second;
+          all[i] = std::move(m);
+        },
         1);
-    // Densely aligned candidates first: their scores are not comparable with the others'.
-    std::stable_sort(r.matches.begin(), r.matches.end(), [&](const PlaceMatch& a, const PlaceMatch& b) {
-      if (a.dense_refined != b.dense_refined) return a.dense_refined;
-      return order(a, b);
-    });
+    for (std::size_t i = from; i < to; ++i)
+      if (!errors[i].ok()) throw PlaceDataError(errors[i]);
+    std::vector<PlaceMatch> batch(std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(from)),
+                                  std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(to)));
+    std::stable_sort(batch.begin(), batch.end(), order);
+    if (params.dense_iterations > 0) {
+      const std::size_t nd = std::min(batch.size(), static_cast<std::size_t>(params.dense_candidates));
+      parallel_for(
+          nd, params.threads, [&](std::size_t i) { refine_match(query, by_index(batch[i].scan), batch[i], params); }, 1);
+    }
+    for (auto& m : batch) r.matches.push_back(std::move(m));
+    std::stable_sort(r.matches.begin(), r.matches.end(), dense_first);
+  };
+  auto accepted = [&] {
+    return !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
+  };
+  const std::size_t n1 = std::min(k1, cands.size());
+  round(0, n1, coarse);
+  r.retrieved = n1;
+  if (!accepted() && cands.size() > n1) {
+    round(n1, cands.size(), surface_only);
+    r.retrieved = cands.size();
   }
-  r.accepted = !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
+  for (const double d : decode_ms) {
+    r.decode_ms += d;
+    r.decoded += d > 0.0 ? 1 : 0;
+  }
+  r.accepted = accepted();
   r.verification_ms = sw.lap_ms();
   return r;
 }

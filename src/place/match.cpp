@@ -856,10 +856,9 @@ double validation_score_located(const PlaceScan& from, const PlaceScan& to, cons
   return std::max(0.0, sum) / static_cast<double>(n);  // eq. 10
 }
 
-// refine_match with the pixel locators of the two coarse images.
-void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, const PixelLocator& locate_q,
-                          const PixelLocator& locate_m, PlaceMatch& m, const PlaceParams& params) {
-  if (!m.valid) return;
+// Dense alignment of m from m.T_feature, its checks and scores.
+void align_and_check(const PlaceScan& query, const PlaceScan& candidate, const PixelLocator& locate_q,
+                     const PixelLocator& locate_m, PlaceMatch& m, const PlaceParams& params) {
   const DenseAlignment a = dense_align_located(query, candidate, locate_q, locate_m, m.T_feature, params);
   m.dense_rms_m = a.rms_m;
   m.dense_used = a.used;
@@ -875,6 +874,43 @@ void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, co
   if (params.max_conflict < 1.0 && std::max(m.dense_q.conflict_share(), m.dense_m.conflict_share()) > params.max_conflict) {
     m.rejected_conflict = true;
     m.valid = false;
+  }
+}
+
+// refine_match with the pixel locators of the two coarse images: the best transform, then,
+// while the aligned transform is rejected, the alternatives in turn. When every one is
+// rejected, the best transform's result is kept (invalid, with its reasons).
+void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, const PixelLocator& locate_q,
+                          const PixelLocator& locate_m, PlaceMatch& m, const PlaceParams& params) {
+  if (!m.valid) return;
+  const double min_score = params.dense_score_ratio * params.accept_score;
+  if (m.score < min_score) {
+    m.rejected_score = true;
+    m.valid = false;
+    return;
+  }
+  const PlaceMatch feature_stage = m;
+  align_and_check(query, candidate, locate_q, locate_m, m, params);
+  m.dense_tried = 1;
+  const std::size_t tries = std::min<std::size_t>(feature_stage.alternatives.size(),
+                                                  static_cast<std::size_t>(params.dense_hypotheses) - 1);
+  for (std::size_t k = 0; k < tries && !m.valid; ++k) {
+    const PlaceAlternative& a = feature_stage.alternatives[k];
+    if (a.score < min_score) break;  // best first: the rest score lower still
+    PlaceMatch c = feature_stage;
+    c.T_match_query = a.T_match_query;
+    c.T_feature = a.T_match_query;
+    c.score = a.score;
+    c.score_query_in_match = a.score_query_in_match;
+    c.score_match_in_query = a.score_match_in_query;
+    c.inliers = a.inliers;
+    c.descriptor_inliers = a.descriptor_inliers;
+    c.rms_inlier_m = a.rms_inlier_m;
+    c.sensor_distance_m = a.sensor_distance_m;
+    align_and_check(query, candidate, locate_q, locate_m, c, params);
+    c.dense_tried = k + 2;
+    if (c.valid) m = std::move(c);
+    else m.dense_tried = k + 2;
   }
 }
 
@@ -927,6 +963,7 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
   }
   const PixelLocator locate_q(query.coarse), locate_m(candidate.coarse);
   bool first = true;
+  std::vector<PlaceMatch> scored;  // valid transforms with a score above 0
   for (const auto& h : refined) {
     if (h.inliers < static_cast<std::size_t>(params.min_inliers)) continue;
     PlaceMatch m;
@@ -957,6 +994,28 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
                                               (m.score == out.score && m.inliers > out.inliers)));
     if (better) out = m;
     first = false;
+    if (m.valid && m.score > 0.0) scored.push_back(m);
+  }
+  // The runners-up, for dense alignment to fall back on: every other valid transform that
+  // scored, best first (ties: more inliers, then the order they were made in).
+  if (out.valid && params.dense_hypotheses > 1) {
+    std::stable_sort(scored.begin(), scored.end(), [](const PlaceMatch& a, const PlaceMatch& b) {
+      return a.score != b.score ? a.score > b.score : a.inliers > b.inliers;
+    });
+    for (const PlaceMatch& m : scored) {
+      if (out.alternatives.size() + 1 >= static_cast<std::size_t>(params.dense_hypotheses)) break;
+      if (m.T_match_query.matrix() == out.T_match_query.matrix()) continue;  // the best itself
+      PlaceAlternative a;
+      a.T_match_query = m.T_match_query;
+      a.score = m.score;
+      a.score_query_in_match = m.score_query_in_match;
+      a.score_match_in_query = m.score_match_in_query;
+      a.inliers = m.inliers;
+      a.descriptor_inliers = m.descriptor_inliers;
+      a.rms_inlier_m = m.rms_inlier_m;
+      a.sensor_distance_m = m.sensor_distance_m;
+      out.alternatives.push_back(a);
+    }
   }
   out.T_feature = out.T_match_query;
   if (out.valid && params.dense_iterations > 0) refine_match_located(query, candidate, locate_q, locate_m, out, params);

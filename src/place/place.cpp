@@ -63,6 +63,9 @@ void PlaceParams::validate() const {
   check(dense_gate_end > 0.0 && dense_gate_end <= dense_gate_start,
         "PlaceParams::dense_gate_end must be in (0, dense_gate_start] m");
   check(dense_candidates >= 1 && dense_candidates <= 1000000, "PlaceParams::dense_candidates must be in [1, 1e6]");
+  check(dense_hypotheses >= 1 && dense_hypotheses <= 100, "PlaceParams::dense_hypotheses must be in [1, 100]");
+  check(dense_score_ratio >= 0.0 && dense_score_ratio <= 1.0, "PlaceParams::dense_score_ratio must be in [0, 1]");
+  check(more_candidates >= 0 && more_candidates <= 1000000, "PlaceParams::more_candidates must be in [0, 1e6]");
   check(threads >= 1 && threads <= 64, "PlaceParams::threads must be in [1, 64]");
   check(fabmap_p_detect > 0.0 && fabmap_p_detect < 1.0, "PlaceParams::fabmap_p_detect must be in (0, 1)");
   check(fabmap_p_false > 0.0 && fabmap_p_false < fabmap_p_detect,

@@ -382,6 +382,70 @@ TEST(PlaceMatch, MaxDistanceLimitsTheImpliedSensorDistance) {
   EXPECT_FALSE(beyond.valid && (truth.inverse() * beyond.T_match_query).translation().norm() < 0.3);
 }
 
+// Revisits 7.7-7.8 m apart, asked as "seen from within 8 m?": the best feature-stage
+// transform of 000112 -> 000072 is wrong (a 6 m shift that overlays the walls), densely
+// aligned it fails the free-space check, and the candidate's next transform is the right
+// one. Aligning only the best (dense_hypotheses = 1) loses the revisit.
+TEST(PlaceMatch, DenseAlignmentFallsBackOnTheNextTransform) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  Balm& b = Balm::get();
+  const PlaceScan q = b.place("000112"), m = b.place("000072");
+  const Pose truth = b.pose("000072").inverse() * b.pose("000112");
+  ASSERT_GT(truth.translation().head<2>().norm(), 7.5);
+  PlaceParams p;
+  p.max_distance = 8.0;
+  const PlaceMatch r = match_scans(q, m, p);
+  ASSERT_TRUE(r.valid) << "conflict " << r.rejected_conflict << ", distance " << r.rejected_distance;
+  EXPECT_TRUE(r.dense_refined);
+  EXPECT_GT(r.dense_tried, 1U) << "the best feature transform is right: the fallback is not exercised";
+  EXPECT_GT(r.score, 0.15);
+  expect_pose_near(r.T_match_query, truth, 0.1, 0.75, "000112 -> 000072");
+  const Pose d = truth.inverse() * r.T_match_query;
+  std::printf("000112 -> 000072: score %.3f, transform %zu of %zu, error %.3f m %.2f deg\n", r.score, r.dense_tried,
+              r.alternatives.size() + 1, d.translation().norm(), Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI);
+  p.dense_hypotheses = 1;
+  const PlaceMatch only_best = match_scans(q, m, p);
+  EXPECT_TRUE(!only_best.valid || (truth.inverse() * only_best.T_match_query).translation().norm() > 1.0);
+}
+
+// A query that accepts none of its first top_k candidates verifies the next more_candidates.
+// A decoy holds the query's own words (retrieved first, tf-idf similarity 1) with the
+// geometry of a scan 14 m away; with top_k = 1 the revisit 7.8 m away is found only by the
+// second round.
+TEST(PlaceDatabase, MoreCandidatesWhenNoneIsAccepted) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  Balm& b = Balm::get();
+  const PlaceScan q = b.place("000162");
+  PlaceDatabase db;
+  PlaceScan decoy = b.place("000040");
+  decoy.words = q.words;
+  decoy.name = "decoy";
+  db.add(std::move(decoy));
+  for (const char* f : {"000060", "000108", "000000"}) db.add(b.place(f));
+  const auto ranked = db.retrieve(q, db.size());
+  ASSERT_FALSE(ranked.empty());
+  ASSERT_EQ(db.name(ranked.front().first), "decoy");
+  PlaceParams p;
+  p.max_distance = 8.0;
+  p.top_k = 1;
+  p.more_candidates = 0;
+  const auto first = db.query(q, p);
+  EXPECT_EQ(first.retrieved, 1U);
+  EXPECT_FALSE(first.accepted);
+  for (const auto& m : first.matches) EXPECT_NE(db.name(m.scan), "000108");
+  p.more_candidates = 8;
+  const auto more = db.query(q, p);
+  EXPECT_EQ(more.retrieved, ranked.size());
+  ASSERT_TRUE(more.best() != nullptr);
+  ASSERT_TRUE(more.best()->valid);
+  EXPECT_EQ(db.name(more.best()->scan), "000108");
+  const Pose truth = b.pose("000108").inverse() * b.pose("000162");
+  expect_pose_near(more.best()->T_match_query, truth, 0.1, 0.75, "000162 -> 000108");
+  const Pose d = truth.inverse() * more.best()->T_match_query;
+  std::printf("000162 -> 000108: score %.3f, error %.3f m %.2f deg\n", more.best()->score, d.translation().norm(),
+              Eigen::AngleAxisd(d.linear()).angle() * 180.0 / M_PI);
+}
+
 // Scans 17.7 m apart in a courtyard with a 90-degree symmetry: a transform turned by 90
 // degrees aligns them with a score above the threshold, but many points of one scan then
 // lie where the other scan's beams passed through; the free-space check rejects it.

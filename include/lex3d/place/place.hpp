@@ -76,7 +76,8 @@ enum class PlaceRetrieval {
 /// Parameters of matching and scoring (defaults from steder2010 and collier2012).
 struct PlaceParams {
   /// Database scans retrieved by tf-idf and verified geometrically (top-K); [1, 1e6].
-  /// On balm, 8 finds every true match that 16 finds (bench/place.sh) at half the cost.
+  /// On balm, 8 finds every true match within 4 m that 16 finds (bench/place.sh) at half the
+  /// cost; of those within 8 m, 000162 -> 000108 ranks below 8 (more_candidates finds it).
   int top_k = 8;
   /// Lowe ratio test on descriptor distances: nearest < ratio · second nearest
   /// (collier2012 §3.2: 0.8); (0, 1].
@@ -156,6 +157,25 @@ struct PlaceParams {
   /// PlaceDatabase::query aligns densely only its best this many candidates (by the score
   /// of the feature transform); [1, 1e6].
   int dense_candidates = 3;
+  /// Transforms of a candidate that dense alignment may try, best feature-stage score first:
+  /// when the aligned transform fails the free-space or distance check, the candidate's next
+  /// valid transform (distinct, score above 0) is aligned and checked instead; 1 = the best
+  /// only; [1, 100]. Between scans several metres apart the feature-stage score separates a
+  /// right transform from a wrong one poorly (few interest points repeat, a shift along a
+  /// corridor overlays walls as well), while the free-space check of the aligned scans does.
+  int dense_hypotheses = 3;
+  /// A transform is aligned densely only when its feature-stage score reaches this share of
+  /// accept_score (a candidate whose best does not is marked invalid, rejected_score); [0, 1].
+  /// Dense alignment is most of a query's cost. On balm (8 m protocol, 720 alignments made
+  /// without this floor) none of the 65 that ended right had scored below 0.52 of accept_score
+  /// before it; 305 of the 655 that ended wrong had scored below 0.4 of it.
+  double dense_score_ratio = 0.4;
+  /// When none of the top_k candidates is accepted (score >= accept_score), the next this
+  /// many (by retrieval rank) are verified as well, with the surface hypotheses only (lower
+  /// ranks share fewer words with the query: their interest points rarely repeat), the best
+  /// dense_candidates of them aligned densely; 0 = none; [0, 1e6]. A query that found its
+  /// place pays nothing more.
+  int more_candidates = 8;
   /// Worker threads over candidates; [1, 64]. Results do not depend on it.
   int threads = 1;
   /// First stage (retrieval of the top_k candidates).
@@ -264,6 +284,19 @@ struct DenseConsistency {
   }
 };
 
+/// A valid feature-stage transform of a candidate other than the best one (what dense
+/// alignment tries when the best fails the free-space or distance check).
+struct PlaceAlternative {
+  Pose T_match_query = Pose::Identity();
+  double score = 0.0;
+  double score_query_in_match = 0.0;
+  double score_match_in_query = 0.0;
+  std::size_t inliers = 0;
+  std::size_t descriptor_inliers = 0;
+  double rms_inlier_m = 0.0;
+  double sensor_distance_m = 0.0;
+};
+
 /// The result of matching a query against one scan.
 struct PlaceMatch {
   std::size_t scan = 0;                 ///< database index
@@ -280,6 +313,7 @@ struct PlaceMatch {
   bool rejected_ground = false;         ///< dropped by the ground-vehicle check
   bool rejected_distance = false;       ///< dropped by PlaceParams::max_distance
   bool rejected_conflict = false;       ///< dropped by PlaceParams::max_conflict
+  bool rejected_score = false;          ///< not aligned densely: score below PlaceParams::dense_score_ratio · accept_score
   double sensor_distance_m = 0.0;       ///< distance between the sensor positions T_match_query implies
   Pose T_feature = Pose::Identity();    ///< the transform before dense alignment
   double dense_rms_m = 0.0;             ///< point-to-plane RMS of the last dense iteration
@@ -287,6 +321,11 @@ struct PlaceMatch {
   DenseConsistency dense_q;             ///< query points in the match's image
   DenseConsistency dense_m;             ///< match points in the query's image
   bool dense_refined = false;           ///< T_match_query and the scores come from dense alignment
+  /// Feature-stage transforms after the best, best score first (at most
+  /// PlaceParams::dense_hypotheses - 1); dense alignment falls back on them in turn.
+  std::vector<PlaceAlternative> alternatives;
+  /// Transforms aligned densely (1 + the alternatives tried; 0 = not aligned).
+  std::size_t dense_tried = 0;
   bool valid = false;                   ///< a transform with at least min_inliers was found
 };
 
@@ -323,7 +362,7 @@ struct PlaceQueryResult {
   std::vector<PlaceMatch> matches;
   /// True when the best score reaches PlaceParams::accept_score; false = unknown place.
   bool accepted = false;
-  std::size_t retrieved = 0;  ///< candidates from the inverted index
+  std::size_t retrieved = 0;  ///< candidates verified (top_k, and more_candidates more when none of those was accepted)
   double retrieval_ms = 0.0;
   double verification_ms = 0.0;  ///< includes decode_ms
   double decode_ms = 0.0;        ///< reading the candidates' stored entries (summed over threads)
