@@ -82,7 +82,7 @@ def main():
           f"{db.bytes_to_workers} bytes, back {db.bytes_from_workers} bytes")
     queries = [i for i, p in enumerate(scans) if int(pathlib.Path(p).stem) >= 100]
     one_ms, sharded_ms, stage = [], [], {"prepare_s": [], "retrieve_s": [], "verify_s": []}
-    sent, back, same = [], [], 0
+    sent, back, qbytes, same = [], [], [], 0
     for i in queries:
         t = time.perf_counter()
         a = whole.query(scans[i], pose=poses[i], top=8, max_distance=8.0, threads=1)
@@ -95,6 +95,7 @@ def main():
             stage[k].append(1000 * timings[k])
         sent.append(timings["bytes_to_workers"])
         back.append(timings["bytes_from_workers"])
+        qbytes.append(timings["query_bytes"])
         same += int([m["scan"] for m in a] == [m["scan"] for m in b] and
                     [m["score"] for m in a] == [m["score"] for m in b] and
                     all(np.array_equal(x["pose"], y["pose"]) for x, y in zip(a, b)))
@@ -102,7 +103,8 @@ def main():
           f"(p95 {percentile(one_ms, 0.95):.0f}), {len(db.shards)} shards median {statistics.median(sharded_ms):.0f} ms "
           f"(p95 {percentile(sharded_ms, 0.95):.0f})")
     print("  sharded stages, median: " + ", ".join(f"{k[:-2]} {statistics.median(v):.0f} ms" for k, v in stage.items()))
-    print(f"  bytes a query: to workers median {statistics.median(sent):.0f}, back {statistics.median(back):.0f}")
+    print(f"  bytes a query: to workers median {statistics.median(sent):.0f} (the prepared query "
+          f"{statistics.median(qbytes):.0f} to every shard, again to the verifying ones), back {statistics.median(back):.0f}")
     print(f"  answers equal to the one database's: {same} of {len(queries)}")
     client.close()
     return 0 if same == len(queries) else 2
