@@ -120,6 +120,11 @@ def test_command_and_bad_shards(client, tmp_path, alphabet):
     assert r.returncode == 1 and "--shards or --scans-per-shard" in r.stderr and not (tmp_path / "u").exists()
     r = run_command("place", "build", *SCANS, "-o", str(tmp_path / "db"), "--shards", "2", "--scheduler", address)
     assert r.returncode == 1 and "already holds" in r.stderr
+    # A scan that cannot be read: named, exit 2, and no partial database (no folder, no shard).
+    r = run_command("place", "build", SCANS[0], str(tmp_path / "missing.bin"), "-o", str(tmp_path / "p"),
+                    "--shards", "2", "--alphabet", str(alphabet), "--scheduler", address)
+    assert r.returncode == 2 and "missing.bin" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "p").exists()
     # A corrupt entry is found when a query verifies it: named in one line, exit 2.
     shard = tmp_path / "db" / "shard_000.lex3dp"
     data = bytearray(shard.read_bytes())

@@ -110,10 +110,13 @@ def build_shard_task(paths, names, poses, alphabet, output, job):
     import lex3d
     _worker_malloc()
     cpu0 = time.process_time()
-    db = lex3d.PlaceDatabase.build(list(paths), names=list(names), poses=poses, alphabet=alphabet)
     tmp = f"{output}.{job}.tmp"
-    db.save(tmp)
-    os.replace(tmp, output)
+    try:
+        db = lex3d.PlaceDatabase.build(list(paths), names=list(names), poses=poses, alphabet=alphabet)
+        db.save(tmp)
+        os.replace(tmp, output)
+    except (ValueError, OSError) as e:  # a value, not raised: the driver names it and cleans up
+        return {"build_error": str(e).splitlines()[0] if str(e) else type(e).__name__}
     return {"entries": len(db), "bytes": os.path.getsize(output), "alphabet_sha256": _sha256(db.alphabet_file()),
             "cpu_s": time.process_time() - cpu0}
 
@@ -145,10 +148,6 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
     ranges = shard_ranges(n, shards, scans_per_shard)
     pose_list = read_poses(poses, n) if poses else None
     names = [_stem(p) for p in scans]
-    try:
-        os.makedirs(output, exist_ok=True)
-    except OSError as e:
-        raise CompressError(3, f"{output}: cannot create the folder: {e.strerror or e}") from None
     if os.path.exists(os.path.join(output, MANIFEST)):
         raise CompressError(1, f"{output}: already holds a sharded database ({MANIFEST}); give a new folder")
     job = uuid.uuid4().hex[:12]
@@ -170,33 +169,56 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
         except (ValueError, OSError) as e:
             raise CompressError(2, f"learning the alphabet: {e}") from None
         learn_s = time.perf_counter() - t
-    alphabet_path = os.path.join(output, "alphabet.lex3da")
-    tmp = f"{alphabet_path}.{job}.tmp"
-    with open(tmp, "wb") as f:
-        f.write(alphabet_bytes)
-    os.replace(tmp, alphabet_path)
+    created = not os.path.isdir(output)
+    try:
+        os.makedirs(output, exist_ok=True)
+    except OSError as e:
+        raise CompressError(3, f"{output}: cannot create the folder: {e.strerror or e}") from None
     key = f"lex3d-place-alphabet-{_sha256(alphabet_bytes)[:16]}"
     alphabet_ref = client.scatter({key: alphabet_bytes}, broadcast=True)[key]
     workers = len(client.scheduler_info().get("workers", {}))
     t = time.perf_counter()
     futures, sent = [], 0
+    outputs = [os.path.abspath(os.path.join(output, f"shard_{i:03d}.lex3dp")) for i in range(len(ranges))]
     for i, (a, b) in enumerate(ranges):
-        args = (scans[a:b], names[a:b], None if pose_list is None else pose_list[a:b], alphabet_ref,
-                os.path.abspath(os.path.join(output, f"shard_{i:03d}.lex3dp")), job)
+        args = (scans[a:b], names[a:b], None if pose_list is None else pose_list[a:b], alphabet_ref, outputs[i], job)
         sent += len(pickle.dumps(args[:3])) + len(pickle.dumps(args[4:]))
         futures.append(client.submit(build_shard_task, *args, key=f"lex3d-place-shard-{job}-{i}", pure=False))
-    results = []
+    _settle(futures)
+    results, error = [], None
     for i, fut in enumerate(futures):
         try:
-            results.append(fut.result())
+            r = fut.result()
         except (ValueError, OSError) as e:
-            for f in futures:
-                f.cancel()
-            raise CompressError(2, f"shard {i} (scans {ranges[i][0]}-{ranges[i][1] - 1}): {e}") from None
+            r = {"build_error": str(e)}
+        if "build_error" in r and error is None:
+            error = f"shard {i} (scans {ranges[i][0]}-{ranges[i][1] - 1}): {r['build_error']}"
+        results.append(r)
     build_s = time.perf_counter() - t
+    if error is None and len({r["alphabet_sha256"] for r in results}) != 1:
+        error = "the shards hold different alphabets"
+    if error is not None:
+        # No partial database: the shards this job wrote go, and the folder when it made it.
+        for path in outputs:
+            try:
+                os.remove(path)
+            except OSError:
+                pass
+        if created:
+            try:
+                os.rmdir(output)
+            except OSError:
+                pass
+        raise CompressError(2, error)
     hashes = {r["alphabet_sha256"] for r in results}
-    if len(hashes) != 1:
-        raise CompressError(2, "the shards hold different alphabets")
+    alphabet_path = os.path.join(output, "alphabet.lex3da")
+    tmp = f"{alphabet_path}.{job}.tmp"
+    try:
+        with open(tmp, "wb") as f:
+            f.write(alphabet_bytes)
+        os.replace(tmp, alphabet_path)
+    except OSError as e:
+        raise CompressError(3, f"{alphabet_path}: cannot write: {e.strerror or e}") from None
     manifest = {
         "kind": KIND, "version": 1, "lex3d": lex3d.__version__, "scans": n,
         "alphabet": "alphabet.lex3da", "alphabet_sha256": hashes.pop(),
