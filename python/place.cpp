@@ -264,6 +264,7 @@ class PyPlaceDatabase {
     d["refined"] = refined;
     d["decoded"] = v.decoded;
     d["decode_ms"] = v.decode_ms;
+    d["dense_candidates"] = p.dense_iterations > 0 ? p.dense_candidates : 0;
     return d;
   }
 
@@ -389,7 +390,8 @@ best first, at most top_k. stats: the (entries, df) of the whole this database i
            py::arg("max_distance") = py::none(), py::arg("ground_vehicle") = false, py::arg("threads") = 2,
            R"(Verifies (index, similarity) candidates of a prepared query: {"matches": the candidates' matches
 with the feature transform, best first; "refined": the first of them densely aligned, as query()
-aligns them; "decoded", "decode_ms"}. Each match a dict as query() gives, plus "dense_refined".)")
+aligns them; "decoded", "decode_ms", "dense_candidates" (how many of all the shards' best take
+their aligned form)}. Each match a dict as query() gives, plus "dense_refined".)")
       .def("alphabet_file", &PyPlaceDatabase::alphabet_file, "The database's alphabet as an alphabet file (bytes).")
       .def("save", &PyPlaceDatabase::save, py::arg("path"),
            "Writes the database (format 2.0) to path, atomically: a failure leaves no partial file.")

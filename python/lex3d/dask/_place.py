@@ -27,9 +27,6 @@ from ._compress import CompressError, expand_inputs, learn_task
 
 MANIFEST = "manifest.json"
 KIND = "lex3d-place-shards"
-# PlaceParams::dense_candidates: the best candidates a query aligns densely.
-DENSE_CANDIDATES = 3
-ACCEPT_SCORE = 0.25  # PlaceParams::accept_score
 
 
 def _sha256(data):
@@ -297,9 +294,10 @@ def _order(m):
     return (not m["valid"], -m["score"], m["index"])
 
 
-def merge_verified(parts, offsets, dense=True):
+def merge_verified(parts, offsets):
     """The matches of verify() parts (shard order, with their first global indices) ordered as
     one database orders them (lex3d::merge_verified)."""
+    dense = max((p["dense_candidates"] for p in parts), default=0)
     matches, refined = [], {}
     for part, off in zip(parts, offsets):
         for m in part["matches"]:
@@ -308,7 +306,7 @@ def merge_verified(parts, offsets, dense=True):
             refined[m["index"] + off] = dict(m, index=m["index"] + off)
     matches.sort(key=_order)
     if dense:
-        for i in range(min(len(matches), DENSE_CANDIDATES)):
+        for i in range(min(len(matches), dense)):
             matches[i] = refined[matches[i]["index"]]
         matches.sort(key=lambda m: (not m["dense_refined"],) + _order(m))
     return matches
