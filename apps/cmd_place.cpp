@@ -65,7 +65,19 @@ struct PlaceOptions {
   int vocabulary_words = 0;            // --vocabulary-words N (0: none learned)
   int vocabulary_scans = 1000;         // --vocabulary-scans
   int list_retrieved = 0;              // --list-retrieved N
+  std::string descriptor;              // --descriptor patch|vdlsd (empty: build/eval patch, query/add the database's)
 };
+
+PlaceDescriptor parse_descriptor(const std::string& s) {
+  return s == "vdlsd" ? PlaceDescriptor::kVdlsd : PlaceDescriptor::kPatch;
+}
+
+// A database described with another descriptor than --descriptor asks for: a bad-data error.
+void check_descriptor(const PlaceOptions& o, const std::string& path, const PlaceDatabase& db) {
+  if (o.descriptor.empty() || parse_descriptor(o.descriptor) == db.storage().descriptor) return;
+  throw CliError(2, path + ": its features are described with " + to_string(db.storage().descriptor) + ", not " +
+                        o.descriptor + " (--descriptor)");
+}
 
 PlaceRetrieval parse_retrieval(const std::string& s) {
   if (s == "tfidf-alphabet") return PlaceRetrieval::kTfidfAlphabet;
@@ -74,11 +86,19 @@ PlaceRetrieval parse_retrieval(const std::string& s) {
   return PlaceRetrieval::kDefault;
 }
 
-ModelParams model_params() {
+ModelParams model_params(int threads) {
   ModelParams mp;
-  mp.threads = 2;
+  mp.threads = threads;
   return mp;
 }
+
+// How scans are described: their up direction (--gravity) and the worker threads (--threads).
+struct Describing {
+  std::string gravity = "auto";
+  int threads = 1;
+};
+
+Describing describing(const PlaceOptions& o) { return {o.gravity, o.params.threads}; }
 
 std::string stem(const std::string& path) { return fs::path(path).stem().string(); }
 
@@ -199,18 +219,23 @@ class PlaceInputs {
 // scan (and the scans the alphabet is learnt from) in memory, not all of them.
 using GetScan = std::function<Cloud(std::size_t)>;
 
-Alphabet learn_on(std::size_t n, const GetScan& get, int learn_scans, int iterations) {
-  std::vector<Cloud> subset;
-  const std::size_t k = std::min<std::size_t>(n, static_cast<std::size_t>(learn_scans));
-  for (std::size_t i = 0; i < k; ++i) subset.push_back(get(i * n / k));
+Alphabet learn_on(std::size_t n, const GetScan& get, const PlaceOptions& o) {
   LearnParams p;
-  p.model = model_params();
-  p.max_iterations = iterations;
+  p.model = model_params(o.params.threads);
+  p.max_iterations = o.iterations;
   ProgressBar bar("learning alphabet");
-  LearnResult r = learn_alphabet(subset, p, [&](const LearnProgress& pr) {
+  return learn_place_alphabet(n, get, static_cast<std::size_t>(o.learn_scans), p, [&](const LearnProgress& pr) {
     bar.update(pr.iteration, pr.max_iterations, std::to_string(pr.alphabet_size) + " words");
   });
-  return std::move(r.alphabet);
+}
+
+// The alphabet file given with --alphabet.
+Alphabet read_alphabet(const std::string& path) {
+  auto bytes = io::read_file(path);
+  if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
+  auto a = codec::decode_alphabet(bytes.value());
+  if (!a.ok()) throw CliError(2, path + ": " + a.status().to_string());
+  return std::move(a).value();
 }
 
 // Sets the up direction of `cloud` as --gravity asks; returns where it came from.
@@ -226,10 +251,9 @@ GravitySource upright(Cloud& cloud, const std::string& gravity, const RangeImage
 }
 
 PlaceScan describe(Cloud cloud, const std::string& name, const Alphabet& alphabet,
-                   const PlaceStorageParams& storage, const std::string& gravity = "auto",
-                   GravitySource* source = nullptr) {
-  const ModelParams mp = model_params();
-  const GravitySource g = upright(cloud, gravity, mp.features.range);
+                   const PlaceStorageParams& storage, const Describing& how, GravitySource* source = nullptr) {
+  const ModelParams mp = model_params(how.threads);
+  const GravitySource g = upright(cloud, how.gravity, mp.features.range);
   if (source != nullptr) *source = g;
   return make_place_scan(cloud, alphabet, storage, mp, name);
 }
@@ -253,13 +277,13 @@ PlaceVocabulary learn_place_vocabulary(const std::vector<PlaceScan>& train, int 
 
 std::vector<PlaceScan> describe_all(std::size_t n, const GetScan& get, const std::vector<std::string>& names,
                                     const Alphabet& alphabet, const PlaceStorageParams& storage, double* prepare_ms,
-                                    const std::string& gravity = "auto", std::vector<GravitySource>* sources = nullptr) {
+                                    const Describing& how, std::vector<GravitySource>* sources = nullptr) {
   std::vector<PlaceScan> out;
   ProgressBar bar("preparing scans");
   Stopwatch sw;
   for (std::size_t i = 0; i < n; ++i) {
     GravitySource g = GravitySource::kNone;
-    out.push_back(describe(get(i), names[i], alphabet, storage, gravity, &g));
+    out.push_back(describe(get(i), names[i], alphabet, storage, how, &g));
     if (sources != nullptr) sources->push_back(g);
     bar.update(static_cast<long>(i + 1), static_cast<long>(n), names[i]);
   }
@@ -278,23 +302,28 @@ struct WriteStats {
 // Adds the inputs' scans through `w`, one at a time, handing each piece to `put`.
 template <typename Put>
 void add_inputs(PlaceFileWriter& w, const PlaceInputs* inputs, const Alphabet& alphabet,
-                const PlaceStorageParams& storage, const Put& put, WriteStats& st, const std::string& gravity) {
+                const PlaceStorageParams& storage, const Put& put, WriteStats& st, const Describing& how) {
   if (inputs == nullptr) return;
   ProgressBar bar("adding scans");
   Stopwatch sw;
+  std::size_t empty = 0;
   for (std::size_t i = 0; i < inputs->size(); ++i) {
-    const PlaceScan s = describe(inputs->load(i), inputs->name(i), alphabet, storage, gravity);
+    const PlaceScan s = describe(inputs->load(i), inputs->name(i), alphabet, storage, how);
+    empty += s.empty_descriptors;
     put(w.add(s));
     ++st.added;
     bar.update(static_cast<long>(i + 1), static_cast<long>(inputs->size()), inputs->name(i));
   }
   st.prepare_ms = sw.elapsed_ms();
+  bar.finish();
+  if (empty > 0)
+    std::fprintf(stderr, "note: %zu stored features had too few points around them for a VD-LSD (stored empty)\n", empty);
 }
 
 // Writes a whole new database file (format 2.0) to a temporary name and renames it over
 // `path`: the stored scans of `from` copied as they are, then the inputs' scans.
 WriteStats write_new_db(const std::string& path, const PlaceStorageParams& storage, const Alphabet& alphabet,
-                        const PlaceDatabase* from, const PlaceInputs* inputs, const std::string& gravity = "auto",
+                        const PlaceDatabase* from, const PlaceInputs* inputs, const Describing& how,
                         std::shared_ptr<const PlaceVocabulary> vocabulary = nullptr) {
   const std::string tmp = io::temporary_path_for(path);
   auto f = io::PositionalFile::create_new(tmp);
@@ -312,10 +341,12 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
     throw_if_error(f.value()->write_at(p.offset, p.bytes.data(), p.bytes.size()));
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
-  PlaceFileWriter w(storage, &alphabet, alphabet.descriptor_dim);
-  if (vocabulary != nullptr && vocabulary->descriptor_dim != alphabet.descriptor_dim)
+  const int dim = detail::stored_descriptor_dim(storage, &alphabet);
+  PlaceFileWriter w(storage, &alphabet, dim);
+  if (vocabulary != nullptr && vocabulary->descriptor_dim != dim)
     throw CliError(2, "the recognition vocabulary's descriptors have " + std::to_string(vocabulary->descriptor_dim) +
-                          " values, the alphabet's " + std::to_string(alphabet.descriptor_dim));
+                          " values, the database's " + to_string(storage.descriptor) + " descriptors " +
+                          std::to_string(dim));
   w.set_vocabulary(std::move(vocabulary));
   put(w.begin());
   if (from != nullptr)
@@ -324,7 +355,7 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
       if (!p.ok()) throw CliError(2, p.status().to_string());
       put(p.value());
     }
-  add_inputs(w, inputs, alphabet, storage, put, st, gravity);
+  add_inputs(w, inputs, alphabet, storage, put, st, how);
   const auto [idx, commit] = w.finish();
   put(idx);
   throw_if_error(f.value()->sync());
@@ -343,7 +374,7 @@ WriteStats write_new_db(const std::string& path, const PlaceStorageParams& stora
 // the committed end, synced, then the other commit record, synced. A crash before the commit
 // record is written leaves the committed database as it was (formats/place_db.md §5).
 WriteStats append_db(io::PositionalFile& file, const PlaceDatabase& db, const PlaceInputs& inputs,
-                     const std::string& gravity) {
+                     const Describing& how) {
   PlaceFileWriter w(db);
   WriteStats st;
   std::uint64_t end = w.start();
@@ -352,7 +383,7 @@ WriteStats append_db(io::PositionalFile& file, const PlaceDatabase& db, const Pl
     end = std::max<std::uint64_t>(end, p.offset + p.bytes.size());
   };
   try {
-    add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st, gravity);
+    add_inputs(w, &inputs, db.alphabet(), db.storage(), put, st, how);
   } catch (...) {
     // Nothing was committed: take back what was written after the committed end.
     (void)file.truncate(w.start());
@@ -402,13 +433,9 @@ void run_build(const PlaceOptions& o) {
   const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
   Alphabet alphabet;
   if (!o.alphabet.empty()) {
-    auto bytes = io::read_file(o.alphabet);
-    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
-    auto a = codec::decode_alphabet(bytes.value());
-    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
-    alphabet = std::move(a).value();
+    alphabet = read_alphabet(o.alphabet);
   } else {
-    alphabet = learn_on(inputs.size(), [&](std::size_t i) { return inputs.load(i); }, o.learn_scans, o.iterations);
+    alphabet = learn_on(inputs.size(), [&](std::size_t i) { return inputs.load(i); }, o);
   }
   std::shared_ptr<const PlaceVocabulary> vocabulary;
   if (!o.vocabulary.empty()) {
@@ -421,7 +448,7 @@ void run_build(const PlaceOptions& o) {
     std::vector<PlaceScan> train;
     ProgressBar bar("vocabulary scans");
     for (std::size_t i = 0; i < k; ++i) {
-      PlaceScan s = describe(inputs.load(i * n / k), inputs.name(i * n / k), alphabet, o.storage, o.gravity);
+      PlaceScan s = describe(inputs.load(i * n / k), inputs.name(i * n / k), alphabet, o.storage, describing(o));
       s.coarse = RangeImage{};
       s.dense_points.clear(), s.dense_normals.clear(), s.dense_index.clear(), s.pairs.clear();
       train.push_back(std::move(s));
@@ -430,7 +457,7 @@ void run_build(const PlaceOptions& o) {
     bar.finish();
     vocabulary = std::make_shared<const PlaceVocabulary>(learn_place_vocabulary(train, o.vocabulary_words));
   }
-  const WriteStats st = write_new_db(o.db, o.storage, alphabet, nullptr, &inputs, o.gravity, vocabulary);
+  const WriteStats st = write_new_db(o.db, o.storage, alphabet, nullptr, &inputs, describing(o), vocabulary);
   print_write(o, st, alphabet.size(), "built from");
 }
 
@@ -442,16 +469,17 @@ void run_add(const PlaceOptions& o) {
   auto file = io::PositionalFile::open_existing(o.db);
   if (!file.ok()) throw CliError(3, file.status().to_string());
   const PlaceDatabase db = read_db(o.db);
+  check_descriptor(o, o.db, db);
   const PlaceFileInfo& fi = db.file_info();
   // In place when the format allows it (2.x) and earlier indexes left behind by appends
   // are under a quarter of the file; otherwise a compact new file replaces it.
   if (fi.major >= 2 && fi.dead_bytes * 4 <= fi.committed_bytes) {
-    print_write(o, append_db(*file.value(), db, inputs, o.gravity), db.alphabet().size(), "appended");
+    print_write(o, append_db(*file.value(), db, inputs, describing(o)), db.alphabet().size(), "appended");
     return;
   }
   if (fi.major < 2)
     std::fprintf(stderr, "note: %s is format %d.%d: rewritten as format 2.0\n", o.db.c_str(), fi.major, fi.minor);
-  print_write(o, write_new_db(o.db, db.storage(), db.alphabet(), &db, &inputs, o.gravity, db.vocabulary()),
+  print_write(o, write_new_db(o.db, db.storage(), db.alphabet(), &db, &inputs, describing(o), db.vocabulary()),
               db.alphabet().size(), "added");
 }
 
@@ -460,7 +488,7 @@ void run_upgrade(const PlaceOptions& o) {
   const std::string& out = o.inputs[0];
   check_output_path(out, {o.db});
   const PlaceDatabase db = read_db(o.db, false);
-  const WriteStats st = write_new_db(out, db.storage(), db.alphabet(), &db, nullptr, "auto", db.vocabulary());
+  const WriteStats st = write_new_db(out, db.storage(), db.alphabet(), &db, nullptr, Describing{}, db.vocabulary());
   if (o.json) {
     Json j;
     j.begin_object().value("scans", st.scans).value("bytes", st.bytes).value("from_major", db.file_info().major);
@@ -494,6 +522,7 @@ void run_query(const PlaceOptions& o) {
   Stopwatch open_sw;
   const PlaceDatabase db = read_db(o.db);
   const double open_ms = open_sw.elapsed_ms();
+  check_descriptor(o, o.db, db);
   const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
   PlaceParams p = o.params;
   p.ground_vehicle = o.ground;
@@ -504,7 +533,7 @@ void run_query(const PlaceOptions& o) {
     Stopwatch sw;
     const double c0 = cpu_ms();
     GravitySource gravity = GravitySource::kNone;
-    const PlaceScan scan = describe(inputs.load(qi), inputs.name(qi), db.alphabet(), db.storage(), o.gravity, &gravity);
+    const PlaceScan scan = describe(inputs.load(qi), inputs.name(qi), db.alphabet(), db.storage(), describing(o), &gravity);
     const double prep = sw.elapsed_ms();
     const double c1 = cpu_ms();
     PlaceQueryResult r;
@@ -660,6 +689,9 @@ void run_eval(const PlaceOptions& o) {
     // The scans as a database stores them (a database of these scans, written by an earlier
     // eval with the same --cache): skips learning and feature extraction.
     PlaceDatabase c = read_db(o.cache);
+    if (c.storage().descriptor != o.storage.descriptor)
+      throw CliError(2, o.cache + ": its features are described with " + to_string(c.storage().descriptor) + ", not " +
+                            to_string(o.storage.descriptor) + " (--descriptor)");
     if (c.size() != clouds.size()) throw CliError(2, o.cache + ": holds " + std::to_string(c.size()) + " scans, not " + std::to_string(clouds.size()));
     for (std::size_t i = 0; i < c.size(); ++i) {
       if (c.name(i) != names[i]) throw CliError(2, o.cache + ": scan " + std::to_string(i) + " is " + c.name(i));
@@ -670,21 +702,18 @@ void run_eval(const PlaceOptions& o) {
     alphabet = c.alphabet();
     cached_vocabulary = c.vocabulary();
   } else if (!o.alphabet.empty()) {
-    auto bytes = io::read_file(o.alphabet);
-    if (!bytes.ok()) throw CliError(2, bytes.status().to_string());
-    auto a = codec::decode_alphabet(bytes.value());
-    if (!a.ok()) throw CliError(2, o.alphabet + ": " + a.status().to_string());
-    alphabet = std::move(a).value();
+    alphabet = read_alphabet(o.alphabet);
   } else {
-    alphabet = learn_on(clouds.size(), [&](std::size_t i) { return clouds[i]; }, o.learn_scans, o.iterations);
+    alphabet = learn_on(clouds.size(), [&](std::size_t i) { return clouds[i]; }, o);
   }
   const double learn_ms = sw.lap_ms();
   double prep_ms = 0;
   std::vector<GravitySource> sources;
   const auto scans = cached.empty() ? describe_all(clouds.size(), [&](std::size_t i) { return clouds[i]; }, names,
-                                                   alphabet, o.storage, &prep_ms, o.gravity, &sources)
+                                                   alphabet, o.storage, &prep_ms, describing(o), &sources)
                                     : cached;
-  std::size_t from_points = 0, from_none = 0;
+  std::size_t from_points = 0, from_none = 0, empty_descriptors = 0;
+  for (const auto& s : scans) empty_descriptors += s.empty_descriptors;
   for (const GravitySource g : sources) {
     from_points += g == GravitySource::kPoints ? 1 : 0;
     from_none += g == GravitySource::kNone ? 1 : 0;
@@ -767,6 +796,17 @@ void run_eval(const PlaceOptions& o) {
   };
   std::size_t tp = 0, fp = 0, pos = 0;
   counts(p.accept_score, o.radius, tp, fp, pos);
+  // First stage: queries with a revisit within the radius that have one among their candidates.
+  std::size_t retrieved_true = 0;
+  for (const auto& r : recs) {
+    if (!(r.nearest_m <= o.radius)) continue;
+    for (const auto& sc : r.scores)
+      if (planar(clouds[r.query].T_world_cloud, clouds[sc.first].T_world_cloud) <= o.radius) {
+        ++retrieved_true;
+        break;
+      }
+  }
+  const double retrieval_recall = pos > 0 ? static_cast<double>(retrieved_true) / static_cast<double>(pos) : 0.0;
   const double precision = tp + fp > 0 ? static_cast<double>(tp) / static_cast<double>(tp + fp) : 1.0;
   const double recall = pos > 0 ? static_cast<double>(tp) / static_cast<double>(pos) : 0.0;
   // PR curve over thresholds at the distinct scores.
@@ -907,7 +947,8 @@ void run_eval(const PlaceOptions& o) {
     j.value("median_translation_error_m", median(et)).value("median_rotation_error_deg", median(er));
     j.value("median_query_ms", median(qms)).value("median_query_cpu_ms", median(qcpu)).value("kb_per_scan", kb_per_scan);
     j.value("alphabet_words", alphabet.size()).value("learn_ms", learn_ms).value("prepare_ms", prep_ms);
-    j.value("query_total_ms", query_total_ms);
+    j.value("query_total_ms", query_total_ms).value("descriptor", to_string(o.storage.descriptor));
+    j.value("empty_descriptors", empty_descriptors).value("retrieval_recall", retrieval_recall);
     j.begin_array("recall_by_distance");
     for (const auto& d : by_distance) j.begin_object().value("radius_m", d[0]).value("tp", d[1]).value("positives", d[2]).end_object();
     j.end_array().begin_array("false_positives_by_threshold");
@@ -918,6 +959,11 @@ void run_eval(const PlaceOptions& o) {
   }
   std::printf("scans %zu, queries with a database %zu, with a true revisit within %.1f m: %zu\n", scans.size(), recs.size(),
               o.radius, pos);
+  std::printf("descriptor %s", to_string(o.storage.descriptor));
+  if (cached.empty() && !scans.empty())
+    std::printf(", scans described in %.1f ms each (learning excluded; %zu features with an empty descriptor)",
+                prep_ms / static_cast<double>(scans.size()), empty_descriptors);
+  std::printf("\n");
   if (o.gravity == "points" || o.gravity == "none")
     std::printf("up direction: --gravity %s (poses used as ground truth only): %zu scans from their points, %zu none%s\n",
                 o.gravity.c_str(), from_points, from_none, cached.empty() ? "" : " (scans from --cache: as it was made)");
@@ -925,6 +971,8 @@ void run_eval(const PlaceOptions& o) {
   if (p.max_conflict < 1.0) std::printf("transforms with more than %.3f of the points in free space rejected (--max-conflict)\n", p.max_conflict);
   std::printf("threshold %.2f: TP %zu FP %zu  precision %.3f recall %.3f\n", p.accept_score, tp, fp, precision, recall);
   std::printf("max F1 %.3f, recall at 100%% precision %.3f\n", max_f1, recall_at_p1);
+  std::printf("first stage (%s): a true revisit among the %d candidates for %zu of %zu queries (recall %.3f)\n",
+              retrieval_name(p.retrieval).c_str(), p.top_k, retrieved_true, pos, retrieval_recall);
   std::printf("accepted: %zu with the right transform (within 1 m, 5 deg), %zu with a wrong one, any distance\n",
               right_pose, wrong_pose);
   std::printf("accepted true matches: median error %.3f m, %.2f deg (%zu)\n", median(et), median(er), et.size());
@@ -939,6 +987,10 @@ void run_eval(const PlaceOptions& o) {
 }
 
 void add_common(CLI::App* sub, PlaceOptions& o) {
+  sub->add_option("--descriptor", o.descriptor,
+                  "Descriptor of the stored features: patch (range-image patch) or vdlsd (collier2012's VD-LSD); "
+                  "build and eval: default patch; query and add: must be the database's")
+      ->check(CLI::IsMember({"patch", "vdlsd"}));
   sub->add_option("--format", o.format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos");
   sub->add_option("--model-alphabet", o.model_alphabet,
                   "Alphabet file of .lex3dm inputs that reference one (inputs may be lex3d model .lex3dm and "
@@ -977,13 +1029,18 @@ void register_place(CLI::App& app) {
   };
   add_vocabulary(build);
   add_common(build, *o);
-  build->callback([o] { run_build(*o); });
+  add_threads_option(*build, o->params.threads, "Worker threads describing the scans and learning the alphabet");
+  build->callback([o] {
+    o->storage.descriptor = parse_descriptor(o->descriptor);
+    run_build(*o);
+  });
 
   CLI::App* add = sub->add_subcommand("add", "Add scans to a place database");
   add->footer("Examples:\n  lex3d place add map.lex3dp today/*.bin --poses today_poses.txt");
   add->add_option("db", o->db, "Database file (appended to in place; a format 1.0 file is rewritten as 2.0)")->required();
   add->add_option("scans", o->inputs, "Point clouds")->required();
   add_common(add, *o);
+  add_threads_option(*add, o->params.threads, "Worker threads describing the scans");
   add->callback([o] { run_add(*o); });
 
   CLI::App* up = sub->add_subcommand("upgrade", "Rewrite a place database in the current format (2.0), compacted");
@@ -1011,7 +1068,7 @@ void register_place(CLI::App& app) {
     s->add_option("--surface-yaws", o->params.surface_yaws, "Yaw candidates of the surface hypotheses (0 = none)")->check(CLI::Range(0, 36));
     s->add_option("--gravity-pairs", o->params.gravity_pairs, "Query feature pairs tried as upright 2-point hypotheses")->check(CLI::Range(0, 100000));
     s->add_option("--validation-points", o->params.validation_points, "Validation points a scan (steder2010: 100)")->check(CLI::Range(1, 4096));
-    add_threads_option(*s, o->params.threads, "Worker threads of a query");
+    add_threads_option(*s, o->params.threads, "Worker threads describing the scans and verifying a query's candidates");
     s->add_option("--retrieval", o->retrieval,
                   "First stage: tfidf-alphabet (compression alphabet), tfidf or fabmap (recognition vocabulary); "
                   "default: tfidf-alphabet")
@@ -1048,7 +1105,10 @@ void register_place(CLI::App& app) {
   add_match(ev);
   add_common(ev, *o);
   ev->get_option("--poses")->required();
-  ev->callback([o] { run_eval(*o); });
+  ev->callback([o] {
+    o->storage.descriptor = parse_descriptor(o->descriptor);
+    run_eval(*o);
+  });
 }
 
 }  // namespace lex3d::cli

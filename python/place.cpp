@@ -119,16 +119,19 @@ class PyPlaceDatabase {
       alphabet = std::move(a).value();
     } else {
       if (n == 0) throw py::value_error("build needs at least one scan to learn an alphabet on (or give alphabet=)");
-      std::vector<Cloud> subset;
-      const std::size_t k = std::min<std::size_t>(n, static_cast<std::size_t>(learn_scans));
-      for (std::size_t i = 0; i < k; ++i) subset.push_back(load(i * n / k));
       LearnParams p;
       p.model = place_model_params();
       p.max_iterations = iterations;
       p.seed = seed;
       p.validate();
       py::gil_scoped_release unlocked;
-      alphabet = learn_alphabet(subset, p).alphabet;
+      alphabet = learn_place_alphabet(
+          n,
+          [&](std::size_t i) {
+            py::gil_scoped_acquire locked;  // the scans are Python objects
+            return load(i);
+          },
+          static_cast<std::size_t>(learn_scans), p);
     }
     PlaceDatabase db;
     db.set_alphabet(std::move(alphabet));

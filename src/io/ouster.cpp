@@ -225,7 +225,12 @@ Status decode_ouster(const std::string& path, const std::string& metadata_path,
 
 Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
                              const std::vector<std::uint8_t>& tb, const std::vector<Datagram>& datagrams,
-                             bool by_size, SensorLog& log) {
+                             bool by_size, SensorLog& log, const std::string& topic) {
+  // Where a datagram came from, in error messages.
+  auto record = [&topic](const Datagram& d) {
+    return topic.empty() ? "capture record " + std::to_string(d.record)
+                         : "message " + std::to_string(d.record) + " on " + topic;
+  };
   const json j = json::parse(tb.begin(), tb.end(), nullptr, false);
   if (j.is_discarded()) {
     const std::string s(tb.begin(), tb.end());
@@ -259,7 +264,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
   std::size_t on_default_port = 0, default_port_size = 0;
   for (const auto& d : datagrams) {
     if (d.truncated && (port != 0 ? d.dst_port == port : (d.dst_port == 7502 || d.claimed == want)))
-      return bad_data(msg(path, "capture record " + std::to_string(d.record) + ": lidar packet truncated: " +
+      return bad_data(msg(path, record(d) + ": lidar packet truncated: " +
                                     std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
                                     " bytes captured"));
     if (d.truncated) continue;  // some other datagram, counted below
@@ -373,7 +378,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
   for (const Datagram* d : packets) {
     const std::vector<std::uint8_t>& b = d->payload;
     if (b.size() != want)
-      return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": lidar packet of " +
+      return bad_data(msg(path, record(*d) + ": lidar packet of " +
                                     std::to_string(b.size()) + " bytes, expected " + std::to_string(want) + " (" + expect +
                                     "; truncated packet or metadata of another mode)"));
     ++info.lidar_packets;
@@ -381,7 +386,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     if (!m.legacy()) {
       const auto type = le<std::uint16_t>(b.data());
       if (type != 1)
-        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": packet type " + std::to_string(type) +
+        return bad_data(msg(path, record(*d) + ": packet type " + std::to_string(type) +
                                       " is not a lidar data packet"));
       frame_id = le<std::uint16_t>(b.data() + 2);
       std::uint64_t sn = 0;
@@ -409,11 +414,11 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
                                     : (le<std::uint16_t>(col + 10) & 1U) != 0;
       if (!valid) continue;
       if (mid >= m.W)
-        return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: capture record " +
-                                      std::to_string(d->record) + " has measurement_id " + std::to_string(mid) +
+        return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: " +
+                                      record(*d) + " has measurement_id " + std::to_string(mid) +
                                       ", columns_per_frame is " + std::to_string(m.W)));
       if (m.legacy() && le<std::uint16_t>(col + 10) != frame_id)
-        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": columns of one packet carry different frame ids"));
+        return bad_data(msg(path, record(*d) + ": columns of one packet carry different frame ids"));
       f.have[mid] = 1;
       for (std::uint32_t l = 0; l < m.H; ++l) {
         const std::uint8_t* px = col + col_head + static_cast<std::size_t>(l) * m.pixel_bytes();

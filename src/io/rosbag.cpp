@@ -219,7 +219,7 @@ Status read_packets(const std::string& path, rosbag::Bag& bag, const BagInfo& in
     datagrams.push_back(std::move(d));
   }
   SensorLog log;
-  Status s = detail::decode_ouster_packets(path, metadata_name, metadata, datagrams, true, log);
+  Status s = detail::decode_ouster_packets(path, metadata_name, metadata, datagrams, true, log, topic.name);
   if (!s.ok()) return s;
   // each frame's time: the bag time of its frame id's first packet
   std::map<std::uint64_t, ros::Time> first_seen;

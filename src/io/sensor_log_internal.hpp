@@ -18,7 +18,7 @@ struct Datagram {
   std::uint32_t dst_ip = 0;
   std::uint16_t src_port = 0;
   std::uint16_t dst_port = 0;
-  std::size_t record = 0;  ///< 1-based capture record of its last fragment (for messages)
+  std::size_t record = 0;  ///< 1-based capture record of its last fragment, or bag message (for messages)
   /// The IPv4 or UDP length claims more bytes than the record holds: `payload` is what is
   /// there, `claimed` what the headers announce. A decoder refuses a truncated lidar packet
   /// and counts any other as skipped.
@@ -42,10 +42,12 @@ Status decode_ouster(const std::string& path, const std::string& metadata_path,
 
 /// The same with the metadata's bytes given (`metadata_path` names them in messages); with
 /// `by_size` the lidar packets are the datagrams of the metadata's packet size, whatever
-/// their ports (packets recorded without their UDP headers, as in a ROS bag).
+/// their ports (packets recorded without their UDP headers, as in a ROS bag). `topic`: the
+/// bag topic the datagrams are the messages of (errors name "message N on TOPIC", N being
+/// Datagram::record); empty for a capture ("capture record N").
 Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
                              const std::vector<std::uint8_t>& metadata, const std::vector<Datagram>& datagrams,
-                             bool by_size, SensorLog& log);
+                             bool by_size, SensorLog& log, const std::string& topic = {});
 
 /// True when the payload looks like a Velodyne data packet (1206 bytes, first block flag).
 bool is_velodyne_packet(const std::vector<std::uint8_t>& payload);

@@ -154,6 +154,20 @@ LearnDecisions::LearnDecisions(const LearnParams& params, const std::vector<std:
   std::shuffle(candidates_.begin(), candidates_.end(), rng);
 }
 
+LearnDecisions LearnDecisions::for_scans(const LearnParams& params, const std::vector<LearnScan>& scans) {
+  std::vector<std::size_t> features, points;
+  std::vector<double> log_ls;
+  features.reserve(scans.size());
+  points.reserve(scans.size());
+  log_ls.reserve(scans.size());
+  for (const auto& s : scans) {
+    features.push_back(s.feature_count());
+    points.push_back(s.point_count());
+    log_ls.push_back(s.log_likelihood());
+  }
+  return LearnDecisions(params, features, points, log_ls);
+}
+
 const LearnCandidate* LearnDecisions::next() const {
   if (iteration_ >= params_.max_iterations || since_accept_ >= params_.patience) return nullptr;
   if (static_cast<std::size_t>(iteration_) >= candidates_.size()) return nullptr;
@@ -215,14 +229,7 @@ LearnResult learn_alphabet(const std::vector<Cloud>& clouds, const LearnParams& 
   res.alphabet.descriptor_dim = scans.empty() ? 0 : scans.front().scan().features.descriptor_dim;
   res.prepare_ms = sw.lap_ms();
 
-  std::vector<std::size_t> features, points;
-  std::vector<double> log_ls;
-  for (const auto& s : scans) {
-    features.push_back(s.feature_count());
-    points.push_back(s.point_count());
-    log_ls.push_back(s.log_likelihood());
-  }
-  LearnDecisions loop(params, features, points, log_ls);
+  LearnDecisions loop = LearnDecisions::for_scans(params, scans);
 
   while (const LearnCandidate* c = loop.next()) {
     Word word = scans[c->scan].cut_word(c->feature, res.alphabet.point_spacing);

@@ -74,6 +74,9 @@ StatusOr<std::shared_ptr<const PlaceScan>> PlaceDatabase::decoded(std::size_t i,
 }
 
 std::size_t PlaceDatabase::add(PlaceScan scan) {
+  if (scan.descriptor != storage_.descriptor)
+    throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' has " + to_string(scan.descriptor) +
+                                " descriptors, the database " + to_string(storage_.descriptor));
   if (!scan.features.empty() && descriptor_dim_ != 0 && scan.descriptor_dim != descriptor_dim_ &&
       (index_.scans > 0 || !added_.empty()))
     throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' has descriptors of " +

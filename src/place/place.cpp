@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "lex3d/features/vdlsd.hpp"
 #include "lex3d/place/place.hpp"
 #include "lex3d/range/pixel_locator.hpp"
 #include "place/internal.hpp"
@@ -70,7 +71,16 @@ void PlaceParams::validate() const {
         "PlaceParams::fabmap_new_place_prior must be in (0, 1)");
 }
 
+const char* to_string(PlaceDescriptor d) noexcept {
+  return d == PlaceDescriptor::kVdlsd ? "vdlsd" : "patch";
+}
+
 namespace detail {
+
+int stored_descriptor_dim(const PlaceStorageParams& storage, const Alphabet* alphabet) noexcept {
+  if (storage.descriptor == PlaceDescriptor::kVdlsd) return vdlsd_dimension(VdlsdParams{}.bins);
+  return alphabet != nullptr ? alphabet->descriptor_dim : 0;
+}
 
 std::uint8_t quantise_descriptor_value(float v, int bits) noexcept {
   const float levels = static_cast<float>((1 << bits) - 1);
@@ -324,7 +334,7 @@ Model assign_words(const Features& features, const Alphabet& alphabet) {
 
 // The PlaceScan of a cloud, its features, its word instances and its (fine) range image.
 PlaceScan build_place_scan(const Cloud& cloud, const Features& f, const Model& model, const PlaceStorageParams& storage,
-                           const RangeImage& fine, std::string name) {
+                           const RangeImage& fine, std::string name, int threads = 1) {
   PlaceScan p;
   p.name = std::move(name);
   p.T_world_cloud = cloud.T_world_cloud;
@@ -342,7 +352,19 @@ PlaceScan build_place_scan(const Cloud& cloud, const Features& f, const Model& m
   }
   // The strongest interest-point features (they come first, by decreasing interest).
   const std::size_t n = std::min<std::size_t>(f.interest_count, static_cast<std::size_t>(storage.max_features));
+  p.descriptor = storage.descriptor;
   p.descriptor_dim = f.descriptor_dim;
+  // VD-LSD in the same frames, its local neighbourhoods grown with the image's beam spacing.
+  VdlsdResult vd;
+  if (storage.descriptor == PlaceDescriptor::kVdlsd) {
+    std::vector<Pose> frames(n);
+    for (std::size_t i = 0; i < n; ++i) frames[i] = f.features[i].T_cloud_feature;
+    VdlsdParams vp;
+    vp.beam_spacing_rad = std::min(0.2, std::max(fine.azimuth_resolution_rad, fine.elevation_resolution_rad));
+    vd = describe_vdlsd(cloud, frames, vp, std::clamp(threads, 1, 64));
+    p.descriptor_dim = vd.descriptor_dim;
+    p.empty_descriptors = vd.empty;
+  }
   p.descriptor_bits = storage.descriptor_bits;
   p.features.reserve(n);
   p.descriptor_codes.reserve(n * static_cast<std::size_t>(std::max(0, f.descriptor_dim)));
@@ -352,8 +374,9 @@ PlaceScan build_place_scan(const Cloud& cloud, const Features& f, const Model& m
     pf.position = T.translation().cast<float>();
     pf.rotation = detail::dequantise_rotation(detail::quantise_rotation(Eigen::Quaterniond(T.linear()).cast<float>()));
     p.features.push_back(pf);
-    const float* d = f.descriptor(i);
-    for (int k = 0; k < f.descriptor_dim; ++k)
+    const float* d = vd.descriptor_dim > 0 ? vd.descriptors.data() + i * static_cast<std::size_t>(vd.descriptor_dim)
+                                           : f.descriptor(i);
+    for (int k = 0; k < p.descriptor_dim; ++k)
       p.descriptor_codes.push_back(detail::quantise_descriptor_value(d[k], storage.descriptor_bits));
   }
   p.coarse = detail::make_coarse_image(fine, storage);
@@ -384,7 +407,7 @@ PlaceScan make_place_scan(const Cloud& cloud, const Alphabet& alphabet, const Pl
   // prepare_scan adds for coding are not needed here.
   const FeatureResult fr = extract_features(cloud, prepare_feature_params(cloud, params, alphabet.word_radius));
   const Model model = assign_words(fr.features, alphabet);
-  return build_place_scan(cloud, fr.features, model, storage, fr.image, std::move(name));
+  return build_place_scan(cloud, fr.features, model, storage, fr.image, std::move(name), params.threads);
 }
 
 namespace detail {

@@ -298,6 +298,7 @@ StatusOr<PlaceScan> decode_scan(const std::uint8_t* p, std::size_t n, std::uint6
       return bad_data("place database: feature frame is not finite or has a zero rotation", r.offset() - 20);
     f.rotation = detail::dequantise_rotation(q);
   }
+  s.descriptor = h.storage.descriptor;
   s.descriptor_dim = h.descriptor_dim;
   s.descriptor_bits = h.descriptor_bits;
   const std::uint8_t* cb = r.take(static_cast<std::size_t>(code_bytes));
@@ -437,7 +438,7 @@ std::vector<std::uint8_t> phdr_payload(const PlaceStorageParams& st, int dim, bo
   p.u32(static_cast<std::uint32_t>(st.max_features));
   p.f64(st.coarse_azimuth_deg);
   p.u16(static_cast<std::uint16_t>(st.coarse_row_factor));
-  p.u16(0);
+  p.u16(static_cast<std::uint16_t>(st.descriptor));  // descriptor_kind (0: patch, the earlier reserved 0)
   p.f64(st.range_step);
   return std::move(p.b);
 }
@@ -457,7 +458,7 @@ StatusOr<Phdr> parse_phdr(const ChunkView& c) {
   Phdr h;
   std::uint8_t bits = 0, alph = 0;
   std::uint32_t maxf = 0;
-  std::uint16_t rowf = 0, reserved = 0;
+  std::uint16_t rowf = 0, kind = 0;
   r.u32(h.scan_count);
   r.u16(h.descriptor_dim);
   r.u8(bits);
@@ -465,13 +466,21 @@ StatusOr<Phdr> parse_phdr(const ChunkView& c) {
   r.u32(maxf);
   r.f64(h.storage.coarse_azimuth_deg);
   r.u16(rowf);
-  r.u16(reserved);
+  r.u16(kind);
   r.f64(h.storage.range_step);
   h.storage.max_features = static_cast<int>(std::min<std::uint32_t>(maxf, 1u << 30));
   h.storage.descriptor_bits = bits;
   h.storage.coarse_row_factor = rowf;
-  if (h.scan_count > kMaxScans || h.descriptor_dim > kMaxDim || alph > 1 || reserved != 0)
+  if (h.scan_count > kMaxScans || h.descriptor_dim > kMaxDim || alph > 1)
     return bad_data("place database: PHDR field out of range", c.at + 12);
+  if (kind > 1)
+    return bad_data("place database: unknown descriptor kind " + std::to_string(kind) + " in PHDR", c.at + 12 + 22);
+  h.storage.descriptor = static_cast<PlaceDescriptor>(kind);
+  if (h.storage.descriptor == PlaceDescriptor::kVdlsd && h.descriptor_dim != 0 &&
+      h.descriptor_dim != detail::stored_descriptor_dim(h.storage, nullptr))
+    return bad_data("place database: PHDR descriptor_dim " + std::to_string(h.descriptor_dim) + " is not VD-LSD's " +
+                        std::to_string(detail::stored_descriptor_dim(h.storage, nullptr)),
+                    c.at + 12 + 4);
   try {
     h.storage.validate();
   } catch (const std::invalid_argument& e) {
@@ -644,8 +653,12 @@ PlaceFileWriter::PlaceFileWriter(const PlaceStorageParams& storage, const Alphab
   storage_.validate();
   if (descriptor_dim < 0 || descriptor_dim > static_cast<int>(kMaxDim))
     throw std::invalid_argument("PlaceFileWriter: descriptor_dim must be in [0, 4096]");
-  if (alphabet != nullptr && descriptor_dim != 0 && alphabet->descriptor_dim != descriptor_dim)
+  if (descriptor_dim != 0 && storage_.descriptor == PlaceDescriptor::kPatch && alphabet != nullptr &&
+      alphabet->descriptor_dim != descriptor_dim)
     throw std::invalid_argument("PlaceFileWriter: the alphabet's descriptors differ from descriptor_dim");
+  if (descriptor_dim != 0 && storage_.descriptor == PlaceDescriptor::kVdlsd &&
+      descriptor_dim != detail::stored_descriptor_dim(storage_, nullptr))
+    throw std::invalid_argument("PlaceFileWriter: descriptor_dim differs from VD-LSD's");
 }
 
 PlaceFileWriter::PlaceFileWriter(const PlaceDatabase& db)
@@ -741,6 +754,9 @@ void PlaceFileWriter::index(std::uint64_t chunk_offset, std::uint64_t payload_le
 
 PlaceFileWriter::Piece PlaceFileWriter::add(const PlaceScan& scan) {
   if (end_ == 0) throw std::logic_error("PlaceFileWriter::add before begin");
+  if (scan.descriptor != storage_.descriptor)
+    throw std::invalid_argument("PlaceFileWriter::add: scan '" + scan.name + "' has " + to_string(scan.descriptor) +
+                                " descriptors, the database " + to_string(storage_.descriptor));
   if (!scan.features.empty() && scan.descriptor_dim != descriptor_dim_)
     throw std::invalid_argument("PlaceFileWriter::add: scan '" + scan.name + "' has descriptors of " +
                                 std::to_string(scan.descriptor_dim) + " values, the database " +
@@ -796,7 +812,7 @@ std::pair<PlaceFileWriter::Piece, PlaceFileWriter::Piece> PlaceFileWriter::finis
 
 std::vector<std::uint8_t> PlaceDatabase::save() const {
   int dim = descriptor_dim_;
-  if (dim == 0 && has_alphabet_) dim = alphabet_.descriptor_dim;
+  if (dim == 0) dim = detail::stored_descriptor_dim(storage_, has_alphabet_ ? &alphabet_ : nullptr);
   PlaceFileWriter w(storage_, has_alphabet_ ? &alphabet_ : nullptr, dim);
   w.set_vocabulary(vocabulary_);
   std::vector<std::uint8_t> out;
@@ -991,7 +1007,8 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
     if (ac.value().type != "ALPH") return bad_data("place database: ALPH chunk missing after PHDR", pos);
     auto a = codec::decode_alphabet(std::vector<std::uint8_t>(ac.value().payload, ac.value().payload + ac.value().length));
     if (!a.ok()) return bad_data("place database: ALPH: " + a.status().message(), pos + 12 + a.status().offset().value_or(0));
-    if (h.descriptor_dim != 0 && a.value().descriptor_dim != h.descriptor_dim)
+    if (h.descriptor_dim != 0 && h.storage.descriptor == PlaceDescriptor::kPatch &&
+        a.value().descriptor_dim != h.descriptor_dim)
       return bad_data("place database: the alphabet's descriptor size differs from PHDR's", pos + 12);
     db.set_alphabet(std::move(a).value());
     pos += 16 + ac.value().length;
@@ -1160,6 +1177,9 @@ std::vector<std::uint8_t> encode_place_query(const PlaceScan& scan, const PlaceS
   if (scan.descriptor_bits != storage.descriptor_bits)
     throw std::invalid_argument("encode_place_query: the scan was quantised to " + std::to_string(scan.descriptor_bits) +
                                 " bits, the storage parameters say " + std::to_string(storage.descriptor_bits));
+  if (scan.descriptor != storage.descriptor)
+    throw std::invalid_argument(std::string("encode_place_query: the scan has ") + to_string(scan.descriptor) +
+                                " descriptors, the storage parameters " + to_string(storage.descriptor));
   const std::vector<std::uint8_t> payload = detail::encode_scan_payload(scan, storage.range_step);
   Writer w;
   w.bytes(reinterpret_cast<const std::uint8_t*>("L3PQ"), 4);

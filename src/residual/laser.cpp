@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <memory>
 #include <complex>
 #include <cstring>
 #include <limits>
@@ -35,6 +36,9 @@ constexpr std::int64_t kMaxLengthUnits = 64 * 65536;
 /// Predictors 2 and 3: left and upper pixels more than this many range steps apart mark
 /// an edge, where a flag says which of them predicts (formats/model.md §2.8.2).
 constexpr std::int64_t kEdgeSteps = 16;
+/// Layers of this many points or more choose their range-step share and predictor on a
+/// quarter of the turn's columns and code only the winner in full.
+constexpr std::size_t kLaserTrialMinPoints = 32768;
 /// A left neighbour further than this many columns back does not predict.
 constexpr std::uint32_t kMaxColumnGap = 4;
 
@@ -1051,7 +1055,7 @@ bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssi
 // assign_lasers
 // ---------------------------------------------------------------------------------------
 
-std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate) {
+std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate, int threads) {
   const std::size_t n = input.size();
   if (n == 0) return std::nullopt;
   LaserAssignment a;
@@ -1115,20 +1119,21 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         LaserTable table;
         double cost = std::numeric_limits<double>::infinity();
       };
+      // (the two side by side where there are two threads)
       std::array<Candidate, 2> cand;
-      double z_rms = 0.0;
-      for (std::size_t k = 0; k < cand.size(); ++k) {
+      parallel_for(cand.size(), threads, [&](std::size_t k) {
         Candidate& c = cand[k];
         bool found = false;
+        double z_rms = 0.0;
         if (k == 0) found = estimate_cones(p, c.ring, c.lasers, z_rms);
         else found = estimate_rings(p, c.ring, c.lasers);
         std::vector<double> tangential;
-        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) continue;
+        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) return;
         auto t = estimate_table(p, c.ring, c.column, c.lasers, c.columns, tangential);
-        if (!t || !storable(*t)) continue;
+        if (!t || !storable(*t)) return;
         c.table = std::move(*t);
         c.cost = assignment_cost(p, c.ring, c.column, c.table);
-      }
+      }, 1);
       std::size_t pick = 0;
       for (std::size_t k = 1; k < cand.size(); ++k)
         if (cand[k].cost < cand[pick].cost) pick = k;
@@ -1191,7 +1196,11 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
                                      const std::vector<std::int64_t>& shift, const std::vector<Beams::Trig>& beam_of,
                                      const std::vector<Eigen::Vector3d>& offset, double max_error, double bound,
                                      bool thin, double share, const std::vector<std::uint32_t>& predictors,
-                                     int threads) {
+                                     int threads, const std::vector<std::uint32_t>* js = nullptr,
+                                     std::vector<std::size_t>* sizes = nullptr) {
+  // The points coded: positions `js` in `order` (a trial on some columns), else all of them.
+  const std::size_t m = js ? js->size() : order.size();
+  const auto J = [js](std::size_t t) -> std::size_t { return js ? (*js)[t] : t; };
   const double qr = 2.0 * share * bound;
   const double qt = std::sqrt(std::max(0.0, 2.0 * (1.0 - share * share))) * bound * 0.99;
   if (!(qt > 0.0)) return std::nullopt;
@@ -1202,22 +1211,23 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     std::int64_t k = 0, k1 = 0, k2 = 0;
     Eigen::Vector3f decoded;
   };
-  std::vector<Coded> q(coded.size());  // by position in `order`
-  std::vector<std::uint8_t> failed(order.size(), 0);
-  parallel_for(order.size(), threads, [&](std::size_t j) {
+  std::vector<Coded> q(m);  // by position t among the points coded (J(t) in `order`)
+  std::vector<std::uint8_t> failed(m, 0);
+  parallel_for(m, threads, [&](std::size_t t) {
+    const std::size_t j = J(t);
     const std::uint32_t i = coded[order[j]];
     const Eigen::Vector3d truth = input[i].cast<double>();
     const Beams::Beam b = beams.beam(a.ring[i], beam_of[j]);
     const Eigen::Vector3d& v = offset[j];
-    Coded& c = q[j];
+    Coded& c = q[t];
     if (!quantise(v.dot(b.u), qr, c.k)) {
-      failed[j] = 1;
+      failed[t] = 1;
       return;
     }
     c.decoded = beams.point(b, c.k, 0, 0, qr, qt);
     if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
     if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) {
-      failed[j] = 1;
+      failed[t] = 1;
       return;
     }
     c.decoded = beams.point(b, c.k, c.k1, c.k2, qr, qt);
@@ -1234,20 +1244,20 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
             found = true;
           }
         }
-    if (!found) failed[j] = 1;
+    if (!found) failed[t] = 1;
   }, 4096);
   if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
 
   // Thinning: a point that a point decoded before it explains is not coded.
-  std::vector<std::uint32_t> kept(order.size());  // positions in `order`
+  std::vector<std::uint32_t> kept(m);  // positions t
   std::iota(kept.begin(), kept.end(), 0U);
   if (thin) {
-    PointBallGrid seen(bound, order.size());
+    PointBallGrid seen(bound, m);
     kept.clear();
-    for (std::uint32_t j = 0; j < order.size(); ++j) {
-      if (seen.any_within(input[coded[order[j]]].cast<double>())) continue;
-      seen.insert(q[j].decoded);
-      kept.push_back(j);
+    for (std::uint32_t t = 0; t < m; ++t) {
+      if (seen.any_within(input[coded[order[J(t)]]].cast<double>())) continue;
+      seen.insert(q[t].decoded);
+      kept.push_back(t);
     }
   }
 
@@ -1255,7 +1265,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   std::vector<std::uint16_t> kept_ring(kept.size());
   std::vector<std::uint32_t> kept_column(kept.size());
   for (std::size_t k = 0; k < kept.size(); ++k) {
-    const std::uint32_t i = coded[order[kept[k]]];
+    const std::uint32_t i = coded[order[J(kept[k])]];
     kept_ring[k] = a.ring[i];
     kept_column[k] = a.column[i];
   }
@@ -1269,7 +1279,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     out.range_step = qr;
     out.coded = kept.size();
     out.sources.resize(kept.size());
-    for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[kept[k]]];
+    for (std::size_t k = 0; k < kept.size(); ++k) out.sources[k] = coded[order[J(kept[k])]];
     RangeEncoder enc = head;
     const auto ring_at = [&](std::size_t k) { return kept_ring[k]; };
     const auto column_at = [&](std::size_t k) { return kept_column[k]; };
@@ -1298,7 +1308,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
       while (end < kept.size() && column_at(end) == column) ++end;
       const std::int64_t dc = static_cast<std::int64_t>(column) - prev_column - 1;
       pc.column_delta.put(enc, pc.column_ctx(), dc);
-      const std::int64_t s = shift[kept[at]];
+      const std::int64_t s = shift[J(kept[at])];
       pc.column_shift.put(enc, pc.shift_ctx(), s - pc.last_shift());
       pc.set_shift(s);
       pc.start_column(column, dc);
@@ -1355,6 +1365,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
     streams[pi] = std::move(out);
   }, 1);
+  if (sizes)
+    for (const auto& o : streams) sizes->push_back(o ? o->stream.size() : std::numeric_limits<std::size_t>::max());
   std::optional<LaserLayer> best;
   for (auto& o : streams)
     if (o && (!best || o->stream.size() < best->stream.size())) best = std::move(o);
@@ -1397,24 +1409,42 @@ std::vector<std::uint32_t> pixel_order(const std::vector<std::uint32_t>& coded, 
 
 }  // namespace
 
-std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
-                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
-                                      const Pose& T_cloud_sensor, double max_error, double bound, bool thin,
-                                      const std::vector<double>& shares, int threads) {
+namespace {
+
+/// One laser assignment made ready to code: its beams, the pixel order, each column's
+/// azimuth shift and every point's beam and offset from the beam's origin.
+struct Prepared {
+  const LaserAssignment* a = nullptr;
+  Beams beams;
+  std::vector<std::uint32_t> order;
+  std::vector<std::int64_t> shift;
+  std::vector<Beams::Trig> beam_of;
+  std::vector<Eigen::Vector3d> offset;
+  Prepared(const LaserAssignment& assignment, const Pose& T_cloud_sensor)
+      : a(&assignment), beams(assignment.table, T_cloud_sensor) {}
+};
+
+std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
+                                        const LaserAssignment& a, const Pose& T_cloud_sensor, int threads) {
   const LaserTable& table = a.table;
-  if (!storable(table)) return std::nullopt;
-  const Beams beams(table, T_cloud_sensor);
+  if (!storable(table)) return nullptr;
+  auto prepared = std::make_unique<Prepared>(a, T_cloud_sensor);
+  const Beams& beams = prepared->beams;
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
 
   // Column by column, lasers in order, then input order.
-  std::vector<std::uint32_t> order = pixel_order(coded, a);
+  std::vector<std::uint32_t>& order = prepared->order;
+  order = pixel_order(coded, a);
   // Each column's azimuth shift: the median of its points' azimuths off their beams (a
   // sensor whose firings do not fall on an even grid), in the table's shift units.
   // Every point's beam (its azimuths' cosines and sines) and its offset from the beam's
   // origin (head frame), first unshifted: a column whose shift comes out 0 keeps them.
-  std::vector<std::int64_t> shift(coded.size(), 0);  // by position in `order`
-  std::vector<Beams::Trig> beam_of(order.size());
-  std::vector<Eigen::Vector3d> offset(order.size());
+  std::vector<std::int64_t>& shift = prepared->shift;  // by position in `order`
+  std::vector<Beams::Trig>& beam_of = prepared->beam_of;
+  std::vector<Eigen::Vector3d>& offset = prepared->offset;
+  shift.assign(coded.size(), 0);
+  beam_of.resize(order.size());
+  offset.resize(order.size());
   parallel_for(order.size(), threads, [&](std::size_t j) {
     const std::uint32_t i = coded[order[j]];
     beam_of[j] = beams.trig(a.ring[i], a.column[i], 0);
@@ -1451,22 +1481,87 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
       offset[j] = T_head_cloud * input[i].cast<double>() - beams.beam(a.ring[i], beam_of[j]).o;
     }, 4096);
   }
+  return prepared;
+}
 
+}  // namespace
+
+std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
+                                      const std::vector<std::uint32_t>& coded,
+                                      const std::vector<const LaserAssignment*>& candidates, const Pose& T_cloud_sensor,
+                                      double max_error, double bound, bool thin, const std::vector<double>& shares,
+                                      int threads, std::size_t* chosen) {
+  std::vector<std::unique_ptr<Prepared>> prepared;
+  for (const LaserAssignment* a : candidates) prepared.push_back(prepare_layer(input, coded, *a, T_cloud_sensor, threads));
+  const auto code = [&](const Prepared& p, double share, std::vector<std::uint32_t> predictors, int inner,
+                        const std::vector<std::uint32_t>* js = nullptr, std::vector<std::size_t>* sizes = nullptr) {
+    return code_laser(head, input, coded, *p.a, p.beams, p.order, p.shift, p.beam_of, p.offset, max_error, bound, thin,
+                      share, predictors, inner, js, sizes);
+  };
   // Each share with predictor 3 (left neighbour, a flag at edges), the first also with
   // predictor 2 (median edge detector, a flag at edges): at 14 mm predictor 2 coded the
   // OS-2-128 scan 8 % and the OS-1-32 scan 4 % smaller than predictor 3, the OS-0-128,
   // OS-0-32, HDL-32E and VLP-16 scans 1-6 % larger. Predictors 0 and 1 (no edge flags)
   // are still decoded; 2 or 3 coded each of these scans and a KITTI and balm scan smaller.
-  // (several shares side by side, one thread each; one share with all the threads)
-  std::vector<std::optional<LaserLayer>> tries(shares.size());
-  const int inner = shares.size() > 1 ? 1 : threads;
-  parallel_for(tries.size(), threads, [&](std::size_t t) {
-    tries[t] = code_laser(head, input, coded, a, beams, order, shift, beam_of, offset, max_error, bound, thin, shares[t],
-                          t == 0 ? std::vector<std::uint32_t>{2, 3} : std::vector<std::uint32_t>{3}, inner);
-  }, 1);
+  const auto predictors_of = [](std::size_t share) {
+    return share == 0 ? std::vector<std::uint32_t>{2, 3} : std::vector<std::uint32_t>{3};
+  };
+  // With several shares (an estimated table) or several candidate assignments, a large
+  // layer makes the choice on a quarter of the turn (every fourth of 32 column blocks):
+  // each candidate, share and predictor is coded there, and only the one with the fewest
+  // bits a sampled point is coded in full. A small layer codes every share of every
+  // candidate in full (the shares side by side, one thread each). (With one share and one
+  // candidate the trial would save nothing: the quantisation, not the stream, is most of
+  // a coding's work.)
+  const bool several = shares.size() > 1 || candidates.size() > 1;
+  if (several && coded.size() >= kLaserTrialMinPoints) {
+    struct Pick {
+      double bits = std::numeric_limits<double>::infinity();
+      std::size_t candidate = 0, share = 0;
+      std::uint32_t predictor = 0;
+    } pick;
+    for (std::size_t c = 0; c < prepared.size(); ++c) {
+      if (!prepared[c] || prepared[c]->a->table.columns < 32) continue;
+      const Prepared& p = *prepared[c];
+      std::vector<std::uint32_t> js;  // positions in `order` of the trial's columns
+      const std::uint32_t block = p.a->table.columns / 32;
+      for (std::size_t j = 0; j < p.order.size(); ++j)
+        if ((p.a->column[coded[p.order[j]]] / block) % 4 == 0) js.push_back(static_cast<std::uint32_t>(j));
+      if (js.empty()) continue;
+      std::vector<std::vector<std::size_t>> bytes(shares.size());
+      parallel_for(shares.size(), threads, [&](std::size_t t) {
+        (void)code(p, shares[t], predictors_of(t), shares.size() > 1 ? 1 : threads, &js, &bytes[t]);
+      }, 1);
+      for (std::size_t t = 0; t < shares.size(); ++t)
+        for (std::size_t k = 0; k < bytes[t].size(); ++k) {
+          if (bytes[t][k] == std::numeric_limits<std::size_t>::max()) continue;
+          const double bits = 8.0 * static_cast<double>(bytes[t][k]) / static_cast<double>(js.size());
+          if (bits < pick.bits) pick = {bits, c, t, predictors_of(t)[k]};
+        }
+    }
+    if (std::isfinite(pick.bits)) {
+      auto best = code(*prepared[pick.candidate], shares[pick.share], {pick.predictor}, threads);
+      if (best) {
+        if (chosen) *chosen = pick.candidate;
+        return best;
+      }
+    }
+    // (no sample coded, or the whole turn did not: a point beyond what a share can code)
+  }
   std::optional<LaserLayer> best;
-  for (auto& t : tries)
-    if (t && (!best || t->stream.size() < best->stream.size())) best = std::move(t);
+  for (std::size_t c = 0; c < prepared.size(); ++c) {
+    if (!prepared[c]) continue;
+    std::vector<std::optional<LaserLayer>> tries(shares.size());
+    const int inner = shares.size() > 1 ? 1 : threads;
+    parallel_for(tries.size(), threads, [&](std::size_t t) {
+      tries[t] = code(*prepared[c], shares[t], predictors_of(t), inner);
+    }, 1);
+    for (auto& t : tries)
+      if (t && (!best || t->stream.size() < best->stream.size())) {
+        best = std::move(t);
+        if (chosen) *chosen = c;
+      }
+  }
   return best;
 }
 

@@ -54,9 +54,10 @@ struct LaserAssignment {
 /// columns when it has them, else estimated from its points (in the sensor frame given by
 /// `T_cloud_sensor`): columns from the azimuths of a laser's points, and, with `estimate`,
 /// lasers from the points' elevations. nullopt when the cloud does not look like a spinning
-/// lidar's scan.
+/// lidar's scan. `threads`: the two estimates side by side with 2 or more (the result does
+/// not depend on it).
 [[nodiscard]] std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor,
-                                                           bool estimate);
+                                                           bool estimate, int threads = 1);
 
 /// A coded sensor-geometry layer: the fields after the ones every coding has, and the stream.
 struct LaserLayer {
@@ -70,15 +71,19 @@ struct LaserLayer {
 /// Size of `fields` in a payload.
 constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 4 + 8 + 96;
 
-/// Codes the input points `coded` with the table of `a` for error bound `bound` (E'),
-/// continuing `head` (which holds the keep mask), once for each range-step share in
+/// Codes the input points `coded` with the table of an assignment for error bound `bound`
+/// (E'), continuing `head` (which holds the keep mask), for each range-step share in
 /// `shares` (the range step is 2·share·E', the rest of the budget goes to corrections
-/// across the beams), and returns the smallest. nullopt when a point cannot be coded
-/// within the bound (float32 resolution) or the table's values are out of the stored range.
+/// across the beams) and each candidate assignment (two estimates of a scan's lasers), and
+/// returns the smallest (a large layer: the smallest on a quarter of its columns, coded in
+/// full); `chosen` gets its candidate's index. nullopt when no candidate codes (a point
+/// beyond float32 resolution, table values out of the stored range).
 [[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
-                                                    const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
+                                                    const std::vector<std::uint32_t>& coded,
+                                                    const std::vector<const LaserAssignment*>& candidates,
                                                     const Pose& T_cloud_sensor, double max_error, double bound,
-                                                    bool thin, const std::vector<double>& shares, int threads);
+                                                    bool thin, const std::vector<double>& shares, int threads,
+                                                    std::size_t* chosen = nullptr);
 
 /// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
 /// bytes from there to the payload's end) after the keep mask was read from `dec`.

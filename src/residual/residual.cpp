@@ -662,11 +662,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<VoxelLayer> voxel;
   // (a voxel stands for every point in it: not with `thin` off, which gives each its own)
   const bool voxel_allowed = options.voxel && options.thin;
-  // The sensor-geometry coding (§2.8) where the scan's lasers and columns are known: each
-  // range-step share in full (it is the fastest coding), the smallest kept.
+  // The sensor-geometry coding (§2.8) where the scan's lasers and columns are known: the
+  // smallest of its range-step shares and laser estimates kept (laser_layer).
   std::optional<detail::LaserLayer> laser;
   std::optional<detail::LaserAssignment> lasers_of;
-  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true);
+  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true, threads);
   bool exact_table = false;
   if (lasers_of) {
     // A table read from the sensor reproduces the beams: the whole budget along them.
@@ -674,17 +674,13 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     exact_table = exact;
     const std::vector<double> shares =
         exact ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
-    laser = detail::laser_layer(head, input.points, coded, *lasers_of, T_cloud_sensor, max_error, check_error,
-                                options.thin, shares, threads);
-    // Lasers estimated two ways from the points: the other estimate coded too, the smaller kept.
-    if (const auto alt = lasers_of->alternative) {
-      auto other = detail::laser_layer(head, input.points, coded, *alt, T_cloud_sensor, max_error, check_error,
-                                       options.thin, shares, threads);
-      if (other && (!laser || other->stream.size() < laser->stream.size())) {
-        laser = std::move(other);
-        lasers_of = *alt;
-      }
-    }
+    // Lasers estimated two ways from the points: both are candidates, the smaller kept.
+    std::vector<const detail::LaserAssignment*> candidates = {&*lasers_of};
+    if (lasers_of->alternative) candidates.push_back(lasers_of->alternative.get());
+    std::size_t chosen = 0;
+    laser = detail::laser_layer(head, input.points, coded, candidates, T_cloud_sensor, max_error, check_error,
+                                options.thin, shares, threads, &chosen);
+    if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
   const bool others = !laser || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -290,6 +291,34 @@ TEST_F(Bags, SharedOusterPacketBag) {
   auto first = io::read_cloud(p);
   ASSERT_TRUE(first.ok()) << first.status().to_string();
   EXPECT_EQ(first.value().cloud.size(), c.size());
+}
+
+TEST_F(Bags, AnOusterPacketErrorNamesTheMessage) {
+  // The shared bag with the packet type of its third lidar packet message spoiled: the error
+  // names that message on its topic (there are no capture records in a bag).
+  const std::string p = std::string(LEX3D_SHARED_DATA_DIR) + "/rosbag/ouster_512x10_raw.bag";
+  if (!fs::exists(p)) GTEST_SKIP() << "no " << p;
+  std::vector<char> bytes = slurp(p);
+  // A lidar packet message: its u32 length (8448 bytes, RNG15_RFL8_NIR8 at 128 beams) and the
+  // packet's u16 type 1.
+  const std::string packet_start("\x00\x21\x00\x00\x01\x00", 6);
+  std::size_t at = std::string::npos, found = 0;
+  for (std::size_t i = 0; i + packet_start.size() <= bytes.size() && found < 3; ++i)
+    if (std::equal(packet_start.begin(), packet_start.end(), bytes.begin() + static_cast<std::ptrdiff_t>(i))) {
+      at = i;
+      ++found;
+    }
+  ASSERT_EQ(found, 3U);
+  bytes[at + 4] = 7;  // packet type 7
+  const std::string bad = path("ouster_type.bag");
+  spit(bad, bytes, bytes.size());
+  auto r = io::read_bag(bad, "");
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  const std::string msg = r.status().to_string();
+  EXPECT_NE(msg.find("ouster_type.bag: message 3 on /os_node0/lidar_packets: packet type 7 is not a lidar data packet"),
+            std::string::npos) << msg;
+  EXPECT_EQ(msg.find("capture record"), std::string::npos) << msg;
 }
 
 TEST_F(Bags, MutatedPointCloud2BytesAreReadOrRefused) {

@@ -128,14 +128,7 @@ TEST(Learner, ScansInTwoGroupsGiveTheAlphabetOfOneProcess) {
   const double radius = learn_word_radius(p.model, &clouds[0]);
   std::vector<LearnScan> scans;
   for (const auto& c : clouds) scans.emplace_back(prepare_scan(c, p.model, radius), 1);
-  std::vector<std::size_t> features, points;
-  std::vector<double> log_ls;
-  for (const auto& s : scans) {
-    features.push_back(s.feature_count());
-    points.push_back(s.point_count());
-    log_ls.push_back(s.log_likelihood());
-  }
-  LearnDecisions loop(p, features, points, log_ls);
+  LearnDecisions loop = LearnDecisions::for_scans(p, scans);
   Alphabet alphabet;
   const double spacing = p.model.word_spacing_factor * radius;
   while (const LearnCandidate* c = loop.next()) {

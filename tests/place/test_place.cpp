@@ -262,6 +262,35 @@ TEST(PlaceScanFromCloud, SameAsFromThePreparedScan) {
   EXPECT_GT(a.pairs.size(), 1000U);
 }
 
+// --descriptor vdlsd: the same features, frames and words as the patch scan, VD-LSDs stored
+// instead of patches (the same from the prepared scan on one thread as from the cloud on two),
+// and a balm revisit found with them.
+TEST(PlaceScanFromCloud, VdlsdKeepsTheFramesAndWordsAndFindsARevisit) {
+  LEX3D_REQUIRE_SHARED(kBalm);
+  Balm& b = Balm::get();
+  PlaceStorageParams st;
+  st.descriptor = PlaceDescriptor::kVdlsd;
+  const PlaceScan patch = b.place("000124");
+  const PlaceScan v = b.place("000124", st);
+  ModelParams mp;
+  const PlaceScan c = make_place_scan(b.prepared("000124").cloud, b.alphabet(), st, mp, "000124");
+  EXPECT_EQ(v.descriptor, PlaceDescriptor::kVdlsd);
+  EXPECT_EQ(v.descriptor_dim, 64);
+  EXPECT_EQ(v.words, patch.words);
+  ASSERT_EQ(v.features.size(), patch.features.size());
+  for (std::size_t i = 0; i < v.features.size(); ++i) EXPECT_EQ(v.features[i].position, patch.features[i].position);
+  ASSERT_EQ(v.descriptor_codes.size(), v.features.size() * 64U);
+  EXPECT_EQ(v.descriptor_codes, c.descriptor_codes);
+  EXPECT_LT(v.empty_descriptors, v.features.size() / 10);
+  PlaceDatabase db(st);
+  for (const char* f : {"000040", "000000", "000060", "000080"}) db.add(b.place(f, st));
+  const auto r = db.query(v, PlaceParams{});
+  ASSERT_TRUE(r.best() != nullptr);
+  EXPECT_TRUE(r.accepted);
+  EXPECT_EQ(db.scan(r.best()->scan).name, "000000") << "best score " << r.best()->score;
+  EXPECT_THROW(db.add(patch), std::invalid_argument);
+}
+
 // Derived state against plain oracles: the pair table in (horizontal, a, b) order, every
 // pair at least 1 m apart listed; dense points on the pixel-centre rays.
 TEST(PlaceScanDerived, PairTableAndDensePointsMatchOracles) {

@@ -531,5 +531,55 @@ TEST(PlaceFile, BalmQueriesOnTheFileEqualInMemory) {
   EXPECT_EQ(again.decoded, again.retrieved);
 }
 
+// PHDR's descriptor_kind: a VD-LSD database keeps its kind through save and load, takes only
+// VD-LSD scans, and an unknown kind or a VD-LSD header with another descriptor size is refused.
+TEST(PlaceFile, DescriptorKindIsStoredAndChecked) {
+  const Alphabet a = tiny_alphabet(kWords);  // patch descriptors of 4 values
+  auto vdlsd_scan = [](std::uint32_t seed) {
+    PlaceScan s = synthetic_scan(seed, kWords);
+    s.descriptor = PlaceDescriptor::kVdlsd;
+    s.descriptor_dim = 64;
+    std::mt19937 rng(seed);
+    s.descriptor_codes.clear();
+    for (std::size_t i = 0; i < s.features.size() * 64; ++i) s.descriptor_codes.push_back(static_cast<std::uint8_t>(rng() % 16));
+    detail::finish_place_scan(s);
+    return s;
+  };
+  PlaceStorageParams st;
+  st.descriptor = PlaceDescriptor::kVdlsd;
+  PlaceDatabase db(st);
+  db.set_alphabet(a);
+  for (std::uint32_t i = 0; i < 5; ++i) db.add(vdlsd_scan(i));
+  EXPECT_THROW(db.add(synthetic_scan(9, kWords)), std::invalid_argument);  // a patch scan
+  PlaceDatabase patch_db;
+  EXPECT_THROW(patch_db.add(vdlsd_scan(9)), std::invalid_argument);
+  const Bytes bytes = db.save();
+  auto back = PlaceDatabase::load(bytes);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_EQ(back.value().storage().descriptor, PlaceDescriptor::kVdlsd);
+  EXPECT_EQ(back.value().descriptor_dim(), 64);
+  const PlaceScan s0 = back.value().scan(0);
+  EXPECT_EQ(s0.descriptor, PlaceDescriptor::kVdlsd);
+  expect_same_scan(vdlsd_scan(0), s0);
+
+  // PHDR is the first chunk, at byte 76: type, u64 length, 32 payload bytes, CRC.
+  constexpr std::size_t kPhdr = 76, kPayload = kPhdr + 12;
+  ASSERT_EQ(std::string(bytes.begin() + kPhdr, bytes.begin() + kPhdr + 4), "PHDR");
+  EXPECT_EQ(bytes[kPayload + 22], 1);
+  EXPECT_EQ(write_file(3, a)[kPayload + 22], 0);  // a patch database: the bytes as before
+  auto with = [&](std::size_t at, std::uint8_t value) {
+    Bytes b = bytes;
+    b[at] = value;
+    put32(b, kPayload + 32, crc_of(b.data() + kPhdr, 12 + 32));
+    return PlaceDatabase::load(b);
+  };
+  const auto unknown = with(kPayload + 22, 2);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().message().find("unknown descriptor kind 2"), std::string::npos) << unknown.status().to_string();
+  const auto wrong_dim = with(kPayload + 4, 100);
+  ASSERT_FALSE(wrong_dim.ok());
+  EXPECT_NE(wrong_dim.status().message().find("not VD-LSD's 64"), std::string::npos) << wrong_dim.status().to_string();
+}
+
 }  // namespace
 }  // namespace lex3d

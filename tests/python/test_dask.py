@@ -152,3 +152,43 @@ def test_bad_options_and_alphabet_are_refused_before_any_work(client, tmp_path):
         lex3d.dask.compress(SCANS, tmp_path / "o.lex3dm", client=client, alphabet=tmp_path / "bad.lex3da")
     assert e.value.code == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.lex3da"]
+
+
+def test_an_interrupted_job_says_what_was_not_written_and_closes_its_client(client, tmp_path, monkeypatch, capsys):
+    from lex3d.dask import _learn, cli
+    opened = []
+    real_client = cli._client
+
+    def tracked_client(args):
+        c, cluster = real_client(args)
+        opened.append(c)
+        return c, cluster
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_client", tracked_client)
+    monkeypatch.setattr(cli, "compress", interrupted)
+    monkeypatch.setattr(_learn, "learn", interrupted)
+    for command, message in (("compress", "(no partial output files; the manifest is not written)"),
+                             ("learn", "(no alphabet written)")):
+        code = cli.main([command, SCANS[0], "-o", str(tmp_path / "out"), "--scheduler", client.scheduler.address])
+        assert code == 130
+        assert capsys.readouterr().err == f"lex3d-dask: interrupted {message}\n"
+        assert len(opened) == 1 and opened.pop().status == "closed"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_progress_line_is_throttled_and_the_last_one_ends_it(capsys):
+    from lex3d.dask._progress import ProgressLine
+    line = ProgressLine("coding", 4, True, lambda done, elapsed_s, failed: f", {failed} failed")
+    line.update(1, 0)
+    line.update(2, 0)  # within 0.2 s of the one before: not drawn
+    line.update(4, 1, final=True)
+    assert capsys.readouterr().err == ("\rcoding [" + "#" * 7 + "." * 23 + "] 1/4, 0 failed"
+                                       "\rcoding [" + "#" * 30 + "] 4/4, 1 failed\n")
+    calls = []
+    line = ProgressLine("learning", 9, lambda *a: calls.append(a), lambda *a: "")
+    line.update(3, "x")
+    line.update(9, "y", final=True)
+    assert calls == [(3, 9, "x")] and capsys.readouterr().err == ""

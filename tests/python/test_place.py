@@ -152,6 +152,20 @@ def test_built_and_saved_as_the_command_builds_it(tmp_path):
     assert (tmp_path / "py.lex3dp").read_bytes() == (tmp_path / "cli.lex3dp").read_bytes()
 
 
+@pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
+def test_learned_and_saved_as_the_command_learns_it(tmp_path):
+    subprocess.run([CLI, "place", "build", str(tmp_path / "cli.lex3dp"), *map(str, SCANS), "--learn-scans", "2",
+                    "--iterations", "60", "--threads", "1"], check=True, capture_output=True)
+    lex3d.PlaceDatabase.build(SCANS, learn_scans=2, iterations=60).save(tmp_path / "py.lex3dp")
+    assert (tmp_path / "py.lex3dp").read_bytes() == (tmp_path / "cli.lex3dp").read_bytes()
+
+
+def test_a_bad_scan_to_learn_on_raises_one_line(tmp_path):
+    (tmp_path / "short.bin").write_bytes(b"\x00" * 5)
+    with pytest.raises(ValueError, match="short.bin"):
+        lex3d.PlaceDatabase.build([SCANS[0], tmp_path / "short.bin"], learn_scans=2, iterations=5)
+
+
 def test_a_query_lets_other_python_threads_run(db):
     """The GIL is released while the query works: a ticking thread keeps ticking."""
     ticks, stop = [], threading.Event()

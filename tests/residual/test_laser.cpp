@@ -293,6 +293,23 @@ TEST(ResidualLaser, SameInputSameBytes) {
             residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, nullptr, two));
 }
 
+/// A large unorganised scan (the KITTI sample: two estimates of its lasers, two range-step
+/// shares) chooses its coding on a quarter of the turn: the same bytes on 1 and 2 threads,
+/// the sensor-geometry coding, the bound kept both ways.
+TEST(ResidualLaser, LargeEstimatedScanChoosesOnASampleWhateverTheThreads) {
+  const Cloud scan = test::load_or_fail(test::sample("kitti00_000000.bin"));
+  ASSERT_GT(scan.size(), 100000U);
+  residual::LayerOptions one;
+  one.threads = 1;
+  residual::LayerOptions two = one;
+  two.threads = 2;
+  residual::LayerStats st;
+  const Bytes layer = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, &st, one);
+  EXPECT_TRUE(st.laser);
+  EXPECT_EQ(layer, residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, nullptr, two));
+  expect_layer_bound(layer, scan, Pose::Identity(), 0.014);
+}
+
 /// Real scans: an Ouster capture (its metadata's exact table), a Velodyne capture (the
 /// published table on the measured firings) and a HDL-32E cloud stored firing by firing
 /// (the table estimated); each takes the sensor-geometry coding, smaller than the

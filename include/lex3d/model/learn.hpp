@@ -98,6 +98,9 @@ class LearnDecisions {
   /// for invalid params or arrays of different lengths.
   LearnDecisions(const LearnParams& params, const std::vector<std::size_t>& feature_counts,
                  const std::vector<std::size_t>& point_counts, const std::vector<double>& log_likelihoods);
+  /// The same, with the counts and initial ln L read from the scans of one process
+  /// (`scans[s]` is scan s).
+  [[nodiscard]] static LearnDecisions for_scans(const LearnParams& params, const std::vector<LearnScan>& scans);
 
   /// Every candidate in the order they are drawn (all features of all scans, seeded shuffle).
   [[nodiscard]] const std::vector<LearnCandidate>& candidates() const noexcept { return candidates_; }

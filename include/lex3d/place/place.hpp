@@ -23,6 +23,7 @@
 /// estimates it from the scan's points, and failing that the sensor's z axis is used.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -37,8 +38,18 @@
 
 namespace lex3d {
 
+/// The descriptor of a database's stored features (PHDR descriptor_kind, formats/place_db.md §3.1).
+enum class PlaceDescriptor : std::uint8_t {
+  kPatch = 0,  ///< the features module's range-image patch (steder2010), which the alphabet's words share
+  kVdlsd = 1,  ///< VD-LSD (collier2012 §3.1; features/vdlsd.hpp): 64 values; the words stay the patch's
+};
+/// "patch", "vdlsd".
+[[nodiscard]] const char* to_string(PlaceDescriptor d) noexcept;
+
 /// What a database stores of each scan; fixed for a database (saved with it).
 struct PlaceStorageParams {
+  /// Descriptor of the stored features (what correspondences and the recognition vocabulary use).
+  PlaceDescriptor descriptor = PlaceDescriptor::kPatch;
   /// Interest-point features kept per scan, strongest first; [1, 4096].
   int max_features = 160;
   /// Bits per descriptor value (values in [-1, 1], uniform quantiser); 4 or 8.
@@ -175,6 +186,11 @@ struct PlaceScan {
   /// Bag of words: (word id, instance count), sorted by word id.
   std::vector<std::pair<std::uint32_t, std::uint32_t>> words;
   std::vector<PlaceFeature> features;
+  /// What the descriptors are (the database's PlaceStorageParams::descriptor).
+  PlaceDescriptor descriptor = PlaceDescriptor::kPatch;
+  /// Features whose VD-LSD support held too few points (stored with the empty descriptor;
+  /// counted when the scan is described, not stored).
+  std::size_t empty_descriptors = 0;
   int descriptor_dim = 0;
   int descriptor_bits = 8;
   /// Quantised descriptors, features.size() x descriptor_dim codes (one per byte in memory).
@@ -223,6 +239,15 @@ struct PlaceScan {
 /// image instead of two and without the neighbourhoods prepare_scan finds for coding.
 [[nodiscard]] PlaceScan make_place_scan(const Cloud& cloud, const Alphabet& alphabet, const PlaceStorageParams& storage,
                                         const ModelParams& params, std::string name = {});
+
+/// The alphabet a place database is built with when none is given (`lex3d place build`,
+/// lex3d.PlaceDatabase.build): learn_alphabet(`params`) on k = min(scan_count, learn_scans)
+/// scans spread evenly over the set, scan(i * scan_count / k) for i < k, each read when
+/// asked for (none when scan_count is 0: then the alphabet learn_alphabet gives for no scans).
+/// Throws std::invalid_argument when learn_scans is 0 or `params` is invalid.
+[[nodiscard]] Alphabet learn_place_alphabet(std::size_t scan_count, const std::function<Cloud(std::size_t)>& scan,
+                                            std::size_t learn_scans, const LearnParams& params,
+                                            const std::function<void(const LearnProgress&)>& progress = {});
 
 /// Bytes of one scan in the database format (its SCAN chunk, framing included).
 [[nodiscard]] std::size_t stored_bytes(const PlaceScan& scan);
@@ -585,6 +610,8 @@ class PlaceFileWriter {
 };
 
 namespace detail {
+/// Values of a stored descriptor: the alphabet's for kPatch (0 without one), 64 for kVdlsd.
+int stored_descriptor_dim(const PlaceStorageParams& storage, const Alphabet* alphabet) noexcept;
 /// Quantises descriptors (values in [-1, 1]) to `bits` per value and back.
 std::uint8_t quantise_descriptor_value(float v, int bits) noexcept;
 float dequantise_descriptor_value(std::uint8_t code, int bits) noexcept;

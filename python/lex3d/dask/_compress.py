@@ -6,10 +6,11 @@ import json
 import os
 import pickle
 import resource
-import sys
 import time
 import uuid
 import warnings
+
+from ._progress import ProgressLine
 
 # Point cloud files a folder is searched for (pose lists, READMEs and times.txt are not scans).
 SCAN_EXTENSIONS = (".bin", ".pcd", ".ply", ".las", ".xyz", ".3d", ".pcap")
@@ -53,6 +54,17 @@ def expand_inputs(items):
     if not scans:
         raise CompressError(1, "no scans given")
     return scans
+
+
+def job_paths(inputs, output):
+    """The scans of `inputs` (expand_inputs) and `output` as a path; CompressError (3) when
+    the output's folder does not exist."""
+    scans = expand_inputs(inputs)
+    output = os.fspath(output)
+    out_dir = os.path.dirname(output) or "."
+    if not os.path.isdir(out_dir):
+        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
+    return scans, output
 
 
 def numbered_output(output, index, count):
@@ -152,28 +164,6 @@ def _uses_words(options):
     return options.get("max_error") is None and options.get("target_bpp") is None
 
 
-class _Progress:
-    """One line on stderr, redrawn: done/total, failures, rate."""
-
-    def __init__(self, total, enabled):
-        self.total, self.enabled, self.start = total, enabled, time.perf_counter()
-        self.last = 0.0
-
-    def update(self, done, failed, final=False):
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if not final and now - self.last < 0.2:
-            return
-        self.last = now
-        width = 30
-        filled = int(width * done / max(1, self.total))
-        rate = done / max(1e-9, now - self.start)
-        sys.stderr.write(f"\rcoding [{'#' * filled}{'.' * (width - filled)}] {done}/{self.total}"
-                         f" {rate:.1f} scans/s" + (f", {failed} failed" if failed else "") + ("\n" if final else ""))
-        sys.stderr.flush()
-
-
 def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn_scans=5,
              iterations=400, seed=None, manifest=None, progress=False, window=None, **options):
     """Codes every scan of `inputs` (expand_inputs) on the cluster of `client` into OUT_000,
@@ -188,12 +178,8 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     import lex3d
     from distributed import as_completed
 
-    scans = expand_inputs(inputs)
+    scans, output = job_paths(inputs, output)
     n = len(scans)
-    output = os.fspath(output)
-    out_dir = os.path.dirname(output) or "."
-    if not os.path.isdir(out_dir):
-        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
     stem = os.path.splitext(output)[0]
     manifest = os.fspath(manifest) if manifest else stem + ".manifest.jsonl"
     words = _uses_words(options)
@@ -284,7 +270,8 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     header = {"lex3d": lex3d.__version__, "scans": n, "alphabet": alphabet_path,
               "alphabet_sha256": alphabet_sha, "options": {k: v for k, v in coding.items()}}
     tmp_manifest = _temporary_name(manifest, job)
-    bar = _Progress(n, progress)
+    bar = ProgressLine("coding", n, progress, lambda done, elapsed_s, failed:
+                       f" {done / max(1e-9, elapsed_s):.1f} scans/s" + (f", {failed} failed" if failed else ""))
     done = failed = 0
     next_row = 0
     pending = {}
@@ -349,7 +336,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     finally:
         if done:
             bar.update(done, failed, final=True)
-        _remove_temporaries(out_dir, job)
+        _remove_temporaries(os.path.dirname(output) or ".", job)
         if os.path.exists(tmp_manifest):
             os.unlink(tmp_manifest)
     wall = time.perf_counter() - wall0

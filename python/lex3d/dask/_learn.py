@@ -16,10 +16,10 @@ deterministic), and the step that failed is repeated.
 
 import os
 import pickle
-import sys
 import time
 
-from ._compress import CompressError, _peak_rss_mb, expand_inputs, write_once
+from ._compress import CompressError, _peak_rss_mb, job_paths, write_once
+from ._progress import ProgressLine
 
 
 class LearnShard:
@@ -160,30 +160,6 @@ class _Shards:
         return self.one(j, "replay", list(words))
 
 
-class _Progress:
-    """A line on stderr, redrawn (progress=True), or a callable's call after every candidate."""
-
-    def __init__(self, enabled):
-        self.enabled, self.last, self.start = enabled, 0.0, time.perf_counter()
-
-    def update(self, it, total, bic, words, final=False):
-        if callable(self.enabled):
-            if not final:
-                self.enabled(it, total, bic, words)
-            return
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if not final and now - self.last < 0.2:
-            return
-        self.last = now
-        width = 30
-        filled = int(width * it / max(1, total))
-        sys.stderr.write(f"\rlearning [{'#' * filled}{'.' * (width - filled)}] {it}/{total} BIC {bic:.6g}, "
-                         f"{words} words" + ("\n" if final else ""))
-        sys.stderr.flush()
-
-
 def learn(inputs, output, *, client, iterations=400, patience=100, seed=1, word_radius=0.0, threads=1,
           prefetch=64, progress=False):
     """Learns one alphabet for every scan of `inputs` (expand_inputs) on the cluster of
@@ -195,12 +171,8 @@ candidate. Raises CompressError when
     the job cannot run (code 1 usage, 2 a scan that cannot be read, 3 I/O)."""
     from lex3d._lex3d import learning
 
-    scans = expand_inputs(inputs)
+    scans, output = job_paths(inputs, output)
     n = len(scans)
-    output = os.fspath(output)
-    out_dir = os.path.dirname(output) or "."
-    if not os.path.isdir(out_dir):
-        raise CompressError(3, f"{output}: the folder {out_dir} does not exist")
     try:
         out_stat = os.stat(output)
     except OSError:
@@ -256,7 +228,7 @@ candidate. Raises CompressError when
                                    iterations=iterations, patience=patience, seed=seed)
     bic0 = loop.bic
     total = min(iterations, loop.candidates)
-    bar = _Progress(progress)
+    bar = ProgressLine("learning", total, progress, lambda it, elapsed_s, bic, words: f" BIC {bic:.6g}, {words} words")
     words = []
     cache = {}
     t_learn = time.perf_counter()
@@ -313,9 +285,9 @@ candidate. Raises CompressError when
             words.append(word)
         else:
             loop.reject()
-        bar.update(loop.iteration, total, loop.bic, len(words))
+        bar.update(loop.iteration, loop.bic, len(words))
     learn_s = time.perf_counter() - t_learn
-    bar.update(loop.iteration, total, loop.bic, len(words), final=True)
+    bar.update(loop.iteration, loop.bic, len(words), final=True)
 
     alphabet = learning.alphabet_file(radius, spacing, dim, words)
     job = f"learn-{os.getpid()}"

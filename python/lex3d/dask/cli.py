@@ -114,25 +114,35 @@ def _client(args):
     return client, cluster
 
 
-def _learn_main(args):
-    from ._learn import learn
+def _run_job(args, job, interrupted_message):
+    """Runs job(client) on the cluster of args (_client), then closes the client and any
+    LocalCluster; (exit code, the job's summary or None). A CompressError is printed as one line
+    and gives its code; Ctrl-C prints "interrupted (interrupted_message)" and gives 130."""
     client = cluster = None
     try:
         client, cluster = _client(args)
-        summary = learn(args.inputs, args.output, client=client, iterations=args.iterations, patience=args.patience,
-                        seed=args.seed, word_radius=args.word_radius, threads=args.threads,
-                        progress=not args.no_progress and sys.stderr.isatty())
+        return 0, job(client)
     except CompressError as e:
         print(f"lex3d-dask: {e}", file=sys.stderr)
-        return e.code
+        return e.code, None
     except KeyboardInterrupt:
-        print("lex3d-dask: interrupted (no alphabet written)", file=sys.stderr)
-        return 130
+        print(f"lex3d-dask: interrupted ({interrupted_message})", file=sys.stderr)
+        return 130, None
     finally:
         if client is not None:
             client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _learn_main(args):
+    from ._learn import learn
+    code, summary = _run_job(args, lambda client: learn(
+        args.inputs, args.output, client=client, iterations=args.iterations, patience=args.patience, seed=args.seed,
+        word_radius=args.word_radius, threads=args.threads, progress=not args.no_progress and sys.stderr.isatty()),
+        "no alphabet written")
+    if code:
+        return code
     if args.json:
         print(json.dumps(summary))
         return 0
@@ -234,26 +244,16 @@ def main(argv=None):
             options[name] = getattr(args, name)
     if args.keep_all_points:
         options["keep_all_points"] = True
-    client = cluster = None
-    try:
-        if explicit_error and args.target_bpp is not None:
-            raise CompressError(1, "give --max-error or --target-bpp, not both")
-        client, cluster = _client(args)
-        summary = compress(args.inputs, args.output, client=client, alphabet=args.alphabet,
-                           save_alphabet=args.save_alphabet, learn_scans=args.learn_scans,
-                           iterations=args.iterations, seed=args.seed, manifest=args.manifest,
-                           progress=not args.no_progress and sys.stderr.isatty(), **options)
-    except CompressError as e:
-        print(f"lex3d-dask: {e}", file=sys.stderr)
-        return e.code
-    except KeyboardInterrupt:
-        print("lex3d-dask: interrupted (no partial output files; the manifest is not written)", file=sys.stderr)
-        return 130
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+    if explicit_error and args.target_bpp is not None:
+        print("lex3d-dask: give --max-error or --target-bpp, not both", file=sys.stderr)
+        return 1
+    code, summary = _run_job(args, lambda client: compress(
+        args.inputs, args.output, client=client, alphabet=args.alphabet, save_alphabet=args.save_alphabet,
+        learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed, manifest=args.manifest,
+        progress=not args.no_progress and sys.stderr.isatty(), **options),
+        "no partial output files; the manifest is not written")
+    if code:
+        return code
     for line in summary["failures"]:
         print(f"lex3d-dask: {line}", file=sys.stderr)
     if args.json:
