@@ -177,21 +177,106 @@ class PyPlaceDatabase {
     if (error) raise(*error);
     py::list out;
     const std::size_t k = std::min<std::size_t>(r.matches.size(), static_cast<std::size_t>(top));
-    for (std::size_t i = 0; i < k; ++i) {
-      const PlaceMatch& m = r.matches[i];
-      py::dict d;
-      d["scan"] = db_.name(m.scan);
-      d["index"] = m.scan;
-      d["score"] = m.score;
-      d["valid"] = m.valid;
-      d["accepted"] = m.valid && m.score >= p.accept_score;
-      d["inliers"] = m.inliers;
-      d["similarity"] = m.retrieval_similarity;
-      d["sensor_distance_m"] = m.sensor_distance_m;
-      d["pose"] = from_pose(m.T_match_query);
-      out.append(d);
-    }
+    for (std::size_t i = 0; i < k; ++i) out.append(match_dict(r.matches[i], p));
     return out;
+  }
+
+  /// The query scan described once, as bytes for every shard (encode_place_query).
+  py::bytes prepare_query(const py::object& scan, const py::object& pose, const py::object& gravity,
+                          const std::optional<py::bytes>& model_alphabet) const {
+    std::vector<std::uint8_t> alpha;
+    if (model_alphabet) alpha = to_vector(*model_alphabet);
+    Cloud c = scan_from(scan, model_alphabet ? &alpha : nullptr, "scan");
+    set_frame(c, pose, gravity);
+    std::vector<std::uint8_t> bytes;
+    {
+      py::gil_scoped_release unlocked;
+      bytes = encode_place_query(describe(c, "query"), db_.storage());
+    }
+    return {reinterpret_cast<const char*>(bytes.data()), bytes.size()};
+  }
+
+  /// (entries, document frequency per word id as uint64 array).
+  py::tuple word_statistics() const {
+    const PlaceWordStatistics st = db_.word_statistics();
+    py::array_t<std::uint64_t> df(static_cast<py::ssize_t>(st.df.size()));
+    std::copy(st.df.begin(), st.df.end(), df.mutable_data());
+    return py::make_tuple(st.scans, df);
+  }
+
+  py::list retrieve(const py::bytes& query, int top_k, const py::object& stats) const {
+    if (top_k < 1) throw py::value_error("top_k must be at least 1, got " + std::to_string(top_k));
+    PlaceWordStatistics global;
+    if (stats.is_none()) {
+      global = db_.word_statistics();
+    } else {
+      const auto t = stats.cast<py::tuple>();
+      if (t.size() != 2) throw py::value_error("stats must be (entries, df) as word_statistics() gives");
+      global.scans = t[0].cast<std::uint64_t>();
+      const auto df = py::array_t<std::uint64_t, py::array::forcecast>(t[1]);
+      if (df.ndim() != 1) throw py::value_error("stats: df must be one-dimensional, got " + shape_of(df));
+      global.df.assign(df.data(), df.data() + df.shape(0));
+    }
+    const PlaceScan q = query_of(query);
+    std::vector<std::pair<std::size_t, double>> r;
+    std::optional<std::string> error;
+    {
+      py::gil_scoped_release unlocked;
+      try {
+        r = db_.retrieve(q, static_cast<std::size_t>(top_k), global);
+      } catch (const std::invalid_argument& e) {
+        error = where() + e.what();
+      }
+    }
+    if (error) throw py::value_error(*error);
+    py::list out;
+    for (const auto& [i, score] : r) out.append(py::make_tuple(i, score));
+    return out;
+  }
+
+  /// PlaceDatabase::verify of (index, similarity) candidates: {"matches": [...], "refined": [...],
+  /// "decoded": n, "decode_ms": t}, each match a dict as query() gives plus "dense_refined".
+  py::dict verify(const py::bytes& query, const std::vector<std::pair<std::size_t, double>>& candidates,
+                  std::optional<double> max_distance, bool ground_vehicle, int threads, bool second_round) const {
+    PlaceParams p;
+    p.threads = threads;
+    p.ground_vehicle = ground_vehicle;
+    p.max_distance = max_distance.value_or(0.0);
+    p.validate();
+    for (const auto& c : candidates)
+      if (c.first >= db_.size())
+        throw py::value_error(where() + "candidate " + std::to_string(c.first) + " of a database of " +
+                              std::to_string(db_.size()) + " scans");
+    const PlaceScan q = query_of(query);
+    PlaceVerified v;
+    std::optional<Status> error;
+    {
+      py::gil_scoped_release unlocked;
+      try {
+        v = db_.verify(q, candidates, p, second_round);
+      } catch (const PlaceDataError& e) {
+        error = Status(e.status().code(), where() + e.status().message(), e.status().offset());
+      }
+    }
+    if (error) raise(*error);
+    py::list matches, refined;
+    for (const auto& m : v.matches) matches.append(match_dict(m, p));
+    for (const auto& m : v.refined) refined.append(match_dict(m, p));
+    py::dict d;
+    d["matches"] = matches;
+    d["refined"] = refined;
+    d["decoded"] = v.decoded;
+    d["decode_ms"] = v.decode_ms;
+    d["dense_candidates"] = p.dense_iterations > 0 ? p.dense_candidates : 0;
+    d["accept_score"] = p.accept_score;
+    d["more_candidates"] = p.more_candidates;
+    return d;
+  }
+
+  /// The alphabet file of the database (bytes), as `lex3d` writes alphabets.
+  py::bytes alphabet_file() const {
+    const std::vector<std::uint8_t> b = codec::encode_alphabet(db_.alphabet());
+    return {reinterpret_cast<const char*>(b.data()), b.size()};
   }
 
   /// Writes the whole database (format 2.0) to `path`, atomically (temporary file + rename).
@@ -220,6 +305,28 @@ class PyPlaceDatabase {
 
  private:
   [[nodiscard]] std::string where() const { return path_.empty() ? std::string{} : path_ + ": "; }
+
+  py::dict match_dict(const PlaceMatch& m, const PlaceParams& p) const {
+    py::dict d;
+    d["scan"] = db_.name(m.scan);
+    d["index"] = m.scan;
+    d["score"] = m.score;
+    d["valid"] = m.valid;
+    d["accepted"] = m.valid && m.score >= p.accept_score;
+    d["inliers"] = m.inliers;
+    d["similarity"] = m.retrieval_similarity;
+    d["sensor_distance_m"] = m.sensor_distance_m;
+    d["dense_refined"] = m.dense_refined;
+    d["pose"] = from_pose(m.T_match_query);
+    return d;
+  }
+
+  PlaceScan query_of(const py::bytes& query) const {
+    const std::string b = query;
+    auto q = decode_place_query(reinterpret_cast<const std::uint8_t*>(b.data()), b.size(), db_.storage());
+    if (!q.ok()) raise(Status(q.status().code(), "query: " + q.status().message(), q.status().offset()));
+    return std::move(q).value();
+  }
 
   /// As `lex3d place` describes a scan (--gravity auto): a scan without a pose or gravity
   /// takes the up direction its surfaces give (apply_gravity).
@@ -272,6 +379,29 @@ names: one a scan (default: the file's stem, or scan_<i>); poses: one 4x4 T_worl
 "index", "score", "valid", "accepted" (valid and score >= 0.25), "inliers", "similarity",
 "sensor_distance_m" and "pose", the 4x4 float64 T_match_query (query frame -> matched scan's frame).
 max_distance: metres, reject transforms that put the sensors farther apart. top_k: candidates verified.)")
+      .def("prepare_query", &PyPlaceDatabase::prepare_query, py::arg("scan"), py::kw_only(),
+           py::arg("pose") = py::none(), py::arg("gravity") = py::none(), py::arg("model_alphabet") = py::none(),
+           R"(The staged query's first step: the scan described once (as query() describes it), as bytes
+that retrieve() and verify() of any database with this alphabet and storage take.)")
+      .def("word_statistics", &PyPlaceDatabase::word_statistics,
+           R"((entries, df): the first stage's statistics, df[w] the entries holding word w (uint64).
+Summed over the shards of a sharded database they are those of one database of all the scans.)")
+      .def("retrieve", &PyPlaceDatabase::retrieve, py::arg("query"), py::kw_only(), py::arg("top_k") = PlaceParams{}.top_k,
+           py::arg("stats") = py::none(),
+           R"(The first stage (tf-idf over the alphabet's words) of a prepared query: [(index, similarity)],
+best first, at most top_k. stats: the (entries, df) of the whole this database is a shard of
+(default: its own), giving the scores one database of all the scans gives.)")
+      .def("verify", &PyPlaceDatabase::verify, py::arg("query"), py::arg("candidates"), py::kw_only(),
+           py::arg("max_distance") = py::none(), py::arg("ground_vehicle") = false, py::arg("threads") = 2,
+           py::arg("second_round") = false,
+           R"(Verifies (index, similarity) candidates of a prepared query: {"matches": the candidates' matches
+with the feature transform, best first; "refined": the first of them densely aligned, as query()
+aligns them; "decoded", "decode_ms", "dense_candidates" (how many of all the shards' best take
+their aligned form), "accept_score" and "more_candidates" (query()'s second round: where no
+match of the first top_k reaches accept_score, the next more_candidates are verified with
+second_round=True, the surface hypotheses alone)}. Each match a dict as query() gives, plus
+"dense_refined".)")
+      .def("alphabet_file", &PyPlaceDatabase::alphabet_file, "The database's alphabet as an alphabet file (bytes).")
       .def("save", &PyPlaceDatabase::save, py::arg("path"),
            "Writes the database (format 2.0) to path, atomically: a failure leaves no partial file.")
       .def("__len__", &PyPlaceDatabase::size)

@@ -36,7 +36,8 @@ struct PlaceDatabase::DecodedCache {
 };
 
 PlaceDatabase::PlaceDatabase(PlaceStorageParams storage)
-    : storage_(storage), norm_cache_(std::make_shared<NormCache>()), decoded_cache_(std::make_shared<DecodedCache>()),
+    : storage_(storage), norm_cache_(std::make_shared<NormCache>()), global_norm_cache_(std::make_shared<NormCache>()),
+      decoded_cache_(std::make_shared<DecodedCache>()),
       vnorm_cache_(std::make_shared<NormCache>()) {
   storage_.validate();
 }
@@ -111,6 +112,7 @@ std::size_t PlaceDatabase::add(PlaceScan scan) {
   }
   added_.push_back(std::move(scan));
   norm_cache_ = std::make_shared<NormCache>();  // idf changed; copies keep their own cache
+  global_norm_cache_ = std::make_shared<NormCache>();
   return index;
 }
 
@@ -170,18 +172,111 @@ std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceS
   return out;
 }
 
-PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams& params) const {
+PlaceWordStatistics& PlaceWordStatistics::operator+=(const PlaceWordStatistics& other) {
+  scans += other.scans;
+  if (df.size() < other.df.size()) df.resize(other.df.size(), 0);
+  for (std::size_t w = 0; w < other.df.size(); ++w) df[w] += other.df[w];
+  return *this;
+}
+
+PlaceWordStatistics PlaceDatabase::word_statistics() const {
+  PlaceWordStatistics st;
+  st.scans = size();
+  const std::size_t words = std::max<std::size_t>(index_.word_slots, added_inverted_.size());
+  st.df.assign(words, 0);
+  for (std::size_t w = 0; w < words; ++w)
+    st.df[w] = stored_postings(static_cast<std::uint32_t>(w)) + (w < added_inverted_.size() ? added_inverted_[w].size() : 0);
+  while (!st.df.empty() && st.df.back() == 0) st.df.pop_back();
+  return st;
+}
+
+std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceScan& query, std::size_t k,
+                                                                    const PlaceWordStatistics& global) const {
+  std::vector<std::pair<std::size_t, double>> out;
+  const std::size_t n = size();
+  if (global.scans < n)
+    throw std::invalid_argument("PlaceDatabase::retrieve: the global statistics hold " + std::to_string(global.scans) +
+                                " scans, this database " + std::to_string(n));
+  auto global_df = [&](std::size_t w) { return w < global.df.size() ? global.df[w] : std::uint64_t{0}; };
+  const auto N = static_cast<double>(global.scans);
+  // The entries' norms under the global idf, kept while the same statistics come.
+  std::vector<double> norm2;
+  {
+    NormCache& c = *global_norm_cache_;
+    std::lock_guard<std::mutex> lock(c.mutex);
+    if (!c.valid || !(c.stats == global)) {
+      c.valid = false;
+      detail::tfidf_norms_with(
+          n, index_, added_inverted_, [this](std::uint32_t s) { return word_total(s); },
+          [&](std::size_t w, std::size_t postings) {
+            const std::uint64_t g = global_df(w);
+            if (g < postings)
+              throw std::invalid_argument("PlaceDatabase::retrieve: the global statistics hold " + std::to_string(g) +
+                                          " scans with word " + std::to_string(w) + ", this database " +
+                                          std::to_string(postings));
+            return std::log(1.0 + N / static_cast<double>(g));
+          },
+          c.norm2);
+      c.stats = global;
+      c.valid = true;
+    }
+    norm2 = c.norm2;
+  }
+  if (n == 0 || k == 0) return out;
+  double qtotal = 0.0;
+  for (const auto& wc : query.words) qtotal += wc.second;
+  if (qtotal <= 0.0) return out;
+  std::vector<double> dot(n, 0.0);
+  double qnorm2 = 0.0;
+  // As retrieve(query, k), term by term in the same order, with the global document frequencies.
+  for (const auto& [word, count] : query.words) {
+    const std::uint64_t g = global_df(word);
+    if (g == 0) continue;
+    const double idf = std::log(1.0 + N / static_cast<double>(g));
+    const double qv = static_cast<double>(count) / qtotal * idf;
+    qnorm2 += qv * qv;
+    const std::size_t ns = stored_postings(word);
+    if (ns > 0) {
+      const std::uint8_t* p = index_.postings + 8 * ld64(index_.word_start + 8 * static_cast<std::size_t>(word));
+      for (std::size_t j = 0; j < ns; ++j, p += 8) {
+        const std::uint32_t s = ld32(p);
+        dot[s] += qv * static_cast<double>(ld32(p + 4)) / static_cast<double>(ld32(index_.entries + s * kEntryBytes + 16)) * idf;
+      }
+    }
+    if (word < added_inverted_.size())
+      for (const auto& p : added_inverted_[word])
+        dot[p.scan] += qv * static_cast<double>(p.count) / static_cast<double>(word_total(p.scan)) * idf;
+  }
+  if (qnorm2 <= 0.0) return out;
+  for (std::size_t i = 0; i < n; ++i)
+    if (dot[i] > 0.0 && norm2[i] > 0.0) out.emplace_back(i, dot[i] / std::sqrt(norm2[i] * qnorm2));
+  const std::size_t keep = std::min(k, out.size());
+  std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(keep), out.end(),
+                    [](const auto& a, const auto& b) { return a.second != b.second ? a.second > b.second : a.first < b.first; });
+  out.resize(keep);
+  return out;
+}
+
+namespace {
+
+// The order of verified matches: valid ones first, then by score, then by lower index.
+bool match_order(const PlaceMatch& a, const PlaceMatch& b) {
+  if (a.valid != b.valid) return a.valid;
+  if (a.score != b.score) return a.score > b.score;
+  return a.scan < b.scan;
+}
+
+}  // namespace
+
+PlaceVerified PlaceDatabase::verify(const PlaceScan& query, const std::vector<std::pair<std::size_t, double>>& cands,
+                                    const PlaceParams& params, bool second_round) const {
   params.validate();
-  PlaceQueryResult r;
-  Stopwatch sw;
-  r.retrieval = resolve(params.retrieval);
-  // The first round verifies the top_k candidates; when none is accepted, a second round
-  // verifies the next more_candidates (retrieved with the first, in rank order).
-  const std::size_t k1 = static_cast<std::size_t>(params.top_k);
-  const std::size_t k2 = k1 + static_cast<std::size_t>(params.more_candidates);
-  const auto cands = retrieve(query, k2, r.retrieval, params,
-                              r.retrieval == PlaceRetrieval::kFabmap ? &r.new_place_probability : nullptr);
-  r.retrieval_ms = sw.lap_ms();
+  for (const auto& c : cands)
+    if (c.first >= size())
+      throw std::out_of_range("PlaceDatabase::verify: candidate " + std::to_string(c.first) + " of a database of " +
+                              std::to_string(size()) + " scans");
+  PlaceVerified v;
+  v.matches.resize(cands.size());
   // Candidates' entries are decoded here (stored ones) and kept for the dense step.
   std::vector<std::shared_ptr<const PlaceScan>> held(cands.size());
   std::vector<const PlaceScan*> cand(cands.size(), nullptr);
@@ -190,81 +285,134 @@ PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams&
   std::vector<PlaceMatch> all(cands.size());
   PlaceParams coarse = params;
   coarse.dense_iterations = 0;
+  if (second_round) {
+    // Candidates ranked lower share fewer words with the query, and their interest points
+    // repeat less, so feature hypotheses rarely find them (and they are most of a
+    // candidate's cost): the surface hypotheses alone.
+    coarse.hypotheses_per_size = 1;
+    coarse.gravity_pairs = 0;
+  }
+  parallel_for(
+      cands.size(), params.threads,
+      [&](std::size_t i) {
+        const std::size_t s = cands[i].first;
+        if (s < index_.scans) {
+          auto x = decoded(s, decode_ms[i]);
+          if (!x.ok()) {
+            errors[i] = x.status();
+            return;
+          }
+          held[i] = std::move(x).value();
+          cand[i] = held[i].get();
+        } else {
+          cand[i] = &added_[s - index_.scans];
+        }
+        PlaceMatch m = match_scans(query, *cand[i], coarse);
+        m.scan = s;
+        m.retrieval_similarity = cands[i].second;
+        v.matches[i] = std::move(m);
+      },
+      1);
+  for (const auto& e : errors)
+    if (!e.ok()) throw PlaceDataError(e);
+  for (const double d : decode_ms) {
+    v.decode_ms += d;
+    v.decoded += d > 0.0 ? 1 : 0;
+  }
   auto by_index = [&](std::size_t s) -> const PlaceScan& {
     for (std::size_t i = 0; i < cands.size(); ++i)
-      if (cands[i].first == s && cand[i] != nullptr) return *cand[i];
-    throw std::logic_error("PlaceDatabase::query: candidate not found");
+      if (cands[i].first == s) return *cand[i];
+    throw std::logic_error("PlaceDatabase::verify: candidate not found");
   };
-  auto order = [](const PlaceMatch& a, const PlaceMatch& b) {
-    if (a.valid != b.valid) return a.valid;
-    if (a.score != b.score) return a.score > b.score;
-    return a.scan < b.scan;
-  };
-  // Densely aligned candidates first: their scores are not comparable with the others'.
-  auto dense_first = [&](const PlaceMatch& a, const PlaceMatch& b) {
-    if (a.dense_refined != b.dense_refined) return a.dense_refined;
-    return order(a, b);
-  };
-  // The second round tries the surface hypotheses alone: candidates ranked lower share fewer
-  // words with the query, and their interest points repeat less, so feature hypotheses rarely
-  // find them (and they are most of a candidate's cost).
-  PlaceParams surface_only = coarse;
-  surface_only.hypotheses_per_size = 1;
-  surface_only.gravity_pairs = 0;
-  // One round: verifies candidates [from, to) and aligns the best dense_candidates of them.
-  auto round = [&](std::size_t from, std::size_t to, const PlaceParams& verify) {
+  std::stable_sort(v.matches.begin(), v.matches.end(), match_order);
+  if (params.dense_iterations > 0) {
+    const std::size_t nd = std::min(v.matches.size(), static_cast<std::size_t>(params.dense_candidates));
+    v.refined.assign(v.matches.begin(), v.matches.begin() + static_cast<std::ptrdiff_t>(nd));
     parallel_for(
-        to - from, params.threads,
-        [&](std::size_t k) {
-          const std::size_t i = from + k;
-          const std::size_t s = cands[i].first;
-          if (s < index_.scans) {
-            auto x = decoded(s, decode_ms[i]);
-            if (!x.ok()) {
-              errors[i] = x.status();
-              return;
-            }
-            held[i] = std::move(x).value();
-            cand[i] = held[i].get();
-          } else {
-            cand[i] = &added_[s - index_.scans];
-          }
-          PlaceMatch m = match_scans(query, *cand[i], verify);
-          m.scan = s;
-          m.retrieval_similarity = cands[i].second;
-          all[i] = std::move(m);
-        },
+        nd, params.threads, [&](std::size_t i) { refine_match(query, by_index(v.refined[i].scan), v.refined[i], params); },
         1);
-    for (std::size_t i = from; i < to; ++i)
-      if (!errors[i].ok()) throw PlaceDataError(errors[i]);
-    std::vector<PlaceMatch> batch(std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(from)),
-                                  std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(to)));
-    std::stable_sort(batch.begin(), batch.end(), order);
-    if (params.dense_iterations > 0) {
-      const std::size_t nd = std::min(batch.size(), static_cast<std::size_t>(params.dense_candidates));
-      parallel_for(
-          nd, params.threads, [&](std::size_t i) { refine_match(query, by_index(batch[i].scan), batch[i], params); }, 1);
+  }
+  return v;
+}
+
+PlaceQueryResult merge_verified(std::vector<PlaceVerified> parts, const std::vector<std::size_t>& offsets,
+                                const PlaceParams& params) {
+  if (parts.size() != offsets.size())
+    throw std::invalid_argument("merge_verified: " + std::to_string(parts.size()) + " parts and " +
+                                std::to_string(offsets.size()) + " offsets");
+  PlaceQueryResult r;
+  std::vector<PlaceMatch> refined;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    for (auto& m : parts[i].matches) {
+      m.scan += offsets[i];
+      r.matches.push_back(std::move(m));
     }
-    for (auto& m : batch) r.matches.push_back(std::move(m));
-    std::stable_sort(r.matches.begin(), r.matches.end(), dense_first);
-  };
-  auto accepted = [&] {
-    return !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
-  };
+    for (auto& m : parts[i].refined) {
+      m.scan += offsets[i];
+      refined.push_back(std::move(m));
+    }
+    r.decode_ms += parts[i].decode_ms;
+    r.decoded += parts[i].decoded;
+  }
+  std::stable_sort(r.matches.begin(), r.matches.end(), match_order);
+  if (params.dense_iterations > 0) {
+    const std::size_t nd = std::min(r.matches.size(), static_cast<std::size_t>(params.dense_candidates));
+    for (std::size_t i = 0; i < nd; ++i) {
+      const auto it = std::find_if(refined.begin(), refined.end(),
+                                   [&](const PlaceMatch& m) { return m.scan == r.matches[i].scan; });
+      if (it == refined.end())
+        throw std::invalid_argument("merge_verified: candidate " + std::to_string(r.matches[i].scan) +
+                                    " is among the best " + std::to_string(nd) + " but its part did not align it densely");
+      r.matches[i] = *it;
+    }
+    // Densely aligned candidates first: their scores are not comparable with the others'.
+    std::stable_sort(r.matches.begin(), r.matches.end(), [&](const PlaceMatch& a, const PlaceMatch& b) {
+      if (a.dense_refined != b.dense_refined) return a.dense_refined;
+      return match_order(a, b);
+    });
+  }
+  r.accepted = !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
+  return r;
+}
+
+PlaceQueryResult PlaceDatabase::query(const PlaceScan& query, const PlaceParams& params) const {
+  params.validate();
+  Stopwatch sw;
+  PlaceRetrieval method = resolve(params.retrieval);
+  double new_place = -1.0;
+  // The first round verifies the top_k candidates; when none is accepted, a second round
+  // verifies the next more_candidates (retrieved with the first, in rank order).
+  const std::size_t k1 = static_cast<std::size_t>(params.top_k);
+  const std::size_t k2 = k1 + static_cast<std::size_t>(params.more_candidates);
+  const auto cands = retrieve(query, k2, method, params, method == PlaceRetrieval::kFabmap ? &new_place : nullptr);
+  const double retrieval_ms = sw.lap_ms();
   const std::size_t n1 = std::min(k1, cands.size());
-  round(0, n1, coarse);
+  const std::vector<std::pair<std::size_t, double>> first(cands.begin(), cands.begin() + static_cast<std::ptrdiff_t>(n1));
+  PlaceQueryResult r = merge_verified({verify(query, first, params)}, {0}, params);
   r.retrieved = n1;
-  if (!accepted() && cands.size() > n1) {
-    round(n1, cands.size(), surface_only);
+  if (!r.accepted && cands.size() > n1) {
+    const std::vector<std::pair<std::size_t, double>> second(cands.begin() + static_cast<std::ptrdiff_t>(n1), cands.end());
+    merge_round(r, merge_verified({verify(query, second, params, true)}, {0}, params), params);
     r.retrieved = cands.size();
   }
-  for (const double d : decode_ms) {
-    r.decode_ms += d;
-    r.decoded += d > 0.0 ? 1 : 0;
-  }
-  r.accepted = accepted();
+  r.retrieval = method;
+  r.new_place_probability = new_place;
+  r.retrieval_ms = retrieval_ms;
   r.verification_ms = sw.lap_ms();
   return r;
+}
+
+void merge_round(PlaceQueryResult& r, PlaceQueryResult second, const PlaceParams& params) {
+  for (auto& m : second.matches) r.matches.push_back(std::move(m));
+  r.decode_ms += second.decode_ms;
+  r.decoded += second.decoded;
+  // Densely aligned candidates first (their scores are not comparable with the others'), as
+  // merge_verified orders one round.
+  std::stable_sort(r.matches.begin(), r.matches.end(), [&](const PlaceMatch& a, const PlaceMatch& b) {
+    if (params.dense_iterations > 0 && a.dense_refined != b.dense_refined) return a.dense_refined;
+    return match_order(a, b);
+  });
+  r.accepted = !r.matches.empty() && r.matches.front().valid && r.matches.front().score >= params.accept_score;
 }
 
 }  // namespace lex3d

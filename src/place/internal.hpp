@@ -19,6 +19,7 @@ struct PlaceDatabase::NormCache {
   std::mutex mutex;
   bool valid = false;
   std::vector<double> norm2;
+  PlaceWordStatistics stats;  // the statistics norm2 was computed under (global norms only)
 };
 
 }  // namespace lex3d
@@ -39,13 +40,13 @@ inline double ldf64(const std::uint8_t* p) {
 }
 
 /// Squared tf-idf norms of `n` scans over an inverted index (formats/place_db.md §3.4):
-/// Σ_w (count / total(scan) · idf_w)², idf_w = ln(1 + n / postings_w), summed in word order,
-/// the stored postings of a word (views into the index bytes: `word_start`, `postings`,
-/// `word_slots`) before those of scans added in memory. One function for the alphabet's
-/// index and the vocabulary's, so both give the same numbers for the same postings.
-template <typename StoredIndex, typename Posting, typename Total>
-void tfidf_norms(std::size_t n, const StoredIndex& stored, const std::vector<std::vector<Posting>>& added,
-                 Total total, std::vector<double>& norm2) {
+/// Σ_w (count / total(scan) · idf(w, postings_w))², summed in word order, the stored postings
+/// of a word (views into the index bytes: `word_start`, `postings`, `word_slots`) before those
+/// of scans added in memory. One function for the alphabet's index and the vocabulary's, and
+/// for a shard's entries under the whole's idf, so all give the same numbers for the same postings.
+template <typename StoredIndex, typename Posting, typename Total, typename Idf>
+void tfidf_norms_with(std::size_t n, const StoredIndex& stored, const std::vector<std::vector<Posting>>& added,
+                      Total total, Idf idf_of, std::vector<double>& norm2) {
   const std::size_t words = std::max<std::size_t>(stored.word_slots, added.size());
   norm2.assign(n, 0.0);
   for (std::size_t w = 0; w < words; ++w) {
@@ -54,7 +55,7 @@ void tfidf_norms(std::size_t n, const StoredIndex& stored, const std::vector<std
                                                  : 0;
     const std::size_t na = w < added.size() ? added[w].size() : 0;
     if (ns + na == 0) continue;
-    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(ns + na));
+    const double idf = idf_of(w, ns + na);
     if (ns > 0) {
       const std::uint64_t a = ld64(stored.word_start + 8 * w);
       for (std::uint64_t k = a; k < a + ns; ++k) {
@@ -69,6 +70,18 @@ void tfidf_norms(std::size_t n, const StoredIndex& stored, const std::vector<std
       norm2[p.scan] += v * v;
     }
   }
+}
+
+/// tfidf_norms_with the database's own idf, ln(1 + n / postings_w).
+template <typename StoredIndex, typename Posting, typename Total>
+void tfidf_norms(std::size_t n, const StoredIndex& stored, const std::vector<std::vector<Posting>>& added,
+                 Total total, std::vector<double>& norm2) {
+  tfidf_norms_with(
+      n, stored, added, total,
+      [n](std::size_t, std::size_t postings) {
+        return std::log(1.0 + static_cast<double>(n) / static_cast<double>(postings));
+      },
+      norm2);
 }
 
 /// Fills scan.dense_points / dense_normals / dense_index from scan.coarse.

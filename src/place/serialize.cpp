@@ -1169,4 +1169,70 @@ StatusOr<PlaceDatabase> PlaceDatabase::open(SharedBytes file) {
   return db;
 }
 
+// A prepared query as bytes (formats/place_db.md §6): "L3PQ", u16 descriptor values, u8
+// descriptor bits, u64 payload length, the SCAN payload, u32 features, their rotations as
+// f32 w x y z, and the CRC-32 of everything before it.
+std::vector<std::uint8_t> encode_place_query(const PlaceScan& scan, const PlaceStorageParams& storage) {
+  storage.validate();
+  if (scan.descriptor_bits != storage.descriptor_bits)
+    throw std::invalid_argument("encode_place_query: the scan was quantised to " + std::to_string(scan.descriptor_bits) +
+                                " bits, the storage parameters say " + std::to_string(storage.descriptor_bits));
+  if (scan.descriptor != storage.descriptor)
+    throw std::invalid_argument(std::string("encode_place_query: the scan has ") + to_string(scan.descriptor) +
+                                " descriptors, the storage parameters " + to_string(storage.descriptor));
+  const std::vector<std::uint8_t> payload = detail::encode_scan_payload(scan, storage.range_step);
+  Writer w;
+  w.bytes(reinterpret_cast<const std::uint8_t*>("L3PQ"), 4);
+  w.u16(static_cast<std::uint16_t>(scan.descriptor_dim));
+  w.u8(static_cast<std::uint8_t>(scan.descriptor_bits));
+  w.u64(payload.size());
+  w.bytes(payload.data(), payload.size());
+  w.u32(static_cast<std::uint32_t>(scan.features.size()));
+  for (const auto& f : scan.features) {
+    w.f32(f.rotation.w());
+    w.f32(f.rotation.x());
+    w.f32(f.rotation.y());
+    w.f32(f.rotation.z());
+  }
+  w.u32(crc(w.b.data(), w.b.size()));
+  return std::move(w.b);
+}
+
+StatusOr<PlaceScan> decode_place_query(const std::uint8_t* data, std::size_t size, const PlaceStorageParams& storage) {
+  if (size < 4 + 2 + 1 + 8 + 4 + 4 || std::memcmp(data, "L3PQ", 4) != 0)
+    return bad_data("place query: not a prepared query (no L3PQ header)", 0);
+  if (crc(data, size - 4) != detail::ld32(data + size - 4)) return bad_data("place query: CRC mismatch", size - 4);
+  Reader r(data, size - 4, 0);
+  r.take(4);
+  DbHeader h;
+  h.storage = storage;
+  r.u16(h.descriptor_dim);
+  r.u8(h.descriptor_bits);
+  if (h.descriptor_dim > kMaxDim || h.descriptor_bits != storage.descriptor_bits)
+    return bad_data("place query: descriptor layout (" + std::to_string(h.descriptor_dim) + " values, " +
+                        std::to_string(h.descriptor_bits) + " bits) does not fit the database's storage",
+                    4);
+  std::uint64_t length = 0;
+  r.u64(length);
+  if (length > r.left()) return bad_data("place query: payload length " + std::to_string(length) + " does not fit", 7);
+  const std::uint64_t at = r.offset();
+  const std::uint8_t* payload = r.take(static_cast<std::size_t>(length));
+  auto scan = decode_scan(payload, static_cast<std::size_t>(length), at, h, 0, false);
+  if (!scan.ok()) return scan.status();
+  PlaceScan s = std::move(scan).value();
+  std::uint32_t nf = 0;
+  if (!r.u32(nf) || nf != s.features.size() || static_cast<std::uint64_t>(nf) * 16 != r.left())
+    return bad_data("place query: the rotations do not match the features", r.offset());
+  for (auto& f : s.features) {
+    float q[4] = {};
+    for (float& v : q) r.f32(v);
+    const Eigen::Quaternionf rot(q[0], q[1], q[2], q[3]);
+    if (!rot.coeffs().allFinite() || std::abs(rot.norm() - 1.0F) > 1e-3F)
+      return bad_data("place query: a feature rotation is not a unit quaternion", r.offset() - 16);
+    f.rotation = rot;
+  }
+  detail::finish_place_scan(s);
+  return s;
+}
+
 }  // namespace lex3d

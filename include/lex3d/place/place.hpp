@@ -373,6 +373,52 @@ struct PlaceQueryResult {
   [[nodiscard]] const PlaceMatch* best() const noexcept { return matches.empty() ? nullptr : &matches.front(); }
 };
 
+/// The first stage's statistics of a database: its entries and, per alphabet word id, how
+/// many of them hold the word (what tf-idf's idf is made of). Summed over the shards of a
+/// sharded database (databases of consecutive scan ranges) they are those of one database
+/// holding all the shards' scans.
+struct PlaceWordStatistics {
+  std::uint64_t scans = 0;
+  std::vector<std::uint64_t> df;  ///< per word id; shorter than the alphabet when the last words are unused
+  PlaceWordStatistics& operator+=(const PlaceWordStatistics& other);
+  [[nodiscard]] bool operator==(const PlaceWordStatistics& o) const noexcept { return scans == o.scans && df == o.df; }
+};
+
+/// One database's part of a staged query (PlaceDatabase::verify): its candidates verified with
+/// the feature transform (no dense step), best first (valid, then score, then lower index), and
+/// copies of the first PlaceParams::dense_candidates of them densely aligned (when
+/// dense_iterations > 0). Indices are the database's own.
+struct PlaceVerified {
+  std::vector<PlaceMatch> matches;
+  std::vector<PlaceMatch> refined;
+  double decode_ms = 0.0;   ///< reading the candidates' stored entries (summed over threads)
+  std::size_t decoded = 0;  ///< candidates read from the stored bytes
+};
+
+/// Merges the verified parts of databases that hold consecutive scan ranges (`offsets[i]`: the
+/// index of part i's first scan in the whole): matches ordered as PlaceDatabase::query orders
+/// them, the best dense_candidates of all taking their densely aligned form, so that the
+/// result is that of one database holding all the scans (given candidates retrieved with the
+/// global statistics). Sets matches, accepted, decode_ms and decoded. Throws
+/// std::invalid_argument when the sizes differ or a part lacks a refined match it should hold.
+[[nodiscard]] PlaceQueryResult merge_verified(std::vector<PlaceVerified> parts, const std::vector<std::size_t>& offsets,
+                                              const PlaceParams& params);
+
+/// Adds a second round's merged result (the next PlaceParams::more_candidates, verified with
+/// `second_round` where the first top_k gave no accepted match) to the first's, ordered as
+/// PlaceDatabase::query orders them; updates accepted, decode_ms and decoded.
+void merge_round(PlaceQueryResult& first, PlaceQueryResult second, const PlaceParams& params);
+
+/// A prepared query scan as bytes, to send to the shards of a database (formats/place_db.md
+/// §6): the scan's SCAN chunk payload plus the unquantised feature rotations, so that
+/// decode_place_query gives a scan that verifies exactly as the one encoded. `storage` must
+/// be the one the scan was made with.
+[[nodiscard]] std::vector<std::uint8_t> encode_place_query(const PlaceScan& scan, const PlaceStorageParams& storage);
+/// The scan of encode_place_query's bytes; kBadData (with the byte offset) for bytes that do not
+/// decode. `storage` as given to encode_place_query.
+[[nodiscard]] StatusOr<PlaceScan> decode_place_query(const std::uint8_t* data, std::size_t size,
+                                                     const PlaceStorageParams& storage);
+
 /// Read-only bytes that stay valid while `owner` lives (a memory-mapped file, a buffer).
 struct SharedBytes {
   const std::uint8_t* data = nullptr;
@@ -444,9 +490,33 @@ class PlaceDatabase {
   /// at most `k` (ties by lower index). idf = ln(1 + N / n_w).
   [[nodiscard]] std::vector<std::pair<std::size_t, double>> retrieve(const PlaceScan& query, std::size_t k) const;
 
-  /// Retrieves top_k candidates and verifies them with match_scans. Throws PlaceDataError
-  /// when a candidate's stored entry is corrupt.
+  /// Retrieves top_k candidates and verifies them with match_scans; when none is accepted,
+  /// the next more_candidates too (a second round). Throws PlaceDataError when a candidate's
+  /// stored entry is corrupt. The staged query below in one call:
+  /// merge_verified({verify(query, first top_k of retrieve(...), params)}, {0}, params), then
+  /// where not accepted merge_round with the next more_candidates verified with second_round.
   [[nodiscard]] PlaceQueryResult query(const PlaceScan& query, const PlaceParams& params) const;
+
+  /// Staged query over shards (databases of consecutive scan ranges, one alphabet): sum the
+  /// shards' word_statistics(), retrieve(query, top_k, global) on each, keep the top_k of all
+  /// (score, then lower global index), verify() each shard's share on its shard, and
+  /// merge_verified() the parts (where none is accepted, the same for the next more_candidates
+  /// with second_round, merge_round() into the first); the result equals query() on one
+  /// database of all the scans.
+  /// Only the alphabet's tf-idf (kTfidfAlphabet) is staged.
+  [[nodiscard]] PlaceWordStatistics word_statistics() const;
+  /// retrieve(query, k) with idf and the entries' norms taken from `global` (the statistics of
+  /// the whole a shard belongs to): the scores one database of all the scans gives; this
+  /// database's indices. Throws std::invalid_argument when `global` holds fewer scans or
+  /// fewer entries of a word than this database.
+  [[nodiscard]] std::vector<std::pair<std::size_t, double>> retrieve(const PlaceScan& query, std::size_t k,
+                                                                     const PlaceWordStatistics& global) const;
+  /// Verifies `candidates` (this database's indices, with their first-stage scores): see
+  /// PlaceVerified. Throws std::out_of_range for a bad index and PlaceDataError when a
+  /// candidate's stored entry is corrupt. `second_round`: the candidates ranked below top_k,
+  /// verified with the surface hypotheses alone (no feature or gravity-pair hypotheses).
+  [[nodiscard]] PlaceVerified verify(const PlaceScan& query, const std::vector<std::pair<std::size_t, double>>& candidates,
+                                     const PlaceParams& params, bool second_round = false) const;
 
   /// Serialises the whole database in the current format (formats/place_db.md), stored
   /// entries copied as they are (their CRC checked). Throws PlaceDataError for a corrupt one.
@@ -518,6 +588,7 @@ class PlaceDatabase {
   std::vector<std::uint32_t> added_total_;                      // instances per added scan
   std::vector<std::vector<Posting>> added_inverted_;            // word id -> postings of added scans
   std::shared_ptr<NormCache> norm_cache_;
+  std::shared_ptr<NormCache> global_norm_cache_;  // norms under the last statistics retrieve(.., global) was given
   std::shared_ptr<DecodedCache> decoded_cache_;  // shared by copies: stored entries never change
   // Recognition vocabulary and its inverted index (VOCB, VIDX chunks).
   struct StoredVocabIndex {

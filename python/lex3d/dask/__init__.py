@@ -4,6 +4,8 @@ learned over many scans.
     python3 -m lex3d.dask compress SCANS_DIR -o out/drive.lex3dm --max-error 0.02 --words on
     python3 -m lex3d.dask compress @files.txt -o out/d.lex3dm --alphabet a.lex3da --scheduler tcp://host:8786
     python3 -m lex3d.dask learn SCANS_DIR -o fleet.lex3da --seed 1
+    python3 -m lex3d.dask place build SCANS_DIR -o places/ --shards 4
+    python3 -m lex3d.dask place query places/ query.bin
 
 From Python:
 
@@ -27,5 +29,8 @@ byte that of `lex3d learn SCANS -o A --seed S` (lex3d.dask._learn).
 
 from ._compress import CompressError, compress, expand_inputs, numbered_output
 from ._learn import learn
+from ._place import ShardedPlaceDatabase
+from ._place import build as build_place_shards
 
-__all__ = ["compress", "learn", "CompressError", "expand_inputs", "numbered_output"]
+__all__ = ["compress", "learn", "build_place_shards", "ShardedPlaceDatabase", "CompressError", "expand_inputs",
+           "numbered_output"]

@@ -1,9 +1,12 @@
 """lex3d-dask (python3 -m lex3d.dask) compress|learn SCAN|FOLDER|@LIST... -o OUT [options]
+          lex3d-dask place build SCAN|FOLDER|@LIST... -o DIR --shards N | place query DIR SCAN...
 
 Runs lex3d's work over many scans on a Dask cluster (--scheduler ADDRESS, or a LocalCluster of
 --workers processes on this machine). compress writes OUT_000.lex3dm ... (the files `lex3d
 compress SCANS --alphabet A -o OUT` writes), OUT.manifest.jsonl and, when it learns one, the
-alphabet; learn writes the alphabet `lex3d learn SCANS -o OUT` writes.
+alphabet; learn writes the alphabet `lex3d learn SCANS -o OUT` writes; place build writes DIR/shard_000.lex3dp, ...
+(consecutive scan ranges, one alphabet) and DIR/manifest.json, and place query answers as one
+database of all the scans would.
 Exit codes: 0 done, 1 usage, 2 bad data (compress: a scan or more could not be coded, the
 others are and the manifest names the failed ones; learn: a scan could not be read), 3 I/O
 (an output folder, the scheduler).
@@ -69,6 +72,27 @@ def _parser():
     ln.add_argument("--word-radius", type=float, default=0.0, help="metres; 0 derives it from the first scan")
     ln.add_argument("--threads", type=int, default=1, help="threads a worker (the alphabet does not depend on it)")
     _cluster_options(ln)
+    pl = sub.add_parser("place", help="a sharded place database: build shards on the workers, query them all")
+    psub = pl.add_subparsers(dest="place_command", required=True, parser_class=_Parser)
+    pb = psub.add_parser("build", help="build place database shards of consecutive scan ranges")
+    pb.add_argument("inputs", nargs="+", help="scan files, folders of scans, or @LIST (one path a line)")
+    pb.add_argument("-o", "--output", required=True, help="folder of the shards, the alphabet and manifest.json")
+    pb.add_argument("--shards", type=int, help="this many shards of nearly equal size")
+    pb.add_argument("--scans-per-shard", type=int, help="shards of this many scans (the last may hold fewer)")
+    pb.add_argument("--alphabet", help="the alphabet file every shard uses (default: learned once)")
+    pb.add_argument("--poses", help="world <- sensor poses, one line of 12 numbers a scan (KITTI layout)")
+    pb.add_argument("--learn-scans", type=int, default=5, help="learn on this many evenly spaced scans (default 5)")
+    pb.add_argument("--iterations", type=int, default=200, help="candidate words drawn when learning (default 200)")
+    pb.add_argument("--seed", type=int, help="seed of the learner")
+    _cluster_options(pb)
+    pq = psub.add_parser("query", help="query every shard; the answer of one database of all the scans")
+    pq.add_argument("database", help="the folder place build wrote")
+    pq.add_argument("scans", nargs="+", help="query scan files")
+    pq.add_argument("--top", type=int, default=3, help="matches printed a query (default 3)")
+    pq.add_argument("--top-k", type=int, default=8, help="candidates verified (default 8, as lex3d place)")
+    pq.add_argument("--max-distance", type=float, help="metres: reject transforms that put the sensors farther apart")
+    pq.add_argument("--ground-vehicle", action="store_true")
+    _cluster_options(pq)
     return p
 
 
@@ -135,10 +159,69 @@ def _learn_main(args):
     return 0
 
 
+def _place_main(args):
+    from . import _place
+    client = cluster = None
+    try:
+        if args.place_command == "build":
+            _place.check_shard_options(args.shards, args.scans_per_shard)  # usage errors before any cluster
+        client, cluster = _client(args)
+        if args.place_command == "build":
+            s = _place.build(args.inputs, args.output, client=client, shards=args.shards,
+                             scans_per_shard=args.scans_per_shard, alphabet=args.alphabet, poses=args.poses,
+                             learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed)
+            if args.json:
+                print(json.dumps(s))
+            else:
+                print(f"{s['scans']} scans in {s['shards']} shards on {s['workers']} workers in {s['wall_s']:.1f} s "
+                      f"(learning {s['learn_s']:.1f} s, shards {s['build_s']:.1f} s, CPU {s['cpu_s']:.1f} s): "
+                      f"{s['bytes']} bytes; sent to workers {s['bytes_to_workers']} bytes")
+                print(f"  manifest {s['manifest']}")
+            return 0
+        db = _place.ShardedPlaceDatabase(args.database, client)
+        out = []
+        for scan in args.scans:
+            timings = {}
+            try:
+                matches = db.query(scan, top=args.top, top_k=args.top_k, max_distance=args.max_distance,
+                                   ground_vehicle=args.ground_vehicle, timings=timings)
+            except (ValueError, OSError) as e:
+                raise _place.CompressError(3 if isinstance(e, OSError) else 2,
+                                           str(e) if scan in str(e) else f"{scan}: {e}") from None
+            if args.json:
+                out.append({"query": scan, "timings": timings,
+                            "matches": [dict(m, pose=m["pose"].tolist()) for m in matches]})
+                continue
+            best = matches[0] if matches else None
+            print(f"{scan}: " + (f"{best['scan']} score {best['score']:.3f}" + ("" if best["accepted"] else " (not accepted)")
+                                 if best else "no candidate") +
+                  f"  [{1000 * (timings['retrieve_s'] + timings['verify_s']):.0f} ms on {len(db.shards)} shards]")
+            for m in matches:
+                t = m["pose"][:3, 3]
+                print(f"  {m['scan']:<24} score {m['score']:.3f} inliers {m['inliers']:>3} similarity "
+                      f"{m['similarity']:.3f} t [{t[0]:.2f} {t[1]:.2f} {t[2]:.2f}]" + ("" if m["valid"] else " invalid"))
+        if args.json:
+            print(json.dumps(out))
+        return 0
+    except _place.CompressError as e:
+        print(f"lex3d-dask: {e}", file=sys.stderr)
+        return e.code
+    except KeyboardInterrupt:
+        print("lex3d-dask: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def main(argv=None):
     args = _parser().parse_args(argv)
     if args.command == "learn":
         return _learn_main(args)
+    if args.command == "place":
+        return _place_main(args)
     options = {"layer_coding": args.layer_coding, "threads": args.threads}
     explicit_error = args.max_error not in ("auto", "none")
     if explicit_error:
