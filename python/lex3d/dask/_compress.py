@@ -11,6 +11,7 @@ import uuid
 import warnings
 
 from ._progress import ProgressLine
+from ._worker import worker_malloc
 
 # Point cloud files a folder is searched for (pose lists, READMEs and times.txt are not scans).
 SCAN_EXTENSIONS = (".bin", ".pcd", ".ply", ".las", ".xyz", ".3d", ".pcap")
@@ -115,6 +116,7 @@ def write_once(path, data, job):
 def learn_task(paths, iterations, seed_kw, threads):
     """On a worker: the alphabet file (bytes) learned on `paths`, as `lex3d learn`."""
     import lex3d
+    worker_malloc()
     return lex3d.learn_alphabet(list(paths), iterations=iterations, threads=threads, **seed_kw)
 
 
@@ -122,6 +124,7 @@ def code_task(index, path, output, alphabet, options, job):
     """On a worker: codes one scan into `output` and returns its manifest row. A scan that
     cannot be read or coded gives a row with status "error" and the one-line message."""
     import lex3d
+    worker_malloc()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     row = {"index": index, "scan": path, "file": output}
     try:

@@ -20,12 +20,14 @@ import time
 
 from ._compress import CompressError, _peak_rss_mb, job_paths, write_once
 from ._progress import ProgressLine
+from ._worker import worker_malloc
 
 
 class LearnShard:
     """A Dask actor: scans [first, first + len(paths)) of the set, their learning state."""
 
     def __init__(self, paths, first, word_radius, threads):
+        worker_malloc()
         self.paths = list(paths)
         self.first = first
         self.word_radius = word_radius

@@ -24,6 +24,7 @@ import uuid
 import numpy as np
 
 from ._compress import CompressError, expand_inputs, learn_task
+from ._worker import worker_malloc
 
 MANIFEST = "manifest.json"
 KIND = "lex3d-place-shards"
@@ -79,33 +80,11 @@ def shard_ranges(n, shards=None, scans_per_shard=None):
     return [(bounds[i], bounds[i + 1]) for i in range(len(bounds) - 1)]
 
 
-_MALLOC_SET = False
-
-
-def _worker_malloc():
-    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_ set, which also pins glibc's mmap
-    threshold at 128 KiB: every larger buffer is then mapped and unmapped afresh. Describing the
-    89 balm scans took 9.5 s of CPU so against 2.5-3.0 s without it (15.8 s wall against 4.4 s).
-    The ceilings glibc's own dynamic thresholds reach (mmap 32 MiB, trim twice that) give the
-    speed back; results do not depend on it."""
-    global _MALLOC_SET
-    if _MALLOC_SET or "MALLOC_TRIM_THRESHOLD_" not in os.environ:
-        return
-    _MALLOC_SET = True
-    try:
-        import ctypes
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD
-        libc.mallopt(-1, 64 << 20)  # M_TRIM_THRESHOLD
-    except (OSError, AttributeError):
-        pass  # not glibc: nothing pinned it
-
-
 def build_shard_task(paths, names, poses, alphabet, output, job):
     """On a worker: the place database of `paths` with `alphabet` (bytes), written to `output`
     (through a temporary name). Returns its entries, bytes, alphabet hash and CPU time."""
     import lex3d
-    _worker_malloc()
+    worker_malloc()
     cpu0 = time.process_time()
     tmp = f"{output}.{job}.tmp"
     try:
@@ -250,7 +229,7 @@ def _shard(path):
 def _on_shard(f):
     """Runs f() on a worker; a bad or missing shard comes back as a value, {"shard_error":
     message, "missing": bool} (a raised error would also be logged by the worker)."""
-    _worker_malloc()
+    worker_malloc()
     try:
         return f()
     except FileNotFoundError as e:
