@@ -11,8 +11,11 @@
 #include "cli_common.hpp"
 #include "json.hpp"
 #include "lex3d/codec/codec.hpp"
+#include "lex3d/io/mapped_file.hpp"
 #include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
+#include "lex3d/place/place.hpp"
+#include "lex3d/place/vocabulary.hpp"
 #include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
 #include "lex3d/range/range_image.hpp"
@@ -299,6 +302,59 @@ bool info_lex3d_file(const InfoOptions& o) {
 
 // A raw lidar log: the sensor, its lasers and columns, and the turns found.
 /// A ROS bag: its topics, their message types and counts.
+// A place database, read as a query reads it (header, alphabet and index, no entry decoded):
+// its format, scans, alphabet, descriptors and vocabulary. False when the file is not one.
+bool info_place_db(const InfoOptions& o) {
+  check_input_file(o.path);
+  auto file = io::MappedFile::open(o.path);
+  if (!file.ok()) return false;  // load_cloud reports the error
+  static constexpr char kPlaceDb[] = "LEX3DPDB";
+  if (file.value()->size() < 8 || std::memcmp(file.value()->data(), kPlaceDb, 8) != 0) return false;
+  SharedBytes bytes;
+  bytes.data = file.value()->data();
+  bytes.size = file.value()->size();
+  bytes.owner = file.value();
+  auto opened = PlaceDatabase::open(bytes);
+  if (!opened.ok()) throw CliError(2, o.path + ": " + opened.status().to_string());
+  const PlaceDatabase& db = opened.value();
+  const PlaceFileInfo& fi = db.file_info();
+  const PlaceStorageParams& st = db.storage();
+  const std::string version = std::to_string(fi.major) + "." + std::to_string(fi.minor);
+  const auto file_bytes = static_cast<std::uint64_t>(bytes.size);
+  const auto scans = static_cast<std::uint64_t>(db.size());
+  const auto words = static_cast<std::uint64_t>(db.has_alphabet() ? db.alphabet().size() : 0);
+  const auto leaves = static_cast<std::uint64_t>(db.has_vocabulary() ? db.vocabulary()->leaves() : 0);
+  if (o.json) {
+    Json j;
+    j.begin_object();
+    j.value("file", o.path).value("kind", "place database").value("format_version", version);
+    j.value("file_bytes", file_bytes).value("scans", scans).value("alphabet_words", words);
+    j.value("descriptor", to_string(st.descriptor)).value("descriptor_bits", static_cast<std::uint64_t>(st.descriptor_bits));
+    j.value("max_features", static_cast<std::uint64_t>(st.max_features));
+    j.value("vocabulary_words", leaves).value("index_bytes", fi.index_bytes).value("dead_bytes", fi.dead_bytes);
+    j.value("ignored_tail_bytes", fi.ignored_tail_bytes);
+    j.end_object();
+    std::printf("%s\n", j.str().c_str());
+    return true;
+  }
+  std::printf("file           %s\n", o.path.c_str());
+  std::printf("kind           lex3d place database, format %s, %llu bytes\n", version.c_str(),
+              static_cast<unsigned long long>(file_bytes));
+  std::printf("scans          %llu (%.1f KB a scan)\n", static_cast<unsigned long long>(scans),
+              scans ? static_cast<double>(file_bytes) / 1024.0 / static_cast<double>(scans) : 0.0);
+  std::printf("alphabet       %llu words\n", static_cast<unsigned long long>(words));
+  std::printf("features       up to %d a scan, %s descriptors of %d bits a value\n", st.max_features,
+              to_string(st.descriptor), st.descriptor_bits);
+  if (leaves) std::printf("vocabulary     %llu words\n", static_cast<unsigned long long>(leaves));
+  else std::printf("vocabulary     none\n");
+  std::printf("index          %llu bytes", static_cast<unsigned long long>(fi.index_bytes));
+  if (fi.dead_bytes) std::printf(", %llu bytes of earlier indexes", static_cast<unsigned long long>(fi.dead_bytes));
+  if (fi.ignored_tail_bytes)
+    std::printf(", %llu bytes after the committed state ignored", static_cast<unsigned long long>(fi.ignored_tail_bytes));
+  std::printf("\n");
+  return true;
+}
+
 void info_bag(const InfoOptions& o) {
   auto r = io::read_bag_info(o.path);
   if (!r.ok()) throw CliError(exit_code_for(r.status().code()), r.status().to_string());
@@ -368,7 +424,7 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
 }
 
 void run_info(const InfoOptions& o) {
-  if (o.format == "auto" && info_lex3d_file(o)) return;
+  if (o.format == "auto" && (info_lex3d_file(o) || info_place_db(o))) return;
   const io::ReadOptions ro = read_options(parse_format_option(o.format), o.metadata, o.sensor_model);
   if (ro.format == io::Format::kAuto && io::is_rosbag(o.path)) {
     check_input_file(o.path);
