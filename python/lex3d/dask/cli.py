@@ -159,61 +159,58 @@ def _learn_main(args):
     return 0
 
 
+def _place_build(args, client):
+    from . import _place
+    s = _place.build(args.inputs, args.output, client=client, shards=args.shards,
+                     scans_per_shard=args.scans_per_shard, alphabet=args.alphabet, poses=args.poses,
+                     learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['scans']} scans in {s['shards']} shards on {s['workers']} workers in {s['wall_s']:.1f} s "
+              f"(learning {s['learn_s']:.1f} s, shards {s['build_s']:.1f} s, CPU {s['cpu_s']:.1f} s): "
+              f"{s['bytes']} bytes; sent to workers {s['bytes_to_workers']} bytes")
+        print(f"  manifest {s['manifest']}")
+
+
+def _place_query(args, client):
+    from . import _place
+    db = _place.ShardedPlaceDatabase(args.database, client)
+    out = []
+    for scan in args.scans:
+        timings = {}
+        try:
+            matches = db.query(scan, top=args.top, top_k=args.top_k, max_distance=args.max_distance,
+                               ground_vehicle=args.ground_vehicle, timings=timings)
+        except (ValueError, OSError) as e:
+            raise CompressError(3 if isinstance(e, OSError) else 2,
+                                str(e) if scan in str(e) else f"{scan}: {e}") from None
+        if args.json:
+            out.append({"query": scan, "timings": timings,
+                        "matches": [dict(m, pose=m["pose"].tolist()) for m in matches]})
+            continue
+        best = matches[0] if matches else None
+        print(f"{scan}: " + (f"{best['scan']} score {best['score']:.3f}" + ("" if best["accepted"] else " (not accepted)")
+                             if best else "no candidate") +
+              f"  [{1000 * (timings['retrieve_s'] + timings['verify_s']):.0f} ms on {len(db.shards)} shards]")
+        for m in matches:
+            t = m["pose"][:3, 3]
+            print(f"  {m['scan']:<24} score {m['score']:.3f} inliers {m['inliers']:>3} similarity "
+                  f"{m['similarity']:.3f} t [{t[0]:.2f} {t[1]:.2f} {t[2]:.2f}]" + ("" if m["valid"] else " invalid"))
+    if args.json:
+        print(json.dumps(out))
+
+
 def _place_main(args):
     from . import _place
-    client = cluster = None
-    try:
-        if args.place_command == "build":
+    if args.place_command == "build":
+        try:
             _place.check_shard_options(args.shards, args.scans_per_shard)  # usage errors before any cluster
-        client, cluster = _client(args)
-        if args.place_command == "build":
-            s = _place.build(args.inputs, args.output, client=client, shards=args.shards,
-                             scans_per_shard=args.scans_per_shard, alphabet=args.alphabet, poses=args.poses,
-                             learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed)
-            if args.json:
-                print(json.dumps(s))
-            else:
-                print(f"{s['scans']} scans in {s['shards']} shards on {s['workers']} workers in {s['wall_s']:.1f} s "
-                      f"(learning {s['learn_s']:.1f} s, shards {s['build_s']:.1f} s, CPU {s['cpu_s']:.1f} s): "
-                      f"{s['bytes']} bytes; sent to workers {s['bytes_to_workers']} bytes")
-                print(f"  manifest {s['manifest']}")
-            return 0
-        db = _place.ShardedPlaceDatabase(args.database, client)
-        out = []
-        for scan in args.scans:
-            timings = {}
-            try:
-                matches = db.query(scan, top=args.top, top_k=args.top_k, max_distance=args.max_distance,
-                                   ground_vehicle=args.ground_vehicle, timings=timings)
-            except (ValueError, OSError) as e:
-                raise _place.CompressError(3 if isinstance(e, OSError) else 2,
-                                           str(e) if scan in str(e) else f"{scan}: {e}") from None
-            if args.json:
-                out.append({"query": scan, "timings": timings,
-                            "matches": [dict(m, pose=m["pose"].tolist()) for m in matches]})
-                continue
-            best = matches[0] if matches else None
-            print(f"{scan}: " + (f"{best['scan']} score {best['score']:.3f}" + ("" if best["accepted"] else " (not accepted)")
-                                 if best else "no candidate") +
-                  f"  [{1000 * (timings['retrieve_s'] + timings['verify_s']):.0f} ms on {len(db.shards)} shards]")
-            for m in matches:
-                t = m["pose"][:3, 3]
-                print(f"  {m['scan']:<24} score {m['score']:.3f} inliers {m['inliers']:>3} similarity "
-                      f"{m['similarity']:.3f} t [{t[0]:.2f} {t[1]:.2f} {t[2]:.2f}]" + ("" if m["valid"] else " invalid"))
-        if args.json:
-            print(json.dumps(out))
-        return 0
-    except _place.CompressError as e:
-        print(f"lex3d-dask: {e}", file=sys.stderr)
-        return e.code
-    except KeyboardInterrupt:
-        print("lex3d-dask: interrupted", file=sys.stderr)
-        return 130
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        except CompressError as e:
+            print(f"lex3d-dask: {e}", file=sys.stderr)
+            return e.code
+        return _run_job(args, lambda client: _place_build(args, client), "no shard written")[0]
+    return _run_job(args, lambda client: _place_query(args, client), "the remaining queries not run")[0]
 
 
 def main(argv=None):
