@@ -21,6 +21,20 @@ namespace lex3d {
 
 namespace {
 
+/// A transform hypothesis's pose and scores from one record to another (a PlaceMatch and
+/// the PlaceAlternative kept of it, either way).
+template <class From, class To>
+void copy_hypothesis(const From& from, To& to) {
+  to.T_match_query = from.T_match_query;
+  to.score = from.score;
+  to.score_query_in_match = from.score_query_in_match;
+  to.score_match_in_query = from.score_match_in_query;
+  to.inliers = from.inliers;
+  to.descriptor_inliers = from.descriptor_inliers;
+  to.rms_inlier_m = from.rms_inlier_m;
+  to.sensor_distance_m = from.sensor_distance_m;
+}
+
 struct Correspondence {
   std::uint32_t q = 0;
   std::uint32_t m = 0;
@@ -898,15 +912,8 @@ void refine_match_located(const PlaceScan& query, const PlaceScan& candidate, co
     const PlaceAlternative& a = feature_stage.alternatives[k];
     if (a.score < min_score) break;  // best first: the rest score lower still
     PlaceMatch c = feature_stage;
-    c.T_match_query = a.T_match_query;
+    copy_hypothesis(a, c);
     c.T_feature = a.T_match_query;
-    c.score = a.score;
-    c.score_query_in_match = a.score_query_in_match;
-    c.score_match_in_query = a.score_match_in_query;
-    c.inliers = a.inliers;
-    c.descriptor_inliers = a.descriptor_inliers;
-    c.rms_inlier_m = a.rms_inlier_m;
-    c.sensor_distance_m = a.sensor_distance_m;
     align_and_check(query, candidate, locate_q, locate_m, c, params);
     c.dense_tried = k + 2;
     if (c.valid) m = std::move(c);
@@ -1006,14 +1013,7 @@ PlaceMatch match_scans(const PlaceScan& query, const PlaceScan& candidate, const
       if (out.alternatives.size() + 1 >= static_cast<std::size_t>(params.dense_hypotheses)) break;
       if (m.T_match_query.matrix() == out.T_match_query.matrix()) continue;  // the best itself
       PlaceAlternative a;
-      a.T_match_query = m.T_match_query;
-      a.score = m.score;
-      a.score_query_in_match = m.score_query_in_match;
-      a.score_match_in_query = m.score_match_in_query;
-      a.inliers = m.inliers;
-      a.descriptor_inliers = m.descriptor_inliers;
-      a.rms_inlier_m = m.rms_inlier_m;
-      a.sensor_distance_m = m.sensor_distance_m;
+      copy_hypothesis(m, a);
       out.alternatives.push_back(a);
     }
   }
