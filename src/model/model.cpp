@@ -140,8 +140,11 @@ Reconstruction reconstruct(const Model& model, const Alphabet& alphabet, double 
       int base[3], side[3];
       int need = 0;  // bit a: the neighbour along axis a may hold a point within `spacing`
       for (int a = 0; a < 3; ++a) {
-        // (clamped: cell_key keeps 21 bits an axis anyway, and a far point only shares keys)
-        const double g = std::clamp(static_cast<double>(q[a]) * inv, -1e9, 1e9);
+        // (clamped: cell_key keeps 21 bits an axis anyway, and a far point only shares keys;
+        // a NaN coordinate, which a damaged file's huge pose and word points can make, goes
+        // to cell 0, where no distance to it is ever below `spacing`)
+        const double x = static_cast<double>(q[a]) * inv;
+        const double g = std::isnan(x) ? 0.0 : std::clamp(x, -1e9, 1e9);
         const double b = std::floor(g);
         base[a] = static_cast<int>(b);
         const double f = g - b;

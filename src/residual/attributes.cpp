@@ -39,7 +39,6 @@ constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
 constexpr int kBuckets = 16, kActivity = 4;
-constexpr std::uint32_t kMaxLasersInHistory = 65536;
 
 const char* kind_name(std::uint8_t k) {
   switch (k) {
