@@ -37,6 +37,7 @@ def no_temporaries(folder):
 @pytest.mark.parametrize("options, cli_args", [
     ({"iterations": 40}, ["--max-error", "none"]),
     ({"max_error": 0.02}, ["--max-error", "0.02"]),
+    ({"max_error": 0.02, "batch": 2}, ["--max-error", "0.02"]),  # tasks of 2 and 1 scans
 ])
 def test_same_files_as_the_command(client, tmp_path, options, cli_args):
     out = tmp_path / "dask" / "s.lex3dm"
@@ -57,6 +58,8 @@ def test_same_files_as_the_command(client, tmp_path, options, cli_args):
         assert abs(row["bits_per_point"] - 8 * len(produced) / row["points"]) < 1e-9
         assert row["max_error"] == options.get("max_error")
     assert summary["alphabet"] is None or "max_error" not in options
+    if options.get("batch") == 2:
+        assert rows[0]["pid"] == rows[1]["pid"]  # one task coded both
     assert no_temporaries(tmp_path / "dask")
 
 
@@ -73,6 +76,15 @@ def test_a_bad_scan_in_the_middle_is_named_and_the_others_complete(client, tmp_p
     assert not (tmp_path / "b_001.lex3dm").exists()
     assert (tmp_path / "b_000.lex3dm").read_bytes() == (tmp_path / "b_002.lex3dm").read_bytes()
     assert summary["failures"] == [f"{bad}: {rows[1]['error']}"]
+
+
+def test_tasks_shrink_to_one_scan_as_the_work_runs_out():
+    sizes, left = [], 1000
+    while left:
+        sizes.append(min(left, lex3d.dask._compress.batch_size(left, slots=2)))
+        left -= sizes[-1]
+    assert sizes[0] == 16 and sizes[-8:] == [1] * 8 and sizes == sorted(sizes, reverse=True)
+    assert len(sizes) < 200  # against 1,000 one-scan tasks
 
 
 def test_a_worker_killed_mid_job_loses_nothing(tmp_path):
