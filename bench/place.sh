@@ -5,9 +5,14 @@
 # threshold, recall at 100% precision, accepted matches with a right / wrong transform,
 # median relative pose error of accepted true matches, query time (excluding feature
 # extraction; wall and CPU, 2 threads) and database size per scan.
-# Usage: bench/place.sh [BUILD_DIR] [extra `place eval` options, e.g. --threads 1]
+# Then, at 8 m, each first stage (--retrieval tfidf-alphabet, tfidf, fabmap; the last two over
+# a recognition vocabulary of at most 4,096 words learned on the scans) with the same
+# verification: recall at 100 % precision per method.
+# Usage: [PNG_DIR=dir] bench/place.sh [BUILD_DIR] [extra `place eval` options, e.g. --threads 1]
 #   (default BUILD_DIR: build). The first radius learns the alphabet and prepares the scans
 #   and keeps them in a temporary place database (--cache) that the second radius reuses.
+#   PNG_DIR keeps the pictures (precision-recall curve with labelled axes, score matrix) of
+#   every run: <run>_pr.png, <run>_confusion.png.
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
 build="${1:-$root/build}"
@@ -16,6 +21,7 @@ data="$root/../shared/data/balm"
 [ -f "$data/poses.txt" ] || { echo "needs $data" >&2; exit 1; }
 out="$(mktemp -d)"
 trap 'rm -rf "$out"' EXIT
+keep_pngs() { [ -z "${PNG_DIR:-}" ] || { mkdir -p "$PNG_DIR" && cp "$out"/*.png "$PNG_DIR"/ 2> /dev/null || true; }; }
 echo "load: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores"
 for radius in 4 8; do
   echo "== radius ${radius} m, min gap 20 s (transforms implying sensors farther apart than ${radius} m rejected) =="
@@ -35,6 +41,16 @@ for radius in 4 8; do
   "$build/lex3d" place eval "$data" --poses "$data/poses.txt" --times "$data/times.txt" \
     --min-gap 20 --radius "$radius" --gravity points --png "$out/p$radius" --cache "$out/points.lex3dp" "$@"
 done
+
+# Each first-stage method at 8 m over one recognition vocabulary (the cache keeps the prepared
+# scans and the vocabulary; its first run learns them).
+for method in tfidf-alphabet tfidf fabmap; do
+  echo "== radius 8 m, min gap 20 s, first stage ${method} (vocabulary of at most 4,096 words) =="
+  "$build/lex3d" place eval "$data" --poses "$data/poses.txt" --times "$data/times.txt" \
+    --min-gap 20 --radius 8 --vocabulary-words 4096 --retrieval "$method" --png "$out/m_$method" \
+    --cache "$out/vocabulary.lex3dp" "$@"
+done
+keep_pngs
 
 # Scan Context on the same scans and protocol (bench/scan_context.py: its published 80 m
 # grid, and 40 m, which suits this 18 x 20 m courtyard better), for comparison.
@@ -70,5 +86,6 @@ with open(sys.argv[2], "w") as out:
 PY
   echo "== kitti00, every frame against the frames at least 0.25 s older (radius 100 m: every frame counts) =="
   "$build/lex3d" place eval "$out/kitti" --poses "$out/kitti/poses.txt" --times "$out/kitti/times.txt" \
-    --min-gap 0.25 --radius 100 --png "$out/kitti/r" "$@"
+    --min-gap 0.25 --radius 100 --png "$out/kitti_r" "$@"
 fi
+keep_pngs
