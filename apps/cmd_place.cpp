@@ -11,6 +11,7 @@
 #include <functional>
 #include <iostream>
 #include <map>
+#include <set>
 
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/io/mapped_file.hpp"
@@ -160,8 +161,38 @@ class PlaceInputs {
           entries_.push_back({path, loader->size() == 1 ? stem(path) : stem(path) + "_" + std::to_string(k), loader, nullptr, k});
       }
     }
+    make_names_unique({});
     if (poses_path.empty()) return;
     poses_ = read_scan_poses(poses_path, entries_.size());
+  }
+  /// Names are what a query answers with: two entries (or an entry and a scan of the database
+  /// added to, `taken`) of the same name are told apart by their folder ("kitti00/000000"),
+  /// then by a count ("000000#2"). Returns how many were renamed.
+  std::size_t make_names_unique(const std::vector<std::string>& taken) {
+    // Compared by the file name part, so "scan" is told apart from a stored "first/scan" too.
+    const auto base = [](const std::string& n) {
+      const std::size_t slash = n.rfind('/');
+      const std::string tail = slash == std::string::npos ? n : n.substr(slash + 1);
+      return tail.substr(0, tail.find('#'));
+    };
+    std::map<std::string, std::size_t> count;
+    for (const auto& t : taken) ++count[base(t)];
+    for (const auto& e : entries_) ++count[base(e.name)];
+    std::size_t renamed = 0;
+    std::set<std::string> used(taken.begin(), taken.end());
+    for (const auto& e : entries_)
+      if (count[base(e.name)] == 1) used.insert(e.name);
+    for (auto& e : entries_) {
+      if (count[base(e.name)] == 1) continue;
+      const std::string folder = fs::path(e.path).parent_path().filename().string();
+      const std::string first = folder.empty() ? e.name : folder + "/" + e.name;
+      std::string name = first;
+      for (int k = 2; used.count(name) != 0; ++k) name = first + "#" + std::to_string(k);
+      used.insert(name);
+      e.name = name;
+      ++renamed;
+    }
+    return renamed;
   }
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
   [[nodiscard]] const std::string& name(std::size_t i) const { return entries_.at(i).name; }
@@ -464,11 +495,16 @@ void run_build(const PlaceOptions& o) {
 void run_add(const PlaceOptions& o) {
   check_db_output(o, o.db);
   check_output_path(o.db, o.inputs);
-  const PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
+  PlaceInputs inputs(o.inputs, o.format, o.poses, o.model_alphabet);
   // Locked before it is read: a second `place add` on the same file waits for nothing and fails.
   auto file = io::PositionalFile::open_existing(o.db);
   if (!file.ok()) throw CliError(3, file.status().to_string());
   const PlaceDatabase db = read_db(o.db);
+  {
+    std::vector<std::string> taken;
+    for (std::size_t i = 0; i < db.size(); ++i) taken.push_back(db.name(i));
+    inputs.make_names_unique(taken);
+  }
   check_descriptor(o, o.db, db);
   const PlaceFileInfo& fi = db.file_info();
   // In place when the format allows it (2.x) and earlier indexes left behind by appends
