@@ -114,6 +114,15 @@ PY
     "$build/lex3d" place query "$kp/late.lex3dp" "$kp/$q.bin" --json > "$kp/full_$q.json"
     "$build/lex3d" place query "$kp/late.lex3dp" "$kp/d$q.bin" --json > "$kp/drop_$q.json"
   done
+  # The same frames 0-1 among the 89 balm scans: what else does a query of 8 or 9 accept?
+  "$build/lex3d" place build "$out/mixed.lex3dp" "$data"/*.bin "$kp/000000.bin" "$kp/000001.bin" > /dev/null
+  for q in 000008 000009 d000008 d000009; do
+    "$build/lex3d" place query "$out/mixed.lex3dp" "$kp/$q.bin" --json | /usr/bin/python3 -c '
+import json, sys
+d = json.load(sys.stdin)
+print(f"{sys.argv[1]} against the 89 balm scans and kitti00 frames 0-1: accepted",
+      ", ".join("%s (%.3f)" % (m["scan"], m["score"]) for m in d["matches"] if m.get("accepted")) or "nothing")' "$q"
+  done
   /usr/bin/python3 - "$out/kitti/poses.txt" "$kp"/*.json <<'PY'
 import json, os, sys
 import numpy as np
