@@ -31,6 +31,7 @@ from ._compress import CompressError, compress, expand_inputs, numbered_output
 from ._learn import learn
 from ._place import ShardedPlaceDatabase
 from ._place import build as build_place_shards
+from ._worker import worker_malloc
 
 __all__ = ["compress", "learn", "build_place_shards", "ShardedPlaceDatabase", "CompressError", "expand_inputs",
-           "numbered_output"]
+           "numbered_output", "worker_malloc"]
