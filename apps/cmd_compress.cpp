@@ -163,9 +163,8 @@ void run_compress(const CompressOptions& o) {
   Json j;
   j.begin_object();
   j.begin_array("files");
-  if (!o.json)
-    std::printf("%-32s %9s %9s %10s %10s%s\n", "output", "points", "instances", "bytes", "bits/pt",
-                layered ? "  max error   coded pts" : "");
+  // The table's header goes out with its first row: a first scan that fails leaves the error alone.
+  bool header_printed = false;
   bool any_words = false;
   codec::SequenceData sequence;
   // One scan from its file (or the learnt scans) to its coded bytes: run for several scans
@@ -316,6 +315,10 @@ void run_compress(const CompressOptions& o) {
       j.end_object();
     } else {
       bar.clear();  // the table row starts on a clean line
+      if (!header_printed)
+        std::printf("%-32s %9s %9s %10s %10s%s\n", "output", "points", "instances", "bytes", "bits/pt",
+                    layered ? "  max error   coded pts" : "");
+      header_printed = true;
       std::printf("%-32s %9llu %9zu %10zu %10.3f", shown.c_str(), static_cast<unsigned long long>(d.input_points),
                   d.model.instances.size(), bytes.size(), bpp);
       if (coded.max_error) std::printf("  %7.4f m %11zu", *coded.max_error, coded.layer.residual_points);

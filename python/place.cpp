@@ -11,6 +11,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "common.hpp"
@@ -25,10 +26,19 @@ namespace lex3d::python {
 
 namespace {
 
-/// The settings `lex3d place` prepares scans with.
-ModelParams place_model_params() {
+/// Worker threads of a `threads=` argument: 0 is every core (as the command's --threads), else
+/// [1, 64].
+int worker_threads(int threads) {
+  if (threads < 0 || threads > 64)
+    throw py::value_error("threads must be 0 (every core) to 64, got " + std::to_string(threads));
+  if (threads > 0) return threads;
+  return static_cast<int>(std::clamp(std::thread::hardware_concurrency(), 1U, 64U));  // 0 where unknown
+}
+
+/// The settings `lex3d place` prepares scans with, on `threads` workers.
+ModelParams place_model_params(int threads) {
   ModelParams mp;
-  mp.threads = 2;
+  mp.threads = threads;
   return mp;
 }
 
@@ -64,9 +74,11 @@ std::string default_name(const py::handle& scan, std::size_t index) {
 
 class PyPlaceDatabase {
  public:
-  PyPlaceDatabase(PlaceDatabase db, std::string path) : db_(std::move(db)), path_(std::move(path)) {}
+  PyPlaceDatabase(PlaceDatabase db, std::string path, int threads)
+      : db_(std::move(db)), path_(std::move(path)), threads_(threads) {}
 
-  static PyPlaceDatabase open(const py::object& path_obj) {
+  static PyPlaceDatabase open(const py::object& path_obj, int threads) {
+    threads = worker_threads(threads);
     const std::string path = path_of(path_obj);
     StatusOr<PlaceDatabase> db = Status(ErrorCode::kBadData, "");
     {
@@ -90,7 +102,7 @@ class PyPlaceDatabase {
     if (db.value().file_info().ignored_tail_bytes > 0)
       warn(path + ": " + std::to_string(db.value().file_info().ignored_tail_bytes) +
            " bytes after the committed database (an add that did not finish) are ignored");
-    return {std::move(db).value(), path};
+    return {std::move(db).value(), path, threads};
   }
 
   /// A new database of `scans`, with `alphabet` (bytes) or one learned on `learn_scans`
@@ -98,7 +110,8 @@ class PyPlaceDatabase {
   static PyPlaceDatabase build(const py::list& scans, const std::optional<std::vector<std::string>>& names,
                                const py::object& poses, const std::optional<py::bytes>& alphabet_file,
                                const std::optional<py::bytes>& model_alphabet, int learn_scans, int iterations,
-                               std::uint64_t seed) {
+                               std::uint64_t seed, int threads) {
+    threads = worker_threads(threads);
     const std::size_t n = scans.size();
     if (names && names->size() != n)
       throw py::value_error("names has " + std::to_string(names->size()) + " entries for " + std::to_string(n) + " scans");
@@ -120,7 +133,7 @@ class PyPlaceDatabase {
     } else {
       if (n == 0) throw py::value_error("build needs at least one scan to learn an alphabet on (or give alphabet=)");
       LearnParams p;
-      p.model = place_model_params();
+      p.model = place_model_params(threads);
       p.max_iterations = iterations;
       p.seed = seed;
       p.validate();
@@ -135,7 +148,7 @@ class PyPlaceDatabase {
     }
     PlaceDatabase db;
     db.set_alphabet(std::move(alphabet));
-    PyPlaceDatabase out(std::move(db), "");
+    PyPlaceDatabase out(std::move(db), "", threads);
     for (std::size_t i = 0; i < n; ++i) out.add_cloud(load(i), names ? (*names)[i] : default_name(scans[i], i));
     return out;
   }
@@ -150,7 +163,7 @@ class PyPlaceDatabase {
   }
 
   py::list query(const py::object& scan, const py::object& pose, const py::object& gravity, int top,
-                 std::optional<double> max_distance, bool ground_vehicle, int top_k, int threads,
+                 std::optional<double> max_distance, bool ground_vehicle, int top_k, std::optional<int> threads,
                  const std::optional<py::bytes>& model_alphabet) const {
     if (top < 1) throw py::value_error("top must be at least 1, got " + std::to_string(top));
     std::vector<std::uint8_t> alpha;
@@ -158,7 +171,7 @@ class PyPlaceDatabase {
     Cloud c = scan_from(scan, model_alphabet ? &alpha : nullptr, "scan");
     set_frame(c, pose, gravity);
     PlaceParams p;
-    p.threads = threads;
+    p.threads = threads ? worker_threads(*threads) : threads_;
     p.top_k = top_k;
     p.ground_vehicle = ground_vehicle;
     p.max_distance = max_distance.value_or(0.0);
@@ -167,7 +180,7 @@ class PyPlaceDatabase {
     std::optional<Status> error;
     {
       py::gil_scoped_release unlocked;
-      const PlaceScan q = describe(c, "query");
+      const PlaceScan q = describe(c, "query", p.threads);
       try {
         r = db_.query(q, p);
       } catch (const PlaceDataError& e) {
@@ -191,7 +204,7 @@ class PyPlaceDatabase {
     std::vector<std::uint8_t> bytes;
     {
       py::gil_scoped_release unlocked;
-      bytes = encode_place_query(describe(c, "query"), db_.storage());
+      bytes = encode_place_query(describe(c, "query", threads_), db_.storage());
     }
     return {reinterpret_cast<const char*>(bytes.data()), bytes.size()};
   }
@@ -237,9 +250,10 @@ class PyPlaceDatabase {
   /// PlaceDatabase::verify of (index, similarity) candidates: {"matches": [...], "refined": [...],
   /// "decoded": n, "decode_ms": t}, each match a dict as query() gives plus "dense_refined".
   py::dict verify(const py::bytes& query, const std::vector<std::pair<std::size_t, double>>& candidates,
-                  std::optional<double> max_distance, bool ground_vehicle, int threads, bool second_round) const {
+                  std::optional<double> max_distance, bool ground_vehicle, std::optional<int> threads,
+                  bool second_round) const {
     PlaceParams p;
-    p.threads = threads;
+    p.threads = threads ? worker_threads(*threads) : threads_;
     p.ground_vehicle = ground_vehicle;
     p.max_distance = max_distance.value_or(0.0);
     p.validate();
@@ -302,6 +316,7 @@ class PyPlaceDatabase {
   }
   [[nodiscard]] std::size_t alphabet_words() const { return db_.alphabet().size(); }
   [[nodiscard]] const std::string& path() const { return path_; }
+  [[nodiscard]] int threads() const { return threads_; }
 
  private:
   [[nodiscard]] std::string where() const { return path_.empty() ? std::string{} : path_ + ": "; }
@@ -330,19 +345,20 @@ class PyPlaceDatabase {
 
   /// As `lex3d place` describes a scan (--gravity auto): a scan without a pose or gravity
   /// takes the up direction its surfaces give (apply_gravity).
-  PlaceScan describe(Cloud cloud, const std::string& name) const {
-    const ModelParams mp = place_model_params();
+  PlaceScan describe(Cloud cloud, const std::string& name, int threads) const {
+    const ModelParams mp = place_model_params(threads);
     apply_gravity(cloud, mp.features.range);
     return make_place_scan(cloud, db_.alphabet(), db_.storage(), mp, name);
   }
 
   std::size_t add_cloud(Cloud cloud, const std::string& name) {
     py::gil_scoped_release unlocked;
-    return db_.add(describe(cloud, name));
+    return db_.add(describe(cloud, name, threads_));
   }
 
   PlaceDatabase db_;
   std::string path_;
+  int threads_ = 2;  // worker threads: describing scans, learning, verifying
 };
 
 }  // namespace
@@ -358,27 +374,35 @@ A scan is an (N, 3) float array (metres, the scan's frame), a path of a point cl
 .lex3dm model file, or the bytes of a model file (model_alphabet= the alphabet it references).
 pose= (4x4, T_world_cloud) or gravity= (3-vector, the direction of gravity in the scan's frame)
 make the features upright as an IMU would; without them the scan's z axis is up.
+threads= (open, build): the worker threads describing scans (build, add, query, prepare_query),
+learning the alphabet and verifying candidates; 0 = every core, as the command's --threads;
+default 2. Results do not depend on it. query() and verify() take their own threads= (default:
+the database's).
 Bad input raises ValueError (OSError for files that cannot be read or written) with one line.)")
-      .def_static("open", &PyPlaceDatabase::open, py::arg("path"),
-                  "Opens a database file (memory-mapped; entries are decoded when a query verifies them).")
+      .def_static("open", &PyPlaceDatabase::open, py::arg("path"), py::kw_only(), py::arg("threads") = 2,
+                  "Opens a database file (memory-mapped; entries are decoded when a query verifies them).\n"
+                  "threads: worker threads (0 = every core); results do not depend on it.")
       .def_static("build", &PyPlaceDatabase::build, py::arg("scans"), py::kw_only(), py::arg("names") = py::none(),
                   py::arg("poses") = py::none(), py::arg("alphabet") = py::none(),
                   py::arg("model_alphabet") = py::none(), py::arg("learn_scans") = 5, py::arg("iterations") = 200,
-                  py::arg("seed") = LearnParams{}.seed,
+                  py::arg("seed") = LearnParams{}.seed, py::arg("threads") = 2,
                   R"(A new database (in memory; save() writes it) of a list of scans, as `lex3d place build`:
 with alphabet= (an alphabet file, bytes), or one learned on learn_scans evenly spaced scans.
-names: one a scan (default: the file's stem, or scan_<i>); poses: one 4x4 T_world_cloud a scan.)")
+names: one a scan (default: the file's stem, or scan_<i>); poses: one 4x4 T_world_cloud a scan.
+threads: worker threads describing the scans and learning (0 = every core); the database, its
+alphabet and every later result do not depend on it.)")
       .def("add", &PyPlaceDatabase::add, py::arg("scan"), py::kw_only(), py::arg("name") = py::none(),
            py::arg("pose") = py::none(), py::arg("gravity") = py::none(), py::arg("model_alphabet") = py::none(),
            "Adds a scan (in memory; save() writes the database) and returns its index.")
       .def("query", &PyPlaceDatabase::query, py::arg("scan"), py::kw_only(), py::arg("pose") = py::none(),
            py::arg("gravity") = py::none(), py::arg("top") = 5, py::arg("max_distance") = py::none(),
-           py::arg("ground_vehicle") = false, py::arg("top_k") = PlaceParams{}.top_k, py::arg("threads") = 2,
+           py::arg("ground_vehicle") = false, py::arg("top_k") = PlaceParams{}.top_k, py::arg("threads") = py::none(),
            py::arg("model_alphabet") = py::none(),
            R"(The verified candidates for a scan, best first (at most `top`): dicts with "scan" (name),
 "index", "score", "valid", "accepted" (valid and score >= 0.25), "inliers", "similarity",
 "sensor_distance_m" and "pose", the 4x4 float64 T_match_query (query frame -> matched scan's frame).
-max_distance: metres, reject transforms that put the sensors farther apart. top_k: candidates verified.)")
+max_distance: metres, reject transforms that put the sensors farther apart. top_k: candidates verified.
+threads: worker threads describing the scan and verifying (0 = every core; default: the database's).)")
       .def("prepare_query", &PyPlaceDatabase::prepare_query, py::arg("scan"), py::kw_only(),
            py::arg("pose") = py::none(), py::arg("gravity") = py::none(), py::arg("model_alphabet") = py::none(),
            R"(The staged query's first step: the scan described once (as query() describes it), as bytes
@@ -392,7 +416,7 @@ Summed over the shards of a sharded database they are those of one database of a
 best first, at most top_k. stats: the (entries, df) of the whole this database is a shard of
 (default: its own), giving the scores one database of all the scans gives.)")
       .def("verify", &PyPlaceDatabase::verify, py::arg("query"), py::arg("candidates"), py::kw_only(),
-           py::arg("max_distance") = py::none(), py::arg("ground_vehicle") = false, py::arg("threads") = 2,
+           py::arg("max_distance") = py::none(), py::arg("ground_vehicle") = false, py::arg("threads") = py::none(),
            py::arg("second_round") = false,
            R"(Verifies (index, similarity) candidates of a prepared query: {"matches": the candidates' matches
 with the feature transform, best first; "refined": the first of them densely aligned, as query()
@@ -400,7 +424,7 @@ aligns them; "decoded", "decode_ms", "dense_candidates" (how many of all the sha
 their aligned form), "accept_score" and "more_candidates" (query()'s second round: where no
 match of the first top_k reaches accept_score, the next more_candidates are verified with
 second_round=True, the surface hypotheses alone)}. Each match a dict as query() gives, plus
-"dense_refined".)")
+"dense_refined". threads: 0 = every core; default: the database's.)")
       .def("alphabet_file", &PyPlaceDatabase::alphabet_file, "The database's alphabet as an alphabet file (bytes).")
       .def("save", &PyPlaceDatabase::save, py::arg("path"),
            "Writes the database (format 2.0) to path, atomically: a failure leaves no partial file.")
@@ -408,6 +432,8 @@ second_round=True, the surface hypotheses alone)}. Each match a dict as query() 
       .def_property_readonly("names", &PyPlaceDatabase::names, "The scans' names, in index order.")
       .def_property_readonly("alphabet_words", &PyPlaceDatabase::alphabet_words)
       .def_property_readonly("path", &PyPlaceDatabase::path, "The file it was opened from ('' when built in memory).")
+      .def_property_readonly("threads", &PyPlaceDatabase::threads,
+                             "The worker threads it describes, learns and verifies with (0 given: the core count).")
       .def("__repr__", [](const PyPlaceDatabase& d) {
         return "<lex3d.PlaceDatabase " + std::to_string(d.size()) + " scans, " + std::to_string(d.alphabet_words()) +
                " words" + (d.path().empty() ? std::string{} : ", " + d.path()) + ">";

@@ -1,8 +1,9 @@
-// reader_replay: the reader and place-database fuzz targets' checks (fuzz_readers.hpp,
-// fuzz_place_db.hpp) for every seed of tests/fuzz/readers/<format>/ and then for seeded
-// random mutations of them (bytes, text tokens, and the place database's structure-aware
-// mutations). Built with any compiler and run by CTest, so every reader's properties are
-// checked on every build, not only where libFuzzer exists. A violated property aborts.
+// reader_replay: the reader, place-database and place-query fuzz targets' checks
+// (fuzz_readers.hpp, fuzz_place_db.hpp, fuzz_place_query.hpp) for every seed of
+// tests/fuzz/readers/<format>/ and then for seeded random mutations of them (bytes, text
+// tokens, and the place database's and query's structure-aware mutations). Built with any
+// compiler and run by CTest, so every reader's properties are checked on every build, not
+// only where libFuzzer exists. A violated property aborts.
 //
 //   reader_replay [--mutations N] [--seed S] READERS_DIR
 
@@ -17,6 +18,7 @@
 #include <vector>
 
 #include "fuzz_place_db.hpp"
+#include "fuzz_place_query.hpp"
 #include "fuzz_readers.hpp"
 
 namespace {
@@ -81,14 +83,17 @@ int main(int argc, char** argv) {
   std::sort(kinds.begin(), kinds.end());
   for (const auto& name : kinds) {
     const bool db = name == "placedb";
+    const bool query = name == "placequery";
     const auto* kind = lex3d::fuzz::find_reader(name);
-    if (!db && kind == nullptr) {
+    if (!db && !query && kind == nullptr) {
       std::fprintf(stderr, "reader_replay: %s: no reader of that name\n", name.c_str());
       return 1;
     }
     const auto check = [&](const Bytes& b) {
       if (db)
         lex3d::fuzz::check_place_db(b.data(), b.size());
+      else if (query)
+        lex3d::fuzz::check_place_query(b.data(), b.size());
       else
         lex3d::fuzz::check_reader(*kind, b.data(), b.size());
     };
@@ -103,6 +108,7 @@ int main(int argc, char** argv) {
       switch (rng() % 3) {
         case 0:
           if (db && lex3d::fuzz::mutate_place_db(b, rng, bytes)) break;
+          if (query && lex3d::fuzz::mutate_place_query(b, rng, bytes)) break;
           lex3d::fuzz::mutate_bytes(b, rng);
           break;
         case 1: mutate_text(b, rng); break;
@@ -110,7 +116,7 @@ int main(int argc, char** argv) {
       }
       check(b);
     }
-    std::printf("%-7s %zu seeds, %ld mutations (seed %llu): every property held\n", name.c_str(), seeds.size(), n, seed);
+    std::printf("%-10s %zu seeds, %ld mutations (seed %llu): every property held\n", name.c_str(), seeds.size(), n, seed);
   }
   return 0;
 }

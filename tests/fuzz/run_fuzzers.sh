@@ -2,8 +2,9 @@
 # Runs every libFuzzer target of a Clang build for a bounded time, two at a time, each on a
 # fresh copy of its seed corpus (tests/fuzz/corpus for the model and alphabet decoders,
 # tests/fuzz/readers/<format> for the readers, tests/fuzz/readers/placedb for the place
-# database), with a fixed seed (-seed=1). Exits non-zero when any target finds a crash, a sanitizer report or a
-# violated property; the input that did it is kept in the target's artifact directory.
+# database, tests/fuzz/readers/placequery for a prepared query), with a fixed seed (-seed=1).
+# Exits non-zero when any target finds a crash, a sanitizer report or a violated property; the
+# input that did it is kept in the target's artifact directory.
 #
 #   tests/fuzz/run_fuzzers.sh BUILD_DIR [SECONDS_EACH=60] [TARGET...]
 set -euo pipefail
@@ -13,10 +14,10 @@ seconds="${2:-60}"
 shift $(( $# >= 2 ? 2 : 1 ))
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  targets=(fuzz_model fuzz_alphabet fuzz_place_db)
+  targets=(fuzz_model fuzz_alphabet fuzz_place_db fuzz_place_query)
   for d in "$here"/readers/*/; do
     name="$(basename "$d")"
-    [ "$name" = placedb ] || targets+=("fuzz_reader_$name")
+    case "$name" in placedb|placequery) ;; *) targets+=("fuzz_reader_$name") ;; esac
   done
 fi
 work="$(mktemp -d)"
@@ -27,6 +28,7 @@ run_one() {
   case "$target" in
     fuzz_model|fuzz_alphabet) seeds="$here/corpus" ;;
     fuzz_place_db) seeds="$here/readers/placedb" ;;
+    fuzz_place_query) seeds="$here/readers/placequery" ;;
     fuzz_reader_*) seeds="$here/readers/${target#fuzz_reader_}" ;;
     *) echo "run_fuzzers: unknown target $target" >&2; return 1 ;;
   esac

@@ -192,3 +192,29 @@ def test_a_query_lets_other_python_threads_run(db):
     longest = max(b - a for a, b in zip(inside, inside[1:]))
     # a lock held through a query would stop the ticks for about a query's time
     assert longest < 0.5 * (t1 - t0) / queries, (longest, t1 - t0, queries)
+
+
+def test_results_do_not_depend_on_threads(db, tmp_path):
+    assert db.threads == 2
+    one = lex3d.PlaceDatabase.build(SCANS, learn_scans=2, iterations=60, threads=1)
+    assert one.threads == 1
+    assert one.alphabet_file() == db.alphabet_file()
+    db.save(tmp_path / "two.lex3dp")
+    one.save(tmp_path / "one.lex3dp")
+    assert (tmp_path / "one.lex3dp").read_bytes() == (tmp_path / "two.lex3dp").read_bytes()
+    every = lex3d.PlaceDatabase.open(tmp_path / "one.lex3dp", threads=0)
+    assert every.threads == min(64, max(1, os.cpu_count() or 1))
+    query = moved(points_of(SCANS[0]), yaw_motion(25.0, [1.0, -0.5, 0.0]))
+    assert one.prepare_query(query) == db.prepare_query(query)
+    answers = [one.query(query), db.query(query), every.query(query), db.query(query, threads=1)]
+    for a in answers[1:]:
+        assert [(m["scan"], m["score"], m["inliers"]) for m in a] == \
+            [(m["scan"], m["score"], m["inliers"]) for m in answers[0]]
+        for x, y in zip(a, answers[0]):
+            assert np.array_equal(x["pose"], y["pose"])
+    assert answers[0][0]["scan"] == "newer_college_00"
+    for bad in (-1, 65):
+        with pytest.raises(ValueError, match="threads must be 0 .every core. to 64, got"):
+            lex3d.PlaceDatabase.open(tmp_path / "one.lex3dp", threads=bad)
+        with pytest.raises(ValueError, match="threads must be"):
+            db.query(query, threads=bad)

@@ -10,6 +10,7 @@ import time
 import uuid
 import warnings
 
+from ._files import read_alphabet_file
 from ._progress import ProgressLine
 from ._worker import worker_malloc
 
@@ -211,11 +212,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
         alphabet_bytes = bytes(alphabet)
     elif alphabet is not None:
         alphabet_path = os.fspath(alphabet)
-        try:
-            with open(alphabet_path, "rb") as f:
-                alphabet_bytes = f.read()
-        except OSError as e:
-            raise CompressError(2, f"{alphabet_path}: cannot read the alphabet: {e.strerror}") from None
+        alphabet_bytes = read_alphabet_file(alphabet_path)
     else:
         alphabet_bytes = None
     if words and alphabet_bytes is None:

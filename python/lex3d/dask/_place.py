@@ -24,6 +24,7 @@ import uuid
 import numpy as np
 
 from ._compress import CompressError, expand_inputs, learn_task
+from ._files import read_alphabet_file
 from ._worker import worker_malloc
 
 MANIFEST = "manifest.json"
@@ -130,11 +131,7 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
     wall0 = time.perf_counter()
     learn_s = 0.0
     if alphabet is not None:
-        try:
-            with open(alphabet, "rb") as f:
-                alphabet_bytes = f.read()
-        except OSError as e:
-            raise CompressError(3, f"{alphabet}: cannot read the alphabet: {e.strerror or e}") from None
+        alphabet_bytes = read_alphabet_file(alphabet)
     else:
         k = min(n, max(1, learn_scans))
         sample = [scans[j * n // k] for j in range(k)]
