@@ -114,12 +114,21 @@ def _client(args):
     return client, cluster
 
 
+def _check_alphabet(args):
+    """An --alphabet given is read and decoded before any cluster starts (read_alphabet_file)."""
+    if getattr(args, "alphabet", None):
+        from ._files import read_alphabet_file
+        read_alphabet_file(args.alphabet)
+
+
 def _run_job(args, job, interrupted_message):
-    """Runs job(client) on the cluster of args (_client), then closes the client and any
-    LocalCluster; (exit code, the job's summary or None). A CompressError is printed as one line
-    and gives its code; Ctrl-C prints "interrupted (interrupted_message)" and gives 130."""
+    """Checks the --alphabet given (_check_alphabet), then runs job(client) on the cluster of
+    args (_client), then closes the client and any LocalCluster; (exit code, the job's summary
+    or None). A CompressError is printed as one line and gives its code; Ctrl-C prints
+    "interrupted (interrupted_message)" and gives 130."""
     client = cluster = None
     try:
+        _check_alphabet(args)
         client, cluster = _client(args)
         return 0, job(client)
     except CompressError as e:
