@@ -89,7 +89,8 @@ def build_shard_task(paths, names, poses, alphabet, output, job):
     cpu0 = time.process_time()
     tmp = f"{output}.{job}.tmp"
     try:
-        db = lex3d.PlaceDatabase.build(list(paths), names=list(names), poses=poses, alphabet=alphabet)
+        # One thread: a Dask worker runs one task a thread it has.
+        db = lex3d.PlaceDatabase.build(list(paths), names=list(names), poses=poses, alphabet=alphabet, threads=1)
         db.save(tmp)
         os.replace(tmp, output)
     except (ValueError, OSError) as e:  # a value, not raised: the driver names it and cleans up
@@ -216,7 +217,7 @@ def _shard(path):
     key = (path, st.st_mtime_ns, st.st_size)
     db = _OPEN.get(key)
     if db is None:
-        db = lex3d.PlaceDatabase.open(path)
+        db = lex3d.PlaceDatabase.open(path, threads=1)  # one task a worker thread
         if len(_OPEN) >= 64:
             _OPEN.clear()
         _OPEN[key] = db
