@@ -493,7 +493,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
                         " were decoded",
                     0);
   if (!layer_lasers.empty() && layer_lasers.size() != n)
-    return bad_data("attribute chunk holds " + std::to_string(n) + " points but the sensor-geometry layer " +
+    return bad_data("attribute chunk holds " + std::to_string(n) + " points but the sensor-geometry layer decoded " +
                         std::to_string(layer_lasers.size()),
                     0);
   const std::size_t layer_keys = key_count(layer_lasers);
