@@ -5,10 +5,14 @@
 //  - method 0 (context tree): u's bits, most significant first, each under a bit model of
 //    the bits above it and a context of the previous value and its last change;
 //  - method 1 (previous value): u minus the previous value, an integer model;
-//  - method 2 (linear): u minus (2·previous − the one before), an integer model.
-// "Previous" is the last value of the same laser when the chunk also holds the ring
-// field (coded first), else the last value in the decoded order. The encoder codes each
-// field every way that applies and keeps the smallest.
+//  - method 2 (linear): u minus (2·previous − the one before), an integer model;
+//  - method 3 (layer laser): u minus the last value at a point of the same laser of the
+//    sensor-geometry residual layer's table, an integer model (only with such a layer);
+//    after a laser's first value a flag says whether all its values are that one, and
+//    then they cost nothing (a ring that is a function of the layer's laser).
+// For methods 0-2 "previous" is the last value of the same laser when the chunk also
+// holds the ring field (coded first), else the last value in the decoded order. The
+// encoder codes each field every way that applies and keeps the smallest.
 
 #include "lex3d/residual/attributes.hpp"
 
@@ -22,6 +26,7 @@
 #include <string>
 
 #include "codec/bytes.hpp"
+#include "residual/layer_lasers.hpp"
 #include "residual/range_coder.hpp"
 
 namespace lex3d::residual {
@@ -34,7 +39,7 @@ using detail::RangeEncoder;
 
 enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
-constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2;
+constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3;
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
@@ -89,6 +94,7 @@ struct ChannelCoder {
   int bits = 0;
   std::vector<BitModel> tree;  // [context][node]
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
+  BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
   ChannelCoder(std::uint8_t m, std::uint64_t s) : method(m), span(s) {
     if (method == kMethodTree) {
@@ -137,18 +143,31 @@ struct ChannelCoder {
   }
 };
 
-/// Codes `channels` channels of values u[c][j] with `method`, laser of point j `laser[j]`
-/// (all 0 without rings).
+/// Codes `channels` channels of values u[c][j] with `method`, the history of point j that
+/// of key `laser[j]` < `lasers` (all 0 when `laser` is empty).
 std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t>>& u, std::uint64_t span,
                                       std::uint8_t method, const std::vector<std::uint16_t>& laser, std::size_t lasers) {
   RangeEncoder enc;
+  const bool by_layer = method == kMethodLayerLaser;
   for (const auto& ch : u) {
     ChannelCoder coder(method, span);
     History h(lasers);
+    std::vector<std::uint8_t> fixed;  // method 3: per laser, every value equals the first
+    if (by_layer) {
+      History first(lasers);
+      fixed.assign(lasers, 1);
+      for (std::size_t j = 0; j < ch.size(); ++j) {
+        const std::size_t l = laser[j];
+        if (!first.seen[l]) first.push(l, ch[j]);
+        else if (ch[j] != first.last[l]) fixed[l] = 0;
+      }
+    }
     for (std::size_t j = 0; j < ch.size(); ++j) {
       const std::size_t l = laser.empty() ? 0 : laser[j];
+      if (by_layer && h.seen[l] && fixed[l]) continue;  // its laser's value, known
       const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
       coder.put(enc, ch[j], prev, prev2);
+      if (by_layer && !h.seen[l]) enc.put(coder.fixed, fixed[l] != 0);
       h.push(l, ch[j]);
     }
   }
@@ -215,6 +234,11 @@ Quant quantise_field(const std::vector<double>& values, bool is_f32, double max_
   return q;
 }
 
+/// The history keys of method 3: the layer lasers, one key beyond the largest.
+std::size_t key_count(const std::vector<std::uint16_t>& keys) {
+  return keys.empty() ? 1 : static_cast<std::size_t>(*std::max_element(keys.begin(), keys.end())) + 1;
+}
+
 struct FieldOut {
   std::uint8_t kind;
   std::uint8_t repr;
@@ -241,9 +265,14 @@ void AttributeOptions::validate() const {
 }
 
 std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
-                                            const AttributeOptions& options, std::vector<AttributeField>* fields_out) {
+                                            const AttributeOptions& options, std::vector<AttributeField>* fields_out,
+                                            const std::vector<std::uint16_t>& layer_lasers) {
   options.validate();
   const std::size_t n_in = input.size(), n = sources.size();
+  if (!layer_lasers.empty() && layer_lasers.size() != n)
+    throw std::invalid_argument("attribute layer lasers: " + std::to_string(layer_lasers.size()) + " for " +
+                                std::to_string(n) + " decoded points");
+  const std::size_t layer_keys = key_count(layer_lasers);
   check_size(input.intensity.size(), n_in, "intensity");
   check_size(input.time.size(), n_in, "time");
   check_size(input.ring.size(), n_in, "ring");
@@ -320,10 +349,12 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const std::size_t hl = f.kind == kRing ? 1 : lasers;
     std::vector<std::uint8_t> best;
     std::uint8_t best_method = 0;
-    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear}) {
+    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser}) {
       if (m == kMethodTree && f.span > kTreeMaxSpan) continue;
       if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
-      std::vector<std::uint8_t> s = code_values(f.u, f.span, m, by, hl);
+      if (m == kMethodLayerLaser && layer_lasers.empty()) continue;
+      std::vector<std::uint8_t> s = m == kMethodLayerLaser ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
+                                                           : code_values(f.u, f.span, m, by, hl);
       if (best.empty() || s.size() < best.size()) {
         best = std::move(s);
         best_method = m;
@@ -391,7 +422,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
-    if (f.method > kMethodLinear) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
+    if (f.method > kMethodLayerLaser) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
     if (f.channels != (f.kind == kRgb ? 3 : 1))
       return bad_data("attribute field " + name + " has " + std::to_string(f.channels) + " channels", at + 3);
     if (f.repr == kQuantised && !(std::isfinite(f.step) && f.step > 0.0 && f.step <= 1e9))
@@ -449,6 +480,11 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
 }
 
 Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded) {
+  return detail::decode_attributes(payload, {}, decoded);
+}
+
+Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const std::vector<std::uint16_t>& layer_lasers,
+                                 Cloud& decoded) {
   auto desc = read_descriptors(payload);
   if (!desc.ok()) return desc.status();
   const std::uint64_t n = codec::bytes::ld_u64(payload.data());
@@ -456,27 +492,46 @@ Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decode
     return bad_data("attribute chunk holds " + std::to_string(n) + " points but " + std::to_string(decoded.size()) +
                         " were decoded",
                     0);
+  if (!layer_lasers.empty() && layer_lasers.size() != n)
+    return bad_data("attribute chunk holds " + std::to_string(n) + " points but the sensor-geometry layer decoded " +
+                        std::to_string(layer_lasers.size()),
+                    0);
+  const std::size_t layer_keys = key_count(layer_lasers);
   std::vector<std::uint16_t> laser;
   std::size_t lasers = 1;
   for (const Descriptor& f : desc.value()) {
     const std::string name = kind_name(f.kind);
-    // Every value costs at least ~1/2^12 bit in the stream: bound the points by the bytes.
-    if (n > (f.stream_bytes + 16) * 4096 * 8)
+    const bool by_layer = f.method == kMethodLayerLaser;
+    if (by_layer && layer_lasers.empty())
+      return bad_data("attribute field " + name +
+                          " is coded by the lasers of a sensor-geometry layer (method 3), but the file has no such layer",
+                      f.offset + 2);
+    // Every value costs at least ~1/2^12 bit in the stream: bound the points by the bytes
+    // (method 3 codes nothing for the points of a laser whose values are all its first;
+    // the decoded points, already there, bound the work).
+    if (!by_layer && n > (f.stream_bytes + 16) * 4096 * 8)
       return bad_data("attribute field " + name + " stream is too short for " + std::to_string(n) + " points", f.offset + 48);
     RangeDecoder dec(payload.data() + f.stream_offset, static_cast<std::size_t>(f.stream_bytes));
     std::vector<std::vector<std::int64_t>> u(f.channels, std::vector<std::int64_t>(n));
     const bool own = f.kind == kRing;
-    const std::size_t hl = own ? 1 : lasers;
+    const std::vector<std::uint16_t>& key = by_layer ? layer_lasers : laser;
+    const std::size_t hl = by_layer ? layer_keys : own ? 1 : lasers;
     for (auto& ch : u) {
       ChannelCoder coder(f.method, f.span);
       History h(hl);
+      std::vector<std::uint8_t> fixed(by_layer ? hl : 0, 0);
       for (std::size_t j = 0; j < n; ++j) {
-        const std::size_t l = own || laser.empty() ? 0 : laser[j];
+        const std::size_t l = (own && !by_layer) || key.empty() ? 0 : key[j];
+        if (by_layer && h.seen[l] && fixed[l]) {
+          ch[j] = h.last[l];
+          continue;
+        }
         const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
         std::int64_t v = 0;
         if (!coder.get(dec, prev, prev2, v))
           return bad_data("attribute field " + name + " value of point " + std::to_string(j) + " is outside its span",
                           f.stream_offset);
+        if (by_layer && !h.seen[l]) fixed[l] = dec.get(coder.fixed) ? 1 : 0;
         ch[j] = v;
         h.push(l, v);
       }

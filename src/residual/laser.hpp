@@ -87,7 +87,8 @@ constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 4 + 8 + 96;
 
 /// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
 /// bytes from there to the payload's end) after the keep mask was read from `dec`.
-/// Appends `coded_points` points to `out`. Returns an error message (empty on success)
+/// Appends `coded_points` points to `out` (and, with `lasers`, each point's laser in the
+/// table to `lasers`). Returns an error message (empty on success)
 /// and the byte offset (relative to `fields`) it refers to.
 struct LaserDecodeError {
   std::string message;
@@ -99,6 +100,7 @@ struct LaserDecodeError {
                                                                   double range_step,
                                                                   double tangential_step, std::uint64_t coded_points,
                                                                   const Pose& T_cloud_sensor,
-                                                                  std::vector<Eigen::Vector3f>& out);
+                                                                  std::vector<Eigen::Vector3f>& out,
+                                                                  std::vector<std::uint16_t>* lasers = nullptr);
 
 }  // namespace lex3d::residual::detail

@@ -456,6 +456,35 @@ run(2 attr.corrupt decompress "${WORK}/k_attr_bad.lex3dm" -o "${WORK}/k_attr_bad
 if(EXISTS "${WORK}/k_attr_bad.pcd")
   message(SEND_ERROR "[attr.corrupt] a partial output was left")
 endif()
+# the ring against the sensor-geometry layer's lasers (method 3): a few dozen bytes on the
+# VLP-16 sample (2,295 with its own history); a method 3 field in a file whose layer is
+# not the sensor-geometry coding is bad data, exit 2, one line, no output
+set(VLP16 "${SAMPLES}/vlp16_velodyne_example.pcap")
+run(0 attr.ring_laser compress "${VLP16}" -o "${WORK}/v_attr.lex3dm" --max-error 0.014 --words off --json)
+expect_match(attr.ring_laser "${LAST_OUT}" "\"coding\":\"sensor-geometry\"")
+string(REGEX MATCH "\"name\":\"ring\",[^}]*\"bytes\":([0-9]+)" _ "${LAST_OUT}")
+if(NOT CMAKE_MATCH_1 OR CMAKE_MATCH_1 GREATER 200)
+  message(SEND_ERROR "[attr.ring_laser] ring field of '${CMAKE_MATCH_1}' bytes, expected at most 200")
+endif()
+run(0 attr.ring_laser_back decompress "${WORK}/v_attr.lex3dm" -o "${WORK}/v_attr.pcd")
+run(0 attr.ring_spherical compress "${VLP16}" -o "${WORK}/v_sph.lex3dm" --max-error 0.014 --words off
+    --layer-coding spherical)
+execute_process(COMMAND /usr/bin/python3 -c "
+import struct, sys, zlib
+d = bytearray(open(sys.argv[1], 'rb').read()); at = 20
+while at < len(d):
+    n = struct.unpack_from('<Q', d, at + 4)[0]
+    if d[at:at + 4] == b'ATTR':
+        assert d[at + 12 + 9] == 1  # the ring field comes first
+        d[at + 12 + 9 + 2] = 3
+        struct.pack_into('<I', d, at + 12 + n, zlib.crc32(bytes(d[at:at + 12 + n])))
+    at += 16 + n
+open(sys.argv[2], 'wb').write(d)" "${WORK}/v_sph.lex3dm" "${WORK}/v_sph_m3.lex3dm")
+run(2 attr.method3_without_laser_layer decompress "${WORK}/v_sph_m3.lex3dm" -o "${WORK}/v_sph_m3.pcd")
+expect_match(attr.method3_without_laser_layer "${LAST_ERR}" "v_sph_m3.lex3dm.*method 3.*no such layer")
+if(EXISTS "${WORK}/v_sph_m3.pcd")
+  message(SEND_ERROR "[attr.method3_without_laser_layer] a partial output was left")
+endif()
 
 # --- raw lidar logs: a capture that is not one, an Ouster capture without metadata ---
 file(WRITE "${WORK}/fake.pcap" "this is not a packet capture\n")

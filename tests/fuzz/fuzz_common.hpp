@@ -75,8 +75,8 @@ inline void check_residual(const codec::ModelData& d) {
   for (const auto& inst : d.model.instances) placed += d.alphabet->words[inst.word].points.size();
   if (placed > 200000 || d.input_points > 2000000) return;
   const auto c = residual::decode_cloud(d);
-  if (!c.ok()) {
-    check_status(c.status(), d.residual->size(), false);
+  if (!c.ok()) {  // an offset in the layer's payload or, for an ATTR error, in the attributes'
+    check_status(c.status(), std::max(d.residual->size(), d.attributes ? d.attributes->size() : std::size_t{0}), false);
     return;
   }
   if (c.value().size() > placed + d.input_points) fail("residual layer decoded more points than allowed", "");

@@ -1,6 +1,7 @@
 // Point attributes in model files (formats/model.md §2.10): round trips of each field,
 // lossless equality where the chunk promises it, bounds where it does not, bad input,
-// corrupt and truncated chunks, determinism, and a real KITTI scan.
+// corrupt and truncated chunks, determinism, a real KITTI scan, and the ring coded against
+// the sensor-geometry layer's lasers (method 3) on synthetic, sample and Ouster scans.
 
 #include <gtest/gtest.h>
 
@@ -312,6 +313,220 @@ TEST(Attributes, KittiIntensityIsLosslessAndCostsFewBits) {
   const double bpp = 8.0 * static_cast<double>(c.fields[0].bytes) / static_cast<double>(out.value().size());
   std::printf("KITTI 000000 intensity: %.3f bits a decoded point (%zu points)\n", bpp, out.value().size());
   EXPECT_LT(bpp, 8.0);  // below a byte a point (raw: 32 bits)
+}
+
+/// A model of `input` whose residual layer is the sensor-geometry coding (the laser table
+/// from the input's geometry or rings), thinning as `thin`; also the ring field's bytes
+/// when coded without the layer's lasers (methods 0-2 only, as before method 3).
+struct LaserCoded {
+  Coded c;
+  residual::LayerStats stats;
+  std::size_t ring_bytes_without_layer = 0;
+};
+LaserCoded code_laser(const Cloud& input, double e, bool thin) {
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  d.T_cloud_sensor = input.T_cloud_sensor;
+  residual::LayerOptions lo;
+  lo.thin = thin;
+  lo.track_sources = true;
+  lo.laser = true;
+  LaserCoded out;
+  const Cloud words = residual::decoder_word_cloud(d, *d.alphabet);
+  d.residual = residual::encode_layer(input, words, d.T_cloud_sensor, e, &out.stats, lo);
+  out.c.sources = out.stats.sources;
+  auto attrs = residual::encode_attributes(input, out.stats.sources, {}, &out.c.fields, out.stats.layer_lasers);
+  std::vector<residual::AttributeField> old_fields;
+  (void)residual::encode_attributes(input, out.stats.sources, {}, &old_fields);
+  for (const auto& f : old_fields)
+    if (f.name == "ring") out.ring_bytes_without_layer = f.bytes;
+  if (!attrs.empty()) d.attributes = std::move(attrs);
+  out.c.file = codec::encode_model(d);
+  return out;
+}
+
+constexpr std::size_t kDescriptorBytes = 56;  // of every field (formats/model.md §2.10)
+
+/// A method 3 ring that is a function of the layer's laser: per laser one value (at most 16
+/// bits through the integer model) and one flag, at most ~3 bytes, plus the range coder's
+/// last bytes; the rest is the descriptor.
+std::size_t free_ring_bound(std::size_t lasers) { return kDescriptorBytes + 3 * lasers + 16; }
+
+const residual::AttributeField* field(const std::vector<residual::AttributeField>& fields, const std::string& name) {
+  for (const auto& f : fields)
+    if (f.name == name) return &f;
+  return nullptr;
+}
+
+/// A scan whose ring is a permutation of its lasers (as an Ouster's channel order is of
+/// the table's elevation order): the ring costs next to nothing against the layer's
+/// lasers and comes back exactly.
+TEST(Attributes, RingFollowsTheSensorGeometryLayersLasers) {
+  Cloud in = synthetic_scan(16, 720, 21);
+  for (auto& r : in.ring) r = static_cast<std::uint16_t>((r * 7 + 3) % 16);  // a permutation of 0..15
+  const LaserCoded lc = code_laser(in, 0.01, false);
+  ASSERT_TRUE(lc.stats.laser) << "the synthetic scan is not coded by the sensor geometry";
+  ASSERT_EQ(lc.stats.layer_lasers.size(), lc.c.sources.size());
+  const auto* ring = field(lc.c.fields, "ring");
+  ASSERT_NE(ring, nullptr);
+  EXPECT_EQ(ring->method, 3);
+  // a value and a flag a laser: its stream under a tenth of the old coding's
+  EXPECT_LT((ring->bytes - kDescriptorBytes) * 10, lc.ring_bytes_without_layer - kDescriptorBytes)
+      << ring->bytes << " vs " << lc.ring_bytes_without_layer;
+  EXPECT_LE(ring->bytes, free_ring_bound(16));
+  auto out = decode(lc.c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  const Cloud& d = out.value();
+  ASSERT_EQ(d.size(), lc.c.sources.size());
+  ASSERT_TRUE(d.has_rings() && d.has_intensity() && d.has_time() && d.has_rgb());
+  for (std::size_t j = 0; j < d.size(); ++j) {
+    const std::uint32_t i = lc.c.sources[j];
+    ASSERT_EQ(d.ring[j], in.ring[i]) << j;
+    ASSERT_EQ(d.intensity[j], in.intensity[i]) << j;
+    ASSERT_EQ(d.time[j], in.time[i]) << j;
+    ASSERT_EQ(d.rgb[j], in.rgb[i]) << j;
+  }
+  // the same bytes again
+  EXPECT_EQ(code_laser(in, 0.01, false).c.file, lc.c.file);
+}
+
+/// Method 3 outside a sensor-geometry layer: the descriptor's method byte set to 3 in a
+/// file whose layer is the spherical coding is refused with a message, as is a method 3
+/// payload given to decode_attributes alone.
+TEST(Attributes, LayerLaserMethodNeedsASensorGeometryLayer) {
+  const Cloud in = synthetic_scan(8, 120, 22);
+  const Coded c = code(in, 0.02);  // spherical layer
+  auto m = codec::decode_model(c.file);
+  ASSERT_TRUE(m.ok());
+  codec::ModelData t = m.value();
+  ASSERT_EQ((*t.attributes)[9], 1);  // the first field is the ring
+  (*t.attributes)[9 + 2] = 3;
+  auto r = residual::decode_cloud(t);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  EXPECT_NE(r.status().message().find("sensor-geometry"), std::string::npos) << r.status().to_string();
+  EXPECT_EQ(r.status().message().find('\n'), std::string::npos);
+
+  Cloud ringed = synthetic_scan(16, 360, 23);
+  const LaserCoded lc = code_laser(ringed, 0.01, false);
+  ASSERT_TRUE(lc.stats.laser);
+  auto lm = codec::decode_model(lc.c.file);
+  ASSERT_TRUE(lm.ok());
+  auto layer = residual::decode_layer(*lm.value().residual, Cloud{}, lm.value().T_cloud_sensor, ringed.size());
+  ASSERT_TRUE(layer.ok());
+  Cloud alone = layer.value();
+  const Status s = residual::decode_attributes(*lm.value().attributes, alone);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("method 3"), std::string::npos) << s.to_string();
+}
+
+/// Every truncation and byte flip of a method 3 chunk fails cleanly or decodes to a cloud
+/// of the right size.
+TEST(Attributes, CorruptLayerLaserPayloadsAreRejectedWithoutCrashing) {
+  const Cloud in = synthetic_scan(8, 96, 24);
+  const LaserCoded lc = code_laser(in, 0.02, false);
+  ASSERT_TRUE(lc.stats.laser);
+  ASSERT_EQ(field(lc.c.fields, "ring")->method, 3);
+  auto m = codec::decode_model(lc.c.file);
+  ASSERT_TRUE(m.ok());
+  const Bytes payload = *m.value().attributes;
+  auto base = residual::decode_cloud(m.value());
+  ASSERT_TRUE(base.ok());
+  for (std::size_t len = 0; len < payload.size(); ++len) {
+    codec::ModelData t = m.value();
+    t.attributes = Bytes(payload.begin(), payload.begin() + static_cast<std::ptrdiff_t>(len));
+    auto r = residual::decode_cloud(t);
+    ASSERT_FALSE(r.ok()) << "truncated at " << len;
+    EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  }
+  for (std::size_t at = 0; at < payload.size(); ++at) {
+    codec::ModelData t = m.value();
+    (*t.attributes)[at] ^= 0x5A;
+    auto r = residual::decode_cloud(t);
+    if (r.ok()) {
+      EXPECT_EQ(r.value().size(), base.value().size());
+    } else {
+      EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    }
+  }
+}
+
+TEST(Attributes, LayerLaserGoldenFileDecodes) {
+  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/attributes_layer_laser_1_6.lex3dm";
+  Cloud in = synthetic_scan(8, 64, 25);
+  for (auto& r : in.ring) r = static_cast<std::uint16_t>(7 - r);
+  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) {
+    ASSERT_TRUE(io::write_file_atomic(path, code_laser(in, 0.02, false).c.file).ok());
+  }
+  ASSERT_TRUE(std::filesystem::exists(path)) << path;
+  auto bytes = io::read_file(path);
+  ASSERT_TRUE(bytes.ok());
+  auto fields = residual::inspect_attributes(
+      [&] {
+        auto m = codec::decode_model(bytes.value());
+        return m.ok() && m.value().attributes ? *m.value().attributes : Bytes{};
+      }());
+  ASSERT_TRUE(fields.ok()) << fields.status().to_string();
+  ASSERT_EQ(fields.value()[0].name, "ring");
+  EXPECT_EQ(fields.value()[0].method, 3);
+  auto out = decode(bytes.value());
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  // made from that scan at 0.02 m without thinning: a permutation of its points
+  ASSERT_EQ(out.value().size(), in.size());
+  auto a = out.value().ring, b = in.ring;
+  std::sort(a.begin(), a.end());
+  std::sort(b.begin(), b.end());
+  EXPECT_EQ(a, b);
+  // each decoded point's ring is the one of the input point at its place
+  for (std::size_t j = 0; j < out.value().size(); ++j) {
+    std::size_t nearest = 0;
+    float best = std::numeric_limits<float>::max();
+    for (std::size_t i = 0; i < in.size(); ++i) {
+      const float dd = (in.points[i] - out.value().points[j]).squaredNorm();
+      if (dd < best) {
+        best = dd;
+        nearest = i;
+      }
+    }
+    ASSERT_EQ(out.value().ring[j], in.ring[nearest]) << j;
+  }
+}
+
+/// A real scan with rings: the ring comes back exactly, its stream is under a tenth of its
+/// coding without the layer's lasers (measured here on the same decoded points) and the
+/// field within free_ring_bound of the table's lasers.
+void expect_free_ring(const std::string& path) {
+  auto r = io::read_cloud(path);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  const Cloud& in = r.value().cloud;
+  ASSERT_TRUE(in.has_rings());
+  const LaserCoded lc = code_laser(in, 0.014, true);
+  ASSERT_TRUE(lc.stats.laser) << path << ": not coded by the sensor geometry";
+  const auto* ring = field(lc.c.fields, "ring");
+  ASSERT_NE(ring, nullptr);
+  auto out = decode(lc.c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  const Cloud& d = out.value();
+  ASSERT_EQ(d.size(), lc.c.sources.size());
+  for (std::size_t j = 0; j < d.size(); ++j) ASSERT_EQ(d.ring[j], in.ring[lc.c.sources[j]]) << j;
+  const double bpp = 8.0 * static_cast<double>(ring->bytes) / static_cast<double>(d.size());
+  const double old_bpp = 8.0 * static_cast<double>(lc.ring_bytes_without_layer) / static_cast<double>(d.size());
+  std::printf("%s: ring %zu bytes (%.4f bits a point, method %d), without the layer's lasers %zu bytes (%.4f)\n",
+              path.c_str(), ring->bytes, bpp, ring->method, lc.ring_bytes_without_layer, old_bpp);
+  EXPECT_EQ(ring->method, 3);
+  EXPECT_LT((ring->bytes - kDescriptorBytes) * 10, lc.ring_bytes_without_layer - kDescriptorBytes);
+  EXPECT_LE(ring->bytes, free_ring_bound(lc.stats.lasers));
+}
+
+TEST(Attributes, OusterRingIsNearlyFreeWithTheSensorGeometryLayer) {
+  const std::string path = std::string(LEX3D_SHARED_DATA_DIR) + "/ouster/OS-2-128-U1_v2.3.0_1024x10.pcap";
+  if (!std::filesystem::exists(path)) GTEST_SKIP() << "no Ouster data";
+  expect_free_ring(path);
+}
+
+TEST(Attributes, Vlp16SampleRingIsNearlyFreeWithTheSensorGeometryLayer) {
+  expect_free_ring(std::string(LEX3D_SAMPLES_DIR) + "/vlp16_velodyne_example.pcap");
 }
 
 }  // namespace

@@ -41,24 +41,32 @@ struct AttributeField {
   double step = 0.0;           ///< quantisation step (0 for float32 bits)
   double max_error = 0.0;      ///< 0: lossless
   std::size_t bytes = 0;       ///< stored bytes of the field (descriptor and stream)
-  std::uint8_t method = 0;     ///< 0: context tree; 1: previous value; 2: linear
+  /// 0: context tree; 1: previous value; 2: linear; 3: previous value of the same laser of
+  /// the sensor-geometry layer
+  std::uint8_t method = 0;
 };
 
 /// Encodes the `ATTR` payload for the decoded points: `sources[j]` is the input point
 /// decoded point j stands for. Fields kept: those of `options` the input has. Throws
 /// std::invalid_argument naming the field for a non-finite value, a field whose size is
 /// neither 0 nor the point count, or a source index beyond the input. An empty result
-/// (no field to keep) means no chunk.
+/// (no field to keep) means no chunk. `layer_lasers`: with a sensor-geometry residual
+/// layer, each decoded point's laser in its table (LayerStats::layer_lasers), which lets
+/// a field be coded against the last value of the same laser (method 3; a ring that is a
+/// function of the table's laser then costs next to nothing); empty otherwise.
 [[nodiscard]] std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
                                                           const AttributeOptions& options = {},
-                                                          std::vector<AttributeField>* fields = nullptr);
+                                                          std::vector<AttributeField>* fields = nullptr,
+                                                          const std::vector<std::uint16_t>& layer_lasers = {});
 
 /// The fields of an `ATTR` payload (descriptors only; the streams are not decoded).
 [[nodiscard]] StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::uint8_t>& payload);
 
 /// Decodes an `ATTR` payload onto `decoded` (the decoded cloud, whose size the payload
 /// must match): sets its intensity, time, ring and rgb as the payload holds them.
-/// kBadData with the payload offset on a malformed or truncated payload.
+/// kBadData with the payload offset on a malformed or truncated payload, and for a field
+/// coded against the sensor-geometry layer's lasers (method 3), which only decode_cloud
+/// can decode.
 [[nodiscard]] Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded);
 
 }  // namespace lex3d::residual

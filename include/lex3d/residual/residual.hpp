@@ -82,6 +82,11 @@ struct LayerStats {
   /// own input point; for a kept word point or a voxel centre the input point nearest
   /// to it (ties: the lowest index).
   std::vector<std::uint32_t> sources;
+  /// With LayerOptions::track_sources and the sensor-geometry coding: each decoded point's
+  /// laser in the layer's table (a kept word point: the table's laser count), as the
+  /// decoder finds it; the attribute coder's history key (formats/model.md §2.10). Empty
+  /// for the other codings.
+  std::vector<std::uint16_t> layer_lasers;
 };
 
 /// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5,
