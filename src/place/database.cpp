@@ -125,7 +125,9 @@ const std::vector<double>& PlaceDatabase::norms() const {
   return c.norm2;
 }
 
-std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceScan& query, std::size_t k) const {
+template <class Idf, class Norm2>
+std::vector<std::pair<std::size_t, double>> PlaceDatabase::rank_tfidf(const PlaceScan& query, std::size_t k, Idf idf,
+                                                                      Norm2 norm2) const {
   std::vector<std::pair<std::size_t, double>> out;
   const std::size_t n = size();
   if (n == 0 || k == 0) return out;
@@ -135,41 +137,46 @@ std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceS
   std::vector<double> dot(n, 0.0);
   double qnorm2 = 0.0;
   for (const auto& [word, count] : query.words) {
-    const std::size_t ns = stored_postings(word);
-    const std::size_t na = word < added_inverted_.size() ? added_inverted_[word].size() : 0;
-    if (ns + na == 0) continue;
-    const double idf = std::log(1.0 + static_cast<double>(n) / static_cast<double>(ns + na));
-    const double qv = static_cast<double>(count) / qtotal * idf;
+    const double w_idf = idf(word);
+    if (w_idf == 0.0) continue;
+    const double qv = static_cast<double>(count) / qtotal * w_idf;
     qnorm2 += qv * qv;
+    const std::size_t ns = stored_postings(word);
     if (ns > 0) {
       const std::uint8_t* p = index_.postings + 8 * ld64(index_.word_start + 8 * static_cast<std::size_t>(word));
       for (std::size_t j = 0; j < ns; ++j, p += 8) {
         const std::uint32_t s = ld32(p);
-        dot[s] += qv * static_cast<double>(ld32(p + 4)) / static_cast<double>(ld32(index_.entries + s * kEntryBytes + 16)) * idf;
+        dot[s] += qv * static_cast<double>(ld32(p + 4)) / static_cast<double>(ld32(index_.entries + s * kEntryBytes + 16)) * w_idf;
       }
     }
-    if (na > 0)
+    if (word < added_inverted_.size())
       for (const auto& p : added_inverted_[word])
-        dot[p.scan] += qv * static_cast<double>(p.count) / static_cast<double>(word_total(p.scan)) * idf;
+        dot[p.scan] += qv * static_cast<double>(p.count) / static_cast<double>(word_total(p.scan)) * w_idf;
   }
   if (qnorm2 <= 0.0) return out;
-  if (added_.empty()) {
-    // The norms stored with the index (computed for this N).
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!(dot[i] > 0.0)) continue;
-      const double n2 = ldf64(index_.entries + i * kEntryBytes + 28);
-      if (n2 > 0.0) out.emplace_back(i, dot[i] / std::sqrt(n2 * qnorm2));
-    }
-  } else {
-    const std::vector<double>& norm2 = norms();
-    for (std::size_t i = 0; i < n; ++i)
-      if (dot[i] > 0.0 && norm2[i] > 0.0) out.emplace_back(i, dot[i] / std::sqrt(norm2[i] * qnorm2));
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(dot[i] > 0.0)) continue;
+    const double n2 = norm2(i);
+    if (n2 > 0.0) out.emplace_back(i, dot[i] / std::sqrt(n2 * qnorm2));
   }
   const std::size_t keep = std::min(k, out.size());
   std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(keep), out.end(),
                     [](const auto& a, const auto& b) { return a.second != b.second ? a.second > b.second : a.first < b.first; });
   out.resize(keep);
   return out;
+}
+
+std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceScan& query, std::size_t k) const {
+  const std::size_t n = size();
+  const auto idf = [&](std::uint32_t word) {
+    const std::size_t df = stored_postings(word) + (word < added_inverted_.size() ? added_inverted_[word].size() : 0);
+    return df == 0 ? 0.0 : std::log(1.0 + static_cast<double>(n) / static_cast<double>(df));
+  };
+  // Without added entries the norms stored with the index (computed for this N).
+  if (added_.empty())
+    return rank_tfidf(query, k, idf, [&](std::size_t i) { return ldf64(index_.entries + i * kEntryBytes + 28); });
+  const std::vector<double>& norm2 = norms();
+  return rank_tfidf(query, k, idf, [&](std::size_t i) { return norm2[i]; });
 }
 
 PlaceWordStatistics& PlaceWordStatistics::operator+=(const PlaceWordStatistics& other) {
@@ -192,7 +199,6 @@ PlaceWordStatistics PlaceDatabase::word_statistics() const {
 
 std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceScan& query, std::size_t k,
                                                                     const PlaceWordStatistics& global) const {
-  std::vector<std::pair<std::size_t, double>> out;
   const std::size_t n = size();
   if (global.scans < n)
     throw std::invalid_argument("PlaceDatabase::retrieve: the global statistics hold " + std::to_string(global.scans) +
@@ -222,39 +228,14 @@ std::vector<std::pair<std::size_t, double>> PlaceDatabase::retrieve(const PlaceS
     }
     norm2 = c.norm2;
   }
-  if (n == 0 || k == 0) return out;
-  double qtotal = 0.0;
-  for (const auto& wc : query.words) qtotal += wc.second;
-  if (qtotal <= 0.0) return out;
-  std::vector<double> dot(n, 0.0);
-  double qnorm2 = 0.0;
-  // As retrieve(query, k), term by term in the same order, with the global document frequencies.
-  for (const auto& [word, count] : query.words) {
-    const std::uint64_t g = global_df(word);
-    if (g == 0) continue;
-    const double idf = std::log(1.0 + N / static_cast<double>(g));
-    const double qv = static_cast<double>(count) / qtotal * idf;
-    qnorm2 += qv * qv;
-    const std::size_t ns = stored_postings(word);
-    if (ns > 0) {
-      const std::uint8_t* p = index_.postings + 8 * ld64(index_.word_start + 8 * static_cast<std::size_t>(word));
-      for (std::size_t j = 0; j < ns; ++j, p += 8) {
-        const std::uint32_t s = ld32(p);
-        dot[s] += qv * static_cast<double>(ld32(p + 4)) / static_cast<double>(ld32(index_.entries + s * kEntryBytes + 16)) * idf;
-      }
-    }
-    if (word < added_inverted_.size())
-      for (const auto& p : added_inverted_[word])
-        dot[p.scan] += qv * static_cast<double>(p.count) / static_cast<double>(word_total(p.scan)) * idf;
-  }
-  if (qnorm2 <= 0.0) return out;
-  for (std::size_t i = 0; i < n; ++i)
-    if (dot[i] > 0.0 && norm2[i] > 0.0) out.emplace_back(i, dot[i] / std::sqrt(norm2[i] * qnorm2));
-  const std::size_t keep = std::min(k, out.size());
-  std::partial_sort(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(keep), out.end(),
-                    [](const auto& a, const auto& b) { return a.second != b.second ? a.second > b.second : a.first < b.first; });
-  out.resize(keep);
-  return out;
+  // As retrieve(query, k), with the global document frequencies.
+  return rank_tfidf(
+      query, k,
+      [&](std::uint32_t word) {
+        const std::uint64_t g = global_df(word);
+        return g == 0 ? 0.0 : std::log(1.0 + N / static_cast<double>(g));
+      },
+      [&](std::size_t i) { return norm2[i]; });
 }
 
 namespace {

@@ -573,6 +573,12 @@ class PlaceDatabase {
   [[nodiscard]] std::uint32_t word_total(std::size_t i) const;
   [[nodiscard]] std::size_t stored_postings(std::uint32_t word) const;
   [[nodiscard]] const std::vector<double>& norms() const;
+  /// The k entries of highest tf-idf cosine with `query` (both retrieve()s): idf(word) is a
+  /// word's inverse document frequency (0: the word is left out), norm2(i) entry i's squared
+  /// tf-idf norm. Defined and used in database.cpp only.
+  template <class Idf, class Norm2>
+  [[nodiscard]] std::vector<std::pair<std::size_t, double>> rank_tfidf(const PlaceScan& query, std::size_t k, Idf idf,
+                                                                       Norm2 norm2) const;
 
   PlaceStorageParams storage_;
   Alphabet alphabet_;
