@@ -5,6 +5,7 @@
 
 #include "lex3d/features/features.hpp"
 #include "lex3d/io/io.hpp"
+#include "same_spot.hpp"
 #include "support/test_support.hpp"
 
 using namespace lex3d;
@@ -84,27 +85,16 @@ TEST(Descriptor, FollowsTheScanUnderARigidMotion) {
 // descriptors than two different spots.
 TEST(Descriptor, SameSpotIsCloserThanDifferentSpotsInOverlappingRealScans) {
   LEX3D_REQUIRE_SHARED("balm/poses.txt");
-  const auto poses = io::read_pose_list(test::shared_data("balm/poses.txt"));
-  ASSERT_TRUE(poses.ok()) << poses.status().to_string();
-  const int ia = 20, ib = 21;  // files 000040.bin and 000042.bin
-  const Cloud ca = test::load_or_fail(test::shared_data("balm/000040.bin"));
-  const Cloud cb = test::load_or_fail(test::shared_data("balm/000042.bin"));
-  const Pose& Ta = poses.value()[ia];
-  const Pose& Tb = poses.value()[ib];
-  FeatureParams p;
-  p.coverage.distance = 1.0;
-  p.descriptor.up = Ta.linear().transpose() * Eigen::Vector3d::UnitZ();
-  const FeatureResult fa = extract_features(ca, p);
-  DescriptorParams db = p.descriptor;
-  db.up = Tb.linear().transpose() * Eigen::Vector3d::UnitZ();
-  const RangeImage img_b = make_range_image(cb, p.range);
+  test::BalmOverlap o;
+  ASSERT_NO_FATAL_FAILURE(test::load_balm_overlap(1.0, o));
+  const FeatureResult& fa = o.fa;
+  const RangeImage& img_b = o.img_b;
 
   // Spots of A that B sees on its visible surface.
-  const Eigen::Isometry3f T_b_a = (Tb.inverse() * Ta).cast<float>();
   std::vector<Keypoint> in_b;
   std::vector<std::size_t> from_a;
   for (std::size_t i = 0; i < fa.features.size(); ++i) {
-    const Eigen::Vector3f q = T_b_a * fa.features.features[i].keypoint.point_sensor;
+    const Eigen::Vector3f q = o.T_b_a * fa.features.features[i].keypoint.point_sensor;
     const auto kp = keypoint_at(img_b, q);
     if (!kp) continue;
     const int x = img_b.wrap_x(static_cast<int>(kp->x)), y = static_cast<int>(kp->y);
@@ -114,33 +104,19 @@ TEST(Descriptor, SameSpotIsCloserThanDifferentSpotsInOverlappingRealScans) {
     from_a.push_back(i);
   }
   ASSERT_GT(in_b.size(), 200U);
-  const Features fb = describe(img_b, in_b, db, 2);
+  const Features fb = describe(img_b, in_b, o.db, 2);
   const int dim = fb.descriptor_dim;
-  std::mt19937 rng(7);
-  std::uniform_int_distribution<std::size_t> pick(0, in_b.size() - 1);
-  double sum_same = 0, sum_diff = 0;
-  std::size_t wins = 0, pairs = 0;
-  for (std::size_t k = 0; k < in_b.size(); ++k) {
-    std::size_t other = pick(rng);
-    for (int tries = 0; tries < 20 && (in_b[other].point_sensor - in_b[k].point_sensor).norm() < 2.0F; ++tries)
-      other = pick(rng);
-    if ((in_b[other].point_sensor - in_b[k].point_sensor).norm() < 2.0F) continue;
-    const float* da = fa.features.descriptor(from_a[k]);
-    const double same = std::sqrt(descriptor_distance_sq(da, fb.descriptor(k), dim));
-    const double diff = std::sqrt(descriptor_distance_sq(da, fb.descriptor(other), dim));
-    sum_same += same;
-    sum_diff += diff;
-    wins += same < diff ? 1 : 0;
-    ++pairs;
-  }
-  ASSERT_GT(pairs, 100U);
-  const double share = static_cast<double>(wins) / static_cast<double>(pairs);
-  RecordProperty("mean_same", std::to_string(sum_same / static_cast<double>(pairs)));
-  RecordProperty("mean_different", std::to_string(sum_diff / static_cast<double>(pairs)));
+  const test::SameSpotScore s = test::score_same_spots(in_b, [&](std::size_t a, std::size_t b) {
+    return std::sqrt(descriptor_distance_sq(fa.features.descriptor(from_a[a]), fb.descriptor(b), dim));
+  });
+  ASSERT_GT(s.pairs, 100U);
+  const double share = s.share();
+  RecordProperty("mean_same", std::to_string(s.sum_same / static_cast<double>(s.pairs)));
+  RecordProperty("mean_different", std::to_string(s.sum_diff / static_cast<double>(s.pairs)));
   RecordProperty("share_same_closer", std::to_string(share));
-  EXPECT_LT(sum_same, sum_diff);
-  EXPECT_GT(share, 0.7) << "same " << sum_same / static_cast<double>(pairs) << " different "
-                        << sum_diff / static_cast<double>(pairs);
+  EXPECT_LT(s.sum_same, s.sum_diff);
+  EXPECT_GT(share, 0.7) << "same " << s.sum_same / static_cast<double>(s.pairs) << " different "
+                        << s.sum_diff / static_cast<double>(s.pairs);
 }
 
 TEST(Descriptor, KeypointOutsideAPartialImageIsRejected) {

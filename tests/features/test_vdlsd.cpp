@@ -7,6 +7,7 @@
 #include "lex3d/features/features.hpp"
 #include "lex3d/features/vdlsd.hpp"
 #include "lex3d/io/io.hpp"
+#include "same_spot.hpp"
 #include "support/test_support.hpp"
 
 using namespace lex3d;
@@ -76,53 +77,29 @@ TEST(Vdlsd, InvariantUnderARigidMotionOfARealScan) {
 // ground-truth poses) is closer than two spots at least 2 m apart.
 TEST(Vdlsd, SameSpotIsCloserThanDifferentSpotsInOverlappingRealScans) {
   LEX3D_REQUIRE_SHARED("balm/poses.txt");
-  const auto poses = io::read_pose_list(test::shared_data("balm/poses.txt"));
-  ASSERT_TRUE(poses.ok()) << poses.status().to_string();
-  const Cloud ca = test::load_or_fail(test::shared_data("balm/000040.bin"));
-  const Cloud cb = test::load_or_fail(test::shared_data("balm/000042.bin"));
-  const Pose& Ta = poses.value()[20];
-  const Pose& Tb = poses.value()[21];
-  FeatureParams p;
-  p.coverage.distance = 0.0;
-  p.descriptor.up = Ta.linear().transpose() * Eigen::Vector3d::UnitZ();
-  const FeatureResult fa = extract_features(ca, p);
-  DescriptorParams db = p.descriptor;
-  db.up = Tb.linear().transpose() * Eigen::Vector3d::UnitZ();
-  const RangeImage img_b = make_range_image(cb, p.range);
-  const Eigen::Isometry3f T_b_a = (Tb.inverse() * Ta).cast<float>();
+  test::BalmOverlap o;
+  ASSERT_NO_FATAL_FAILURE(test::load_balm_overlap(0.0, o));
+  const FeatureResult& fa = o.fa;
   std::vector<Keypoint> in_b;
   std::vector<Pose> frames_a;
   for (std::size_t i = 0; i < fa.features.size(); ++i) {
-    const auto kp = keypoint_at(img_b, T_b_a * fa.features.features[i].keypoint.point_sensor);
+    const auto kp = keypoint_at(o.img_b, o.T_b_a * fa.features.features[i].keypoint.point_sensor);
     if (!kp) continue;
     in_b.push_back(*kp);
     frames_a.push_back(fa.features.features[i].T_cloud_feature);
   }
   ASSERT_GT(in_b.size(), 60U);
-  const Features fb = describe(img_b, in_b, db, 2);
-  const VdlsdResult va = describe_vdlsd(ca, frames_a, params_for(fa.image), 2);
-  const VdlsdResult vb = describe_vdlsd(cb, frames_of(fb, fb.size()), params_for(img_b), 2);
-  std::mt19937 rng(7);
-  std::uniform_int_distribution<std::size_t> pick(0, in_b.size() - 1);
-  double sum_same = 0, sum_diff = 0;
-  std::size_t wins = 0, pairs = 0;
-  for (std::size_t k = 0; k < in_b.size(); ++k) {
-    std::size_t other = pick(rng);
-    for (int tries = 0; tries < 20 && (in_b[other].point_sensor - in_b[k].point_sensor).norm() < 2.0F; ++tries)
-      other = pick(rng);
-    if ((in_b[other].point_sensor - in_b[k].point_sensor).norm() < 2.0F) continue;
-    const double same = distance(va, k, vb, k), diff = distance(va, k, vb, other);
-    sum_same += same;
-    sum_diff += diff;
-    wins += same < diff ? 1 : 0;
-    ++pairs;
-  }
-  ASSERT_GT(pairs, 50U);
-  const double share = static_cast<double>(wins) / static_cast<double>(pairs);
+  const Features fb = describe(o.img_b, in_b, o.db, 2);
+  const VdlsdResult va = describe_vdlsd(o.ca, frames_a, params_for(fa.image), 2);
+  const VdlsdResult vb = describe_vdlsd(o.cb, frames_of(fb, fb.size()), params_for(o.img_b), 2);
+  const test::SameSpotScore s =
+      test::score_same_spots(in_b, [&](std::size_t a, std::size_t b) { return distance(va, a, vb, b); });
+  ASSERT_GT(s.pairs, 50U);
+  const double share = s.share();
   RecordProperty("share_same_closer", std::to_string(share));
-  EXPECT_LT(sum_same, sum_diff);
-  EXPECT_GT(share, 0.7) << "same " << sum_same / static_cast<double>(pairs) << " different "
-                        << sum_diff / static_cast<double>(pairs);
+  EXPECT_LT(s.sum_same, s.sum_diff);
+  EXPECT_GT(share, 0.7) << "same " << s.sum_same / static_cast<double>(s.pairs) << " different "
+                        << s.sum_diff / static_cast<double>(s.pairs);
 }
 
 TEST(Vdlsd, SameResultsOnAnyThreadCount) {
