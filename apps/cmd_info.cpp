@@ -29,13 +29,15 @@ const char* octree_contexts_name(std::uint32_t contexts) {
   return contexts == 1 ? "mixed (§2.7.4, format 1.8)" : "face (§2.7.1, format 1.3)";
 }
 
-/// The sensor-geometry coding's range predictor (formats/model.md §2.8.2).
+/// The sensor-geometry coding's range predictor (formats/model.md §2.8.2, §2.8.4).
 const char* range_predictor_name(std::uint32_t predictor) {
   switch (predictor) {
     case 0: return "left neighbour";
     case 1: return "median edge detector";
     case 2: return "median edge detector with edge flags";
     case 3: return "left neighbour with edge flags";
+    case 4: return "median edge detector with edge flags and mixed contexts";
+    case 5: return "left neighbour with edge flags and mixed contexts";
     default: return "unknown predictor";
   }
 }

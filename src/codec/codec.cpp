@@ -48,6 +48,9 @@ constexpr std::uint32_t kLayerCodings = 4;
 /// and the first minor version that has it.
 constexpr std::uint16_t kLaserEdgeMinor = 7;
 constexpr std::size_t kLaserPredictorOffset = 68;
+/// A sensor-geometry layer whose range residuals are coded with mixed contexts (range
+/// predictor 4 or 5, model.md §2.8.4) and the first minor version that has it.
+constexpr std::uint16_t kLaserMixedMinor = 9;
 /// A voxel layer with the mixed octree contexts (model.md §2.7.4) and the first minor
 /// version that has it.
 constexpr std::uint16_t kVoxelMixedMinor = 8;
@@ -730,6 +733,11 @@ bool laser_edge_layer(const std::vector<std::uint8_t>& payload) {
          ld_u32(payload.data() + kLaserPredictorOffset) >= 2;
 }
 
+/// Whether a layer is a sensor-geometry layer with mixed range contexts (predictor 4 or 5).
+bool laser_mixed_layer(const std::vector<std::uint8_t>& payload) {
+  return laser_edge_layer(payload) && ld_u32(payload.data() + kLaserPredictorOffset) >= 4;
+}
+
 bool voxel_mixed_layer(const std::vector<std::uint8_t>& payload) {
   return layer_coding(payload) == 2 && payload.size() > kVoxelContextsOffset && payload[kVoxelContextsOffset] >= 1;
 }
@@ -977,6 +985,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   std::uint16_t minor = data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor;
   if (data.residual && laser_edge_layer(*data.residual)) minor = std::max(minor, kLaserEdgeMinor);
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
+  if (data.residual && laser_mixed_layer(*data.residual)) minor = std::max(minor, kLaserMixedMinor);
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
 
   std::vector<std::uint8_t> mhdr;
@@ -1108,6 +1117,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
             return ctx.error("a sensor-geometry layer with range predictor " +
                                  std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
                                  " needs format version 1." + std::to_string(kLaserEdgeMinor) + ", the header says 1." +
+                                 std::to_string(h.minor),
+                             c.payload_offset + kLaserPredictorOffset);
+          if (laser_mixed_layer(*out.residual) && h.minor < kLaserMixedMinor)
+            return ctx.error("a sensor-geometry layer with range predictor " +
+                                 std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
+                                 " needs format version 1." + std::to_string(kLaserMixedMinor) + ", the header says 1." +
                                  std::to_string(h.minor),
                              c.payload_offset + kLaserPredictorOffset);
           if (voxel_mixed_layer(*out.residual) && h.minor < kVoxelMixedMinor)

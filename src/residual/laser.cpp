@@ -23,6 +23,7 @@
 #include "codec/bytes.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/layout.hpp"
+#include "residual/mixing.hpp"
 #include "residual/point_ball_grid.hpp"
 
 namespace lex3d::residual::detail {
@@ -155,6 +156,75 @@ class RangeModel {
   std::vector<std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1>> mant_;
 };
 
+/// The beam-length residuals of predictors 4 and 5 (formats/model.md §2.8.4): RangeModel's
+/// binarisation, with the probability of each zero, sign and exponent decision mixed in the
+/// logistic domain from three context models (YoungBitModel) by weights that learn per
+/// decision; the mantissa bits are RangeModel's.
+class MixedRangeModel {
+ public:
+  static constexpr int kClasses = IntModel::kClasses;
+  static constexpr int kMaxExponent = IntModel::kMaxExponent;
+  /// Contexts of the three models: recent errors (as RangeModel's), the predicted beam
+  /// length's size with the recent errors, the local gradient with the laser's last
+  /// residual and the laser's place in the table.
+  static constexpr int kContexts[3] = {kClasses * kClasses, 16 * kClasses, kClasses * kClasses * 8};
+  struct Contexts {
+    int at[3];
+    int sign;      ///< 0, 1, 2: the laser's last residual zero, positive, negative
+    int mantissa;  ///< the class of the recent errors
+  };
+  MixedRangeModel() : mant_(kClasses) {
+    for (int m = 0; m < 3; ++m) models_[m].resize(static_cast<std::size_t>(kContexts[m]) * kSlots);
+  }
+  void put(RangeEncoder& enc, const Contexts& x, std::int64_t v) {
+    bit(enc, x, 0, 0, v != 0);
+    if (v == 0) return;
+    bit(enc, x, 1 + x.sign, 1, v < 0);
+    const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
+    int e = 0;
+    while ((mag >> (e + 1)) != 0) ++e;
+    for (int j = 0; j < e; ++j) bit(enc, x, 4 + j, 2 + std::min(j, 3), true);
+    if (e < kMaxExponent) bit(enc, x, 4 + e, 2 + std::min(e, 3), false);
+    auto& mant = mant_[static_cast<std::size_t>(x.mantissa)];
+    for (int j = e - 1; j >= 0; --j)
+      enc.put(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)], ((mag >> j) & 1U) != 0);
+  }
+  std::int64_t get(RangeDecoder& dec, const Contexts& x) {
+    if (!bit(dec, x, 0, 0)) return 0;
+    const bool negative = bit(dec, x, 1 + x.sign, 1);
+    int e = 0;
+    while (e < kMaxExponent && bit(dec, x, 4 + e, 2 + std::min(e, 3))) ++e;
+    auto& mant = mant_[static_cast<std::size_t>(x.mantissa)];
+    std::uint64_t mag = 1;
+    for (int j = e - 1; j >= 0; --j)
+      mag = (mag << 1) | (dec.get(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)]) ? 1U : 0U);
+    const auto v = static_cast<std::int64_t>(mag);
+    return negative ? -v : v;
+  }
+
+ private:
+  static constexpr int kSlots = 4 + kMaxExponent + 1;  // zero, sign in 3 contexts, exponent bits
+  static constexpr int kWeightSets = 6;                // zero, sign, exponent bits 0, 1, 2, 3 and on
+  static constexpr std::int32_t kInitialWeight = 19661;  // 0.3 in 1/65536
+  std::uint32_t p0(const Contexts& x, int slot, int set) {
+    const auto at = [&](int m) -> YoungBitModel& { return models_[m][static_cast<std::size_t>(x.at[m] * kSlots + slot)]; };
+    return mix_.p0(at(0), at(1), at(2), static_cast<std::size_t>(set));
+  }
+  void bit(RangeEncoder& enc, const Contexts& x, int slot, int set, bool b) {
+    enc.put(p0(x, slot, set), b);
+    mix_.learn(b);
+  }
+  bool bit(RangeDecoder& dec, const Contexts& x, int slot, int set) {
+    const bool b = dec.get(p0(x, slot, set));
+    mix_.learn(b);
+    return b;
+  }
+
+  std::array<std::vector<YoungBitModel>, 3> models_;
+  Mix3 mix_{kWeightSets, kInitialWeight};
+  std::vector<std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1>> mant_;
+};
+
 /// The models and predictor state shared by encoder and decoder (formats/model.md §2.8.3).
 class PointCoder {
  public:
@@ -162,7 +232,9 @@ class PointCoder {
   /// `spacing`: range step · grid step / E, so that a beam length index times it is the gap,
   /// in units of E, between neighbouring columns' points at that range.
   PointCoder(std::uint32_t lasers, double spacing, std::uint32_t predictor)
-      : med_(predictor == 1 || predictor == 2), edges_(predictor >= 2), spacing_(spacing), sel_(lasers, 0),
+      : med_(predictor == 1 || predictor == 2 || predictor == 4), edges_(predictor >= 2),
+        mixed_(predictor >= 4 ? std::make_unique<MixedRangeModel>() : nullptr),
+        occ_mix_(predictor >= 4 ? std::make_unique<OccupancyMix>(lasers) : nullptr), lasers_(lasers), spacing_(spacing), sel_(lasers, 0),
         last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone), last_res_(lasers, 0),
         last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0),
         occ_prev2_(lasers + 1, 0), err_(lasers, 0) {}
@@ -188,20 +260,34 @@ class PointCoder {
   }
   /// With predictors 2 and 3 the context also holds the pixel two coded columns back and
   /// the upper-left one.
+  /// How far laser l's pixel in this column lies from the laser's last point, in E, as a
+  /// class 0-3: under E, thinning has likely dropped it.
+  int near(std::uint32_t l) const {
+    if (last_c_[l] == kNone) return 3;
+    const double gap = static_cast<double>(std::abs(last_k_[l])) * spacing_ * static_cast<double>(column_ - last_c_[l]);
+    return gap < 0.8 ? 0 : gap < 1.0 ? 1 : gap < 1.25 ? 2 : 3;
+  }
   int occupancy_ctx(std::uint32_t l) const {
     const int up = l == 0 ? 1 : occ_now_[l - 1];
-    // How far this pixel lies from the laser's last point, in E: under E, thinning
-    // has likely dropped it.
-    int near = 3;
-    if (last_c_[l] != kNone) {
-      const double gap = static_cast<double>(std::abs(last_k_[l])) * spacing_ * static_cast<double>(column_ - last_c_[l]);
-      near = gap < 0.8 ? 0 : gap < 1.0 ? 1 : gap < 1.25 ? 2 : 3;
-    }
+    const int near = this->near(l);
     const int base = occ_prev_[l] + 2 * occ_prev_[l + 1] + 4 * up + 8 * (last_dc_ == 0 ? 1 : 0) + 16 * near;
     if (!edges_) return base;
     return base + 64 * occ_prev2_[l] + 128 * (l == 0 ? 1 : occ_prev_[l - 1]);
   }
   void occupied(std::uint32_t l) { occ_now_[l] = 1; }
+  /// Codes (or decodes) whether laser l has a point in this column: with `occupancy`, or
+  /// with predictors 4 and 5 mixed from three models (formats/model.md §2.8.4).
+  void put_occupancy(RangeEncoder& enc, std::uint32_t l, bool occ) {
+    if (!mixed_) return enc.put(occupancy[occupancy_ctx(l)], occ);
+    enc.put(occupancy_p0(l), occ);
+    occ_mix_->mix.learn(occ);
+  }
+  bool get_occupancy(RangeDecoder& dec, std::uint32_t l) {
+    if (!mixed_) return dec.get(occupancy[occupancy_ctx(l)]);
+    const bool occ = dec.get(occupancy_p0(l));
+    occ_mix_->mix.learn(occ);
+    return occ;
+  }
 
   // --- one point of laser l in the current column ---
   /// A beam length is predicted by the laser's left neighbour (the same laser's last point
@@ -212,9 +298,10 @@ class PointCoder {
   struct Prediction {
     std::int64_t k;
     int ctx;
-    bool edge = false;     ///< predictors 2, 3: left and upper pixels far apart, a flag picks one
+    bool edge = false;     ///< predictors 2-5: left and upper pixels far apart, a flag picks one
     std::int64_t alt = 0;  ///< the upper pixel's value, picked by flag 1 (k: the left one, flag 0)
     int flag_ctx = 0;
+    std::int64_t gradient = 0;  ///< |a - c| + |b - c| where the left, upper and upper-left pixels exist
   };
   Prediction predict(std::uint32_t l) const {
     const bool has_a = last_c_[l] != kNone && column_ - last_c_[l] <= kMaxColumnGap;
@@ -226,12 +313,13 @@ class PointCoder {
     else score *= 2;
     const int activity = std::min(IntModel::context_of(score / 4), kClasses - 1);
     if ((med_ || edges_) && has_a && has_b && prev_c_[up_] != kNone && prev_c_[up_] == last_c_[l]) {
-      const std::int64_t a = last_k_[l], b = last_k_[up_];
+      const std::int64_t a = last_k_[l], b = last_k_[up_], c = prev_k_[up_];
+      const std::int64_t gradient = std::min<std::int64_t>(std::abs(a - c) + std::abs(b - c), std::int64_t{1} << 40);
       if (edges_ && std::abs(a - b) > kEdgeSteps) {
         const int fc = sel_[l] + 3 * sel_[up_] + 9 * (a < b ? 1 : 0);
-        return {a, activity * kClasses + second, true, b, fc};
+        return {a, activity * kClasses + second, true, b, fc, gradient};
       }
-      return {med_ ? med(l) : a, activity * kClasses + second};
+      return {med_ ? med(l) : a, activity * kClasses + second, false, 0, 0, gradient};
     }
     return {has_a ? last_k_[l] : last_k_[up_], activity * kClasses + second};
   }
@@ -239,6 +327,15 @@ class PointCoder {
   std::int64_t med(std::uint32_t l) const {
     const std::int64_t a = last_k_[l], b = last_k_[up_], c = prev_k_[up_];
     return c >= std::max(a, b) ? std::min(a, b) : c <= std::min(a, b) ? std::max(a, b) : a + b - c;
+  }
+  /// Codes (or decodes) laser l's residual from prediction `pk`: with RangeModel, or with
+  /// predictors 4 and 5 with MixedRangeModel.
+  void put_residual(RangeEncoder& enc, std::uint32_t l, const Prediction& p, std::int64_t pk, std::int64_t res) {
+    if (mixed_) mixed_->put(enc, mixed_contexts(l, p, pk), res);
+    else range.put(enc, p.ctx, sign_ctx(l), res);
+  }
+  std::int64_t get_residual(RangeDecoder& dec, std::uint32_t l, const Prediction& p, std::int64_t pk) {
+    return mixed_ ? mixed_->get(dec, mixed_contexts(l, p, pk)) : range.get(dec, p.ctx, sign_ctx(l));
   }
   int k1_ctx(std::uint32_t l) const { return IntModel::context_of(last_k1_[l], last_k1_any_); }
   int k2_ctx(std::uint32_t l, std::int64_t k1) const { return IntModel::context_of(last_k2_[l], k1); }
@@ -272,7 +369,49 @@ class PointCoder {
 
  private:
   static constexpr std::uint32_t kNone = 0xFFFFFFFFU;
+  /// The three contexts of MixedRangeModel: `ctx`; the bit length of the predicted beam
+  /// length index (less 4, in 0..15) with the recent errors' class; the gradient's class
+  /// with the class of the laser's last residual and the laser's eighth of the table.
+  MixedRangeModel::Contexts mixed_contexts(std::uint32_t l, const Prediction& p, std::int64_t pk) const {
+    const int activity = p.ctx / kClasses, second = p.ctx % kClasses;
+    std::uint64_t a = pk < 0 ? static_cast<std::uint64_t>(-pk) : static_cast<std::uint64_t>(pk);
+    int size = 0;
+    while (a != 0) {
+      a >>= 1;
+      ++size;
+    }
+    size = std::clamp(size - 4, 0, 15);
+    const int eighth = static_cast<int>((static_cast<std::uint64_t>(l) * 8) / lasers_);
+    const int gradient = IntModel::context_of(p.gradient);
+    return {{p.ctx, size * kClasses + activity, (gradient * kClasses + second) * 8 + eighth}, sign_ctx(l), activity};
+  }
+  /// The occupancy models of predictors 4 and 5: occupancy_ctx; the laser with its own
+  /// last two columns and the pixel above; the previous column from the laser above to two
+  /// below, the two pixels above in this column and `near`. Weights per (pixel above,
+  /// laser's last column).
+  struct OccupancyMix {
+    explicit OccupancyMix(std::uint32_t lasers) : by_laser(static_cast<std::size_t>(lasers) * 8) {}
+    std::vector<YoungBitModel> by_ctx = std::vector<YoungBitModel>(256);
+    std::vector<YoungBitModel> by_laser;
+    std::vector<YoungBitModel> by_window = std::vector<YoungBitModel>(64 * 4);
+    Mix3 mix{4, 21845};
+  };
+  std::uint32_t occupancy_p0(std::uint32_t l) {
+    OccupancyMix& m = *occ_mix_;
+    const unsigned up = l == 0 ? 1U : occ_now_[l - 1];
+    const unsigned up2 = l < 2 ? 1U : occ_now_[l - 2];
+    const unsigned left = occ_prev_[l];
+    const std::size_t by_laser = static_cast<std::size_t>(l) * 8 + left + 2U * occ_prev2_[l] + 4U * up;
+    const unsigned below2 = l + 2 < lasers_ ? occ_prev_[l + 2] : 0U;
+    const std::size_t window = ((((l == 0 ? 1U : occ_prev_[l - 1]) + 2U * left + 4U * occ_prev_[l + 1] + 8U * below2 +
+                                  16U * up + 32U * up2) << 2) | static_cast<unsigned>(near(l)));
+    return m.mix.p0(m.by_ctx[static_cast<std::size_t>(occupancy_ctx(l))], m.by_laser[by_laser], m.by_window[window],
+                    up * 2 + left);
+  }
   bool med_, edges_;
+  std::unique_ptr<MixedRangeModel> mixed_;
+  std::unique_ptr<OccupancyMix> occ_mix_;
+  std::uint32_t lasers_;
   double spacing_;
   std::vector<std::uint8_t> sel_;  // per laser: the neighbour its last point took (picked)
   std::vector<std::int64_t> last_k_;
@@ -1315,7 +1454,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
       std::size_t j = at;
       for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
         const bool occ = j < end && ring_at(j) == l;
-        enc.put(pc.occupancy[pc.occupancy_ctx(l)], occ);
+        pc.put_occupancy(enc, l, occ);
         if (!occ) continue;
         pc.occupied(l);
         for (;;) {
@@ -1334,7 +1473,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
             pc.picked(l, 0);
           }
           const std::int64_t res = c.k - pk;
-          pc.range.put(enc, pred.ctx, pc.sign_ctx(l), res);
+          pc.put_residual(enc, l, pred, pk, res);
           if (any_correction) {
             pc.tangential1.put(enc, pc.k1_ctx(l), c.k1);
             pc.tangential2.put(enc, pc.k2_ctx(l, c.k1), c.k2);
@@ -1504,7 +1643,7 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
   // OS-0-32, HDL-32E and VLP-16 scans 1-6 % larger. Predictors 0 and 1 (no edge flags)
   // are still decoded; 2 or 3 coded each of these scans and a KITTI and balm scan smaller.
   const auto predictors_of = [](std::size_t share) {
-    return share == 0 ? std::vector<std::uint32_t>{2, 3} : std::vector<std::uint32_t>{3};
+    return share == 0 ? std::vector<std::uint32_t>{4, 5} : std::vector<std::uint32_t>{5};
   };
   // With several shares (an estimated table) or several candidate assignments, a large
   // layer makes the choice on a quarter of the turn (every fourth of 32 column blocks):
@@ -1590,7 +1729,7 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
     return LaserDecodeError{"column count " + std::to_string(table.columns) + " is not in [1, 2^20]", 20};
   if (dir != 1U && dir != 0xFFFFFFFFU) return LaserDecodeError{"column direction is neither +1 nor -1", 24};
   table.direction = dir == 1U ? 1 : -1;
-  if (table.predictor > 3) return LaserDecodeError{"range predictor " + std::to_string(table.predictor) + " is not in 0..3", 28};
+  if (table.predictor > 5) return LaserDecodeError{"range predictor " + std::to_string(table.predictor) + " is not in 0..5", 28};
   if (!(std::isfinite(table.azimuth0) && std::abs(table.azimuth0) <= kTwoPi))
     return LaserDecodeError{"azimuth of column 0 is not in [-2pi, 2pi]", 32};
   Eigen::Matrix3d R;
@@ -1654,7 +1793,7 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
     pc.set_shift(shift);
     pc.start_column(c, dc);
     for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
-      if (!dec.get(pc.occupancy[pc.occupancy_ctx(l)])) continue;
+      if (!pc.get_occupancy(dec, l)) continue;
       pc.occupied(l);
       const auto b = beams.beam(l, c, shift);
       for (;;) {
@@ -1667,7 +1806,7 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
         } else {
           pc.picked(l, 0);
         }
-        const std::int64_t res = pc.range.get(dec, pred.ctx, pc.sign_ctx(l));
+        const std::int64_t res = pc.get_residual(dec, l, pred, pk);
         const std::int64_t k1 = any_correction ? pc.tangential1.get(dec, pc.k1_ctx(l)) : 0;
         const std::int64_t k2 = any_correction ? pc.tangential2.get(dec, pc.k2_ctx(l, k1)) : 0;
         const std::int64_t k = pk + res;

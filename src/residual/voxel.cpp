@@ -3,6 +3,8 @@
 
 #include "residual/voxel.hpp"
 
+#include "residual/mixing.hpp"
+
 #include <algorithm>
 #include <array>
 #include <memory>
@@ -145,48 +147,6 @@ class OccupancyModels {
   std::vector<BitModel> models_ = std::vector<BitModel>(8 * 64 * 256);
 };
 
-/// squash(d) = 4096 / (1 + e^(-d/256)) at d = -2048, -1920, ..., 2048 (formats/model.md
-/// §2.7.4): the mixer's logistic function, interpolated between these knots.
-constexpr std::int32_t kSquashKnots[33] = {1,    2,    4,    6,    10,   17,   27,   45,   74,   120,  194,
-                                           311,  488,  747,  1102, 1546, 2048, 2550, 2994, 3349, 3608, 3785,
-                                           3902, 3976, 4022, 4051, 4069, 4079, 4086, 4090, 4092, 4094, 4095};
-
-/// The probability of a 1, in 1/4096 and within [1, 4095], of a logit d in 1/256.
-std::int32_t squash(std::int32_t d) {
-  d = std::clamp(d, -2047, 2047) + 2048;
-  const std::int32_t k = d >> 7, f = d & 127;
-  return std::clamp((kSquashKnots[k] * (128 - f) + kSquashKnots[k + 1] * f + 64) >> 7, 1, 4095);
-}
-
-/// stretch(p): the least d in [-2047, 2047] with squash(d) >= p, for p in [0, 4095] (the
-/// inverse of squash, as a table).
-const std::array<std::int16_t, 4096>& stretch_table() {
-  static const std::array<std::int16_t, 4096> table = [] {
-    std::array<std::int16_t, 4096> t{};
-    std::int32_t d = -2047;
-    for (std::int32_t p = 0; p < 4096; ++p) {
-      while (d < 2047 && squash(d) < p) ++d;
-      t[static_cast<std::size_t>(p)] = static_cast<std::int16_t>(d);
-    }
-    return t;
-  }();
-  return table;
-}
-
-/// An adaptive probability of a 1 (in 1/65536) that moves by 1/2, 1/4, 1/8, 1/16 of the
-/// error over its first 1, 2, 4, 8 bits and by 1/32 after 15.
-struct YoungBitModel {
-  std::uint16_t p1 = 32768;
-  std::uint8_t seen = 0;
-  void update(bool bit) {
-    const int shift = seen < 1 ? 1 : seen < 3 ? 2 : seen < 7 ? 3 : seen < 15 ? 4 : 5;
-    if (seen < 15) ++seen;
-    if (bit) p1 = static_cast<std::uint16_t>(p1 + ((65536U - p1) >> shift));
-    else p1 = static_cast<std::uint16_t>(p1 - (p1 >> shift));
-    p1 = std::clamp<std::uint16_t>(p1, 256, 65280);
-  }
-};
-
 /// The occupancy models of §2.7.4: per bit, three context models, each a YoungBitModel,
 /// mixed in the logistic domain with weights that learn per (child, siblings so far).
 class MixedContexts {
@@ -228,25 +188,10 @@ class MixedContexts {
     index_[0] = faces;
     index_[1] = faces * 8 + far;
     index_[2] = (set * 27 + plane) * 8 + low;
-    weights_at_ = 3 * set;
-    const auto& st = stretch_table();
-    std::int64_t dot = 0;
-    for (int m = 0; m < 3; ++m) {
-      input_[m] = st[models_[m][index_[m]].p1 >> 4];
-      dot += static_cast<std::int64_t>(weights_[weights_at_ + m]) * input_[m];
-    }
-    p1_ = squash(static_cast<std::int32_t>(std::clamp<std::int64_t>(dot >> 16, -2047, 2047)));  // (>>: floor)
-    return static_cast<std::uint32_t>(4096 - p1_);
+    return mix_.p0(models_[0][index_[0]], models_[1][index_[1]], models_[2][index_[2]], set);
   }
   /// Learns child i's bit after p0.
-  void update(bool bit) {
-    const std::int32_t error = (bit ? 4096 : 0) - p1_;
-    for (int m = 0; m < 3; ++m) {
-      models_[m][index_[m]].update(bit);
-      std::int32_t& w = weights_[weights_at_ + m];
-      w = std::clamp(w + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
-    }
-  }
+  void update(bool bit) { mix_.learn(bit); }
   /// Ends the node, `byte` its children: its plane along each axis is remembered.
   void end_node(unsigned byte) {
     for (unsigned a = 0; a < 3; ++a) {
@@ -269,11 +214,10 @@ class MixedContexts {
     return t;
   }();
   static constexpr std::uint32_t kNoKey = 0xFFFFFFFFU;
-  static constexpr std::int32_t kMaxWeight = 1 << 19;
   std::array<std::vector<YoungBitModel>, 3> models_{std::vector<YoungBitModel>(4096),
                                                     std::vector<YoungBitModel>(4096 * 8),
                                                     std::vector<YoungBitModel>(64 * 27 * 8)};
-  std::vector<std::int32_t> weights_ = std::vector<std::int32_t>(64 * 3, 21845);
+  Mix3 mix_{64, 21845};  // weights 1/3 each, per (child, siblings so far)
   std::array<std::vector<std::uint32_t>, 3> plane_key_;
   std::array<std::vector<std::uint8_t>, 3> plane_;
   std::size_t plane_mask_ = 0;
@@ -281,9 +225,6 @@ class MixedContexts {
   unsigned faces_ = 0;
   unsigned predicted_[3] = {2, 2, 2};
   std::size_t index_[3] = {0, 0, 0};
-  std::size_t weights_at_ = 0;
-  std::int32_t input_[3] = {0, 0, 0};
-  std::int32_t p1_ = 2048;
 };
 
 /// Which of child i's three lower neighbours on the child level are occupied (bit a: along

@@ -219,12 +219,13 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   const residual::LayerStats st = residual::add_layer(d, Alphabet{}, scan, 0.01);
   ASSERT_TRUE(st.laser);
   const Bytes file = codec::encode_model(d);
-  EXPECT_EQ(file[10], 7) << "a sensor-geometry layer with edge flags (predictor 2 or 3) makes the file format 1.7";
+  EXPECT_EQ(file[10], 9) << "a sensor-geometry layer with mixed contexts (predictor 4 or 5) makes the file format 1.9";
   ASSERT_TRUE(d.residual);
   ASSERT_GE(d.residual->size(), 72U);
   std::uint32_t predictor = 0;
   std::memcpy(&predictor, d.residual->data() + 68, 4);  // (little-endian hosts)
-  EXPECT_GE(predictor, 2U);
+  EXPECT_GE(predictor, 4U);
+  EXPECT_LE(predictor, 5U);
   const auto decoded = codec::decode_model(file);
   ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
   const auto cloud = residual::decode_cloud(decoded.value());
@@ -233,6 +234,7 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
   expect_rejected(retype_chunk(file, "RESL", "RESL", 3), "1.4");
   expect_rejected(retype_chunk(file, "RESL", "RESL", 6), "1.7");
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 8), "1.9");
   expect_rejected(retype_chunk(file, "RESL", "RESD", 4), "RESL");
   expect_rejected(retype_chunk(file, "RESL", "RESV", 4), "RESL");
 }
@@ -264,12 +266,12 @@ TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
   EXPECT_FALSE(residual::decode_layer(poke(good, 64, &dir, 4), Cloud{}, Pose::Identity(), scan.size()).ok());
   for (const double unit : {-1.0, 0.5, std::nan("")})
     EXPECT_FALSE(residual::decode_layer(poke(good, 48, &unit, 8), Cloud{}, Pose::Identity(), scan.size()).ok()) << unit;
-  const std::uint32_t bad_predictor = 4;
+  const std::uint32_t bad_predictor = 6;
   EXPECT_FALSE(residual::decode_layer(poke(good, 68, &bad_predictor, 4), Cloud{}, Pose::Identity(), scan.size()).ok())
       << "predictor";
   // Another valid predictor on the same stream decodes other points, or fails, but never
   // more points than the layer holds.
-  for (const std::uint32_t other : {0U, 1U, 2U, 3U}) {
+  for (const std::uint32_t other : {0U, 1U, 2U, 3U, 4U, 5U}) {
     const auto d = residual::decode_layer(poke(good, 68, &other, 4), Cloud{}, Pose::Identity(), scan.size());
     if (d.ok()) EXPECT_LE(d.value().size(), scan.size()) << other;
   }
@@ -400,7 +402,8 @@ TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile) {
   write_xyz(golden_path("tiny_residual_laser_1.4.decoded.xyz"), cloud.value());
 }
 
-// Format 1.7: the same scan with range predictor 2 or 3 (edge flags).
+// Format 1.7: the same scan with range predictor 2 or 3 (edge flags), as written before
+// format 1.9 (the encoder now writes predictors 4 and 5: this writer stays as the record).
 TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_7) {
   const Cloud input = organised_scan(8, 128, 0.1, 21);
   codec::ModelData d;
@@ -439,6 +442,50 @@ TEST(ResidualLaserGolden, Format1_7FileDecodesToTheRecordedCloud) {
   const auto info = codec::inspect(file);
   ASSERT_TRUE(info.ok());
   EXPECT_EQ(info.value().minor, 7);
+  std::string types;
+  for (const auto& c : info.value().chunks) types += c.type + " ";
+  EXPECT_EQ(types, "MHDR ALPH INST RESL IEND ");
+}
+
+// Format 1.9: the same scan with range predictor 4 or 5 (mixed contexts).
+TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_9) {
+  const Cloud input = organised_scan(8, 128, 0.1, 21);
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError);
+  ASSERT_TRUE(st.laser);
+  const Bytes file = codec::encode_model(d);
+  ASSERT_EQ(file[10], 9);
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok());
+  const auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok());
+  std::ofstream out(golden_path("tiny_residual_laser_1.9.lex3dm"), std::ios::binary);
+  out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
+  write_xyz(golden_path("tiny_residual_laser_1.9.input.xyz"), input);
+  write_xyz(golden_path("tiny_residual_laser_1.9.decoded.xyz"), cloud.value());
+}
+
+TEST(ResidualLaserGolden, Format1_9FileDecodesToTheRecordedCloud) {
+  const Bytes file = read_bytes(golden_path("tiny_residual_laser_1.9.lex3dm"));
+  const Cloud input = read_xyz(golden_path("tiny_residual_laser_1.9.input.xyz"));
+  const Cloud recorded = read_xyz(golden_path("tiny_residual_laser_1.9.decoded.xyz"));
+  ASSERT_FALSE(file.empty());
+  ASSERT_FALSE(input.empty());
+  ASSERT_FALSE(recorded.empty());
+  const auto d = codec::decode_model(file);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_EQ(d.value().input_points, input.size());
+  const auto cloud = residual::decode_cloud(d.value());
+  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
+  ASSERT_EQ(cloud.value().size(), recorded.size());
+  for (std::size_t i = 0; i < recorded.size(); ++i) EXPECT_TRUE(cloud.value().points[i] == recorded.points[i]) << i;
+  EXPECT_LE(hausdorff(input, cloud.value()), kGoldenMaxError);
+  EXPECT_LE(hausdorff(cloud.value(), input), kGoldenMaxError);
+  const auto info = codec::inspect(file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info.value().minor, 9);
   std::string types;
   for (const auto& c : info.value().chunks) types += c.type + " ";
   EXPECT_EQ(types, "MHDR ALPH INST RESL IEND ");
