@@ -1637,23 +1637,22 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     return code_laser(head, input, coded, *p.a, p.beams, p.order, p.shift, p.beam_of, p.offset, max_error, bound, thin,
                       share, predictors, inner, js, sizes);
   };
-  // Each share with predictor 3 (left neighbour, a flag at edges), the first also with
-  // predictor 2 (median edge detector, a flag at edges): at 14 mm predictor 2 coded the
-  // OS-2-128 scan 8 % and the OS-1-32 scan 4 % smaller than predictor 3, the OS-0-128,
-  // OS-0-32, HDL-32E and VLP-16 scans 1-6 % larger. Predictors 0 and 1 (no edge flags)
-  // are still decoded; 2 or 3 coded each of these scans and a KITTI and balm scan smaller.
+  // Each share with predictor 5 (left neighbour, a flag at edges), the first also with
+  // predictor 4 (median edge detector, a flag at edges), both with mixed contexts: at 14 mm
+  // the median edge detector coded the OS-2-128 scan 8 % and the OS-1-32 scan 4 % smaller
+  // than the left neighbour, the OS-0-128, OS-0-32, HDL-32E and VLP-16 scans 1-6 % larger.
+  // Predictors 0-3 are still decoded; 2 or 3 coded each of these scans and a KITTI and
+  // balm scan smaller than 0 or 1, and 4 or 5 (the same with mixed contexts) 2-7 %
+  // smaller than 2 or 3.
   const auto predictors_of = [](std::size_t share) {
     return share == 0 ? std::vector<std::uint32_t>{4, 5} : std::vector<std::uint32_t>{5};
   };
-  // With several shares (an estimated table) or several candidate assignments, a large
-  // layer makes the choice on a quarter of the turn (every fourth of 32 column blocks):
-  // each candidate, share and predictor is coded there, and only the one with the fewest
-  // bits a sampled point is coded in full. A small layer codes every share of every
-  // candidate in full (the shares side by side, one thread each). (With one share and one
-  // candidate the trial would save nothing: the quantisation, not the stream, is most of
-  // a coding's work.)
-  const bool several = shares.size() > 1 || candidates.size() > 1;
-  if (several && coded.size() >= kLaserTrialMinPoints) {
+  // A large layer makes the choice of candidate assignment, share and predictor on a
+  // quarter of the turn (every fourth of 32 column blocks): each is coded there, and only
+  // the one with the fewest bits a sampled point is coded in full. A small layer codes
+  // every share of every candidate with each of its predictors in full (the shares side
+  // by side, one thread each).
+  if (coded.size() >= kLaserTrialMinPoints) {
     struct Pick {
       double bits = std::numeric_limits<double>::infinity();
       std::size_t candidate = 0, share = 0;

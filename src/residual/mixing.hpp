@@ -44,11 +44,13 @@ struct YoungBitModel {
   std::uint16_t p1 = 32768;
   std::uint8_t seen = 0;
   void update(bool bit) {
-    const int shift = seen < 1 ? 1 : seen < 3 ? 2 : seen < 7 ? 3 : seen < 15 ? 4 : 5;
-    if (seen < 15) ++seen;
-    if (bit) p1 = static_cast<std::uint16_t>(p1 + ((65536U - p1) >> shift));
-    else p1 = static_cast<std::uint16_t>(p1 - (p1 >> shift));
-    p1 = std::clamp<std::uint16_t>(p1, 256, 65280);
+    static constexpr std::uint8_t kShift[16] = {1, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5};
+    static constexpr std::uint8_t kNext[16] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 15};
+    const unsigned shift = kShift[seen & 15U];
+    seen = kNext[seen & 15U];
+    const std::uint32_t p = p1;
+    const std::uint32_t moved = bit ? p + ((65536U - p) >> shift) : p - (p >> shift);
+    p1 = static_cast<std::uint16_t>(std::clamp<std::uint32_t>(moved, 256, 65280));
   }
 };
 
