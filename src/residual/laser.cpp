@@ -241,7 +241,13 @@ class PointCoder {
 
   // --- structure ---
   int column_ctx() const { return IntModel::context_of(last_dc_); }
-  int shift_ctx() const { return IntModel::context_of(last_shift_delta_); }
+  /// The column shift's context: the class of the last shift change, or with predictors 4
+  /// and 5 that change itself, signed, within -3..3 (a shift that jitters about its mean
+  /// changes sign from one column to the next).
+  int shift_ctx() const {
+    if (mixed_) return static_cast<int>(std::clamp<std::int64_t>(last_shift_delta_, -3, 3) + 3);
+    return IntModel::context_of(last_shift_delta_);
+  }
   std::int64_t last_shift() const { return last_shift_; }
   void set_shift(std::int64_t shift) {
     last_shift_delta_ = shift - last_shift_;
