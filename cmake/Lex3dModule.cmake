@@ -20,5 +20,9 @@ function(lex3d_add_module name)
     PUBLIC $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include> $<INSTALL_INTERFACE:include>
     PRIVATE ${PROJECT_SOURCE_DIR}/src)
   target_link_libraries(lex3d_${name} PUBLIC ${M_PUBLIC_DEPS} PRIVATE ${M_PRIVATE_DEPS})
+  # Hidden unless declared in a public header (between its `#pragma GCC visibility
+  # push(default)` and `pop`): liblex3d.so exports the public API only, not the modules'
+  # internals nor the PCL, FLANN and Eigen templates they instantiate.
+  set_target_properties(lex3d_${name} PROPERTIES CXX_VISIBILITY_PRESET hidden)
   lex3d_set_warnings(lex3d_${name})
 endfunction()

@@ -31,6 +31,9 @@
 #include "lex3d/model/model.hpp"
 #include "lex3d/version.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// The library's version ("major.minor.patch"), as built; compare with
@@ -131,3 +134,5 @@ struct AlphabetResult {
 void check_cloud(const Cloud& cloud, const std::string& what = "cloud");
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

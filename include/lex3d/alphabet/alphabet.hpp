@@ -12,6 +12,9 @@
 #include "lex3d/core/status.hpp"
 #include "lex3d/features/features.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// One word of an alphabet.
@@ -65,3 +68,5 @@ class WordIndex {
 };
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

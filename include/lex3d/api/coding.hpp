@@ -18,6 +18,9 @@
 #include "lex3d/residual/residual.hpp"
 #include "lex3d/residual/sensor_profile.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Whether a model file holds instances of the alphabet's words.
@@ -153,3 +156,5 @@ class ScanCoder {
 };
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

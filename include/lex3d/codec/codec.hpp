@@ -14,6 +14,9 @@
 #include "lex3d/core/status.hpp"
 #include "lex3d/model/model.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::codec {
 
 /// Quantisation steps; they are written into the files, so decoders need no options.
@@ -140,3 +143,5 @@ struct FileInfo {
 [[nodiscard]] StatusOr<FileInfo> inspect(const std::vector<std::uint8_t>& bytes);
 
 }  // namespace lex3d::codec
+
+#pragma GCC visibility pop

@@ -15,6 +15,9 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// A rigid 6-DoF transform (rotation + translation), double precision.
@@ -162,3 +165,5 @@ struct Bounds {
 [[nodiscard]] Cloud transformed(const Cloud& cloud, const Pose& T);
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -13,6 +13,9 @@
 
 #include <Eigen/Core>
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 struct OrderLayout {
@@ -37,3 +40,5 @@ struct OrderLayout {
 [[nodiscard]] std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f>& points);
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -8,6 +8,9 @@
 #include <thread>
 #include <vector>
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Calls fn(i) for every i in [0, n) on up to `threads` threads, handing out chunks of
@@ -39,3 +42,5 @@ void parallel_for(std::size_t n, int threads, Fn&& fn, std::size_t grain = 16) {
 }
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

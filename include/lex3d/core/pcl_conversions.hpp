@@ -21,6 +21,9 @@
 
 #include "lex3d/core/cloud.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// What from_pcl did not carry over.
@@ -96,3 +99,5 @@ template <typename PointT>
 }
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

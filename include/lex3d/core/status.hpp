@@ -10,6 +10,9 @@
 #include <utility>
 #include <variant>
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// What kind of failure a Status reports; maps onto the CLI exit codes.
@@ -78,3 +81,5 @@ class StatusOr {
 };
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -5,6 +5,9 @@
 #include <chrono>
 #include <cstdint>
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// A steady-clock stopwatch started at construction.
@@ -33,3 +36,5 @@ class Stopwatch {
 [[nodiscard]] std::uint64_t peak_rss_bytes();
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

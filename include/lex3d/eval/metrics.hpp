@@ -10,6 +10,9 @@
 
 #include "lex3d/core/cloud.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::eval {
 
 struct DistanceParams {
@@ -96,3 +99,5 @@ struct RateResult {
                                            const std::vector<Pose>& instance_pose);
 
 }  // namespace lex3d::eval
+
+#pragma GCC visibility pop

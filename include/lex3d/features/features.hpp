@@ -9,6 +9,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/range/range_image.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Parameters of the interest operator (steder2010 eq. 1-5 and its two filters).
@@ -161,3 +164,5 @@ struct FeatureResult {
 [[nodiscard]] FeatureResult extract_features(const Cloud& cloud, const FeatureParams& params = {});
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

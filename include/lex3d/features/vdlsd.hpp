@@ -12,6 +12,9 @@
 
 #include "lex3d/core/cloud.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Parameters of the VD-LSD.
@@ -65,3 +68,5 @@ struct VdlsdResult {
                                          const VdlsdParams& params, int threads = 1);
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -15,6 +15,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/core/status.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::io {
 
 /// Point cloud file formats lex3d reads (and, for some, writes).
@@ -170,3 +173,5 @@ struct OctomapStats {
                                                    double resolution);
 
 }  // namespace lex3d::io
+
+#pragma GCC visibility pop

@@ -10,6 +10,9 @@
 
 #include "lex3d/core/status.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::io {
 
 /// A file mapped read-only. The bytes stay valid while the object lives; share it with
@@ -65,3 +68,5 @@ class PositionalFile {
 void remove_file_quietly(const std::string& path) noexcept;
 
 }  // namespace lex3d::io
+
+#pragma GCC visibility pop

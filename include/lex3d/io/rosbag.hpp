@@ -25,6 +25,9 @@
 #include "lex3d/core/status.hpp"
 #include "lex3d/io/io.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::io {
 
 /// True when lex3d was built with ROS bag support.
@@ -95,3 +98,5 @@ struct BagScans {
                                const std::string& topic = "/points");
 
 }  // namespace lex3d::io
+
+#pragma GCC visibility pop

@@ -30,6 +30,9 @@
 #include "lex3d/core/status.hpp"
 #include "lex3d/io/io.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::io {
 
 /// What a raw log held besides its turns.
@@ -75,3 +78,5 @@ struct SensorLog {
 [[nodiscard]] StatusOr<SensorLog> read_sensor_log(const std::string& path, const ReadOptions& options = {});
 
 }  // namespace lex3d::io
+
+#pragma GCC visibility pop

@@ -22,6 +22,9 @@
 
 #include "lex3d/model/model.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 namespace detail {
@@ -147,3 +150,5 @@ class LearnDecisions {
 };
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -12,6 +12,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/features/features.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Parameters shared by learning and encoding.
@@ -169,3 +172,5 @@ struct LearnResult {
                                          const std::function<void(const LearnProgress&)>& progress = {});
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

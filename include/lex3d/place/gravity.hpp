@@ -15,6 +15,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/range/range_image.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Where the up direction of a scan came from.
@@ -50,3 +53,5 @@ struct GravityEstimate {
 GravitySource apply_gravity(Cloud& cloud, const RangeImageParams& range = {});
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -36,6 +36,9 @@
 #include "lex3d/range/range_image.hpp"
 #include "lex3d/place/vocabulary.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// The descriptor of a database's stored features (PHDR descriptor_kind, formats/place_db.md §3.1).
@@ -675,3 +678,5 @@ void finish_place_scan(PlaceScan& scan);
 }  // namespace detail
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -18,6 +18,9 @@
 
 #include "lex3d/core/status.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 struct PlaceScan;
@@ -101,3 +104,5 @@ struct PlaceVocabulary {
 [[nodiscard]] StatusOr<PlaceVocabulary> decode_vocabulary(const std::uint8_t* p, std::size_t n, std::uint64_t base = 0);
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

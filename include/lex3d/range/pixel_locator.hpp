@@ -18,6 +18,9 @@
 
 #include "lex3d/range/range_image.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Pixel lookup tables for one range image. Keeps a pointer to the image: the image must
@@ -63,3 +66,5 @@ class PixelLocator {
 };
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -16,6 +16,9 @@
 
 #include "lex3d/core/cloud.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d {
 
 /// Angular spacing of a scan's beams, in radians.
@@ -134,3 +137,5 @@ struct RangeImage {
 [[nodiscard]] RangeImage make_range_image(const Cloud& cloud, const RangeImageParams& params = {});
 
 }  // namespace lex3d
+
+#pragma GCC visibility pop

@@ -19,6 +19,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/core/status.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::residual {
 
 /// Which attributes the encoder keeps (those the input has), and how.
@@ -70,3 +73,5 @@ struct AttributeField {
 [[nodiscard]] Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded);
 
 }  // namespace lex3d::residual
+
+#pragma GCC visibility pop

@@ -27,6 +27,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/core/status.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::residual {
 
 /// Smallest and largest error bound a residual layer accepts, metres.
@@ -165,3 +168,5 @@ LayerStats add_layer(codec::ModelData& data, const Alphabet& alphabet, const Clo
 [[nodiscard]] StatusOr<Cloud> decode_cloud(const codec::ModelData& data);
 
 }  // namespace lex3d::residual
+
+#pragma GCC visibility pop

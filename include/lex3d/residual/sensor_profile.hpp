@@ -15,6 +15,9 @@
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/core/status.hpp"
 
+// The public API: exported by liblex3d.so, which hides everything else.
+#pragma GCC visibility push(default)
+
 namespace lex3d::residual {
 
 /// One laser of a profile, as the vendor tables give it.
@@ -71,3 +74,5 @@ inline constexpr double kOffBeamSteps = 2.0;
                                                         const std::string& what);
 
 }  // namespace lex3d::residual
+
+#pragma GCC visibility pop
