@@ -9,7 +9,12 @@
 //  - method 3 (layer laser): u minus the last value at a point of the same laser of the
 //    sensor-geometry residual layer's table, an integer model (only with such a layer);
 //    after a laser's first value a flag says whether all its values are that one, and
-//    then they cost nothing (a ring that is a function of the layer's laser).
+//    then they cost nothing (a ring that is a function of the layer's laser);
+//  - method 4 (layer laser tree): method 0's context tree, with 32 buckets of the previous
+//    value instead of 16, over method 3's history, the previous two values at points of
+//    the same laser of the sensor-geometry layer (a laser's intensities follow its
+//    calibration and its neighbours along the scan line; the tree learns their
+//    distribution given that neighbour, not only a difference).
 // For methods 0-2 "previous" is the last value of the same laser when the chunk also
 // holds the ring field (coded first), else the last value in the decoded order. The
 // encoder codes each field every way that applies and keeps the smallest.
@@ -39,11 +44,16 @@ using detail::RangeEncoder;
 
 enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
-constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3;
+constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3,
+                       kMethodLayerTree = 4;
+
+bool is_tree(std::uint8_t method) { return method == kMethodTree || method == kMethodLayerTree; }
+/// Methods whose history is keyed by the sensor-geometry layer's lasers.
+bool is_by_layer(std::uint8_t method) { return method == kMethodLayerLaser || method == kMethodLayerTree; }
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
-constexpr int kBuckets = 16, kActivity = 4;
+constexpr int kBuckets = 16, kLayerTreeBuckets = 32, kActivity = 4;
 
 const char* kind_name(std::uint8_t k) {
   switch (k) {
@@ -92,19 +102,21 @@ struct ChannelCoder {
   std::uint8_t method;
   std::uint64_t span;
   int bits = 0;
+  int buckets = kBuckets;  // of the previous value in the tree's context
   std::vector<BitModel> tree;  // [context][node]
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
   BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
   ChannelCoder(std::uint8_t m, std::uint64_t s) : method(m), span(s) {
-    if (method == kMethodTree) {
+    if (is_tree(method)) {
       while ((std::uint64_t{1} << bits) <= span) ++bits;
-      tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
+      if (method == kMethodLayerTree) buckets = kLayerTreeBuckets;
+      tree.resize(static_cast<std::size_t>(buckets * kActivity) << bits);
     }
   }
   [[nodiscard]] int tree_context(std::int64_t prev, std::int64_t prev2) const {
     const std::uint64_t n = span + 1;
-    const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * kBuckets / n);
+    const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * static_cast<std::uint64_t>(buckets) / n);
     const std::uint64_t change = static_cast<std::uint64_t>(prev > prev2 ? prev - prev2 : prev2 - prev) * 32 / n;
     const int act = change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
     return bucket * kActivity + act;
@@ -113,7 +125,7 @@ struct ChannelCoder {
     return method == kMethodLinear ? 2 * prev - prev2 : prev;
   }
   void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2) {
-    if (method == kMethodTree) {
+    if (is_tree(method)) {
       const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
       std::size_t node = 1;
       for (int j = bits - 1; j >= 0; --j) {
@@ -129,7 +141,7 @@ struct ChannelCoder {
   }
   /// Decodes one value; false when it falls outside [0, span].
   bool get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t& u) {
-    if (method == kMethodTree) {
+    if (is_tree(method)) {
       const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
       std::size_t node = 1;
       for (int j = 0; j < bits; ++j) node = 2 * node + (dec.get(tree[base + node]) ? 1 : 0);
@@ -148,12 +160,12 @@ struct ChannelCoder {
 std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t>>& u, std::uint64_t span,
                                       std::uint8_t method, const std::vector<std::uint16_t>& laser, std::size_t lasers) {
   RangeEncoder enc;
-  const bool by_layer = method == kMethodLayerLaser;
+  const bool flags = method == kMethodLayerLaser;
   for (const auto& ch : u) {
     ChannelCoder coder(method, span);
     History h(lasers);
     std::vector<std::uint8_t> fixed;  // method 3: per laser, every value equals the first
-    if (by_layer) {
+    if (flags) {
       History first(lasers);
       fixed.assign(lasers, 1);
       for (std::size_t j = 0; j < ch.size(); ++j) {
@@ -164,10 +176,10 @@ std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t
     }
     for (std::size_t j = 0; j < ch.size(); ++j) {
       const std::size_t l = laser.empty() ? 0 : laser[j];
-      if (by_layer && h.seen[l] && fixed[l]) continue;  // its laser's value, known
+      if (flags && h.seen[l] && fixed[l]) continue;  // its laser's value, known
       const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
       coder.put(enc, ch[j], prev, prev2);
-      if (by_layer && !h.seen[l]) enc.put(coder.fixed, fixed[l] != 0);
+      if (flags && !h.seen[l]) enc.put(coder.fixed, fixed[l] != 0);
       h.push(l, ch[j]);
     }
   }
@@ -349,12 +361,12 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const std::size_t hl = f.kind == kRing ? 1 : lasers;
     std::vector<std::uint8_t> best;
     std::uint8_t best_method = 0;
-    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser}) {
-      if (m == kMethodTree && f.span > kTreeMaxSpan) continue;
+    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree}) {
+      if (is_tree(m) && f.span > kTreeMaxSpan) continue;
       if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
-      if (m == kMethodLayerLaser && layer_lasers.empty()) continue;
-      std::vector<std::uint8_t> s = m == kMethodLayerLaser ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
-                                                           : code_values(f.u, f.span, m, by, hl);
+      if (is_by_layer(m) && layer_lasers.empty()) continue;
+      std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
+                                                   : code_values(f.u, f.span, m, by, hl);
       if (best.empty() || s.size() < best.size()) {
         best = std::move(s);
         best_method = m;
@@ -422,7 +434,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
-    if (f.method > kMethodLayerLaser) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
+    if (f.method > kMethodLayerTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
     if (f.channels != (f.kind == kRgb ? 3 : 1))
       return bad_data("attribute field " + name + " has " + std::to_string(f.channels) + " channels", at + 3);
     if (f.repr == kQuantised && !(std::isfinite(f.step) && f.step > 0.0 && f.step <= 1e9))
@@ -436,7 +448,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (f.kmin < -static_cast<std::int64_t>(kMaxSpan) * 4096 || f.kmin > static_cast<std::int64_t>(kMaxSpan) * 4096 ||
         ((f.kind == kRing || f.kind == kRgb) && f.kmin != 0))
       return bad_data("attribute field " + name + " kmin " + std::to_string(f.kmin) + " is out of range", at + 32);
-    if (f.method == kMethodTree && f.span > kTreeMaxSpan)
+    if (is_tree(f.method) && f.span > kTreeMaxSpan)
       return bad_data("attribute field " + name + " uses the context tree with a span above 255", at + 2);
     if (f.repr == kFloatBits && (f.base != 0.0 || f.kmin < -2147483648LL || f.kmin + static_cast<std::int64_t>(f.span) > 2147483647LL))
       return bad_data("attribute field " + name + " float keys are out of range", at + 32);
@@ -501,15 +513,17 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
   std::size_t lasers = 1;
   for (const Descriptor& f : desc.value()) {
     const std::string name = kind_name(f.kind);
-    const bool by_layer = f.method == kMethodLayerLaser;
+    const bool by_layer = is_by_layer(f.method), flags = f.method == kMethodLayerLaser;
     if (by_layer && layer_lasers.empty())
-      return bad_data("attribute field " + name +
-                          " is coded by the lasers of a sensor-geometry layer (method 3), but the file has no such layer",
+      return bad_data("attribute field " + name + " is coded by the lasers of a sensor-geometry layer (method " +
+                          std::to_string(f.method) + "), but the file has no such layer",
                       f.offset + 2);
-    // Every value costs at least ~1/2^12 bit in the stream: bound the points by the bytes
-    // (method 3 codes nothing for the points of a laser whose values are all its first;
-    // the decoded points, already there, bound the work).
-    if (!by_layer && n > (f.stream_bytes + 16) * 4096 * 8)
+    // Every value coded costs at least ~1/2^12 bit in the stream: bound the points by the
+    // bytes. Method 3 codes nothing for the points of a laser whose values are all its
+    // first, and a tree over a span of 0 nothing at all; there the decoded points, already
+    // there, bound the work.
+    const bool every_point_coded = !flags && !(is_tree(f.method) && f.span == 0);
+    if (every_point_coded && n > (f.stream_bytes + 16) * 4096 * 8)
       return bad_data("attribute field " + name + " stream is too short for " + std::to_string(n) + " points", f.offset + 48);
     RangeDecoder dec(payload.data() + f.stream_offset, static_cast<std::size_t>(f.stream_bytes));
     std::vector<std::vector<std::int64_t>> u(f.channels, std::vector<std::int64_t>(n));
@@ -519,10 +533,10 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
     for (auto& ch : u) {
       ChannelCoder coder(f.method, f.span);
       History h(hl);
-      std::vector<std::uint8_t> fixed(by_layer ? hl : 0, 0);
+      std::vector<std::uint8_t> fixed(flags ? hl : 0, 0);
       for (std::size_t j = 0; j < n; ++j) {
         const std::size_t l = (own && !by_layer) || key.empty() ? 0 : key[j];
-        if (by_layer && h.seen[l] && fixed[l]) {
+        if (flags && h.seen[l] && fixed[l]) {
           ch[j] = h.last[l];
           continue;
         }
@@ -531,7 +545,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         if (!coder.get(dec, prev, prev2, v))
           return bad_data("attribute field " + name + " value of point " + std::to_string(j) + " is outside its span",
                           f.stream_offset);
-        if (by_layer && !h.seen[l]) fixed[l] = dec.get(coder.fixed) ? 1 : 0;
+        if (flags && !h.seen[l]) fixed[l] = dec.get(coder.fixed) ? 1 : 0;
         ch[j] = v;
         h.push(l, v);
       }
