@@ -10,11 +10,13 @@
 //    sensor-geometry residual layer's table, an integer model (only with such a layer);
 //    after a laser's first value a flag says whether all its values are that one, and
 //    then they cost nothing (a ring that is a function of the layer's laser);
-//  - method 4 (layer laser tree): method 0's context tree, with 32 buckets of the previous
-//    value instead of 16, over method 3's history, the previous two values at points of
-//    the same laser of the sensor-geometry layer (a laser's intensities follow its
-//    calibration and its neighbours along the scan line; the tree learns their
-//    distribution given that neighbour, not only a difference).
+//  - method 4 (mixed tree on the layer's lasers): u's bits, most significant first, over
+//    method 3's history (the same laser of the sensor-geometry layer), each bit predicted
+//    by three context models mixed in the logistic domain (as the voxel coding's occupancy
+//    bits, §2.7.4): the previous value coarsely with its last change, the previous value
+//    exactly, and the previous values of this laser and of the laser above. A laser's
+//    intensities follow its calibration and its neighbours; the models learn their
+//    distribution given those neighbours, not only a difference.
 // For methods 0-2 "previous" is the last value of the same laser when the chunk also
 // holds the ring field (coded first), else the last value in the decoded order. The
 // encoder codes each field every way that applies and keeps the smallest.
@@ -22,22 +24,28 @@
 #include "lex3d/residual/attributes.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <iomanip>
 #include <sstream>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
 #include "codec/bytes.hpp"
 #include "residual/layer_lasers.hpp"
+#include "residual/logistic.hpp"
 #include "residual/range_coder.hpp"
 
 namespace lex3d::residual {
 namespace {
 
 using detail::BitModel;
+using detail::YoungBitModel;
+using detail::squash;
+using detail::stretch_table;
 using detail::IntModel;
 using detail::RangeDecoder;
 using detail::RangeEncoder;
@@ -53,7 +61,9 @@ bool is_by_layer(std::uint8_t method) { return method == kMethodLayerLaser || me
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
-constexpr int kBuckets = 16, kLayerTreeBuckets = 32, kActivity = 4;
+constexpr std::uint64_t kMixedTreeMaxSpan = 1023;  // method 4
+std::uint64_t tree_max_span(std::uint8_t method) { return method == kMethodLayerTree ? kMixedTreeMaxSpan : kTreeMaxSpan; }
+constexpr int kBuckets = 16, kActivity = 4;
 
 const char* kind_name(std::uint8_t k) {
   switch (k) {
@@ -95,6 +105,96 @@ struct History {
     last[l] = u;
     seen[l] = 1;
   }
+  /// The last value of key l − 1 (the laser above in a table's order), or `prev` when
+  /// there is none.
+  [[nodiscard]] std::int64_t above(std::size_t l, std::int64_t prev) const {
+    return l > 0 && seen[l - 1] ? last[l - 1] : prev;
+  }
+};
+
+/// The class of the last change |prev − prev2| of values in [0, n): 0 (none) to 3 (large).
+int activity(std::int64_t prev, std::int64_t prev2, std::uint64_t n) {
+  const std::uint64_t change = static_cast<std::uint64_t>(prev > prev2 ? prev - prev2 : prev2 - prev) * 32 / n;
+  return change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
+}
+
+/// Method 4: u's bits, most significant first, each predicted by three context models
+/// (young bit models) whose stretched probabilities are mixed with weights learnt per bit
+/// position (formats/model.md §2.10).
+class MixedTree {
+ public:
+  explicit MixedTree(std::uint64_t span) : n_(span + 1), fine_(std::min<std::uint64_t>(n_, kFine)) {
+    while ((std::uint64_t{1} << bits_) <= span) ++bits_;
+    const std::size_t nodes = std::size_t{1} << bits_;
+    models_[0].resize(static_cast<std::size_t>(kCoarse * kActivity) * nodes);
+    models_[1].resize(static_cast<std::size_t>(fine_) * kActivity * nodes);
+    models_[2].resize(static_cast<std::size_t>(kNear * kNear) * nodes);
+    weights_.assign(static_cast<std::size_t>(bits_) * 3, kInitialWeight);
+  }
+  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    start(prev, prev2, up);
+    std::size_t node = 1;
+    for (int j = bits_ - 1; j >= 0; --j) {
+      const bool bit = ((static_cast<std::uint64_t>(u) >> j) & 1U) != 0;
+      enc.put(p0(bits_ - 1 - j, node), bit);
+      update(bit);
+      node = 2 * node + (bit ? 1 : 0);
+    }
+  }
+  std::int64_t get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    start(prev, prev2, up);
+    std::size_t node = 1;
+    for (int d = 0; d < bits_; ++d) {
+      const bool bit = dec.get(p0(d, node));
+      update(bit);
+      node = 2 * node + (bit ? 1 : 0);
+    }
+    return static_cast<std::int64_t>(node - (std::size_t{1} << bits_));
+  }
+
+ private:
+  static constexpr int kCoarse = 32, kNear = 16, kFine = 256;
+  static constexpr std::int32_t kInitialWeight = 21845, kMaxWeight = 1 << 19;
+  void start(std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    const auto b = [&](std::int64_t v, std::uint64_t buckets) {
+      return static_cast<std::size_t>(static_cast<std::uint64_t>(v) * buckets / n_);
+    };
+    const auto act = static_cast<std::size_t>(activity(prev, prev2, n_));
+    ctx_[0] = (b(prev, kCoarse) * kActivity + act) << bits_;
+    ctx_[1] = (b(prev, fine_) * kActivity + act) << bits_;  // the value itself for spans below 256
+    ctx_[2] = (b(prev, kNear) * kNear + b(up, kNear)) << bits_;
+  }
+  /// The probability of a 0 (in 1/4096) of the bit at depth `d` (0: the most significant)
+  /// under tree node `node`.
+  std::uint32_t p0(int d, std::size_t node) {
+    const auto& st = stretch_table();
+    at_ = static_cast<std::size_t>(d) * 3;
+    std::int64_t dot = 0;
+    for (std::size_t m = 0; m < 3; ++m) {
+      index_[m] = ctx_[m] + node;
+      input_[m] = st[models_[m][index_[m]].p1 >> 4];
+      dot += static_cast<std::int64_t>(weights_[at_ + m]) * input_[m];
+    }
+    p1_ = squash(static_cast<std::int32_t>(std::clamp<std::int64_t>(dot >> 16, -2047, 2047)));  // (>>: floor)
+    return static_cast<std::uint32_t>(4096 - p1_);
+  }
+  void update(bool bit) {
+    const std::int32_t error = (bit ? 4096 : 0) - p1_;
+    for (std::size_t m = 0; m < 3; ++m) {
+      models_[m][index_[m]].update(bit);
+      std::int32_t& w = weights_[at_ + m];
+      w = std::clamp(w + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
+    }
+  }
+
+  std::uint64_t n_, fine_;
+  int bits_ = 0;
+  std::array<std::vector<YoungBitModel>, 3> models_;
+  std::vector<std::int32_t> weights_;
+  std::array<std::size_t, 3> ctx_{}, index_{};
+  std::array<std::int32_t, 3> input_{};
+  std::size_t at_ = 0;
+  std::int32_t p1_ = 2048;
 };
 
 /// The models of one channel for one method.
@@ -102,30 +202,33 @@ struct ChannelCoder {
   std::uint8_t method;
   std::uint64_t span;
   int bits = 0;
-  int buckets = kBuckets;  // of the previous value in the tree's context
   std::vector<BitModel> tree;  // [context][node]
+  std::unique_ptr<MixedTree> mixed;  // method 4
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
   BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
   ChannelCoder(std::uint8_t m, std::uint64_t s) : method(m), span(s) {
-    if (is_tree(method)) {
+    if (method == kMethodTree) {
       while ((std::uint64_t{1} << bits) <= span) ++bits;
-      if (method == kMethodLayerTree) buckets = kLayerTreeBuckets;
-      tree.resize(static_cast<std::size_t>(buckets * kActivity) << bits);
+      tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
     }
+    if (method == kMethodLayerTree) mixed = std::make_unique<MixedTree>(span);
   }
   [[nodiscard]] int tree_context(std::int64_t prev, std::int64_t prev2) const {
     const std::uint64_t n = span + 1;
-    const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * static_cast<std::uint64_t>(buckets) / n);
-    const std::uint64_t change = static_cast<std::uint64_t>(prev > prev2 ? prev - prev2 : prev2 - prev) * 32 / n;
-    const int act = change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
-    return bucket * kActivity + act;
+    const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * kBuckets / n);
+    return bucket * kActivity + activity(prev, prev2, n);
   }
   [[nodiscard]] std::int64_t prediction(std::int64_t prev, std::int64_t prev2) const {
     return method == kMethodLinear ? 2 * prev - prev2 : prev;
   }
-  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2) {
-    if (is_tree(method)) {
+  /// `up`: the previous value of the laser above (method 4 only).
+  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    if (mixed) {
+      mixed->put(enc, u, prev, prev2, up);
+      return;
+    }
+    if (method == kMethodTree) {
       const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
       std::size_t node = 1;
       for (int j = bits - 1; j >= 0; --j) {
@@ -140,8 +243,10 @@ struct ChannelCoder {
     last_residual = r;
   }
   /// Decodes one value; false when it falls outside [0, span].
-  bool get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t& u) {
-    if (is_tree(method)) {
+  bool get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t up, std::int64_t& u) {
+    if (mixed) {
+      u = mixed->get(dec, prev, prev2, up);
+    } else if (method == kMethodTree) {
       const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
       std::size_t node = 1;
       for (int j = 0; j < bits; ++j) node = 2 * node + (dec.get(tree[base + node]) ? 1 : 0);
@@ -178,7 +283,7 @@ std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t
       const std::size_t l = laser.empty() ? 0 : laser[j];
       if (flags && h.seen[l] && fixed[l]) continue;  // its laser's value, known
       const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
-      coder.put(enc, ch[j], prev, prev2);
+      coder.put(enc, ch[j], prev, prev2, h.above(l, prev));
       if (flags && !h.seen[l]) enc.put(coder.fixed, fixed[l] != 0);
       h.push(l, ch[j]);
     }
@@ -362,7 +467,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     std::vector<std::uint8_t> best;
     std::uint8_t best_method = 0;
     for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree}) {
-      if (is_tree(m) && f.span > kTreeMaxSpan) continue;
+      if (is_tree(m) && f.span > tree_max_span(m)) continue;
       if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
       if (is_by_layer(m) && layer_lasers.empty()) continue;
       std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
@@ -448,8 +553,10 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (f.kmin < -static_cast<std::int64_t>(kMaxSpan) * 4096 || f.kmin > static_cast<std::int64_t>(kMaxSpan) * 4096 ||
         ((f.kind == kRing || f.kind == kRgb) && f.kmin != 0))
       return bad_data("attribute field " + name + " kmin " + std::to_string(f.kmin) + " is out of range", at + 32);
-    if (is_tree(f.method) && f.span > kTreeMaxSpan)
-      return bad_data("attribute field " + name + " uses the context tree with a span above 255", at + 2);
+    if (is_tree(f.method) && f.span > tree_max_span(f.method))
+      return bad_data("attribute field " + name + " uses method " + std::to_string(f.method) + " with a span above " +
+                          std::to_string(tree_max_span(f.method)),
+                      at + 2);
     if (f.repr == kFloatBits && (f.base != 0.0 || f.kmin < -2147483648LL || f.kmin + static_cast<std::int64_t>(f.span) > 2147483647LL))
       return bad_data("attribute field " + name + " float keys are out of range", at + 32);
     if (f.stream_bytes > p.size() - f.stream_offset)
@@ -542,7 +649,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         }
         const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
         std::int64_t v = 0;
-        if (!coder.get(dec, prev, prev2, v))
+        if (!coder.get(dec, prev, prev2, h.above(l, prev), v))
           return bad_data("attribute field " + name + " value of point " + std::to_string(j) + " is outside its span",
                           f.stream_offset);
         if (flags && !h.seen[l]) fixed[l] = dec.get(coder.fixed) ? 1 : 0;
