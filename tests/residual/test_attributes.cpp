@@ -521,20 +521,21 @@ TEST(Attributes, Vlp16SampleRingIsNearlyFreeWithTheSensorGeometryLayer) {
 /// follows from the same laser's previous one, while the differences differ from laser to
 /// laser — what a context tree on the previous value of the same laser predicts and a
 /// difference does not.
-Cloud calibrated_scan(int lasers, int columns, std::uint32_t seed) {
+/// Levels 0..`top` in steps of `step`.
+Cloud calibrated_scan(int lasers, int columns, std::uint32_t seed, int top = 99, double step = 0.01) {
   Cloud c = synthetic_scan(lasers, columns, seed);
   c.ring.clear();
   c.time.clear();
   c.rgb.clear();
   std::mt19937 rng(seed + 1);
-  std::uniform_int_distribution<int> level(0, 99), stay(0, 4);
+  std::uniform_int_distribution<int> level(0, top), stay(0, 4);
   std::vector<std::array<int, 2>> levels(static_cast<std::size_t>(lasers));
   for (auto& lv : levels) lv = {level(rng), level(rng)};
   std::vector<int> state(static_cast<std::size_t>(lasers), 0);
   for (std::size_t i = 0; i < c.size(); ++i) {
     const std::size_t l = i % static_cast<std::size_t>(lasers);  // synthetic_scan: column by column
     if (stay(rng) != 0) state[l] = 1 - state[l];
-    c.intensity[i] = static_cast<float>(levels[l][static_cast<std::size_t>(state[l])] * 0.01);
+    c.intensity[i] = static_cast<float>(levels[l][static_cast<std::size_t>(state[l])] * step);
   }
   return c;
 }
@@ -598,6 +599,39 @@ TEST(Attributes, CorruptLayerTreePayloadsAreRejectedWithoutCrashing) {
   r = residual::decode_cloud(t);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("method 5 is unknown"), std::string::npos) << r.status().to_string();
+}
+
+/// Method 4 beyond the context tree's span of 255 (10-bit counts, as balm's): chosen,
+/// lossless; a method 4 descriptor whose span exceeds 1023 is refused.
+TEST(Attributes, LayerTreeCodesTenBitCounts) {
+  const Cloud in = calibrated_scan(16, 360, 34, 999, 1.0);
+  const LaserCoded lc = code_laser(in, 0.01, false);
+  ASSERT_TRUE(lc.stats.laser);
+  const auto* it = field(lc.c.fields, "intensity");
+  ASSERT_NE(it, nullptr);
+  EXPECT_EQ(it->method, 4);
+  EXPECT_EQ(it->step, 1.0);
+  auto out = decode(lc.c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  for (std::size_t j = 0; j < out.value().size(); ++j)
+    ASSERT_EQ(out.value().intensity[j], in.intensity[lc.c.sources[j]]) << j;
+
+  auto m = codec::decode_model(lc.c.file);
+  ASSERT_TRUE(m.ok());
+  codec::ModelData t = m.value();
+  ASSERT_EQ((*t.attributes)[9], 2);
+  ASSERT_EQ((*t.attributes)[9 + 2], 4);
+  const std::size_t span_at = 9 + 40;
+  std::uint64_t span = 0;  // u64, little-endian
+  for (int b = 7; b >= 0; --b) span = span << 8 | (*t.attributes)[span_at + static_cast<std::size_t>(b)];
+  ASSERT_GT(span, 255U);
+  ASSERT_LE(span, 1023U);
+  (*t.attributes)[span_at] = 0x00;  // 1024
+  (*t.attributes)[span_at + 1] = 0x04;
+  auto r = residual::decode_cloud(t);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  EXPECT_NE(r.status().message().find("span above 1023"), std::string::npos) << r.status().to_string();
 }
 
 TEST(Attributes, LayerTreeGoldenFileDecodes) {
