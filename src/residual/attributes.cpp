@@ -16,8 +16,9 @@
 //    bits, §2.7.4): the previous value coarsely with its last change, the previous value
 //    exactly, and the previous values of this laser and of the laser above. A laser's
 //    intensities follow its calibration and its neighbours; the models learn their
-//    distribution given those neighbours, not only a difference.
-// For methods 0-2 "previous" is the last value of the same laser when the chunk also
+//    distribution given those neighbours, not only a difference;
+//  - method 5 (mixed tree): method 4 over the history of methods 0-2.
+// For methods 0-2 and 5 "previous" is the last value of the same laser when the chunk also
 // holds the ring field (coded first), else the last value in the decoded order. The
 // encoder codes each field every way that applies and keeps the smallest.
 
@@ -53,16 +54,17 @@ using detail::RangeEncoder;
 enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
 constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3,
-                       kMethodLayerTree = 4;
+                       kMethodLayerTree = 4, kMethodMixedTree = 5;
 
-bool is_tree(std::uint8_t method) { return method == kMethodTree || method == kMethodLayerTree; }
+bool is_mixed(std::uint8_t method) { return method == kMethodLayerTree || method == kMethodMixedTree; }
+bool is_tree(std::uint8_t method) { return method == kMethodTree || is_mixed(method); }
 /// Methods whose history is keyed by the sensor-geometry layer's lasers.
 bool is_by_layer(std::uint8_t method) { return method == kMethodLayerLaser || method == kMethodLayerTree; }
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
 constexpr std::uint64_t kMixedTreeMaxSpan = 1023;  // method 4
-std::uint64_t tree_max_span(std::uint8_t method) { return method == kMethodLayerTree ? kMixedTreeMaxSpan : kTreeMaxSpan; }
+std::uint64_t tree_max_span(std::uint8_t method) { return is_mixed(method) ? kMixedTreeMaxSpan : kTreeMaxSpan; }
 constexpr int kBuckets = 16, kActivity = 4;
 
 const char* kind_name(std::uint8_t k) {
@@ -203,7 +205,7 @@ struct ChannelCoder {
   std::uint64_t span;
   int bits = 0;
   std::vector<BitModel> tree;  // [context][node]
-  std::unique_ptr<MixedTree> mixed;  // method 4
+  std::unique_ptr<MixedTree> mixed;  // methods 4 and 5
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
   BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
@@ -212,7 +214,7 @@ struct ChannelCoder {
       while ((std::uint64_t{1} << bits) <= span) ++bits;
       tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
     }
-    if (method == kMethodLayerTree) mixed = std::make_unique<MixedTree>(span);
+    if (is_mixed(method)) mixed = std::make_unique<MixedTree>(span);
   }
   [[nodiscard]] int tree_context(std::int64_t prev, std::int64_t prev2) const {
     const std::uint64_t n = span + 1;
@@ -222,7 +224,7 @@ struct ChannelCoder {
   [[nodiscard]] std::int64_t prediction(std::int64_t prev, std::int64_t prev2) const {
     return method == kMethodLinear ? 2 * prev - prev2 : prev;
   }
-  /// `up`: the previous value of the laser above (method 4 only).
+  /// `up`: the previous value of the laser above (methods 4 and 5 only).
   void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
     if (mixed) {
       mixed->put(enc, u, prev, prev2, up);
@@ -466,10 +468,14 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const std::size_t hl = f.kind == kRing ? 1 : lasers;
     std::vector<std::uint8_t> best;
     std::uint8_t best_method = 0;
-    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree}) {
+    for (const std::uint8_t m :
+         {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree, kMethodMixedTree}) {
       if (is_tree(m) && f.span > tree_max_span(m)) continue;
       if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
       if (is_by_layer(m) && layer_lasers.empty()) continue;
+      // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
+      // scans measured, method 5 never won there): not tried, to save its time.
+      if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
       std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
                                                    : code_values(f.u, f.span, m, by, hl);
       if (best.empty() || s.size() < best.size()) {
@@ -539,7 +545,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
-    if (f.method > kMethodLayerTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
+    if (f.method > kMethodMixedTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
     if (f.channels != (f.kind == kRgb ? 3 : 1))
       return bad_data("attribute field " + name + " has " + std::to_string(f.channels) + " channels", at + 3);
     if (f.repr == kQuantised && !(std::isfinite(f.step) && f.step > 0.0 && f.step <= 1e9))

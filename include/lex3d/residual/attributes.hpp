@@ -42,7 +42,7 @@ struct AttributeField {
   double max_error = 0.0;      ///< 0: lossless
   std::size_t bytes = 0;       ///< stored bytes of the field (descriptor and stream)
   /// 0: context tree; 1: previous value; 2: linear; 3: previous value of the same laser of
-  /// the sensor-geometry layer; 4: context tree on the same laser of that layer
+  /// the sensor-geometry layer; 4: mixed tree on the same laser of that layer; 5: mixed tree
   std::uint8_t method = 0;
 };
 
