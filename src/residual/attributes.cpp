@@ -9,40 +9,62 @@
 //  - method 3 (layer laser): u minus the last value at a point of the same laser of the
 //    sensor-geometry residual layer's table, an integer model (only with such a layer);
 //    after a laser's first value a flag says whether all its values are that one, and
-//    then they cost nothing (a ring that is a function of the layer's laser).
-// For methods 0-2 "previous" is the last value of the same laser when the chunk also
+//    then they cost nothing (a ring that is a function of the layer's laser);
+//  - method 4 (mixed tree on the layer's lasers): u's bits, most significant first, over
+//    method 3's history (the same laser of the sensor-geometry layer), each bit predicted
+//    by three context models mixed in the logistic domain (as the voxel coding's occupancy
+//    bits, §2.7.4): the previous value coarsely with its last change, the previous value
+//    exactly, and the previous values of this laser and of the laser above. A laser's
+//    intensities follow its calibration and its neighbours; the models learn their
+//    distribution given those neighbours, not only a difference;
+//  - method 5 (mixed tree): method 4 over the history of methods 0-2.
+// For methods 0-2 and 5 "previous" is the last value of the same laser when the chunk also
 // holds the ring field (coded first), else the last value in the decoded order. The
 // encoder codes each field every way that applies and keeps the smallest.
 
 #include "lex3d/residual/attributes.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <iomanip>
 #include <sstream>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
 #include "codec/bytes.hpp"
 #include "residual/layer_lasers.hpp"
+#include "residual/logistic.hpp"
 #include "residual/range_coder.hpp"
 
 namespace lex3d::residual {
 namespace {
 
 using detail::BitModel;
+using detail::YoungBitModel;
+using detail::squash;
+using detail::stretch_table;
 using detail::IntModel;
 using detail::RangeDecoder;
 using detail::RangeEncoder;
 
 enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
-constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3;
+constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3,
+                       kMethodLayerTree = 4, kMethodMixedTree = 5;
+
+bool is_mixed(std::uint8_t method) { return method == kMethodLayerTree || method == kMethodMixedTree; }
+bool is_tree(std::uint8_t method) { return method == kMethodTree || is_mixed(method); }
+/// Methods whose history is keyed by the sensor-geometry layer's lasers.
+bool is_by_layer(std::uint8_t method) { return method == kMethodLayerLaser || method == kMethodLayerTree; }
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
+constexpr std::uint64_t kMixedTreeMaxSpan = 1023;  // method 4
+std::uint64_t tree_max_span(std::uint8_t method) { return is_mixed(method) ? kMixedTreeMaxSpan : kTreeMaxSpan; }
 constexpr int kBuckets = 16, kActivity = 4;
 
 const char* kind_name(std::uint8_t k) {
@@ -85,6 +107,96 @@ struct History {
     last[l] = u;
     seen[l] = 1;
   }
+  /// The last value of key l − 1 (the laser above in a table's order), or `prev` when
+  /// there is none.
+  [[nodiscard]] std::int64_t above(std::size_t l, std::int64_t prev) const {
+    return l > 0 && seen[l - 1] ? last[l - 1] : prev;
+  }
+};
+
+/// The class of the last change |prev − prev2| of values in [0, n): 0 (none) to 3 (large).
+int activity(std::int64_t prev, std::int64_t prev2, std::uint64_t n) {
+  const std::uint64_t change = static_cast<std::uint64_t>(prev > prev2 ? prev - prev2 : prev2 - prev) * 32 / n;
+  return change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
+}
+
+/// Method 4: u's bits, most significant first, each predicted by three context models
+/// (young bit models) whose stretched probabilities are mixed with weights learnt per bit
+/// position (formats/model.md §2.10).
+class MixedTree {
+ public:
+  explicit MixedTree(std::uint64_t span) : n_(span + 1), fine_(std::min<std::uint64_t>(n_, kFine)) {
+    while ((std::uint64_t{1} << bits_) <= span) ++bits_;
+    const std::size_t nodes = std::size_t{1} << bits_;
+    models_[0].resize(static_cast<std::size_t>(kCoarse * kActivity) * nodes);
+    models_[1].resize(static_cast<std::size_t>(fine_) * kActivity * nodes);
+    models_[2].resize(static_cast<std::size_t>(kNear * kNear) * nodes);
+    weights_.assign(static_cast<std::size_t>(bits_) * 3, kInitialWeight);
+  }
+  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    start(prev, prev2, up);
+    std::size_t node = 1;
+    for (int j = bits_ - 1; j >= 0; --j) {
+      const bool bit = ((static_cast<std::uint64_t>(u) >> j) & 1U) != 0;
+      enc.put(p0(bits_ - 1 - j, node), bit);
+      update(bit);
+      node = 2 * node + (bit ? 1 : 0);
+    }
+  }
+  std::int64_t get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    start(prev, prev2, up);
+    std::size_t node = 1;
+    for (int d = 0; d < bits_; ++d) {
+      const bool bit = dec.get(p0(d, node));
+      update(bit);
+      node = 2 * node + (bit ? 1 : 0);
+    }
+    return static_cast<std::int64_t>(node - (std::size_t{1} << bits_));
+  }
+
+ private:
+  static constexpr int kCoarse = 32, kNear = 16, kFine = 256;
+  static constexpr std::int32_t kInitialWeight = 21845, kMaxWeight = 1 << 19;
+  void start(std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    const auto b = [&](std::int64_t v, std::uint64_t buckets) {
+      return static_cast<std::size_t>(static_cast<std::uint64_t>(v) * buckets / n_);
+    };
+    const auto act = static_cast<std::size_t>(activity(prev, prev2, n_));
+    ctx_[0] = (b(prev, kCoarse) * kActivity + act) << bits_;
+    ctx_[1] = (b(prev, fine_) * kActivity + act) << bits_;  // the value itself for spans below 256
+    ctx_[2] = (b(prev, kNear) * kNear + b(up, kNear)) << bits_;
+  }
+  /// The probability of a 0 (in 1/4096) of the bit at depth `d` (0: the most significant)
+  /// under tree node `node`.
+  std::uint32_t p0(int d, std::size_t node) {
+    const auto& st = stretch_table();
+    at_ = static_cast<std::size_t>(d) * 3;
+    std::int64_t dot = 0;
+    for (std::size_t m = 0; m < 3; ++m) {
+      index_[m] = ctx_[m] + node;
+      input_[m] = st[models_[m][index_[m]].p1 >> 4];
+      dot += static_cast<std::int64_t>(weights_[at_ + m]) * input_[m];
+    }
+    p1_ = squash(static_cast<std::int32_t>(std::clamp<std::int64_t>(dot >> 16, -2047, 2047)));  // (>>: floor)
+    return static_cast<std::uint32_t>(4096 - p1_);
+  }
+  void update(bool bit) {
+    const std::int32_t error = (bit ? 4096 : 0) - p1_;
+    for (std::size_t m = 0; m < 3; ++m) {
+      models_[m][index_[m]].update(bit);
+      std::int32_t& w = weights_[at_ + m];
+      w = std::clamp(w + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
+    }
+  }
+
+  std::uint64_t n_, fine_;
+  int bits_ = 0;
+  std::array<std::vector<YoungBitModel>, 3> models_;
+  std::vector<std::int32_t> weights_;
+  std::array<std::size_t, 3> ctx_{}, index_{};
+  std::array<std::int32_t, 3> input_{};
+  std::size_t at_ = 0;
+  std::int32_t p1_ = 2048;
 };
 
 /// The models of one channel for one method.
@@ -93,6 +205,7 @@ struct ChannelCoder {
   std::uint64_t span;
   int bits = 0;
   std::vector<BitModel> tree;  // [context][node]
+  std::unique_ptr<MixedTree> mixed;  // methods 4 and 5
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
   BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
@@ -101,18 +214,22 @@ struct ChannelCoder {
       while ((std::uint64_t{1} << bits) <= span) ++bits;
       tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
     }
+    if (is_mixed(method)) mixed = std::make_unique<MixedTree>(span);
   }
   [[nodiscard]] int tree_context(std::int64_t prev, std::int64_t prev2) const {
     const std::uint64_t n = span + 1;
     const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * kBuckets / n);
-    const std::uint64_t change = static_cast<std::uint64_t>(prev > prev2 ? prev - prev2 : prev2 - prev) * 32 / n;
-    const int act = change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
-    return bucket * kActivity + act;
+    return bucket * kActivity + activity(prev, prev2, n);
   }
   [[nodiscard]] std::int64_t prediction(std::int64_t prev, std::int64_t prev2) const {
     return method == kMethodLinear ? 2 * prev - prev2 : prev;
   }
-  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2) {
+  /// `up`: the previous value of the laser above (methods 4 and 5 only).
+  void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
+    if (mixed) {
+      mixed->put(enc, u, prev, prev2, up);
+      return;
+    }
     if (method == kMethodTree) {
       const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
       std::size_t node = 1;
@@ -128,8 +245,10 @@ struct ChannelCoder {
     last_residual = r;
   }
   /// Decodes one value; false when it falls outside [0, span].
-  bool get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t& u) {
-    if (method == kMethodTree) {
+  bool get(RangeDecoder& dec, std::int64_t prev, std::int64_t prev2, std::int64_t up, std::int64_t& u) {
+    if (mixed) {
+      u = mixed->get(dec, prev, prev2, up);
+    } else if (method == kMethodTree) {
       const std::size_t base = static_cast<std::size_t>(tree_context(prev, prev2)) << bits;
       std::size_t node = 1;
       for (int j = 0; j < bits; ++j) node = 2 * node + (dec.get(tree[base + node]) ? 1 : 0);
@@ -148,12 +267,12 @@ struct ChannelCoder {
 std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t>>& u, std::uint64_t span,
                                       std::uint8_t method, const std::vector<std::uint16_t>& laser, std::size_t lasers) {
   RangeEncoder enc;
-  const bool by_layer = method == kMethodLayerLaser;
+  const bool flags = method == kMethodLayerLaser;
   for (const auto& ch : u) {
     ChannelCoder coder(method, span);
     History h(lasers);
     std::vector<std::uint8_t> fixed;  // method 3: per laser, every value equals the first
-    if (by_layer) {
+    if (flags) {
       History first(lasers);
       fixed.assign(lasers, 1);
       for (std::size_t j = 0; j < ch.size(); ++j) {
@@ -164,10 +283,10 @@ std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t
     }
     for (std::size_t j = 0; j < ch.size(); ++j) {
       const std::size_t l = laser.empty() ? 0 : laser[j];
-      if (by_layer && h.seen[l] && fixed[l]) continue;  // its laser's value, known
+      if (flags && h.seen[l] && fixed[l]) continue;  // its laser's value, known
       const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
-      coder.put(enc, ch[j], prev, prev2);
-      if (by_layer && !h.seen[l]) enc.put(coder.fixed, fixed[l] != 0);
+      coder.put(enc, ch[j], prev, prev2, h.above(l, prev));
+      if (flags && !h.seen[l]) enc.put(coder.fixed, fixed[l] != 0);
       h.push(l, ch[j]);
     }
   }
@@ -349,12 +468,16 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const std::size_t hl = f.kind == kRing ? 1 : lasers;
     std::vector<std::uint8_t> best;
     std::uint8_t best_method = 0;
-    for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser}) {
-      if (m == kMethodTree && f.span > kTreeMaxSpan) continue;
+    for (const std::uint8_t m :
+         {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree, kMethodMixedTree}) {
+      if (is_tree(m) && f.span > tree_max_span(m)) continue;
       if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
-      if (m == kMethodLayerLaser && layer_lasers.empty()) continue;
-      std::vector<std::uint8_t> s = m == kMethodLayerLaser ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
-                                                           : code_values(f.u, f.span, m, by, hl);
+      if (is_by_layer(m) && layer_lasers.empty()) continue;
+      // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
+      // scans measured, method 5 never won there): not tried, to save its time.
+      if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
+      std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
+                                                   : code_values(f.u, f.span, m, by, hl);
       if (best.empty() || s.size() < best.size()) {
         best = std::move(s);
         best_method = m;
@@ -422,7 +545,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
-    if (f.method > kMethodLayerLaser) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
+    if (f.method > kMethodMixedTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
     if (f.channels != (f.kind == kRgb ? 3 : 1))
       return bad_data("attribute field " + name + " has " + std::to_string(f.channels) + " channels", at + 3);
     if (f.repr == kQuantised && !(std::isfinite(f.step) && f.step > 0.0 && f.step <= 1e9))
@@ -436,8 +559,10 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (f.kmin < -static_cast<std::int64_t>(kMaxSpan) * 4096 || f.kmin > static_cast<std::int64_t>(kMaxSpan) * 4096 ||
         ((f.kind == kRing || f.kind == kRgb) && f.kmin != 0))
       return bad_data("attribute field " + name + " kmin " + std::to_string(f.kmin) + " is out of range", at + 32);
-    if (f.method == kMethodTree && f.span > kTreeMaxSpan)
-      return bad_data("attribute field " + name + " uses the context tree with a span above 255", at + 2);
+    if (is_tree(f.method) && f.span > tree_max_span(f.method))
+      return bad_data("attribute field " + name + " uses method " + std::to_string(f.method) + " with a span above " +
+                          std::to_string(tree_max_span(f.method)),
+                      at + 2);
     if (f.repr == kFloatBits && (f.base != 0.0 || f.kmin < -2147483648LL || f.kmin + static_cast<std::int64_t>(f.span) > 2147483647LL))
       return bad_data("attribute field " + name + " float keys are out of range", at + 32);
     if (f.stream_bytes > p.size() - f.stream_offset)
@@ -501,15 +626,17 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
   std::size_t lasers = 1;
   for (const Descriptor& f : desc.value()) {
     const std::string name = kind_name(f.kind);
-    const bool by_layer = f.method == kMethodLayerLaser;
+    const bool by_layer = is_by_layer(f.method), flags = f.method == kMethodLayerLaser;
     if (by_layer && layer_lasers.empty())
-      return bad_data("attribute field " + name +
-                          " is coded by the lasers of a sensor-geometry layer (method 3), but the file has no such layer",
+      return bad_data("attribute field " + name + " is coded by the lasers of a sensor-geometry layer (method " +
+                          std::to_string(f.method) + "), but the file has no such layer",
                       f.offset + 2);
-    // Every value costs at least ~1/2^12 bit in the stream: bound the points by the bytes
-    // (method 3 codes nothing for the points of a laser whose values are all its first;
-    // the decoded points, already there, bound the work).
-    if (!by_layer && n > (f.stream_bytes + 16) * 4096 * 8)
+    // Every value coded costs at least ~1/2^12 bit in the stream: bound the points by the
+    // bytes. Method 3 codes nothing for the points of a laser whose values are all its
+    // first, and a tree over a span of 0 nothing at all; there the decoded points, already
+    // there, bound the work.
+    const bool every_point_coded = !flags && !(is_tree(f.method) && f.span == 0);
+    if (every_point_coded && n > (f.stream_bytes + 16) * 4096 * 8)
       return bad_data("attribute field " + name + " stream is too short for " + std::to_string(n) + " points", f.offset + 48);
     RangeDecoder dec(payload.data() + f.stream_offset, static_cast<std::size_t>(f.stream_bytes));
     std::vector<std::vector<std::int64_t>> u(f.channels, std::vector<std::int64_t>(n));
@@ -519,19 +646,19 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
     for (auto& ch : u) {
       ChannelCoder coder(f.method, f.span);
       History h(hl);
-      std::vector<std::uint8_t> fixed(by_layer ? hl : 0, 0);
+      std::vector<std::uint8_t> fixed(flags ? hl : 0, 0);
       for (std::size_t j = 0; j < n; ++j) {
         const std::size_t l = (own && !by_layer) || key.empty() ? 0 : key[j];
-        if (by_layer && h.seen[l] && fixed[l]) {
+        if (flags && h.seen[l] && fixed[l]) {
           ch[j] = h.last[l];
           continue;
         }
         const std::int64_t prev = h.seen[l] ? h.last[l] : 0, prev2 = h.seen[l] ? h.last2[l] : 0;
         std::int64_t v = 0;
-        if (!coder.get(dec, prev, prev2, v))
+        if (!coder.get(dec, prev, prev2, h.above(l, prev), v))
           return bad_data("attribute field " + name + " value of point " + std::to_string(j) + " is outside its span",
                           f.stream_offset);
-        if (by_layer && !h.seen[l]) fixed[l] = dec.get(coder.fixed) ? 1 : 0;
+        if (flags && !h.seen[l]) fixed[l] = dec.get(coder.fixed) ? 1 : 0;
         ch[j] = v;
         h.push(l, v);
       }

@@ -1,6 +1,6 @@
 #pragma once
 // Each decoded point's laser in a sensor-geometry layer's table (formats/model.md §2.8),
-// handed from the layer to the attribute coder (§2.10, method 3) on both sides.
+// handed from the layer to the attribute coder (§2.10, methods 3 and 4) on both sides.
 
 #include <cstdint>
 #include <vector>
@@ -18,7 +18,7 @@ namespace lex3d::residual::detail {
                                                   std::vector<std::uint16_t>& lasers);
 
 /// decode_attributes with the decoded points' layer lasers (empty without a
-/// sensor-geometry layer, and a method 3 field is then an error).
+/// sensor-geometry layer, and a method 3 or 4 field is then an error).
 [[nodiscard]] Status decode_attributes(const std::vector<std::uint8_t>& payload,
                                        const std::vector<std::uint16_t>& layer_lasers, Cloud& decoded);
 

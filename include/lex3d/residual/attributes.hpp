@@ -45,7 +45,7 @@ struct AttributeField {
   double max_error = 0.0;      ///< 0: lossless
   std::size_t bytes = 0;       ///< stored bytes of the field (descriptor and stream)
   /// 0: context tree; 1: previous value; 2: linear; 3: previous value of the same laser of
-  /// the sensor-geometry layer
+  /// the sensor-geometry layer; 4: mixed tree on the same laser of that layer; 5: mixed tree
   std::uint8_t method = 0;
 };
 
@@ -56,7 +56,8 @@ struct AttributeField {
 /// (no field to keep) means no chunk. `layer_lasers`: with a sensor-geometry residual
 /// layer, each decoded point's laser in its table (LayerStats::layer_lasers), which lets
 /// a field be coded against the last value of the same laser (method 3; a ring that is a
-/// function of the table's laser then costs next to nothing); empty otherwise.
+/// function of the table's laser then costs next to nothing) or by a context tree on it
+/// (method 4); empty otherwise.
 [[nodiscard]] std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
                                                           const AttributeOptions& options = {},
                                                           std::vector<AttributeField>* fields = nullptr,
@@ -68,7 +69,7 @@ struct AttributeField {
 /// Decodes an `ATTR` payload onto `decoded` (the decoded cloud, whose size the payload
 /// must match): sets its intensity, time, ring and rgb as the payload holds them.
 /// kBadData with the payload offset on a malformed or truncated payload, and for a field
-/// coded against the sensor-geometry layer's lasers (method 3), which only decode_cloud
+/// coded against the sensor-geometry layer's lasers (methods 3 and 4), which only decode_cloud
 /// can decode.
 [[nodiscard]] Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded);
 
