@@ -37,16 +37,15 @@
 
 #include "codec/bytes.hpp"
 #include "residual/layer_lasers.hpp"
-#include "residual/logistic.hpp"
+#include "residual/mixing.hpp"
 #include "residual/range_coder.hpp"
 
 namespace lex3d::residual {
 namespace {
 
 using detail::BitModel;
+using detail::Mix3;
 using detail::YoungBitModel;
-using detail::squash;
-using detail::stretch_table;
 using detail::IntModel;
 using detail::RangeDecoder;
 using detail::RangeEncoder;
@@ -131,7 +130,7 @@ class MixedTree {
     models_[0].resize(static_cast<std::size_t>(kCoarse * kActivity) * nodes);
     models_[1].resize(static_cast<std::size_t>(fine_) * kActivity * nodes);
     models_[2].resize(static_cast<std::size_t>(kNear * kNear) * nodes);
-    weights_.assign(static_cast<std::size_t>(bits_) * 3, kInitialWeight);
+    mix_ = std::make_unique<Mix3>(static_cast<std::size_t>(bits_), kInitialWeight);
   }
   void put(RangeEncoder& enc, std::int64_t u, std::int64_t prev, std::int64_t prev2, std::int64_t up) {
     start(prev, prev2, up);
@@ -156,7 +155,7 @@ class MixedTree {
 
  private:
   static constexpr int kCoarse = 32, kNear = 16, kFine = 256;
-  static constexpr std::int32_t kInitialWeight = 21845, kMaxWeight = 1 << 19;
+  static constexpr std::int32_t kInitialWeight = 21845;
   void start(std::int64_t prev, std::int64_t prev2, std::int64_t up) {
     const auto b = [&](std::int64_t v, std::uint64_t buckets) {
       return static_cast<std::size_t>(static_cast<std::uint64_t>(v) * buckets / n_);
@@ -169,34 +168,16 @@ class MixedTree {
   /// The probability of a 0 (in 1/4096) of the bit at depth `d` (0: the most significant)
   /// under tree node `node`.
   std::uint32_t p0(int d, std::size_t node) {
-    const auto& st = stretch_table();
-    at_ = static_cast<std::size_t>(d) * 3;
-    std::int64_t dot = 0;
-    for (std::size_t m = 0; m < 3; ++m) {
-      index_[m] = ctx_[m] + node;
-      input_[m] = st[models_[m][index_[m]].p1 >> 4];
-      dot += static_cast<std::int64_t>(weights_[at_ + m]) * input_[m];
-    }
-    p1_ = squash(static_cast<std::int32_t>(std::clamp<std::int64_t>(dot >> 16, -2047, 2047)));  // (>>: floor)
-    return static_cast<std::uint32_t>(4096 - p1_);
+    return mix_->p0(models_[0][ctx_[0] + node], models_[1][ctx_[1] + node], models_[2][ctx_[2] + node],
+                    static_cast<std::size_t>(d));
   }
-  void update(bool bit) {
-    const std::int32_t error = (bit ? 4096 : 0) - p1_;
-    for (std::size_t m = 0; m < 3; ++m) {
-      models_[m][index_[m]].update(bit);
-      std::int32_t& w = weights_[at_ + m];
-      w = std::clamp(w + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
-    }
-  }
+  void update(bool bit) { mix_->learn(bit); }
 
   std::uint64_t n_, fine_;
   int bits_ = 0;
   std::array<std::vector<YoungBitModel>, 3> models_;
-  std::vector<std::int32_t> weights_;
-  std::array<std::size_t, 3> ctx_{}, index_{};
-  std::array<std::int32_t, 3> input_{};
-  std::size_t at_ = 0;
-  std::int32_t p1_ = 2048;
+  std::unique_ptr<Mix3> mix_;  // one weight set per bit depth
+  std::array<std::size_t, 3> ctx_{};
 };
 
 /// The models of one channel for one method.

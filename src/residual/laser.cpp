@@ -109,6 +109,28 @@ struct Beams {
   }
 };
 
+/// The mantissa bits of a magnitude (below its leading 1, most significant first), a bit
+/// model per (set, exponent, bit).
+class MantissaModels {
+ public:
+  static constexpr int kMaxExponent = IntModel::kMaxExponent;
+  explicit MantissaModels(int sets) : m_(static_cast<std::size_t>(sets)) {}
+  void put(RangeEncoder& enc, int set, int e, std::uint64_t mag) {
+    auto& m = m_[static_cast<std::size_t>(set)][static_cast<std::size_t>(e)];
+    for (int j = e - 1; j >= 0; --j) enc.put(m[static_cast<std::size_t>(j)], ((mag >> j) & 1U) != 0);
+  }
+  /// The magnitude of exponent e.
+  std::uint64_t get(RangeDecoder& dec, int set, int e) {
+    auto& m = m_[static_cast<std::size_t>(set)][static_cast<std::size_t>(e)];
+    std::uint64_t mag = 1;
+    for (int j = e - 1; j >= 0; --j) mag = (mag << 1) | (dec.get(m[static_cast<std::size_t>(j)]) ? 1U : 0U);
+    return mag;
+  }
+
+ private:
+  std::vector<std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1>> m_;
+};
+
 /// Signed integers as IntModel codes them (zero flag, sign, Elias-gamma exponent, mantissa),
 /// except that the sign is conditioned on a sign context and the mantissa bits on the
 /// context's first class too (beam lengths: their magnitude's low bits still follow how
@@ -128,9 +150,7 @@ class RangeModel {
     while ((mag >> (e + 1)) != 0) ++e;
     for (int j = 0; j < e; ++j) enc.put(m.exponent[static_cast<std::size_t>(j)], true);
     if (e < kMaxExponent) enc.put(m.exponent[static_cast<std::size_t>(e)], false);
-    auto& mant = mant_[static_cast<std::size_t>(ctx / kClasses)];
-    for (int j = e - 1; j >= 0; --j)
-      enc.put(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)], ((mag >> j) & 1U) != 0);
+    mant_.put(enc, ctx / kClasses, e, mag);
   }
   std::int64_t get(RangeDecoder& dec, int ctx, int sign_ctx) {
     Context& m = ctx_[static_cast<std::size_t>(ctx)];
@@ -138,11 +158,7 @@ class RangeModel {
     const bool negative = dec.get(m.sign[sign_ctx]);
     int e = 0;
     while (e < kMaxExponent && dec.get(m.exponent[static_cast<std::size_t>(e)])) ++e;
-    auto& mant = mant_[static_cast<std::size_t>(ctx / kClasses)];
-    std::uint64_t mag = 1;
-    for (int j = e - 1; j >= 0; --j)
-      mag = (mag << 1) | (dec.get(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)]) ? 1U : 0U);
-    const auto v = static_cast<std::int64_t>(mag);
+    const auto v = static_cast<std::int64_t>(mant_.get(dec, ctx / kClasses, e));
     return negative ? -v : v;
   }
 
@@ -153,7 +169,7 @@ class RangeModel {
     std::array<BitModel, kMaxExponent + 1> exponent{};
   };
   std::vector<Context> ctx_;
-  std::vector<std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1>> mant_;
+  MantissaModels mant_;
 };
 
 /// The beam-length residuals of predictors 4 and 5 (formats/model.md §2.8.4): RangeModel's
@@ -185,20 +201,14 @@ class MixedRangeModel {
     while ((mag >> (e + 1)) != 0) ++e;
     for (int j = 0; j < e; ++j) bit(enc, x, 4 + j, 2 + std::min(j, 3), true);
     if (e < kMaxExponent) bit(enc, x, 4 + e, 2 + std::min(e, 3), false);
-    auto& mant = mant_[static_cast<std::size_t>(x.mantissa)];
-    for (int j = e - 1; j >= 0; --j)
-      enc.put(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)], ((mag >> j) & 1U) != 0);
+    mant_.put(enc, x.mantissa, e, mag);
   }
   std::int64_t get(RangeDecoder& dec, const Contexts& x) {
     if (!bit(dec, x, 0, 0)) return 0;
     const bool negative = bit(dec, x, 1 + x.sign, 1);
     int e = 0;
     while (e < kMaxExponent && bit(dec, x, 4 + e, 2 + std::min(e, 3))) ++e;
-    auto& mant = mant_[static_cast<std::size_t>(x.mantissa)];
-    std::uint64_t mag = 1;
-    for (int j = e - 1; j >= 0; --j)
-      mag = (mag << 1) | (dec.get(mant[static_cast<std::size_t>(e)][static_cast<std::size_t>(j)]) ? 1U : 0U);
-    const auto v = static_cast<std::int64_t>(mag);
+    const auto v = static_cast<std::int64_t>(mant_.get(dec, x.mantissa, e));
     return negative ? -v : v;
   }
 
@@ -222,7 +232,7 @@ class MixedRangeModel {
 
   std::array<std::vector<YoungBitModel>, 3> models_;
   Mix3 mix_{kWeightSets, kInitialWeight};
-  std::vector<std::array<std::array<BitModel, kMaxExponent>, kMaxExponent + 1>> mant_;
+  MantissaModels mant_;
 };
 
 /// The models and predictor state shared by encoder and decoder (formats/model.md §2.8.3).

@@ -112,6 +112,9 @@ using detail::kMaxSteps;
 /// A decoder accepts at most this many coded points per payload byte (each point costs
 /// at least four binary decisions of >= 0.011 bits).
 constexpr std::uint64_t kMaxPointsPerByte = 200;
+/// The same for a sensor-geometry layer of range predictor 4 or 5, whose mixed occupancy and
+/// zero decisions cost at least log2(4096 / 4095) bits each: at most 11,355 points a byte.
+constexpr std::uint64_t kMaxMixedPointsPerByte = 12000;
 
 // ---------------------------------------------------------------------------------------
 // The point predictor and quantiser shared by encoder and decoder
@@ -901,12 +904,18 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
                     at + 16);
   const std::uint64_t stream_bytes = payload.size() - h.stream_offset;
   const bool voxel = h.coding == kCodingVoxel;
-  if (n_c > max_points || n_c > (voxel ? kMaxVoxelsPerByte : kMaxPointsPerByte) * stream_bytes + 64)
+  const bool sweep = h.coding == kCodingSweep;
+  const bool laser = h.coding == kCodingLaser;
+  const auto too_many = [&](std::uint64_t per_byte) {
+    return n_c > max_points || n_c > per_byte * stream_bytes + 64;
+  };
+  const auto too_many_error = [&] {
     return bad_data("residual layer coded_points " + std::to_string(n_c) + " exceeds what the model (" +
                         std::to_string(max_points) + " input points) or the stored bytes can hold",
                     at + 24);
-  const bool sweep = h.coding == kCodingSweep;
-  const bool laser = h.coding == kCodingLaser;
+  };
+  // (a sensor-geometry layer's bound depends on its predictor, checked once it is read)
+  if (too_many(voxel ? kMaxVoxelsPerByte : laser ? kMaxMixedPointsPerByte : kMaxPointsPerByte)) return too_many_error();
   detail::LaserTable table;
   double tangential_step = 0.0;
   if (laser) {
@@ -915,6 +924,7 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
     if (auto e = detail::read_laser_fields(payload.data() + at + kHeadBytes, payload.size() - at - kHeadBytes, max_error,
                                            table, tangential_step))
       return bad_data("residual layer " + e->message, at + kHeadBytes + e->offset);
+    if (too_many(table.predictor >= 4 ? kMaxMixedPointsPerByte : kMaxPointsPerByte)) return too_many_error();
   }
   if (sweep && !(h.cell >= 1e-6 && h.cell <= kPi))
     return bad_data("residual layer direction cell " + std::to_string(h.cell) + " rad is not in [1e-6, pi]", at + 32);

@@ -2,7 +2,6 @@
 // formats/model.md §2.7).
 
 #include "residual/voxel.hpp"
-#include "residual/logistic.hpp"
 
 #include "residual/mixing.hpp"
 
