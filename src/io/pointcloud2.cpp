@@ -256,6 +256,24 @@ struct Record {
   std::uint64_t data = 0, data_len = 0, end = 0;
 };
 
+/// Reads the `name=value` fields (each after its u32 length) from byte `o` to `end` of `p`.
+Status read_fields(const std::string& head, const std::uint8_t* p, std::uint64_t o, std::uint64_t end,
+                   std::map<std::string, std::string_view>& fields) {
+  while (o < end) {
+    if (end - o < 4) return bad_data(head + " (a field length is cut)", o);
+    std::uint32_t flen = 0;
+    std::memcpy(&flen, p + o, 4);
+    o += 4;
+    if (flen > end - o) return bad_data(head + ": a field of " + std::to_string(flen) + " bytes runs past it", o);
+    const std::string_view field(reinterpret_cast<const char*>(p + o), flen);
+    const std::size_t eq = field.find('=');
+    if (eq == std::string_view::npos) return bad_data(head + ": a field has no '='", o);
+    fields[std::string(field.substr(0, eq))] = field.substr(eq + 1);
+    o += flen;
+  }
+  return {};
+}
+
 /// Reads the record at `at` of the `size` bytes at `p`; `what` names the region in messages.
 Status read_record(const std::string& path, const std::uint8_t* p, std::uint64_t size, std::uint64_t at, Record& rec,
                    const std::string& where) {
@@ -271,19 +289,9 @@ Status read_record(const std::string& path, const std::uint8_t* p, std::uint64_t
   const std::uint64_t hlen = u32(at);
   if (hlen > size - at - 4)
     return bad_data(head + "truncated: header of " + std::to_string(hlen) + " bytes, " + std::to_string(size - at - 4) + " left", at);
-  std::uint64_t o = at + 4;
-  const std::uint64_t hend = o + hlen;
-  while (o < hend) {
-    if (hend - o < 4) return bad_data(head + "corrupt header (a field length is cut)", o);
-    const std::uint64_t flen = u32(o);
-    o += 4;
-    if (flen > hend - o) return bad_data(head + "corrupt header: a field of " + std::to_string(flen) + " bytes runs past it", o);
-    const std::string_view field(reinterpret_cast<const char*>(p + o), flen);
-    const std::size_t eq = field.find('=');
-    if (eq == std::string_view::npos) return bad_data(head + "corrupt header: a field has no '='", o);
-    rec.fields[std::string(field.substr(0, eq))] = field.substr(eq + 1);
-    o += flen;
-  }
+  const std::uint64_t hend = at + 4 + hlen;
+  Status s = read_fields(head + "corrupt header", p, at + 4, hend, rec.fields);
+  if (!s.ok()) return s;
   if (size - hend < 4) return bad_data(head + "truncated (its data length is cut)", hend);
   rec.data_len = u32(hend);
   rec.data = hend + 4;
@@ -292,6 +300,14 @@ Status read_record(const std::string& path, const std::uint8_t* p, std::uint64_t
                         std::to_string(size - rec.data) + " left",
                     rec.data);
   rec.end = rec.data + rec.data_len;
+  // a connection's data is a second list of fields (topic, type, md5sum, message_definition),
+  // which the ROS bag library parses without checking its lengths against the data
+  const auto op = rec.fields.find("op");
+  if (op != rec.fields.end() && op->second == std::string_view("\x07", 1)) {
+    std::map<std::string, std::string_view> conn;
+    s = read_fields(head + "corrupt connection data", p, rec.data, rec.end, conn);
+    if (!s.ok()) return s;
+  }
   return {};
 }
 
@@ -435,6 +451,9 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
   std::set<std::uint64_t> chunk_at;
   std::vector<std::uint64_t> message_at;  // the last chunk's message records (offsets in its data)
   std::vector<std::uint8_t> inflated;     // a compressed chunk's data
+  std::map<std::uint64_t, std::map<std::uint32_t, std::uint32_t>> indexed;  // chunk -> connection -> messages
+  std::set<std::uint32_t> listed;         // the index's connections
+  std::set<std::uint64_t> described;      // chunks with a chunk info
   std::uint64_t last_chunk = 0;
   std::uint64_t at = fh.end;
   std::uint32_t connections = 0, chunk_infos = 0;
@@ -512,10 +531,14 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
       chunk_at.insert(at);
       last_chunk = at;
     } else if (op == 0x04) {  // index data of the chunk before it: offsets of its message records
-      std::uint32_t ver = 0, count = 0;
+      std::uint32_t ver = 0, count = 0, conn = 0;
       if (last_chunk == 0 || !field_uint(rec, "ver", ver) || ver != 1 || !field_uint(rec, "count", count) ||
-          static_cast<std::uint64_t>(count) * 12U != rec.data_len)
+          !field_uint(rec, "conn", conn) || static_cast<std::uint64_t>(count) * 12U != rec.data_len)
         return bad_data(msg(path, where + ": index data that does not follow a chunk or does not hold its count"), at);
+      if (!indexed[last_chunk].emplace(conn, count).second)
+        return bad_data(msg(path, where + ": a second index data record of connection " + std::to_string(conn) +
+                                      " for the chunk at byte " + std::to_string(last_chunk)),
+                        at);
       for (std::uint32_t k = 0; k < count; ++k) {
         std::uint32_t off = 0;
         std::memcpy(&off, p + rec.data + 12ULL * k + 8, 4);
@@ -526,11 +549,36 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
                           at);
       }
     } else if (op == 0x07) {
-      if (in_index) ++connections;
-    } else if (op == 0x06) {  // chunk info: names a chunk seen above
+      std::uint32_t conn = 0;
+      if (!field_uint(rec, "conn", conn)) return bad_data(msg(path, where + ": a connection without its conn field"), at);
+      if (in_index) {
+        ++connections;
+        if (!listed.insert(conn).second)
+          return bad_data(msg(path, where + ": connection " + std::to_string(conn) + " listed twice in the index"), at);
+      }
+    } else if (op == 0x06) {  // chunk info: names a chunk seen above, and its messages a connection
       std::uint64_t pos = 0;
+      std::uint32_t ver = 0, count = 0;
       if (!field_uint(rec, "chunk_pos", pos) || chunk_at.count(pos) == 0)
         return bad_data(msg(path, where + ": chunk info naming no chunk of the file"), at);
+      if (!field_uint(rec, "ver", ver) || ver != 1 || !field_uint(rec, "count", count) ||
+          static_cast<std::uint64_t>(count) * 8U != rec.data_len)
+        return bad_data(msg(path, where + ": chunk info that does not hold its count"), at);
+      if (!described.insert(pos).second)
+        return bad_data(msg(path, where + ": a second chunk info for the chunk at byte " + std::to_string(pos)), at);
+      // the ROS bag library reads as many index data records after the chunk as this lists
+      // connections: a list that differs would drop messages without a word
+      std::map<std::uint32_t, std::uint32_t> counts;
+      for (std::uint32_t k = 0; k < count; ++k) {
+        std::uint32_t conn = 0, n = 0;
+        std::memcpy(&conn, p + rec.data + 8ULL * k, 4);
+        std::memcpy(&n, p + rec.data + 8ULL * k + 4, 4);
+        counts[conn] += n;
+      }
+      if (counts != indexed[pos] || counts.size() != count)
+        return bad_data(msg(path, where + ": the chunk info of the chunk at byte " + std::to_string(pos) +
+                                      " lists other connections or message counts than the index data after it"),
+                        at);
       ++chunk_infos;
     } else if (op != 0x02) {
       return bad_data(msg(path, where + ": unknown record op"), at);
@@ -543,6 +591,13 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
                                   std::to_string(chunk_at.size()) + " chunks, " + std::to_string(chunk_infos) +
                                   " chunk infos and " + std::to_string(connections) + " connections in its index"),
                     size);
+  for (const auto& [pos, counts] : indexed)
+    for (const auto& [conn, n] : counts)
+      if (listed.count(conn) == 0)
+        return bad_data(msg(path, "corrupt bag: the index data of the chunk at byte " + std::to_string(pos) + " names connection " +
+                                      std::to_string(conn) + ", which the index does not list (" + std::to_string(n) +
+                                      " messages)"),
+                        pos);
   return {};
 }
 

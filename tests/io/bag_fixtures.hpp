@@ -151,4 +151,30 @@ inline ChunkAt first_chunk(const std::vector<char>& b) {
   return c;
 }
 
+/// A top-level record of a bag: where it starts, its op and its data.
+struct RecordAt {
+  std::size_t at = 0, data = 0, data_len = 0;
+  std::uint8_t op = 0;
+};
+
+/// The top-level records after the magic line, in file order.
+inline std::vector<RecordAt> records(const std::vector<char>& b) {
+  std::vector<RecordAt> out;
+  for (std::size_t at = 13; at + 8 <= b.size();) {
+    RecordAt r;
+    r.at = at;
+    const std::size_t hlen = u32_at(b, at);
+    for (std::size_t o = at + 4; o + 4 <= at + 4 + hlen;) {
+      const std::size_t flen = u32_at(b, o);
+      if (flen == 4 && std::memcmp(b.data() + o + 4, "op=", 3) == 0) r.op = static_cast<std::uint8_t>(b[o + 7]);
+      o += 4 + flen;
+    }
+    r.data_len = u32_at(b, at + 4 + hlen);
+    r.data = at + 4 + hlen + 4;
+    out.push_back(r);
+    at = r.data + r.data_len;
+  }
+  return out;
+}
+
 }  // namespace bagfix

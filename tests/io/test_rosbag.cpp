@@ -495,3 +495,37 @@ TEST_F(Bags, CorruptCompressedBytesAreRefusedNamingTheChunk) {
     EXPECT_NE(r.status().to_string().find(names_chunk), std::string::npos) << r.status().to_string();
   }
 }
+
+TEST_F(Bags, ConnectionDataFieldRunningPastItIsRefused) {
+  // A connection record's data is a list of fields (topic=, type=, ...) that the ROS bag
+  // library parses without checking a field's length against the data (found by
+  // fuzz_reader_bag: a heap overflow in ros::Header::parse). Each connection record of the
+  // bag, the one in its chunk and the one in its index, with its first field's length past
+  // the data: refused.
+  const std::string p = path("conn.bag");
+  bagfix::write(p, "/points", {bagfix::driver_cloud()}, false);
+  const std::vector<char> bytes = slurp(p);
+  std::vector<std::size_t> conn_data;  // data offsets of the connection records
+  for (const auto& r : bagfix::records(bytes)) {
+    if (r.op == 0x07) conn_data.push_back(r.data);
+    if (r.op == 0x05)  // inside the (uncompressed) chunk
+      for (const auto& inner : bagfix::records(std::vector<char>(bytes.begin() + static_cast<std::ptrdiff_t>(r.data) - 13,
+                                                                  bytes.begin() + static_cast<std::ptrdiff_t>(r.data + r.data_len))))
+        if (inner.op == 0x07) conn_data.push_back(inner.data + r.data - 13);
+  }
+  ASSERT_EQ(conn_data.size(), 2U);
+  for (const std::size_t at : conn_data) {
+    std::vector<char> b = bytes;
+    const std::uint32_t flen = bagfix::u32_at(b, at) + 5000;
+    std::memcpy(b.data() + at, &flen, 4);
+    const std::string bad = path("conn_bad.bag");
+    spit(bad, b, b.size());
+    for (const bool info : {false, true}) {
+      const Status s = info ? io::read_bag_info(bad).status() : io::read_bag(bad, "").status();
+      ASSERT_FALSE(s.ok()) << at;
+      EXPECT_EQ(s.code(), ErrorCode::kBadData);
+      EXPECT_NE(s.to_string().find(bad + ": "), std::string::npos) << s.to_string();
+      EXPECT_NE(s.to_string().find("corrupt connection data: a field of"), std::string::npos) << s.to_string();
+    }
+  }
+}
