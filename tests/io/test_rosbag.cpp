@@ -529,3 +529,42 @@ TEST_F(Bags, ConnectionDataFieldRunningPastItIsRefused) {
     }
   }
 }
+
+TEST_F(Bags, IndexThatDisagreesWithItsChunkIsRefused) {
+  // the index data after a chunk: an entry's offset moved off its message record, or the
+  // record's connection changed (the ROS bag library would then drop the topic's messages
+  // without a word and read the bag as holding only /note)
+  const std::string p = path("index.bag");
+  bagfix::write(p, "/points", {bagfix::driver_cloud(), bagfix::driver_cloud(1700000001, 0)});
+  const std::vector<char> bytes = slurp(p);
+  std::size_t index_data = 0, conn_field = 0;
+  for (const auto& r : bagfix::records(bytes))
+    if (r.op == 0x04 && index_data == 0) {
+      index_data = r.data;
+      const std::string header(bytes.data() + r.at, bytes.data() + r.data);
+      conn_field = r.at + header.find("conn=") + 5;
+    }
+  ASSERT_NE(index_data, 0U);
+  struct Case {
+    const char* name;
+    std::size_t at;
+    std::uint32_t add;
+    const char* expect;
+  };
+  for (const Case& c : {Case{"offset", index_data + 8, 1, "is not the start of a message record of the chunk at byte"},
+                        Case{"conn", conn_field, 7, "lists other connections or message counts than the index data"}}) {
+    std::vector<char> b = bytes;
+    const std::uint32_t v = bagfix::u32_at(b, c.at) + c.add;
+    std::memcpy(b.data() + c.at, &v, 4);
+    const std::string bad = path(std::string("index_") + c.name + ".bag");
+    spit(bad, b, b.size());
+    for (const bool info : {false, true}) {
+      const Status s = info ? io::read_bag_info(bad).status() : io::read_bag(bad, "/points").status();
+      ASSERT_FALSE(s.ok()) << c.name;
+      EXPECT_EQ(s.code(), ErrorCode::kBadData);
+      EXPECT_NE(s.to_string().find(bad + ": corrupt bag: "), std::string::npos) << s.to_string();
+      EXPECT_NE(s.to_string().find(c.expect), std::string::npos) << s.to_string();
+      EXPECT_EQ(s.to_string().find('\n'), std::string::npos);
+    }
+  }
+}
