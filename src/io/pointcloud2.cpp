@@ -480,10 +480,13 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
         return bad_data(msg(path, where + ": unknown chunk compression " + quoted(compression)), at);
       const std::string chunk = "chunk " + std::to_string(chunk_at.size() + 1) + " at byte " + std::to_string(at) + " (" +
                                 std::string(compression) + ", " + std::to_string(rec.data_len) + " bytes)";
-      if (usize > kMaxChunkBytes || (compression == "none" && usize != rec.data_len))
-        return bad_data(msg(path, where + ": chunk of " + std::to_string(rec.data_len) + " bytes claims " +
-                                      std::to_string(usize) + " uncompressed"),
+      if (usize > kMaxChunkBytes)
+        return bad_data(msg(path, "corrupt bag: " + chunk + " declares " + std::to_string(usize) +
+                                      " bytes uncompressed, more than the " + std::to_string(kMaxChunkBytes) +
+                                      " a chunk may hold"),
                         at);
+      if (compression == "none" && usize != rec.data_len)
+        return bad_data(msg(path, "corrupt bag: " + chunk + " declares " + std::to_string(usize) + " bytes uncompressed"), at);
       // the declared size checked against what the compressed bytes can hold before anything is
       // allocated; the data then decompressed (its buffer grows with the output, not with the
       // declared size) and required to give exactly the declared size, since the ROS bag library
