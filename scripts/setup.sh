@@ -18,7 +18,7 @@ PACKAGES=(
   libpcap-dev nlohmann-json3-dev
   python3-dev pybind11-dev python3-pytest
   python3-distributed python3-dask
-  librosbag-storage-dev libsensor-msgs-dev
+  librosbag-storage-dev libsensor-msgs-dev libbz2-dev liblz4-dev
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

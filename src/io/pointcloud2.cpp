@@ -14,6 +14,9 @@
 #include <string_view>
 #include <vector>
 
+#include <bzlib.h>
+#include <lz4frame.h>
+
 #include "io/internal.hpp"
 #include "io/rosbag_internal.hpp"
 
@@ -237,6 +240,14 @@ namespace {
 constexpr char kBagMagic[] = "#ROSBAG V2.0\n";
 constexpr std::size_t kBagMagicBytes = sizeof(kBagMagic) - 1;
 constexpr std::uint64_t kMaxChunkBytes = 1ULL << 31;  // an uncompressed chunk (recorders write ~768 KiB)
+// The most a compressed chunk can expand. LZ4: a match of 255 more bytes costs at least one
+// more byte of input, so no LZ4 frame expands beyond 255:1 (the format's own bound). bzip2
+// has no useful bound of its own (its run-length stage alone reaches ~45,000,000:1 on a
+// single repeated byte); 2^16:1 is above any chunk a recorder writes (a 768 KiB chunk of one
+// repeated byte, the most compressible there is, compresses to 46 bytes: 17,096:1) and keeps
+// what a chunk of a few bytes may ask to be decompressed within a few hundred KiB.
+constexpr std::uint64_t kMaxLz4Ratio = 255;
+constexpr std::uint64_t kMaxBz2Ratio = 1ULL << 16;
 
 /// One record: its header fields and where its data lies.
 struct Record {
@@ -244,6 +255,24 @@ struct Record {
   std::map<std::string, std::string_view> fields;
   std::uint64_t data = 0, data_len = 0, end = 0;
 };
+
+/// Reads the `name=value` fields (each after its u32 length) from byte `o` to `end` of `p`.
+Status read_fields(const std::string& head, const std::uint8_t* p, std::uint64_t o, std::uint64_t end,
+                   std::map<std::string, std::string_view>& fields) {
+  while (o < end) {
+    if (end - o < 4) return bad_data(head + " (a field length is cut)", o);
+    std::uint32_t flen = 0;
+    std::memcpy(&flen, p + o, 4);
+    o += 4;
+    if (flen > end - o) return bad_data(head + ": a field of " + std::to_string(flen) + " bytes runs past it", o);
+    const std::string_view field(reinterpret_cast<const char*>(p + o), flen);
+    const std::size_t eq = field.find('=');
+    if (eq == std::string_view::npos) return bad_data(head + ": a field has no '='", o);
+    fields[std::string(field.substr(0, eq))] = field.substr(eq + 1);
+    o += flen;
+  }
+  return {};
+}
 
 /// Reads the record at `at` of the `size` bytes at `p`; `what` names the region in messages.
 Status read_record(const std::string& path, const std::uint8_t* p, std::uint64_t size, std::uint64_t at, Record& rec,
@@ -260,19 +289,9 @@ Status read_record(const std::string& path, const std::uint8_t* p, std::uint64_t
   const std::uint64_t hlen = u32(at);
   if (hlen > size - at - 4)
     return bad_data(head + "truncated: header of " + std::to_string(hlen) + " bytes, " + std::to_string(size - at - 4) + " left", at);
-  std::uint64_t o = at + 4;
-  const std::uint64_t hend = o + hlen;
-  while (o < hend) {
-    if (hend - o < 4) return bad_data(head + "corrupt header (a field length is cut)", o);
-    const std::uint64_t flen = u32(o);
-    o += 4;
-    if (flen > hend - o) return bad_data(head + "corrupt header: a field of " + std::to_string(flen) + " bytes runs past it", o);
-    const std::string_view field(reinterpret_cast<const char*>(p + o), flen);
-    const std::size_t eq = field.find('=');
-    if (eq == std::string_view::npos) return bad_data(head + "corrupt header: a field has no '='", o);
-    rec.fields[std::string(field.substr(0, eq))] = field.substr(eq + 1);
-    o += flen;
-  }
+  const std::uint64_t hend = at + 4 + hlen;
+  Status s = read_fields(head + "corrupt header", p, at + 4, hend, rec.fields);
+  if (!s.ok()) return s;
   if (size - hend < 4) return bad_data(head + "truncated (its data length is cut)", hend);
   rec.data_len = u32(hend);
   rec.data = hend + 4;
@@ -281,6 +300,14 @@ Status read_record(const std::string& path, const std::uint8_t* p, std::uint64_t
                         std::to_string(size - rec.data) + " left",
                     rec.data);
   rec.end = rec.data + rec.data_len;
+  // a connection's data is a second list of fields (topic, type, md5sum, message_definition),
+  // which the ROS bag library parses without checking its lengths against the data
+  const auto op = rec.fields.find("op");
+  if (op != rec.fields.end() && op->second == std::string_view("\x07", 1)) {
+    std::map<std::string, std::string_view> conn;
+    s = read_fields(head + "corrupt connection data", p, rec.data, rec.end, conn);
+    if (!s.ok()) return s;
+  }
   return {};
 }
 
@@ -297,6 +324,102 @@ bool field_uint(const Record& r, const char* name, T& v) {
   if (it == r.fields.end() || it->second.size() != sizeof(T)) return false;
   std::memcpy(&v, it->second.data(), sizeof(T));
   return true;
+}
+
+/// Why a chunk's data did not decompress to its declared size.
+struct Inflated {
+  enum Kind { kOk, kShort, kLong, kCorrupt } kind = kOk;
+  std::string why;  ///< kCorrupt: the decompressor's complaint
+};
+
+/// The output buffer, grown only as output arrives (never to a size the file declares up
+/// front) and to at most `limit` bytes; false when it is full.
+bool grow(std::vector<std::uint8_t>& out, std::size_t produced, std::size_t limit) {
+  if (produced < out.size()) return true;
+  if (out.size() >= limit) return false;
+  out.resize(std::min<std::size_t>(limit, std::max<std::size_t>(out.size() * 2, 64 * 1024)));
+  return true;
+}
+
+/// Decompresses a bz2 chunk's `n` bytes into `out` (resized to what came out), expecting
+/// `declared` bytes: stops at one byte more.
+Inflated inflate_bz2(const std::uint8_t* p, std::size_t n, std::size_t declared, std::vector<std::uint8_t>& out) {
+  bz_stream z{};
+  if (BZ2_bzDecompressInit(&z, 0, 0) != BZ_OK) return {Inflated::kCorrupt, "the bzip2 decoder did not start"};
+  z.next_in = const_cast<char*>(reinterpret_cast<const char*>(p));  // bzlib's API is not const
+  z.avail_in = static_cast<unsigned>(n);
+  std::size_t produced = 0;
+  out.clear();
+  Inflated r;
+  for (;;) {
+    if (!grow(out, produced, declared + 1)) {
+      r = {Inflated::kLong, ""};
+      break;
+    }
+    z.next_out = reinterpret_cast<char*>(out.data() + produced);
+    z.avail_out = static_cast<unsigned>(std::min<std::size_t>(out.size() - produced, 1U << 30));
+    const unsigned before_in = z.avail_in, before_out = z.avail_out;
+    const int ret = BZ2_bzDecompress(&z);
+    produced += before_out - z.avail_out;
+    if (ret == BZ_STREAM_END) {
+      if (produced > declared) r = {Inflated::kLong, ""};
+      else if (z.avail_in != 0)
+        r = {Inflated::kCorrupt, std::to_string(z.avail_in) + " bytes follow the end of its bzip2 stream"};
+      else if (produced < declared) r = {Inflated::kShort, ""};
+      break;
+    }
+    if (ret != BZ_OK) {
+      r = {Inflated::kCorrupt, ret == BZ_DATA_ERROR_MAGIC ? "not a bzip2 stream"
+                               : ret == BZ_MEM_ERROR      ? "the bzip2 decoder ran out of memory"
+                                                          : "corrupt bzip2 data"};
+      break;
+    }
+    // all input taken and room left, or no progress at all: the stream needs bytes it lacks
+    if ((z.avail_in == 0 && z.avail_out > 0) || (before_in == z.avail_in && before_out == z.avail_out)) {
+      r = {Inflated::kCorrupt, "the bzip2 stream is cut short"};
+      break;
+    }
+  }
+  BZ2_bzDecompressEnd(&z);
+  out.resize(std::min(produced, out.size()));
+  return r;
+}
+
+/// The same for an LZ4 frame (the ROS bag library writes LZ4's frame format).
+Inflated inflate_lz4(const std::uint8_t* p, std::size_t n, std::size_t declared, std::vector<std::uint8_t>& out) {
+  LZ4F_dctx* ctx = nullptr;
+  if (LZ4F_isError(LZ4F_createDecompressionContext(&ctx, LZ4F_VERSION)))
+    return {Inflated::kCorrupt, "the LZ4 decoder did not start"};
+  std::size_t in = 0, produced = 0;
+  out.clear();
+  Inflated r;
+  for (;;) {
+    if (!grow(out, produced, declared + 1)) {
+      r = {Inflated::kLong, ""};
+      break;
+    }
+    std::size_t dst = out.size() - produced, src = n - in;
+    const std::size_t ret = LZ4F_decompress(ctx, out.data() + produced, &dst, p + in, &src, nullptr);
+    if (LZ4F_isError(ret)) {
+      r = {Inflated::kCorrupt, std::string("corrupt LZ4 data (") + LZ4F_getErrorName(ret) + ")"};
+      break;
+    }
+    in += src;
+    produced += dst;
+    if (ret == 0) {  // the frame is complete
+      if (produced > declared) r = {Inflated::kLong, ""};
+      else if (in != n) r = {Inflated::kCorrupt, std::to_string(n - in) + " bytes follow the end of its LZ4 frame"};
+      else if (produced < declared) r = {Inflated::kShort, ""};
+      break;
+    }
+    if (src == 0 && dst == 0) {  // no input taken, no output made: the frame needs bytes it lacks
+      r = {Inflated::kCorrupt, "the LZ4 frame is cut short"};
+      break;
+    }
+  }
+  LZ4F_freeDecompressionContext(ctx);
+  out.resize(std::min(produced, out.size()));
+  return r;
 }
 
 }  // namespace
@@ -326,7 +449,11 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
                     size);
   // chunks (each followed by its index records) up to index_pos, then connections and chunk infos
   std::set<std::uint64_t> chunk_at;
-  std::map<std::uint64_t, std::uint64_t> chunk_size;  // chunk position -> uncompressed size
+  std::vector<std::uint64_t> message_at;  // the last chunk's message records (offsets in its data)
+  std::vector<std::uint8_t> inflated;     // a compressed chunk's data
+  std::map<std::uint64_t, std::map<std::uint32_t, std::uint32_t>> indexed;  // chunk -> connection -> messages
+  std::set<std::uint32_t> listed;         // the index's connections
+  std::set<std::uint64_t> described;      // chunks with a chunk info
   std::uint64_t last_chunk = 0;
   std::uint64_t at = fh.end;
   std::uint32_t connections = 0, chunk_infos = 0;
@@ -348,43 +475,113 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
       const auto comp = rec.fields.find("compression");
       if (comp == rec.fields.end() || !field_uint(rec, "size", usize))
         return bad_data(msg(path, where + " lacks compression or size"), at);
-      if (comp->second != "none" && comp->second != "bz2" && comp->second != "lz4")
-        return bad_data(msg(path, where + ": unknown chunk compression " + quoted(comp->second)), at);
-      if (usize > kMaxChunkBytes || (comp->second == "none" && usize != rec.data_len))
-        return bad_data(msg(path, where + ": chunk of " + std::to_string(rec.data_len) + " bytes claims " +
-                                      std::to_string(usize) + " uncompressed"),
+      const std::string_view compression = comp->second;
+      if (compression != "none" && compression != "bz2" && compression != "lz4")
+        return bad_data(msg(path, where + ": unknown chunk compression " + quoted(compression)), at);
+      const std::string chunk = "chunk " + std::to_string(chunk_at.size() + 1) + " at byte " + std::to_string(at) + " (" +
+                                std::string(compression) + ", " + std::to_string(rec.data_len) + " bytes)";
+      if (usize > kMaxChunkBytes)
+        return bad_data(msg(path, "corrupt bag: " + chunk + " declares " + std::to_string(usize) +
+                                      " bytes uncompressed, more than the " + std::to_string(kMaxChunkBytes) +
+                                      " a chunk may hold"),
                         at);
-      if (comp->second == "none") {  // its message and connection records fit it
-        std::uint64_t in = rec.data;
-        while (in < rec.end) {
-          Record inner;
-          s = read_record(path, p, rec.end, in, inner, "chunk at byte " + std::to_string(at) + ": ");
-          if (!s.ok()) return s;
-          in = inner.end;
-        }
+      if (compression == "none" && usize != rec.data_len)
+        return bad_data(msg(path, "corrupt bag: " + chunk + " declares " + std::to_string(usize) + " bytes uncompressed"), at);
+      // the declared size checked against what the compressed bytes can hold before anything is
+      // allocated; the data then decompressed (its buffer grows with the output, not with the
+      // declared size) and required to give exactly the declared size, since the ROS bag library
+      // trusts it (its bz2 reader keeps a short chunk's stale tail)
+      const std::uint8_t* body = p;
+      std::uint64_t begin = rec.data, end = rec.end;
+      if (compression != "none") {
+        const std::uint64_t ratio = compression == "lz4" ? kMaxLz4Ratio : kMaxBz2Ratio;
+        if (usize > ratio * rec.data_len)
+          return bad_data(msg(path, "corrupt bag: " + chunk + " declares " + std::to_string(usize) +
+                                        " bytes uncompressed, more than " + std::string(compression) + " expands " +
+                                        std::to_string(rec.data_len) + " bytes to (at most " + std::to_string(ratio) + ":1)"),
+                          at);
+        const Inflated r = compression == "bz2" ? inflate_bz2(p + rec.data, rec.data_len, usize, inflated)
+                                                : inflate_lz4(p + rec.data, rec.data_len, usize, inflated);
+        if (r.kind == Inflated::kShort)
+          return bad_data(msg(path, "corrupt bag: " + chunk + " decompresses to " + std::to_string(inflated.size()) +
+                                        " bytes, fewer than the " + std::to_string(usize) + " its header declares"),
+                          at);
+        if (r.kind == Inflated::kLong)
+          return bad_data(msg(path, "corrupt bag: " + chunk + " decompresses to more than the " + std::to_string(usize) +
+                                        " bytes its header declares"),
+                          at);
+        if (r.kind == Inflated::kCorrupt)
+          return bad_data(msg(path, "corrupt bag: " + chunk + " does not decompress: " + r.why), at);
+        body = inflated.data();
+        begin = 0;
+        end = usize;
+      }
+      // its records: connections and messages that fit it; the messages' offsets kept for the
+      // index data that follows
+      message_at.clear();
+      for (std::uint64_t in = begin; in < end;) {
+        Record inner;
+        s = read_record(path, body, end, in, inner, chunk + (compression == "none" ? ": " : ", decompressed: "));
+        if (!s.ok()) return s;
+        std::uint8_t inner_op = 0;
+        if (!field_u8(inner, "op", inner_op) || (inner_op != 0x02 && inner_op != 0x07))
+          return bad_data(msg(path, "corrupt bag: " + chunk + ": the record at data byte " + std::to_string(in - begin) +
+                                        " is neither a message nor a connection"),
+                          at);
+        if (inner_op == 0x02) message_at.push_back(in - begin);
+        in = inner.end;
       }
       chunk_at.insert(at);
-      chunk_size[at] = usize;
       last_chunk = at;
-    } else if (op == 0x04) {  // index data of the chunk before it: offsets within that chunk
-      std::uint32_t ver = 0, count = 0;
+    } else if (op == 0x04) {  // index data of the chunk before it: offsets of its message records
+      std::uint32_t ver = 0, count = 0, conn = 0;
       if (last_chunk == 0 || !field_uint(rec, "ver", ver) || ver != 1 || !field_uint(rec, "count", count) ||
-          static_cast<std::uint64_t>(count) * 12U != rec.data_len)
+          !field_uint(rec, "conn", conn) || static_cast<std::uint64_t>(count) * 12U != rec.data_len)
         return bad_data(msg(path, where + ": index data that does not follow a chunk or does not hold its count"), at);
+      if (!indexed[last_chunk].emplace(conn, count).second)
+        return bad_data(msg(path, where + ": a second index data record of connection " + std::to_string(conn) +
+                                      " for the chunk at byte " + std::to_string(last_chunk)),
+                        at);
       for (std::uint32_t k = 0; k < count; ++k) {
         std::uint32_t off = 0;
         std::memcpy(&off, p + rec.data + 12ULL * k + 8, 4);
-        if (off >= chunk_size[last_chunk])
-          return bad_data(msg(path, where + ": a message offset " + std::to_string(off) + " lies beyond its chunk of " +
-                                        std::to_string(chunk_size[last_chunk]) + " bytes"),
+        if (!std::binary_search(message_at.begin(), message_at.end(), std::uint64_t{off}))
+          return bad_data(msg(path, where + ": message offset " + std::to_string(off) +
+                                        " is not the start of a message record of the chunk at byte " +
+                                        std::to_string(last_chunk)),
                           at);
       }
     } else if (op == 0x07) {
-      if (in_index) ++connections;
-    } else if (op == 0x06) {  // chunk info: names a chunk seen above
+      std::uint32_t conn = 0;
+      if (!field_uint(rec, "conn", conn)) return bad_data(msg(path, where + ": a connection without its conn field"), at);
+      if (in_index) {
+        ++connections;
+        if (!listed.insert(conn).second)
+          return bad_data(msg(path, where + ": connection " + std::to_string(conn) + " listed twice in the index"), at);
+      }
+    } else if (op == 0x06) {  // chunk info: names a chunk seen above, and its messages a connection
       std::uint64_t pos = 0;
+      std::uint32_t ver = 0, count = 0;
       if (!field_uint(rec, "chunk_pos", pos) || chunk_at.count(pos) == 0)
         return bad_data(msg(path, where + ": chunk info naming no chunk of the file"), at);
+      if (!field_uint(rec, "ver", ver) || ver != 1 || !field_uint(rec, "count", count) ||
+          static_cast<std::uint64_t>(count) * 8U != rec.data_len)
+        return bad_data(msg(path, where + ": chunk info that does not hold its count"), at);
+      if (!described.insert(pos).second)
+        return bad_data(msg(path, where + ": a second chunk info for the chunk at byte " + std::to_string(pos)), at);
+      // the ROS bag library reads as many index data records after the chunk as this lists
+      // connections: a list that differs would drop messages without a word
+      std::map<std::uint32_t, std::uint32_t> counts;
+      for (std::uint32_t k = 0; k < count; ++k) {
+        std::uint32_t conn = 0, n = 0;
+        std::memcpy(&conn, p + rec.data + 8ULL * k, 4);
+        std::memcpy(&n, p + rec.data + 8ULL * k + 4, 4);
+        counts[conn] += n;
+      }
+      if (counts != indexed[pos] || counts.size() != count)
+        return bad_data(msg(path, where + ": the chunk info of the chunk at byte " + std::to_string(pos) +
+                                      " lists other connections or message counts than the index data after it"),
+                        at);
       ++chunk_infos;
     } else if (op != 0x02) {
       return bad_data(msg(path, where + ": unknown record op"), at);
@@ -397,6 +594,13 @@ Status check_bag_container(const std::string& path, const std::uint8_t* p, std::
                                   std::to_string(chunk_at.size()) + " chunks, " + std::to_string(chunk_infos) +
                                   " chunk infos and " + std::to_string(connections) + " connections in its index"),
                     size);
+  for (const auto& [pos, counts] : indexed)
+    for (const auto& [conn, n] : counts)
+      if (listed.count(conn) == 0)
+        return bad_data(msg(path, "corrupt bag: the index data of the chunk at byte " + std::to_string(pos) + " names connection " +
+                                      std::to_string(conn) + ", which the index does not list (" + std::to_string(n) +
+                                      " messages)"),
+                        pos);
   return {};
 }
 

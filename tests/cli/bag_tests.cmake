@@ -82,6 +82,24 @@ file(WRITE "${WORK}/fake.bag" "#ROSBAG V2.0\nnothing else\n")
 run(2 bad.fake info "${WORK}/fake.bag")
 expect_match(bad.fake "${LAST_ERR}" "fake.bag: ")
 
+# --- compressed chunks: bz2 and LZ4 bags read as the uncompressed one; a chunk that declares
+# another size than it decompresses to, or whose compressed bytes are spoilt, is named
+foreach(c bz2 lz4)
+  run(0 packed.${c} compress "${WORK}/packed_${c}.bag" -o "${WORK}/packed_${c}.lex3dq" --one-file)
+  expect_match(packed.${c} "${LAST_OUT}" "total: [0-9]+ bytes for 800 points")
+  foreach(what size flip)
+    set(bag "${WORK}/chunk_${what}_${c}.bag")
+    run(2 chunk.${what}.${c} compress "${bag}" -o "${WORK}/chunk_${what}_${c}.lex3dq" --one-file)
+    expect_match(chunk.${what}.${c} "${LAST_ERR}" "chunk_${what}_${c}.bag: corrupt bag: chunk 1 at byte [0-9]+ \\(${c}, [0-9]+ bytes\\) ")
+    expect_absent(chunk.${what}.${c} "${WORK}/chunk_${what}_${c}.lex3dq")
+    if(what STREQUAL "size")
+      expect_match(chunk.size.${c} "${LAST_ERR}" "decompresses to [0-9]+ bytes, fewer than the [0-9]+ its header declares")
+    endif()
+    run(2 chunk.${what}.${c}.convert convert "${bag}" "${WORK}/chunk_${what}_${c}.pcd")
+    expect_absent(chunk.${what}.${c}.convert "${WORK}/chunk_${what}_${c}.pcd" "${WORK}/chunk_${what}_${c}_000.pcd")
+  endforeach()
+endforeach()
+
 # --- the shared Ouster bag (raw packets + metadata), when the data set is present
 set(OUSTER "${SHARED}/rosbag/ouster_512x10_raw.bag")
 if(EXISTS "${OUSTER}")

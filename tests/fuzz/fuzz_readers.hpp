@@ -26,12 +26,13 @@
 #include <vector>
 
 #include "lex3d/io/io.hpp"
+#include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
 
 namespace lex3d::fuzz {
 
 /// The inputs one reader target takes.
-enum class Reader { kPcd, kPly, kKitti, kBinXyz, kXyz, kUos, kLas, kPcap, kOuster, kPoses };
+enum class Reader { kPcd, kPly, kKitti, kBinXyz, kXyz, kUos, kLas, kPcap, kOuster, kPoses, kBag };
 
 struct ReaderKind {
   Reader reader;
@@ -43,7 +44,7 @@ inline constexpr ReaderKind kReaderKinds[] = {
     {Reader::kPcd, "pcd", ".pcd"},       {Reader::kPly, "ply", ".ply"},       {Reader::kKitti, "kitti", ".bin"},
     {Reader::kBinXyz, "binxyz", ".bin"}, {Reader::kXyz, "xyz", ".xyz"},       {Reader::kUos, "uos", ".3d"},
     {Reader::kLas, "las", ".las"},       {Reader::kPcap, "pcap", ".pcap"},    {Reader::kOuster, "ouster", ".pcap"},
-    {Reader::kPoses, "poses", ".txt"},
+    {Reader::kPoses, "poses", ".txt"},    {Reader::kBag, "bag", ".bag"},
 };
 
 inline const ReaderKind* find_reader(std::string_view name) {
@@ -79,7 +80,7 @@ inline const std::string& scratch_dir() {
 inline void remove_scratch() {
   const std::string& d = scratch_dir();
   for (const char* f : {"/input.pcd", "/input.ply", "/input.bin", "/input.xyz", "/input.3d", "/input.las",
-                        "/input.pcap", "/input.json", "/input.txt", "/back.pcd"})
+                        "/input.pcap", "/input.json", "/input.txt", "/input.bag", "/keep.bag", "/back.pcd"})
     std::remove((d + f).c_str());
   std::remove(d.c_str());
 }
@@ -172,6 +173,30 @@ inline void check_reader(const ReaderKind& kind, const std::uint8_t* data, std::
       if (!r.ok()) return check_failure(r.status(), path);
       for (const auto& p : r.value())
         if (!p.matrix().allFinite()) reader_fail("non-finite pose", "");
+      return;
+    }
+    case Reader::kBag: {
+      // the topics, then the scans of the bag's one point cloud topic and of its first topic
+      // (each read opens the bag anew, which costs the ROS bag library a 4 MiB buffer)
+      const auto info = io::read_bag_info(path);
+      if (!info.ok()) return check_failure(info.status(), path);
+      if (info.value().file_bytes != size) reader_fail("file_bytes is not the input's size", std::to_string(size));
+      std::uint64_t messages = 0;
+      for (const auto& t : info.value().topics) messages += t.messages;
+      if (messages != info.value().messages) reader_fail("topic message counts do not add up", "");
+      std::vector<std::string> topics{""};
+      if (!info.value().topics.empty()) topics.push_back(info.value().topics.front().name);
+      for (const auto& topic : topics) {
+        const auto r = io::read_bag(path, topic);
+        if (!r.ok()) {
+          check_failure(r.status(), path);
+          continue;
+        }
+        const auto& bag = r.value();
+        if (bag.scans.empty()) reader_fail("a bag read with no scan", topic);
+        for (const auto& s : bag.scans) check_cloud(s.cloud);
+        check_write_back(bag.scans.front().cloud);
+      }
       return;
     }
     case Reader::kPcap:

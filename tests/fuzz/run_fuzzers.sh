@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs every libFuzzer target of a Clang build for a bounded time, two at a time, each on a
 # fresh copy of its seed corpus (tests/fuzz/corpus for the model and alphabet decoders,
-# tests/fuzz/readers/<format> for the readers, tests/fuzz/readers/placedb for the place
+# tests/fuzz/readers/<format> for the readers (bag: ROS bags, make_bag_corpus.cpp), tests/fuzz/readers/placedb for the place
 # database, tests/fuzz/readers/placequery for a prepared query), with a fixed seed (-seed=1).
 # Exits non-zero when any target finds a crash, a sanitizer report or a violated property; the
 # input that did it is kept in the target's artifact directory.

@@ -100,11 +100,15 @@ inline sensor_msgs::PointCloud2 organised_cloud() {
                     1700000001, 0);
 }
 
-/// Writes `clouds` on `topic` (one a second from t0), and optionally more topics.
+/// Writes `clouds` on `topic` (one a second from t0), and optionally more topics, in chunks
+/// of `compression` (the library's default chunk threshold: 768 KiB uncompressed).
 inline void write(const std::string& path, const std::string& topic, const std::vector<sensor_msgs::PointCloud2>& clouds,
-                  bool extra_topic = true) {
+                  bool extra_topic = true, rosbag::CompressionType compression = rosbag::compression::Uncompressed,
+                  std::uint32_t chunk_threshold = 768 * 1024) {
   rosbag::Bag bag;
   bag.open(path, rosbag::bagmode::Write);
+  bag.setCompression(compression);
+  bag.setChunkThreshold(chunk_threshold);
   for (std::size_t i = 0; i < clouds.size(); ++i)
     bag.write(topic, ros::Time(1700000000 + static_cast<std::uint32_t>(i), 0), clouds[i]);
   if (extra_topic) {
@@ -113,6 +117,64 @@ inline void write(const std::string& path, const std::string& topic, const std::
     bag.write("/note", ros::Time(1700000000, 1), s);
   }
   bag.close();
+}
+
+/// Where the first chunk record of a bag lies: its `size` field's 4 bytes (the declared
+/// uncompressed size) and its data.
+struct ChunkAt {
+  std::size_t record = 0, size_field = 0, data = 0, data_len = 0;
+  std::uint32_t declared = 0;
+};
+
+inline std::uint32_t u32_at(const std::vector<char>& b, std::size_t at) {
+  std::uint32_t v = 0;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+/// The first chunk after the file header (bag 2.0: the magic line, then the file header record).
+inline ChunkAt first_chunk(const std::vector<char>& b) {
+  ChunkAt c;
+  const std::size_t fh = 13;
+  c.record = fh + 4 + u32_at(b, fh);
+  c.record += 4 + u32_at(b, c.record);  // past the file header's data (padding)
+  const std::size_t hlen = u32_at(b, c.record);
+  for (std::size_t o = c.record + 4; o < c.record + 4 + hlen;) {
+    const std::size_t flen = u32_at(b, o);
+    const std::string field(b.data() + o + 4, flen);
+    if (field.rfind("size=", 0) == 0) c.size_field = o + 4 + 5;
+    o += 4 + flen;
+  }
+  c.data_len = u32_at(b, c.record + 4 + hlen);
+  c.data = c.record + 4 + hlen + 4;
+  c.declared = u32_at(b, c.size_field);
+  return c;
+}
+
+/// A top-level record of a bag: where it starts, its op and its data.
+struct RecordAt {
+  std::size_t at = 0, data = 0, data_len = 0;
+  std::uint8_t op = 0;
+};
+
+/// The top-level records after the magic line, in file order.
+inline std::vector<RecordAt> records(const std::vector<char>& b) {
+  std::vector<RecordAt> out;
+  for (std::size_t at = 13; at + 8 <= b.size();) {
+    RecordAt r;
+    r.at = at;
+    const std::size_t hlen = u32_at(b, at);
+    for (std::size_t o = at + 4; o + 4 <= at + 4 + hlen;) {
+      const std::size_t flen = u32_at(b, o);
+      if (flen == 4 && std::memcmp(b.data() + o + 4, "op=", 3) == 0) r.op = static_cast<std::uint8_t>(b[o + 7]);
+      o += 4 + flen;
+    }
+    r.data_len = u32_at(b, at + 4 + hlen);
+    r.data = at + 4 + hlen + 4;
+    out.push_back(r);
+    at = r.data + r.data_len;
+  }
+  return out;
 }
 
 }  // namespace bagfix

@@ -83,7 +83,10 @@ struct BagScans {
 /// lists the bag's topics), a topic of another type, a PointCloud2 with fields that do not
 /// fit (a field beyond point_step, row_step smaller than width × point_step, data not
 /// row_step × height bytes, an unknown datatype, no x/y/z field, is_bigendian set), a
-/// truncated or corrupt bag; kIoError when the file cannot be opened.
+/// truncated or corrupt bag (a bz2 or LZ4 chunk is decompressed and checked before the ROS
+/// bag library reads it: a declared size beyond what its bytes can expand to, a chunk that
+/// decompresses to more or fewer bytes than declared or not at all is named with its
+/// position); kIoError when the file cannot be opened.
 [[nodiscard]] StatusOr<BagScans> read_bag(const std::string& path, const std::string& topic,
                                           const ReadOptions& options = {});
 
