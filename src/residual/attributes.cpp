@@ -323,14 +323,20 @@ Quant quantise_field(const std::vector<double>& values, bool is_f32, double max_
     q.step = 0.0;
     return q;
   }
-  // No exact step (double times): within fallback_error.
-  const double step = 2.0 * fallback_error;
-  if (!fits(step, lo, fallback_error * 1.000001))
-    throw std::invalid_argument(std::string(name) + ": values span too wide a range to code within " +
-                                std::to_string(fallback_error));
+  // No exact step (double times): within fallback_error, or, where the values span more
+  // than 2^31 such steps (GPS times of a LAS file over seconds, at 1 ns), within half the
+  // finest step that fits them (3.1 ns over 6.5 s); the bound is stored and reported.
+  double step = 2.0 * fallback_error;
+  for (int attempt = 0; attempt < 64 && !fits(step, lo, 0.5 * step * 1.000001); ++attempt)
+    step = std::max(step * 1.25, 1.000001 * (hi - lo) / static_cast<double>(kMaxSpan - 1));
+  if (!fits(step, lo, 0.5 * step * 1.000001)) {
+    std::ostringstream msg;
+    msg << name << ": values span too wide a range to code (" << std::setprecision(17) << lo << " to " << hi << ")";
+    throw std::invalid_argument(msg.str());
+  }
   q.step = step;
   q.base = lo;
-  q.max_error = fallback_error;
+  q.max_error = 0.5 * step * 1.000001;
   return q;
 }
 

@@ -115,6 +115,26 @@ TEST(Attributes, EveryFieldRoundTripsLosslessly) {
   EXPECT_EQ(c.fields[1].name, "intensity");
 }
 
+/// GPS times as a LAS file holds them (seconds of the week, no exact step) spanning more
+/// than 2^31 of the default 1 ns steps: kept within half the finest step that fits them,
+/// which the field reports, instead of refusing the scan.
+TEST(Attributes, TimesSpanningSecondsWithoutAStepAreKeptWithinTheirReportedBound) {
+  Cloud in = synthetic_scan(8, 200, 4);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> jitter(0.0, 1e-4);
+  for (std::size_t i = 0; i < in.size(); ++i) in.time[i] = 245379.398436825 + 6.5 * static_cast<double>(i) / static_cast<double>(in.size()) + jitter(rng);
+  const Coded c = code(in, 0.01);
+  const auto time = std::find_if(c.fields.begin(), c.fields.end(), [](const auto& f) { return f.name == "time"; });
+  ASSERT_NE(time, c.fields.end());
+  EXPECT_GT(time->max_error, 0.5e-9);  // wider than the default, as the span needs
+  EXPECT_LT(time->max_error, 5e-9);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  ASSERT_EQ(out.value().size(), in.size());
+  for (std::size_t j = 0; j < out.value().size(); ++j)
+    ASSERT_LE(std::abs(out.value().time[j] - in.time[c.sources[j]]), time->max_error) << j;
+}
+
 TEST(Attributes, FloatIntensitiesWithoutAStepKeepTheirBits) {
   Cloud in = synthetic_scan(8, 200, 2);
   std::mt19937 rng(3);
