@@ -727,15 +727,12 @@ std::uint32_t layer_coding(const std::vector<std::uint8_t>& payload) {
 
 bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_coding(payload) == 1; }
 
-/// Whether a layer is a sensor-geometry layer with edge flags (range predictor 2 or 3).
-bool laser_edge_layer(const std::vector<std::uint8_t>& payload) {
-  return layer_coding(payload) == 3 && payload.size() >= kLaserPredictorOffset + 4 &&
-         ld_u32(payload.data() + kLaserPredictorOffset) >= 2;
-}
-
-/// Whether a layer is a sensor-geometry layer with mixed range contexts (predictor 4 or 5).
-bool laser_mixed_layer(const std::vector<std::uint8_t>& payload) {
-  return laser_edge_layer(payload) && ld_u32(payload.data() + kLaserPredictorOffset) >= 4;
+/// The minor version a sensor-geometry layer's range predictor needs: 7 for edge flags
+/// (predictor 2 or 3), 9 for mixed contexts (4 or 5); 0 for other layers and predictors.
+std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
+  if (layer_coding(payload) != 3 || payload.size() < kLaserPredictorOffset + 4) return 0;
+  const std::uint32_t predictor = ld_u32(payload.data() + kLaserPredictorOffset);
+  return predictor >= 4 ? kLaserMixedMinor : predictor >= 2 ? kLaserEdgeMinor : 0;
 }
 
 bool voxel_mixed_layer(const std::vector<std::uint8_t>& payload) {
@@ -983,9 +980,8 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   const LayerChunk& layer_chunk = kLayerChunks[coding];
   std::vector<std::uint8_t> out;
   std::uint16_t minor = data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor;
-  if (data.residual && laser_edge_layer(*data.residual)) minor = std::max(minor, kLaserEdgeMinor);
+  if (data.residual) minor = std::max(minor, laser_predictor_minor(*data.residual));
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
-  if (data.residual && laser_mixed_layer(*data.residual)) minor = std::max(minor, kLaserMixedMinor);
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
 
   std::vector<std::uint8_t> mhdr;
@@ -1113,16 +1109,10 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                                  kLayerChunks[coding].coding + " coding, which belongs in an '" +
                                  kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8)",
                              c.payload_offset);
-          if (laser_edge_layer(*out.residual) && h.minor < kLaserEdgeMinor)
+          if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need)
             return ctx.error("a sensor-geometry layer with range predictor " +
                                  std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
-                                 " needs format version 1." + std::to_string(kLaserEdgeMinor) + ", the header says 1." +
-                                 std::to_string(h.minor),
-                             c.payload_offset + kLaserPredictorOffset);
-          if (laser_mixed_layer(*out.residual) && h.minor < kLaserMixedMinor)
-            return ctx.error("a sensor-geometry layer with range predictor " +
-                                 std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
-                                 " needs format version 1." + std::to_string(kLaserMixedMinor) + ", the header says 1." +
+                                 " needs format version 1." + std::to_string(need) + ", the header says 1." +
                                  std::to_string(h.minor),
                              c.payload_offset + kLaserPredictorOffset);
           if (voxel_mixed_layer(*out.residual) && h.minor < kVoxelMixedMinor)

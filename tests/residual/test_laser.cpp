@@ -259,8 +259,8 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
   expect_rejected(retype_chunk(file, "RESL", "RESL", 3), "1.4");
-  expect_rejected(retype_chunk(file, "RESL", "RESL", 6), "1.7");
-  expect_rejected(retype_chunk(file, "RESL", "RESL", 8), "1.9");
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 6), "needs format version 1.9");
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 8), "needs format version 1.9");
   expect_rejected(retype_chunk(file, "RESL", "RESD", 4), "RESL");
   expect_rejected(retype_chunk(file, "RESL", "RESV", 4), "RESL");
 }
