@@ -116,6 +116,7 @@ void run_compress(const CompressOptions& o) {
   // Scans side by side: as many as threads (one each), or one scan on all the threads.
   const auto side_by_side = static_cast<std::size_t>(std::max(1, std::min<int>(mp.threads, static_cast<int>(n_scans))));
   if (n_scans == 1) keep_heap_on_huge_pages();
+  else restore_mmap_threshold();
   std::vector<std::int64_t> learnt_as(n_scans, -1);  // scan -> its place among the learnt scans
   std::vector<Cloud> clouds;                         // the learnt scans
   std::vector<std::string> learnt_names;
