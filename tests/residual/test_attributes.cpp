@@ -79,6 +79,20 @@ Coded code(const Cloud& input, double e, const residual::AttributeOptions& ao = 
   return c;
 }
 
+/// The index of the point of `c` nearest to `p` (the first of equals).
+std::size_t nearest_point(const Cloud& c, const Eigen::Vector3f& p) {
+  std::size_t nearest = 0;
+  float best = std::numeric_limits<float>::max();
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const float dd = (c.points[i] - p).squaredNorm();
+    if (dd < best) {
+      best = dd;
+      nearest = i;
+    }
+  }
+  return nearest;
+}
+
 StatusOr<Cloud> decode(const Bytes& file) {
   auto d = codec::decode_model(file);
   if (!d.ok()) return d.status();
@@ -486,18 +500,8 @@ TEST(Attributes, LayerLaserGoldenFileDecodes) {
   std::sort(b.begin(), b.end());
   EXPECT_EQ(a, b);
   // each decoded point's ring is the one of the input point at its place
-  for (std::size_t j = 0; j < out.value().size(); ++j) {
-    std::size_t nearest = 0;
-    float best = std::numeric_limits<float>::max();
-    for (std::size_t i = 0; i < in.size(); ++i) {
-      const float dd = (in.points[i] - out.value().points[j]).squaredNorm();
-      if (dd < best) {
-        best = dd;
-        nearest = i;
-      }
-    }
-    ASSERT_EQ(out.value().ring[j], in.ring[nearest]) << j;
-  }
+  for (std::size_t j = 0; j < out.value().size(); ++j)
+    ASSERT_EQ(out.value().ring[j], in.ring[nearest_point(in, out.value().points[j])]) << j;
 }
 
 /// A real scan with rings: the ring comes back exactly, its stream is under a tenth of its
@@ -673,18 +677,8 @@ void expect_golden_intensity(const std::string& path, const Cloud& in, int metho
   auto out = decode(bytes.value());
   ASSERT_TRUE(out.ok()) << out.status().to_string();
   ASSERT_EQ(out.value().size(), in.size());
-  for (std::size_t j = 0; j < out.value().size(); ++j) {
-    std::size_t nearest = 0;
-    float best = std::numeric_limits<float>::max();
-    for (std::size_t i = 0; i < in.size(); ++i) {
-      const float dd = (in.points[i] - out.value().points[j]).squaredNorm();
-      if (dd < best) {
-        best = dd;
-        nearest = i;
-      }
-    }
-    ASSERT_EQ(out.value().intensity[j], in.intensity[nearest]) << j;
-  }
+  for (std::size_t j = 0; j < out.value().size(); ++j)
+    ASSERT_EQ(out.value().intensity[j], in.intensity[nearest_point(in, out.value().points[j])]) << j;
 }
 
 TEST(Attributes, LayerTreeGoldenFileDecodes) {
