@@ -283,9 +283,10 @@ class PointCoder {
     const double gap = static_cast<double>(std::abs(last_k_[l])) * spacing_ * static_cast<double>(column_ - last_c_[l]);
     return gap < 0.8 ? 0 : gap < 1.0 ? 1 : gap < 1.25 ? 2 : 3;
   }
-  int occupancy_ctx(std::uint32_t l) const {
+  int occupancy_ctx(std::uint32_t l) const { return occupancy_ctx(l, near(l)); }
+  /// The same, given near(l).
+  int occupancy_ctx(std::uint32_t l, int near) const {
     const int up = l == 0 ? 1 : occ_now_[l - 1];
-    const int near = this->near(l);
     const int base = occ_prev_[l] + 2 * occ_prev_[l + 1] + 4 * up + 8 * (last_dc_ == 0 ? 1 : 0) + 16 * near;
     if (!edges_) return base;
     return base + 64 * occ_prev2_[l] + 128 * (l == 0 ? 1 : occ_prev_[l - 1]);
@@ -419,9 +420,10 @@ class PointCoder {
     const unsigned left = occ_prev_[l];
     const std::size_t by_laser = static_cast<std::size_t>(l) * 8 + left + 2U * occ_prev2_[l] + 4U * up;
     const unsigned below2 = l + 2 < lasers_ ? occ_prev_[l + 2] : 0U;
+    const int near_l = near(l);
     const std::size_t window = ((((l == 0 ? 1U : occ_prev_[l - 1]) + 2U * left + 4U * occ_prev_[l + 1] + 8U * below2 +
-                                  16U * up + 32U * up2) << 2) | static_cast<unsigned>(near(l)));
-    return m.mix.p0(m.by_ctx[static_cast<std::size_t>(occupancy_ctx(l))], m.by_laser[by_laser], m.by_window[window],
+                                  16U * up + 32U * up2) << 2) | static_cast<unsigned>(near_l));
+    return m.mix.p0(m.by_ctx[static_cast<std::size_t>(occupancy_ctx(l, near_l))], m.by_laser[by_laser], m.by_window[window],
                     up * 2 + left);
   }
   bool med_, edges_;
