@@ -444,7 +444,8 @@ void register_compress(CLI::App& app) {
       ->capture_default_str();
   sub->add_flag("--keep-all-points", o->keep_all_points,
                 "Residual layer: give every input point its own decoded point (by default a point within the "
-                "error of one decoded before it is not coded again)");
+                "error of one decoded before it is not coded again; the sensor-geometry coding leaves out only "
+                "those that would cost more than their neighbours)");
   sub->add_option("--layer-coding", o->layer_coding,
                   "Residual layer: try the sensor-centred spherical codings, the voxel (octree) coding and, where "
                   "the scan's lasers and columns are known, the sensor-geometry coding, and keep the smallest "

@@ -1409,16 +1409,26 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   }, 4096);
   if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
 
-  // Thinning: a point that a point decoded before it explains is not coded.
+  // Thinning (with `thin`): a point that a point decoded before it explains is not coded
+  // where coding it would cost more than its neighbours (laser_layer): it needs a
+  // correction across its beam, or its beam length lies more than kEdgeSteps from its
+  // laser's last coded point's.
   std::vector<std::uint32_t> kept(m);  // positions t
   std::iota(kept.begin(), kept.end(), 0U);
   if (thin) {
     PointBallGrid seen(bound, m);
+    std::vector<std::int64_t> last_k(a.table.lasers(), 0);
+    std::vector<std::uint8_t> any(a.table.lasers(), 0);
     kept.clear();
     for (std::uint32_t t = 0; t < m; ++t) {
-      if (seen.any_within(input[coded[order[J(t)]]].cast<double>())) continue;
-      seen.insert(q[t].decoded);
+      const std::uint32_t l = a.ring[coded[order[J(t)]]];
+      const Coded& c = q[t];
+      const bool costly = c.k1 != 0 || c.k2 != 0 || any[l] == 0 || std::abs(c.k - last_k[l]) > kEdgeSteps;
+      if (costly && seen.any_within(input[coded[order[J(t)]]].cast<double>())) continue;
+      seen.insert(c.decoded);
       kept.push_back(t);
+      last_k[l] = c.k;
+      any[l] = 1;
     }
   }
 
@@ -1619,9 +1629,9 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
     double sum = 0.0;
     for (const Eigen::Vector3d& v : offset) sum += v.x() * v.x() + v.y() * v.y();
     const double rms = std::sqrt(sum / static_cast<double>(offset.size()));
-    const double column = kTwoPi / static_cast<double>(table.columns);
-    prepared->beams.shift_unit = std::clamp(rms > 0.0 ? kShiftRounding * bound / rms : column / 2.0, column / 256.0,
-                                            std::min(column / 2.0, kPi / 64.0));
+    const double step = kTwoPi / static_cast<double>(table.columns);
+    prepared->beams.shift_unit =
+        std::clamp(rms > 0.0 ? kShiftRounding * bound / rms : step / 2.0, step / 256.0, std::min(step / 2.0, kPi / 64.0));
     std::vector<double> off;
     std::int64_t last = 0;
     for (std::size_t at = 0; at < order.size();) {

@@ -77,7 +77,12 @@ constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 4 + 8 + 96;
 /// across the beams) and each candidate assignment (two estimates of a scan's lasers), and
 /// returns the smallest (a large layer: the smallest on a quarter of its columns, coded in
 /// full); `chosen` gets its candidate's index. nullopt when no candidate codes (a point
-/// beyond float32 resolution, table values out of the stored range).
+/// beyond float32 resolution, table values out of the stored range). With `thin`, a point
+/// within E' of a point decoded before it is left out only where coding it would cost
+/// more than its neighbours (a correction across its beam, or a beam length far off its
+/// laser's last): leaving out every such point broke the lasers' runs of neighbours, and
+/// the occupancy bits and predictions that cost outweighed the points (VLP-16 and HDL-32E
+/// turns at E = 6 cm: 14 % fewer bytes and 1 dB more PSNR coding them).
 [[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                                     const std::vector<std::uint32_t>& coded,
                                                     const std::vector<const LaserAssignment*>& candidates,

@@ -715,8 +715,20 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       };
       // With a laser table read from the sensor, the spherical trial comes first, alone:
       // where it costs kExactLaserSkipRatio times the sensor-geometry coding's bits or
-      // more, neither the voxel trial nor a full spherical coding runs.
+      // more, neither the voxel trial nor a full spherical coding runs, unless half the
+      // points or more lie closer to their laser's next than a voxel cell is wide (the
+      // voxel coding merges such points; on the Ouster turns at E = 20 cm it coded 15 %
+      // smaller than the sensor-geometry coding, whose bits the spherical trial still
+      // exceeded 2.1 times).
       const bool defer_voxel = laser && exact_table;
+      bool dense = false;
+      if (defer_voxel && lasers_of && lasers_of->table.columns > 0) {
+        const double step = 2.0 * kPi / static_cast<double>(lasers_of->table.columns);
+        const double cell = 2.0 * check_error / std::sqrt(3.0);
+        std::size_t close = 0;
+        for (const std::uint32_t i : coded) close += spherical[i].r * step < cell ? 1 : 0;
+        dense = 2 * close >= coded.size();
+      }
       // (the voxel trial, the longest job, first: the other thread meanwhile takes the
       // spherical ones)
       const std::size_t first_way = try_voxel && !defer_voxel ? 1 : 0;
@@ -740,7 +752,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
           laser ? 8.0 * static_cast<double>(laser->stream.size() - std::min(laser->stream.size(), head_bytes)) /
                       static_cast<double>(coded.size())
                 : std::numeric_limits<double>::infinity();
-      const bool skip_others = defer_voxel && spherical_window_bits >= kExactLaserSkipRatio * laser_bits;
+      const bool skip_others = defer_voxel && !dense && spherical_window_bits >= kExactLaserSkipRatio * laser_bits;
       if (try_voxel && defer_voxel && !skip_others) voxel_trial();
       const bool full_voxel = !skip_others && try_voxel && voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits &&
                               voxel_window_bits < kLaserSkipRatio * laser_bits;
