@@ -46,11 +46,18 @@ install(TARGETS lex3d_library EXPORT lex3dTargets
 # found again by lex3dConfig.cmake (the pkg-config file's Libs.private).
 option(LEX3D_INSTALL_STATIC "Also build and install the static library liblex3d.a (lex3d::lex3d_static)" ON)
 if(LEX3D_INSTALL_STATIC)
-  # LZ4 by name (FLANN's headers call it), so that the export does not hold this machine's path
-  if(NOT TARGET lex3d::lz4)
-    add_library(lex3d::lz4 UNKNOWN IMPORTED)
-    set_target_properties(lex3d::lz4 PROPERTIES IMPORTED_LOCATION ${LEX3D_LZ4_LIBRARY})
-  endif()
+  # PCL's common and kd-tree libraries, LZ4 (FLANN's headers call it), bzip2 and libpcap by
+  # name: the config file finds them with find_library (PCL's package, FindBZip2 and
+  # FindThreads cost every consumer's configure seconds), and the export holds no path of
+  # this machine.
+  set(LEX3D_STATIC_BY_NAME pcl_common pcl_kdtree lz4 bz2 pcap)
+  foreach(lib IN LISTS LEX3D_STATIC_BY_NAME)
+    find_library(LEX3D_STATIC_${lib}_LIBRARY ${lib} REQUIRED)
+    if(NOT TARGET lex3d::${lib})
+      add_library(lex3d::${lib} UNKNOWN IMPORTED)
+      set_target_properties(lex3d::${lib} PROPERTIES IMPORTED_LOCATION ${LEX3D_STATIC_${lib}_LIBRARY})
+    endif()
+  endforeach()
   add_library(lex3d_static STATIC ${lex3d_objects})
   add_library(lex3d::lex3d_static ALIAS lex3d_static)
   set_target_properties(lex3d_static PROPERTIES OUTPUT_NAME lex3d EXPORT_NAME lex3d_static)
@@ -61,8 +68,8 @@ if(LEX3D_INSTALL_STATIC)
   target_compile_features(lex3d_static PUBLIC cxx_std_17)
   target_link_libraries(lex3d_static
     PUBLIC Eigen3::Eigen
-    PRIVATE pcl_kdtree pcl_common octomap octomath ZLIB::ZLIB liblzf::liblzf PkgConfig::libpcap BZip2::BZip2
-            lex3d::lz4 Threads::Threads ${CMAKE_DL_LIBS})
+    PRIVATE lex3d::pcl_kdtree lex3d::pcl_common octomap octomath ZLIB::ZLIB liblzf::liblzf lex3d::pcap lex3d::bz2
+            lex3d::lz4 -pthread ${CMAKE_DL_LIBS})
   install(TARGETS lex3d_static EXPORT lex3dTargets ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
   set(LEX3D_PC_LIBS_PRIVATE "-lpcl_kdtree -lpcl_common -loctomap -loctomath -lz -llzf -lpcap -lbz2 -llz4 -lpthread")
   if(CMAKE_DL_LIBS)
