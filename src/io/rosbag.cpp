@@ -73,6 +73,12 @@ namespace {
 
 // --- the plugin: found, opened and checked once a process, on the first bag ---
 
+struct Plugin {
+  const lex3d_rosbag_plugin* api = nullptr;
+  std::string error;  ///< why there is none: "ROS bag support is not installed (...)"
+};
+
+#ifndef LEX3D_ROSBAG_BUILTIN
 constexpr const char* kPluginFile = "liblex3d_rosbag.so";
 // Where the plugin is installed, relative to the command's directory and absolute (CMake
 // passes both from the install layout); the defaults are the GNU layout's.
@@ -83,12 +89,6 @@ constexpr const char* kPluginFile = "liblex3d_rosbag.so";
 #define LEX3D_ROSBAG_PLUGIN_INSTALL_DIR "/usr/local/lib/lex3d"
 #endif
 
-struct Plugin {
-  const lex3d_rosbag_plugin* api = nullptr;
-  std::string error;  ///< why there is none: "ROS bag support is not installed (...)"
-};
-
-#ifndef LEX3D_ROSBAG_BUILTIN
 /// The file holding this code: liblex3d.so, the Python module, or the executable linking io.
 std::string this_object_file() {
   Dl_info info{};
