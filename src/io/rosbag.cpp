@@ -1,16 +1,20 @@
-// ROS 1 bags through the ROS bag library (rosbag_storage): the only translation unit of
-// lex3d that includes a ROS header. The library finds the messages; their bytes are read
-// here as serialized PointCloud2 (pointcloud2.cpp) or Ouster packets (ouster.cpp), every
-// length checked, rather than through sensor_msgs's generated deserializer, which trusts the
-// lengths it reads. Bags are written with sensor_msgs's generated PointCloud2 type, so the
-// message definition and MD5 sum in the bag are ROS's own.
+// ROS 1 bags. The ROS bag library (rosbag_storage) is reached through the plugin
+// liblex3d_rosbag.so (rosbag_plugin.cpp, rosbag_plugin.h), opened with dlopen on the first bag
+// read or written, so that no lex3d program loads the ROS libraries before it needs them.
+// The plugin finds the messages; their bytes are read here as serialized PointCloud2
+// (pointcloud2.cpp) or Ouster packets (ouster.cpp), every length checked, rather than
+// through sensor_msgs's generated deserializer, which trusts the lengths it reads. Bags are
+// written by the plugin with sensor_msgs's generated PointCloud2 type, so the message
+// definition and MD5 sum in the bag are ROS's own.
 
 #include "lex3d/io/rosbag.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <map>
 #include <memory>
 #include <new>
@@ -23,10 +27,18 @@
 #include "lex3d/io/mapped_file.hpp"
 
 #ifdef LEX3D_WITH_ROSBAG
-#include <console_bridge/console.h>
-#include <rosbag/bag.h>
-#include <rosbag/view.h>
-#include <sensor_msgs/PointCloud2.h>
+#include <dlfcn.h>
+#include <link.h>
+#include <limits.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include <mutex>
+
+#include "io/rosbag_plugin.h"
+#ifdef LEX3D_ROSBAG_BUILTIN
+extern "C" const lex3d_rosbag_plugin* lex3d_rosbag_plugin_v1();
+#endif
 #endif
 
 namespace lex3d::io {
@@ -57,9 +69,189 @@ Status write_bag(const std::string& path, const std::vector<BagScan>&, const std
 
 #else
 
-bool rosbag_supported() noexcept { return true; }
-
 namespace {
+
+// --- the plugin: found, opened and checked once a process, on the first bag ---
+
+struct Plugin {
+  const lex3d_rosbag_plugin* api = nullptr;
+  std::string error;  ///< why there is none: "ROS bag support is not installed (...)"
+};
+
+#ifndef LEX3D_ROSBAG_BUILTIN
+constexpr const char* kPluginFile = "liblex3d_rosbag.so";
+// Where the plugin is installed, relative to the command's directory and absolute (CMake
+// passes both from the install layout); the defaults are the GNU layout's.
+#ifndef LEX3D_ROSBAG_PLUGIN_FROM_BINDIR
+#define LEX3D_ROSBAG_PLUGIN_FROM_BINDIR "../lib/lex3d"
+#endif
+#ifndef LEX3D_ROSBAG_PLUGIN_INSTALL_DIR
+#define LEX3D_ROSBAG_PLUGIN_INSTALL_DIR "/usr/local/lib/lex3d"
+#endif
+
+/// The file holding this code: liblex3d.so, the Python module, or the executable linking io.
+std::string this_object_file() {
+  Dl_info info{};
+  link_map* map = nullptr;
+  if (dladdr1(reinterpret_cast<void*>(&this_object_file), &info, reinterpret_cast<void**>(&map), RTLD_DL_LINKMAP) ==
+      0)
+    return {};
+  // the executable's own entry has an empty name (dladdr would give argv[0])
+  const std::string file =
+      map != nullptr && map->l_name != nullptr && map->l_name[0] != '\0' ? map->l_name : "/proc/self/exe";
+  char resolved[PATH_MAX];
+  if (realpath(file.c_str(), resolved) == nullptr) return {};
+  return resolved;
+}
+
+/// The files tried in order: $LEX3D_ROSBAG_PLUGIN alone when set; else beside the file
+/// holding io (the build tree, an installed liblex3d.so's lib/, the Python package), in its
+/// lex3d/ folder (lib/lex3d/ beside liblex3d.so), the install layout's plugin folder seen
+/// from bin/ (the command, a program linking liblex3d.a installed beside it), the install
+/// prefix's plugin folder, then the bare name (LD_LIBRARY_PATH, the caller's run path,
+/// ld.so.cache).
+std::vector<std::string> plugin_candidates() {
+  const char* env = std::getenv("LEX3D_ROSBAG_PLUGIN");
+  if (env != nullptr && *env != '\0') return {env};
+  std::vector<std::string> c;
+  const std::string self = this_object_file();
+  const std::size_t slash = self.rfind('/');
+  if (slash != std::string::npos) {
+    const std::string dir = self.substr(0, slash + 1);
+    c.push_back(dir + kPluginFile);
+    c.push_back(dir + "lex3d/" + kPluginFile);
+    c.push_back(dir + LEX3D_ROSBAG_PLUGIN_FROM_BINDIR "/" + kPluginFile);
+  }
+  c.push_back(std::string(LEX3D_ROSBAG_PLUGIN_INSTALL_DIR "/") + kPluginFile);
+  c.push_back(kPluginFile);
+  return c;
+}
+
+std::string dl_error() {
+  const char* e = dlerror();
+  return detail::printable(e != nullptr ? e : "unknown error", 200);
+}
+
+#endif  // LEX3D_ROSBAG_BUILTIN
+
+Plugin load_plugin() {
+  Plugin p;
+#ifdef LEX3D_ROSBAG_BUILTIN  // the plugin's code linked in (the fuzz targets)
+  p.api = lex3d_rosbag_plugin_v1();
+  return p;
+#else
+  const char* named = std::getenv("LEX3D_ROSBAG_PLUGIN");
+  for (const std::string& path : plugin_candidates()) {
+    const bool bare = path.find('/') == std::string::npos;
+    if (!bare && access(path.c_str(), F_OK) != 0) continue;
+    void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (handle == nullptr) {
+      const std::string why = dl_error();
+      // the bare name not found anywhere: not installed; any other failure (a library the
+      // plugin needs is missing) is reported as it is
+      if (bare && why.rfind(path + ":", 0) == 0) break;
+      p.error = "ROS bag support cannot be loaded (" + why + ")";
+      return p;
+    }
+    auto entry = reinterpret_cast<lex3d_rosbag_entry_fn>(dlsym(handle, LEX3D_ROSBAG_ENTRY));
+    const lex3d_rosbag_plugin* api = entry != nullptr ? entry() : nullptr;
+    if (api == nullptr || api->abi != LEX3D_ROSBAG_ABI || api->table_size < sizeof(lex3d_rosbag_plugin)) {
+      dlclose(handle);
+      p.error = "ROS bag support cannot be loaded (" + detail::printable(path, 200) +
+                " is not a ROS bag plugin of this lex3d: interface " +
+                (api == nullptr ? std::string("missing") : std::to_string(api->abi)) + ", needed " +
+                std::to_string(LEX3D_ROSBAG_ABI) + ")";
+      return p;
+    }
+    p.api = api;  // never closed: the ROS libraries stay loaded for the process
+    return p;
+  }
+  p.error = named != nullptr && *named != '\0'
+                ? "ROS bag support is not installed (" + detail::printable(named, 200) +
+                      ", named by LEX3D_ROSBAG_PLUGIN, not found)"
+                : std::string("ROS bag support is not installed (") + kPluginFile + " not found)";
+  return p;
+#endif
+}
+
+const Plugin& plugin() {
+  static const Plugin p = load_plugin();
+  return p;
+}
+
+/// The plugin's table, or the one-line error naming `path`.
+StatusOr<const lex3d_rosbag_plugin*> plugin_for(const std::string& path) {
+  const Plugin& p = plugin();
+  if (p.api == nullptr) return bad_data(detail::msg(path, p.error));
+  return p.api;
+}
+
+/// A plugin's result as a Status: the library's refusal of a bag being read is bad data, of
+/// one being written an I/O error.
+Status plugin_status(const std::string& path, int rc, const lex3d_bag_error& err, bool writing) {
+  const std::string text = detail::printable(err.text, 160);
+  if (rc == LEX3D_BAG_NO_MEMORY)
+    return out_of_memory(detail::msg(path, writing ? "out of memory writing the bag" : "out of memory reading the bag"));
+  if (writing) return io_error(detail::msg(path, "cannot write the bag: " + text));
+  return bad_data(detail::msg(path, "corrupt or truncated bag: " + text));
+}
+
+/// An open bag, closed when it goes out of scope.
+class OpenBag {
+ public:
+  OpenBag(const lex3d_rosbag_plugin* api, lex3d_bag* bag) : api_(api), bag_(bag) {}
+  OpenBag(const OpenBag&) = delete;
+  OpenBag& operator=(const OpenBag&) = delete;
+  ~OpenBag() {
+    if (bag_ != nullptr) {
+      lex3d_bag_error err{};
+      (void)api_->close(bag_, &err);
+    }
+  }
+  [[nodiscard]] const lex3d_rosbag_plugin& api() const { return *api_; }
+  [[nodiscard]] lex3d_bag* get() const { return bag_; }
+  /// Closes the bag (a written one: its index); the result of the plugin's close.
+  int close(lex3d_bag_error& err) {
+    if (bag_ == nullptr) return LEX3D_BAG_OK;
+    lex3d_bag* b = bag_;
+    bag_ = nullptr;
+    return api_->close(b, &err);
+  }
+
+ private:
+  const lex3d_rosbag_plugin* api_;
+  lex3d_bag* bag_;
+};
+
+/// Calls `fn(time, bytes, size) -> Status` with each message of `topic`; the first non-ok
+/// Status stops the reading and is returned. An exception of `fn` is caught before it
+/// reaches the plugin and thrown again here.
+template <typename Fn>
+Status for_each_message(const std::string& path, OpenBag& bag, const std::string& topic, Fn&& fn) {
+  struct Context {
+    Fn* fn;
+    Status status;
+    std::exception_ptr failure;
+  } ctx{&fn, {}, nullptr};
+  lex3d_bag_error err{};
+  const int rc = bag.api().read_topic(
+      bag.get(), topic.c_str(),
+      [](void* user, lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size) -> int {
+        auto& c = *static_cast<Context*>(user);
+        try {
+          c.status = (*c.fn)(t, bytes, size);
+          return c.status.ok() ? 0 : 1;
+        } catch (...) {
+          c.failure = std::current_exception();
+          return 1;
+        }
+      },
+      &ctx, &err);
+  if (ctx.failure) std::rethrow_exception(ctx.failure);
+  if (rc == LEX3D_BAG_STOPPED) return ctx.status;
+  if (rc != LEX3D_BAG_OK) return plugin_status(path, rc, err, false);
+  return {};
+}
 
 constexpr const char* kPointCloud2 = "sensor_msgs/PointCloud2";
 
@@ -67,30 +259,28 @@ bool is_packet_type(const std::string& type) {
   return type == "ouster_ros/PacketMsg" || type == "ouster_sensor_msgs/PacketMsg";
 }
 
-/// The library's own log lines (console_bridge) would break the one-line errors: off.
-void quiet_library() {
-  static const bool done = [] {
-    console_bridge::setLogLevel(console_bridge::CONSOLE_BRIDGE_LOG_NONE);
-    return true;
-  }();
-  (void)done;
+/// A bag checked (check_bag_container) and opened; the library opens only a file that
+/// passes (opening costs a few ms).
+StatusOr<std::unique_ptr<OpenBag>> open_bag(const std::string& path, std::uint64_t& file_bytes) {
+  auto api = plugin_for(path);
+  if (!api.ok()) return api.status();
+  {
+    auto mapped = MappedFile::open(path);
+    if (!mapped.ok()) return mapped.status();
+    const MappedFile& f = *mapped.value();
+    file_bytes = f.size();
+    if (f.size() == 0) return bad_data(detail::msg(path, "file is empty"), 0);
+    Status s = detail::check_bag_container(path, f.data(), f.size());
+    if (!s.ok()) return s;
+  }
+  lex3d_bag* bag = nullptr;
+  lex3d_bag_error err{};
+  const int rc = api.value()->open_read(path.c_str(), &bag, &err);
+  if (rc != LEX3D_BAG_OK) return plugin_status(path, rc, err, false);
+  return std::make_unique<OpenBag>(api.value(), bag);
 }
 
-/// A bag checked (check_bag_container) and opened; the library's Bag is made only for a
-/// file that passes (making one costs a few ms).
-Status open_bag(const std::string& path, std::unique_ptr<rosbag::Bag>& bag, std::uint64_t& file_bytes) {
-  quiet_library();
-  auto mapped = MappedFile::open(path);
-  if (!mapped.ok()) return mapped.status();
-  const MappedFile& f = *mapped.value();
-  file_bytes = f.size();
-  if (f.size() == 0) return bad_data(detail::msg(path, "file is empty"), 0);
-  Status s = detail::check_bag_container(path, f.data(), f.size());
-  if (!s.ok()) return s;
-  bag = std::make_unique<rosbag::Bag>();
-  bag->open(path, rosbag::bagmode::Read);
-  return {};
-}
+double seconds(lex3d_bag_time t) { return static_cast<double>(t.sec) + 1e-9 * static_cast<double>(t.nsec); }
 
 std::string topic_list(const BagInfo& info) {
   std::string s;
@@ -99,52 +289,56 @@ std::string topic_list(const BagInfo& info) {
   return s.empty() ? std::string("no topics") : s;
 }
 
-BagInfo bag_info(rosbag::Bag& bag, std::uint64_t file_bytes) {
+/// The topics of a bag, and (in `md5`) each topic's connections' MD5 sums.
+StatusOr<BagInfo> bag_info(const std::string& path, OpenBag& bag, std::uint64_t file_bytes,
+                           std::map<std::string, std::set<std::string>>* md5 = nullptr) {
   BagInfo info;
   info.file_bytes = file_bytes;
-  rosbag::View all(bag);
+  lex3d_bag_error err{};
+  const lex3d_bag_connection* list = nullptr;
+  std::size_t n = 0;
+  int rc = bag.api().connections(bag.get(), &list, &n, &err);
+  if (rc != LEX3D_BAG_OK) return plugin_status(path, rc, err, false);
   std::map<std::string, std::set<std::string>> types;
-  for (const rosbag::ConnectionInfo* c : all.getConnections()) types[c->topic].insert(c->datatype);
+  for (std::size_t i = 0; i < n; ++i) {
+    types[list[i].topic].insert(list[i].datatype);
+    if (md5 != nullptr) (*md5)[list[i].topic].insert(list[i].md5sum);
+  }
   for (const auto& [topic, ts] : types) {
     BagTopic t;
     t.name = detail::printable(topic, 256);  // names as they appear in messages: one line
     for (const auto& ty : ts) t.type += (t.type.empty() ? "" : " | ") + detail::printable(ty, 256);
-    t.messages = rosbag::View(bag, rosbag::TopicQuery(topic)).size();
+    rc = bag.api().count(bag.get(), topic.c_str(), &t.messages, &err);
+    if (rc != LEX3D_BAG_OK) return plugin_status(path, rc, err, false);
     info.messages += t.messages;
     info.topics.push_back(std::move(t));
   }
   if (info.messages > 0) {
-    info.start_s = all.getBeginTime().toSec();
-    info.end_s = all.getEndTime().toSec();
+    lex3d_bag_time begin{}, end{};
+    rc = bag.api().time_range(bag.get(), &begin, &end, &err);
+    if (rc != LEX3D_BAG_OK) return plugin_status(path, rc, err, false);
+    info.start_s = seconds(begin);
+    info.end_s = seconds(end);
   }
   return info;
-}
-
-/// The bytes of one message.
-void message_bytes(const rosbag::MessageInstance& m, std::vector<std::uint8_t>& buf) {
-  const std::uint32_t n = m.size();
-  buf.resize(n);
-  ros::serialization::OStream os(buf.data(), n);
-  m.write(os);
 }
 
 void add_unique(std::vector<std::string>& list, const std::string& s) {
   if (std::find(list.begin(), list.end(), s) == list.end()) list.push_back(s);
 }
 
-Status read_clouds(const std::string& path, rosbag::Bag& bag, const BagTopic& topic, BagScans& out) {
-  rosbag::View view(bag, rosbag::TopicQuery(topic.name));
-  for (const rosbag::ConnectionInfo* c : view.getConnections())
-    if (c->md5sum != ros::message_traits::MD5Sum<sensor_msgs::PointCloud2>::value())
+Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::string>& md5s, const BagTopic& topic,
+                   BagScans& out) {
+  const std::string expected = bag.api().pointcloud2_md5;
+  for (const std::string& m : md5s)
+    if (m != expected)
       return bad_data(detail::msg(path, "topic " + topic.name + ": a PointCloud2 of another definition (MD5 " +
-                                            detail::printable(c->md5sum, 40) + ")"));
-  std::vector<std::uint8_t> buf;
+                                            detail::printable(m, 40) + ")"));
   std::size_t k = 0;
-  for (const rosbag::MessageInstance& m : view) {
+  return for_each_message(path, bag, topic.name, [&](lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size) {
     const std::string where = detail::msg(path, "message " + std::to_string(k) + " on " + topic.name);
-    message_bytes(m, buf);
     detail::PointCloud2Msg pm;
-    Status s = detail::parse_pointcloud2(where, buf.data(), buf.size(), pm);
+    Status s = detail::parse_pointcloud2(where, bytes, size, pm);
     if (!s.ok()) return s;
     ReadResult r;
     s = detail::pointcloud2_to_cloud(where, pm, r);
@@ -155,8 +349,8 @@ Status read_clouds(const std::string& path, rosbag::Bag& bag, const BagTopic& to
     scan.stamp_sec = pm.stamp_sec;
     scan.stamp_nsec = pm.stamp_nsec;
     if (scan.stamp_sec == 0 && scan.stamp_nsec == 0) {  // no header stamp: the bag's time
-      scan.stamp_sec = m.getTime().sec;
-      scan.stamp_nsec = m.getTime().nsec;
+      scan.stamp_sec = t.sec;
+      scan.stamp_nsec = t.nsec;
     }
     out.non_finite_dropped += r.non_finite_dropped;
     out.no_return_dropped += r.no_return_dropped;
@@ -164,15 +358,14 @@ Status read_clouds(const std::string& path, rosbag::Bag& bag, const BagTopic& to
     for (const auto& n : r.notes) add_unique(out.notes, n);
     out.scans.push_back(std::move(scan));
     ++k;
-  }
-  return {};
+    return Status{};
+  });
 }
 
-Status read_packets(const std::string& path, rosbag::Bag& bag, const BagInfo& info, const BagTopic& topic,
+Status read_packets(const std::string& path, OpenBag& bag, const BagInfo& info, const BagTopic& topic,
                     const ReadOptions& options, BagScans& out) {
   std::vector<std::uint8_t> metadata;
   std::string metadata_name = options.metadata_path;
-  std::vector<std::uint8_t> buf;
   if (!metadata_name.empty()) {
     auto text = read_file(metadata_name, 64ULL << 20);
     if (!text.ok()) return text.status();
@@ -191,48 +384,47 @@ Status read_packets(const std::string& path, rosbag::Bag& bag, const BagInfo& in
       return bad_data(detail::msg(path, "topic " + topic.name + " holds Ouster packets but the bag has no metadata "
                                         "topic (std_msgs/String named .../metadata): give the sensor's metadata JSON "
                                         "with --metadata"));
-    rosbag::View mv(bag, rosbag::TopicQuery(meta->name));
-    for (const rosbag::MessageInstance& m : mv) {
-      message_bytes(m, buf);
+    bool got = false;  // the first message
+    Status s = for_each_message(path, bag, meta->name, [&](lex3d_bag_time, const std::uint8_t* bytes, std::size_t size) {
+      if (got) return Status{};
+      got = true;
       const std::uint8_t* b = nullptr;
       std::size_t n = 0;
-      if (!detail::parse_byte_array(buf.data(), buf.size(), b, n))
+      if (!detail::parse_byte_array(bytes, size, b, n))
         return bad_data(detail::msg(path, "topic " + meta->name + ": a truncated std_msgs/String"));
       metadata.assign(b, b + n);
-      break;
-    }
+      return Status{};
+    });
+    if (!s.ok()) return s;
     metadata_name = path + " topic " + meta->name;
   }
   std::vector<detail::Datagram> datagrams;
-  rosbag::View view(bag, rosbag::TopicQuery(topic.name));
+  std::vector<lex3d_bag_time> times;  // each packet's bag time
   std::size_t k = 0;
-  for (const rosbag::MessageInstance& m : view) {
+  Status s = for_each_message(path, bag, topic.name, [&](lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size) {
     ++k;
-    message_bytes(m, buf);
     const std::uint8_t* b = nullptr;
     std::size_t n = 0;
-    if (!detail::parse_byte_array(buf.data(), buf.size(), b, n))
+    if (!detail::parse_byte_array(bytes, size, b, n))
       return bad_data(detail::msg(path, "message " + std::to_string(k) + " on " + topic.name + ": a truncated packet message"));
     detail::Datagram d;
     d.record = k;
     d.payload.assign(b, b + n);
     datagrams.push_back(std::move(d));
-  }
+    times.push_back(t);
+    return Status{};
+  });
+  if (!s.ok()) return s;
   SensorLog log;
-  Status s = detail::decode_ouster_packets(path, metadata_name, metadata, datagrams, true, log, topic.name);
+  s = detail::decode_ouster_packets(path, metadata_name, metadata, datagrams, true, log, topic.name);
   if (!s.ok()) return s;
   // each frame's time: the bag time of its frame id's first packet
-  std::map<std::uint64_t, ros::Time> first_seen;
-  {
-    std::size_t j = 0;
-    rosbag::View again(bag, rosbag::TopicQuery(topic.name));
-    for (const rosbag::MessageInstance& m : again) {
-      const auto& p = datagrams[j++].payload;
-      std::uint16_t id = 0;
-      if (p.size() >= 12) std::memcpy(&id, p.data() + (log.info.profile == "LEGACY" ? 10 : 2), 2);
-      first_seen.emplace(id, m.getTime());
-      if (j == datagrams.size()) break;
-    }
+  std::map<std::uint64_t, lex3d_bag_time> first_seen;
+  for (std::size_t j = 0; j < datagrams.size(); ++j) {
+    const auto& p = datagrams[j].payload;
+    std::uint16_t id = 0;
+    if (p.size() >= 12) std::memcpy(&id, p.data() + (log.info.profile == "LEGACY" ? 10 : 2), 2);
+    first_seen.emplace(id, times[j]);
   }
   out.sensor = log.info.sensor;
   out.incomplete_frames = log.info.incomplete_frames;
@@ -260,12 +452,14 @@ Status read_packets(const std::string& path, rosbag::Bag& bag, const BagInfo& in
 }
 
 StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& topic, const ReadOptions& options) {
-  std::unique_ptr<rosbag::Bag> opened;
   std::uint64_t bytes = 0;
-  Status s = open_bag(path, opened, bytes);
-  if (!s.ok()) return s;
-  rosbag::Bag& bag = *opened;
-  const BagInfo info = bag_info(bag, bytes);
+  auto opened = open_bag(path, bytes);
+  if (!opened.ok()) return opened.status();
+  OpenBag& bag = *opened.value();
+  std::map<std::string, std::set<std::string>> md5;
+  auto listed = bag_info(path, bag, bytes, &md5);
+  if (!listed.ok()) return listed.status();
+  const BagInfo& info = listed.value();
   const BagTopic* chosen = nullptr;
   if (!topic.empty()) {
     for (const auto& t : info.topics)
@@ -288,7 +482,8 @@ StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& top
   BagScans out;
   out.topic = chosen->name;
   out.type = chosen->type;
-  if (chosen->type == kPointCloud2) s = read_clouds(path, bag, *chosen, out);
+  Status s;
+  if (chosen->type == kPointCloud2) s = read_clouds(path, bag, md5[chosen->name], *chosen, out);
   else if (is_packet_type(chosen->type)) s = read_packets(path, bag, info, *chosen, options, out);
   else
     return bad_data(detail::msg(path, "topic " + chosen->name + " holds " + chosen->type +
@@ -308,7 +503,6 @@ auto guarded(const std::string& path, Fn&& fn) -> decltype(fn()) {
   } catch (const std::length_error&) {
     return out_of_memory(detail::msg(path, "out of memory reading the bag"));
   } catch (const std::exception& e) {
-    // the ROS bag library's exceptions (BagFormatException, BagIOException, ...)
     return bad_data(detail::msg(path, "corrupt or truncated bag: " + detail::printable(e.what(), 160)));
   }
 }
@@ -316,21 +510,43 @@ auto guarded(const std::string& path, Fn&& fn) -> decltype(fn()) {
 /// PointField datatypes.
 constexpr std::uint8_t kU16 = 4, kF32 = 7, kF64 = 8;
 
-sensor_msgs::PointCloud2 to_message(const BagScan& scan, const ros::Time& stamp) {
+/// A PointCloud2 message to write: the plugin's view of it (`view()`) points into it.
+struct Message {
+  lex3d_bag_time stamp{};
+  std::string frame_id;
+  std::vector<lex3d_bag_point_field> fields;
+  std::uint32_t height = 0, width = 0, point_step = 0, row_step = 0;
+  bool is_dense = false;
+  std::vector<std::uint8_t> data;
+
+  [[nodiscard]] lex3d_bag_pointcloud2 view() const {
+    lex3d_bag_pointcloud2 v{};
+    v.stamp = stamp;
+    v.frame_id = frame_id.c_str();
+    v.height = height;
+    v.width = width;
+    v.fields = fields.data();
+    v.field_count = fields.size();
+    v.is_bigendian = 0;
+    v.point_step = point_step;
+    v.row_step = row_step;
+    v.data = data.data();
+    v.data_size = data.size();
+    v.is_dense = is_dense ? 1 : 0;
+    return v;
+  }
+};
+
+Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   const Cloud& c = scan.cloud;
-  sensor_msgs::PointCloud2 m;
-  m.header.stamp = stamp;
-  m.header.frame_id = scan.frame_id;
+  Message m;
+  m.stamp = stamp;
+  m.frame_id = scan.frame_id;
   std::uint32_t step = 0;
   auto field = [&](const char* name, std::uint8_t type, std::uint32_t size) {
-    sensor_msgs::PointField f;
-    f.name = name;
-    f.offset = step;
-    f.datatype = type;
-    f.count = 1;
-    m.fields.push_back(f);
+    m.fields.push_back({name, step, type, 1});
     step += size;
-    return f.offset;
+    return m.fields.back().offset;
   };
   const std::uint32_t ox = field("x", kF32, 4), oy = field("y", kF32, 4), oz = field("z", kF32, 4);
   const bool in = c.has_intensity(), ring = c.has_rings(), time = c.has_time(), rgb = c.has_rgb();
@@ -340,7 +556,6 @@ sensor_msgs::PointCloud2 to_message(const BagScan& scan, const ros::Time& stamp)
   step = (step + 7U) & ~7U;  // the double time aligned
   const std::uint32_t ot = time ? field("time", kF64, 8) : 0;
   m.point_step = step;
-  m.is_bigendian = false;
   // organised: every point has a distinct pixel (row, column) of the shape
   std::vector<std::size_t> pixel;  // point -> pixel
   bool organised = c.rows > 1 && c.columns > 0 && c.has_rings() && c.has_columns() &&
@@ -385,15 +600,42 @@ sensor_msgs::PointCloud2 to_message(const BagScan& scan, const ros::Time& stamp)
   return m;
 }
 
+/// The scans' bag times: each its stamp; a bag cannot hold time 0, so a scan without one is
+/// placed 1 s after the one before (the first at 1 s) and the bag's time order is the
+/// scans' order. False when a time passes ROS time's last second.
+bool bag_times(const std::vector<BagScan>& scans, std::vector<lex3d_bag_time>& times) {
+  constexpr std::uint64_t kNs = 1000000000ULL;
+  std::uint64_t last_sec = 0, last_nsec = 0;
+  for (const BagScan& s : scans) {
+    std::uint64_t sec = last_sec + 1, nsec = last_nsec;
+    if (s.stamp_sec != 0 || s.stamp_nsec != 0) {
+      sec = std::uint64_t{s.stamp_sec} + s.stamp_nsec / kNs;
+      nsec = s.stamp_nsec % kNs;
+    }
+    if (sec > 0xFFFFFFFFULL) return false;
+    times.push_back({static_cast<std::uint32_t>(sec), static_cast<std::uint32_t>(nsec)});
+    last_sec = sec;
+    last_nsec = nsec;
+  }
+  return true;
+}
+
 }  // namespace
+
+bool rosbag_supported() noexcept {
+  try {
+    return plugin().api != nullptr;
+  } catch (...) {
+    return false;
+  }
+}
 
 StatusOr<BagInfo> read_bag_info(const std::string& path) {
   return guarded(path, [&]() -> StatusOr<BagInfo> {
-    std::unique_ptr<rosbag::Bag> bag;
     std::uint64_t bytes = 0;
-    Status s = open_bag(path, bag, bytes);
-    if (!s.ok()) return s;
-    return bag_info(*bag, bytes);
+    auto bag = open_bag(path, bytes);
+    if (!bag.ok()) return bag.status();
+    return bag_info(path, *bag.value(), bytes);
   });
 }
 
@@ -402,33 +644,43 @@ StatusOr<BagScans> read_bag(const std::string& path, const std::string& topic, c
 }
 
 Status write_bag(const std::string& path, const std::vector<BagScan>& scans, const std::string& topic) {
-  quiet_library();
   if (topic.empty() || topic.front() != '/')
     return Status(ErrorCode::kInvalidArgument, "write_bag: topic must start with '/', got '" + topic + "'");
+  auto api = plugin_for(path);
+  if (!api.ok()) return api.status();
   const std::string tmp = temporary_path_for(path);
   try {
-    {
-      rosbag::Bag bag;
-      bag.open(tmp, rosbag::bagmode::Write);
-      bag.setCompression(rosbag::compression::Uncompressed);
-      ros::Time last(0, 0);
-      for (const BagScan& s : scans) {
-        // a bag cannot hold time 0: a scan without a stamp is placed 1 s after the one before
-        // (the first at 1 s), so that the bag's time order is the scans' order
-        const bool stamped = s.stamp_sec != 0 || s.stamp_nsec != 0;
-        const ros::Time t = stamped ? ros::Time(s.stamp_sec, s.stamp_nsec) : last + ros::Duration(1, 0);
-        last = t;
-        bag.write(topic, t, to_message(s, t));
-      }
-      bag.close();
+    std::vector<lex3d_bag_time> times;
+    if (!bag_times(scans, times))
+      return io_error(detail::msg(path, "cannot write the bag: a scan's time is beyond ROS time's range"));
+    lex3d_bag* opened = nullptr;
+    lex3d_bag_error err{};
+    int rc = api.value()->open_write(tmp.c_str(), &opened, &err);
+    if (rc != LEX3D_BAG_OK) {
+      remove_file_quietly(tmp);
+      return plugin_status(path, rc, err, true);
+    }
+    OpenBag bag(api.value(), opened);
+    for (std::size_t i = 0; i < scans.size(); ++i) {
+      const Message m = to_message(scans[i], times[i]);
+      const lex3d_bag_pointcloud2 v = m.view();
+      rc = bag.api().write_pointcloud2(bag.get(), topic.c_str(), times[i], &v, &err);
+      if (rc != LEX3D_BAG_OK) break;
+    }
+    if (rc == LEX3D_BAG_OK) rc = bag.close(err);
+    if (rc != LEX3D_BAG_OK) {
+      lex3d_bag_error ignored{};
+      (void)bag.close(ignored);  // (already closed when the close failed)
+      remove_file_quietly(tmp);
+      return plugin_status(path, rc, err, true);
     }
     return rename_file(tmp, path);
   } catch (const std::bad_alloc&) {
     remove_file_quietly(tmp);
     return out_of_memory(detail::msg(path, "out of memory writing the bag"));
-  } catch (const std::exception& e) {
+  } catch (const std::length_error&) {
     remove_file_quietly(tmp);
-    return io_error(detail::msg(path, std::string("cannot write the bag: ") + detail::printable(e.what(), 160)));
+    return out_of_memory(detail::msg(path, "out of memory writing the bag"));
   }
 }
 

@@ -113,3 +113,22 @@ else()
   message(STATUS "[ouster] skipped: no ${OUSTER}")
 endif()
 
+
+# --- without the ROS bag plugin (LEX3D_ROSBAG_PLUGIN naming a missing file, then a file that
+# is not a shared library): every bag command fails with one line naming the bag, exit 2,
+# nothing written; other formats still work
+set(ENV{LEX3D_ROSBAG_PLUGIN} "${WORK}/no_such_dir/liblex3d_rosbag.so")
+run(2 noplugin.info info "${DRIVE}")
+expect_match(noplugin.info "${LAST_ERR}" "drive.bag: ROS bag support is not installed \\(.*no_such_dir/liblex3d_rosbag.so, named by LEX3D_ROSBAG_PLUGIN, not found\\)")
+run(2 noplugin.compress compress "${DRIVE}" -o "${WORK}/noplugin.lex3dq" --one-file)
+expect_match(noplugin.compress "${LAST_ERR}" "drive.bag: ROS bag support is not installed")
+expect_absent(noplugin.compress "${WORK}/noplugin.lex3dq")
+run(2 noplugin.decompress decompress "${WORK}/drive.lex3dq" -o "${WORK}/noplugin.bag")
+expect_match(noplugin.decompress "${LAST_ERR}" "noplugin.bag: ROS bag support is not installed")
+expect_absent(noplugin.decompress "${WORK}/noplugin.bag")
+run(0 noplugin.pcd decompress "${WORK}/drive.lex3dq" -o "${WORK}/noplugin.pcd")
+file(WRITE "${WORK}/not_a_plugin.so" "not a shared library\n")
+set(ENV{LEX3D_ROSBAG_PLUGIN} "${WORK}/not_a_plugin.so")
+run(2 badplugin.info info "${DRIVE}")
+expect_match(badplugin.info "${LAST_ERR}" "drive.bag: ROS bag support cannot be loaded \\(.*not_a_plugin.so: ")
+unset(ENV{LEX3D_ROSBAG_PLUGIN})

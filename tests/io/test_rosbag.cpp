@@ -17,8 +17,11 @@
 
 #include <random>
 
+#include <dlfcn.h>
+
 #include "bag_fixtures.hpp"
 #include "io/rosbag_internal.hpp"
+#include "io/rosbag_plugin.h"
 #include "lex3d/io/io.hpp"
 #include "lex3d/io/rosbag.hpp"
 #include "test_config.hpp"
@@ -56,6 +59,60 @@ std::string Bags::dir_;
 }  // namespace
 
 TEST_F(Bags, SupportIsBuilt) { EXPECT_TRUE(io::rosbag_supported()); }
+
+// The plugin's C table (io/rosbag_plugin.h) directly: its interface version, the library's
+// refusals turned into a code and a message (no exception crosses it), a callback that stops
+// the reading, and messages handed over in bag order with their times.
+TEST_F(Bags, PluginTableReturnsCodesNotExceptions) {
+  void* handle = dlopen("liblex3d_rosbag.so", RTLD_NOW | RTLD_LOCAL);  // the build tree's (run path)
+  ASSERT_NE(handle, nullptr) << dlerror();
+  auto entry = reinterpret_cast<lex3d_rosbag_entry_fn>(dlsym(handle, LEX3D_ROSBAG_ENTRY));
+  ASSERT_NE(entry, nullptr);
+  const lex3d_rosbag_plugin* api = entry();
+  ASSERT_NE(api, nullptr);
+  EXPECT_EQ(api->abi, LEX3D_ROSBAG_ABI);
+  EXPECT_EQ(api->table_size, sizeof(lex3d_rosbag_plugin));
+  EXPECT_EQ(std::string(api->pointcloud2_md5), ros::message_traits::MD5Sum<sensor_msgs::PointCloud2>::value());
+
+  lex3d_bag* bag = nullptr;
+  lex3d_bag_error err{};
+  EXPECT_EQ(api->open_read(path("absent.bag").c_str(), &bag, &err), LEX3D_BAG_ERROR);
+  EXPECT_EQ(bag, nullptr);
+  EXPECT_GT(std::strlen(err.text), 0U);
+  err = {};
+  EXPECT_EQ(api->open_write((dir_ + "/no_such_dir/out.bag").c_str(), &bag, &err), LEX3D_BAG_ERROR);
+  EXPECT_GT(std::strlen(err.text), 0U);
+
+  const std::string p = path("plugin_table.bag");
+  bagfix::write(p, "/points", {bagfix::driver_cloud(1700000000, 100), bagfix::driver_cloud(1700000001, 200),
+                               bagfix::driver_cloud(1700000002, 300)});
+  ASSERT_EQ(api->open_read(p.c_str(), &bag, &err), LEX3D_BAG_OK) << err.text;
+  const lex3d_bag_connection* list = nullptr;
+  std::size_t n = 0;
+  ASSERT_EQ(api->connections(bag, &list, &n, &err), LEX3D_BAG_OK);
+  std::vector<std::string> topics;
+  for (std::size_t i = 0; i < n; ++i) topics.emplace_back(list[i].topic);
+  EXPECT_NE(std::find(topics.begin(), topics.end(), "/points"), topics.end());
+  std::uint64_t count = 0;
+  ASSERT_EQ(api->count(bag, "/points", &count, &err), LEX3D_BAG_OK);
+  EXPECT_EQ(count, 3U);
+  struct Seen {
+    std::vector<std::uint32_t> sec;
+    std::size_t stop_after = 0;
+  } seen;
+  auto collect = [](void* user, lex3d_bag_time t, const std::uint8_t*, std::size_t size) -> int {
+    auto& s = *static_cast<Seen*>(user);
+    if (size > 0) s.sec.push_back(t.sec);
+    return s.sec.size() == s.stop_after ? 1 : 0;
+  };
+  ASSERT_EQ(api->read_topic(bag, "/points", collect, &seen, &err), LEX3D_BAG_OK);
+  EXPECT_EQ(seen.sec, (std::vector<std::uint32_t>{1700000000, 1700000001, 1700000002}));  // bag times
+  seen = {{}, 2};
+  EXPECT_EQ(api->read_topic(bag, "/points", collect, &seen, &err), LEX3D_BAG_STOPPED);
+  EXPECT_EQ(seen.sec.size(), 2U);
+  EXPECT_EQ(api->close(bag, &err), LEX3D_BAG_OK);
+  EXPECT_EQ(api->close(nullptr, &err), LEX3D_BAG_OK);
+}
 
 TEST_F(Bags, DriverCloudFieldsAreKeptAndOthersReported) {
   const std::string p = path("driver.bag");

@@ -4,7 +4,13 @@
 /// written back as `sensor_msgs/PointCloud2` messages. Built on the ROS bag library when
 /// lex3d is configured with LEX3D_WITH_ROSBAG (AUTO: on when the library is found); without it,
 /// every function but is_rosbag and rosbag_supported returns kBadData naming the file
-/// ("built without ROS bag support"). No ROS header is included here.
+/// ("built without ROS bag support"). No ROS header is included here, and no ROS library is
+/// linked: the first bag read or written loads the plugin liblex3d_rosbag.so, found beside
+/// the library or program holding this code, in its lex3d/ folder, in ../lib/lex3d/ from a
+/// bin/ folder, in the install prefix's lib/lex3d/, then on the library search path (or the
+/// file the environment variable LEX3D_ROSBAG_PLUGIN names). Without it these functions
+/// return kBadData naming the file ("ROS bag support is not installed (liblex3d_rosbag.so
+/// not found)").
 ///
 /// A topic of `sensor_msgs/PointCloud2` gives one scan a message. Its fields are read as a
 /// PCD file's are: `x y z` (any numeric type; required, one element each), `intensity`,
@@ -30,7 +36,8 @@
 
 namespace lex3d::io {
 
-/// True when lex3d was built with ROS bag support.
+/// True when this lex3d reads and writes ROS bags: built with the support and its plugin
+/// found (the first call loads it).
 [[nodiscard]] bool rosbag_supported() noexcept;
 
 /// True when `path` starts with the ROS bag 2.0 magic line ("#ROSBAG V2.0\n"), or, when it
