@@ -21,11 +21,16 @@ set_target_properties(lex3d_library PROPERTIES
   EXPORT_NAME lex3d
   VERSION ${PROJECT_VERSION}
   SOVERSION ${PROJECT_VERSION_MAJOR}.${PROJECT_VERSION_MINOR})
-target_include_directories(lex3d_library PUBLIC
-  $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include>
-  $<BUILD_INTERFACE:${PROJECT_BINARY_DIR}/generated/include>
-  $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
-target_compile_features(lex3d_library PUBLIC cxx_std_17)
+# What a consumer of either library gets: the public headers (and the generated version
+# header) and C++17.
+function(lex3d_library_interface target)
+  target_include_directories(${target} PUBLIC
+    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include>
+    $<BUILD_INTERFACE:${PROJECT_BINARY_DIR}/generated/include>
+    $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
+  target_compile_features(${target} PUBLIC cxx_std_17)
+endfunction()
+lex3d_library_interface(lex3d_library)
 target_link_libraries(lex3d_library
   PUBLIC Eigen3::Eigen
   PRIVATE ZLIB::ZLIB liblzf::liblzf octomap PkgConfig::libpcap nlohmann_json::nlohmann_json lex3d_pcl
@@ -61,11 +66,7 @@ if(LEX3D_INSTALL_STATIC)
   add_library(lex3d_static STATIC ${lex3d_objects})
   add_library(lex3d::lex3d_static ALIAS lex3d_static)
   set_target_properties(lex3d_static PROPERTIES OUTPUT_NAME lex3d EXPORT_NAME lex3d_static)
-  target_include_directories(lex3d_static PUBLIC
-    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/include>
-    $<BUILD_INTERFACE:${PROJECT_BINARY_DIR}/generated/include>
-    $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
-  target_compile_features(lex3d_static PUBLIC cxx_std_17)
+  lex3d_library_interface(lex3d_static)
   target_link_libraries(lex3d_static
     PUBLIC Eigen3::Eigen
     PRIVATE lex3d::pcl_kdtree lex3d::pcl_common octomap octomath ZLIB::ZLIB liblzf::liblzf lex3d::pcap lex3d::bz2

@@ -1174,8 +1174,10 @@ double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<
   return total;
 }
 
-/// The table's shift unit, its lasers in elevation order (top first) and the points' RMS
-/// distance from their beams. False when the table cannot be stored.
+/// The table's shift unit (the grid's step / 64: a positive unit marks a table whose
+/// columns may shift; the unit a layer codes with follows from its bound, prepare_layer),
+/// its lasers in elevation order (top first) and the points' RMS distance from their
+/// beams. False when the table cannot be stored.
 bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssignment& a) {
   const std::size_t n = input.size();
   a.table.shift_unit = kTwoPi / static_cast<double>(std::max<std::uint32_t>(1, a.table.columns)) / 64.0;
@@ -1411,8 +1413,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
 
   // Thinning (with `thin`): a point that a point decoded before it explains is not coded
   // where coding it would cost more than its neighbours (laser_layer): it needs a
-  // correction across its beam, or its beam length lies more than kEdgeSteps from its
-  // laser's last coded point's.
+  // correction across its beam, it is its laser's first, or its beam length lies more than
+  // kEdgeSteps from its laser's last coded point's.
   std::vector<std::uint32_t> kept(m);  // positions t
   std::iota(kept.begin(), kept.end(), 0U);
   if (thin) {
@@ -1421,10 +1423,11 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     std::vector<std::uint8_t> any(a.table.lasers(), 0);
     kept.clear();
     for (std::uint32_t t = 0; t < m; ++t) {
-      const std::uint32_t l = a.ring[coded[order[J(t)]]];
+      const std::uint32_t i = coded[order[J(t)]];
+      const std::uint32_t l = a.ring[i];
       const Coded& c = q[t];
       const bool costly = c.k1 != 0 || c.k2 != 0 || any[l] == 0 || std::abs(c.k - last_k[l]) > kEdgeSteps;
-      if (costly && seen.any_within(input[coded[order[J(t)]]].cast<double>())) continue;
+      if (costly && seen.any_within(input[i].cast<double>())) continue;
       seen.insert(c.decoded);
       kept.push_back(t);
       last_k[l] = c.k;

@@ -25,7 +25,8 @@ constexpr std::uint32_t kMaxLaserColumns = 1U << 20;
 struct LaserTable {
   std::vector<std::int64_t> elevation, beam_azimuth, column_azimuth, z_offset, radial_offset;  // stored units
   std::uint32_t columns = 0;
-  /// Unit of the per-column azimuth shifts, radians (the grid's step / 64).
+  /// Unit of the per-column azimuth shifts, radians: in an estimate, the grid's step / 64
+  /// (columns may shift); in a layer, chosen from its bound (formats/model.md §2.8).
   double shift_unit = 0.0;
   std::int32_t direction = 1;
   /// Beam lengths predicted by 0: the left neighbour; 1: the median edge detector; 2 and 3:
@@ -79,8 +80,8 @@ constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 4 + 8 + 96;
 /// full); `chosen` gets its candidate's index. nullopt when no candidate codes (a point
 /// beyond float32 resolution, table values out of the stored range). With `thin`, a point
 /// within E' of a point decoded before it is left out only where coding it would cost
-/// more than its neighbours (a correction across its beam, or a beam length far off its
-/// laser's last): leaving out every such point broke the lasers' runs of neighbours, and
+/// more than its neighbours (a correction across its beam, its laser's first point, or a
+/// beam length far off its laser's last): leaving out every such point broke the lasers' runs of neighbours, and
 /// the occupancy bits and predictions that cost outweighed the points (VLP-16 and HDL-32E
 /// turns at E = 6 cm: 14 % fewer bytes and 1 dB more PSNR coding them).
 [[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
