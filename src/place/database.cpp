@@ -91,6 +91,15 @@ std::size_t PlaceDatabase::add(PlaceScan scan) {
     throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' has descriptors of " +
                                 std::to_string(scan.descriptor_dim) + " values, the recognition vocabulary " +
                                 std::to_string(vocabulary_->descriptor_dim));
+  // Word ids index the inverted lists; one out of range (a scan decoded from damaged bytes)
+  // would otherwise grow them to its size.
+  const std::size_t word_limit = has_alphabet_ ? alphabet_.size() : kMaxWordsWithoutAlphabet;
+  for (const auto& wc : scan.words)
+    if (wc.first >= word_limit)
+      throw std::invalid_argument("PlaceDatabase::add: scan '" + scan.name + "' holds word " + std::to_string(wc.first) +
+                                  (has_alphabet_ ? ", the database's alphabet has " + std::to_string(alphabet_.size()) + " words"
+                                                 : ", beyond the " + std::to_string(kMaxWordsWithoutAlphabet) +
+                                                       " words a database without an alphabet takes"));
   if (!scan.features.empty()) descriptor_dim_ = scan.descriptor_dim;
   const auto index = static_cast<std::uint32_t>(size());
   std::uint32_t total = 0;

@@ -144,6 +144,28 @@ TEST(PlaceShards, QueryBytesVerifyAsTheScan) {
   EXPECT_FALSE(decode_place_query(bytes.data(), bytes.size(), eight).ok());
 }
 
+TEST(PlaceShards, AddRefusesWordsPastTheAlphabet) {
+  // A query's bytes carry word ids that decode_place_query cannot check (it has no alphabet);
+  // a database given one refuses ids past it instead of growing its inverted lists to them.
+  const Cloud c = test::load_or_fail(test::sample("newer_college_00.bin"));
+  const PreparedScan s = prepare_scan(c, ModelParams{}, 0.39);
+  const Alphabet a = alphabet_of(s, 40);
+  PlaceScan q = make_place_scan(c, a, PlaceStorageParams{}, ModelParams{}, "q");
+  ASSERT_FALSE(q.words.empty());
+  PlaceDatabase db(PlaceStorageParams{});
+  db.set_alphabet(a);
+  PlaceScan past = q;
+  past.words.back().first = static_cast<std::uint32_t>(a.size());
+  EXPECT_THROW(db.add(past), std::invalid_argument);
+  EXPECT_EQ(db.size(), 0U);
+  PlaceDatabase bare(PlaceStorageParams{});
+  past.words.back().first = 0xFFFFFFF0U;
+  EXPECT_THROW(bare.add(past), std::invalid_argument);
+  EXPECT_EQ(bare.size(), 0U);
+  EXPECT_EQ(db.add(q), 0U);
+  EXPECT_EQ(bare.add(q), 0U);
+}
+
 TEST(PlaceShards, SamplesShardedEqualWhole) {
   std::vector<Cloud> clouds;
   for (const char* f : {"newer_college_00.bin", "kitti00_000000.bin", "room_scan1.pcd"})

@@ -472,8 +472,11 @@ class PlaceDatabase {
   /// Descriptor values a feature of this database's scans (0 until known).
   [[nodiscard]] int descriptor_dim() const noexcept { return descriptor_dim_; }
 
+  /// The largest word id + 1 a database without an alphabet accepts.
+  static constexpr std::size_t kMaxWordsWithoutAlphabet = std::size_t{1} << 24;
   /// Adds a scan (kept in memory); returns its index. Throws std::invalid_argument when
-  /// its descriptor layout differs from the database's.
+  /// its descriptor layout differs from the database's, or it holds a word id the database's
+  /// alphabet does not have (without an alphabet: kMaxWordsWithoutAlphabet or more).
   std::size_t add(PlaceScan scan);
   [[nodiscard]] std::size_t size() const noexcept { return stored_count() + added_.size(); }
   /// Scans read from bytes (the others were added in memory).
