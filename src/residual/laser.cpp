@@ -50,6 +50,9 @@ constexpr std::uint32_t kMaxColumnGap = 4;
 /// The table as doubles, with the per-laser trigonometry the beams need.
 struct Beams {
   std::vector<double> sin_el, cos_el, beam_az, col_az, z, radial;
+  /// Cosines and sines of each laser's azimuth offsets: its origin's (col_az) and its
+  /// direction's (col_az + beam_az), turned by a column's azimuth (ColumnTrig) per beam.
+  std::vector<double> cos_o, sin_o, cos_d, sin_d;
   double azimuth0 = 0.0, column_angle = 0.0;  // column_angle: direction · 2π / columns
   double shift_unit = 0.0;
   Pose T_cloud_head = Pose::Identity();
@@ -62,6 +65,10 @@ struct Beams {
     col_az.resize(n);
     z.resize(n);
     radial.resize(n);
+    cos_o.resize(n);
+    sin_o.resize(n);
+    cos_d.resize(n);
+    sin_d.resize(n);
     for (std::size_t l = 0; l < n; ++l) {
       const double el = static_cast<double>(t.elevation[l]) * kLaserAngleUnit;
       sin_el[l] = std::sin(el);
@@ -70,6 +77,10 @@ struct Beams {
       col_az[l] = static_cast<double>(t.column_azimuth[l]) * kLaserAngleUnit;
       z[l] = static_cast<double>(t.z_offset[l]) * kLaserLengthUnit;
       radial[l] = static_cast<double>(t.radial_offset[l]) * kLaserLengthUnit;
+      cos_o[l] = std::cos(col_az[l]);
+      sin_o[l] = std::sin(col_az[l]);
+      cos_d[l] = std::cos(col_az[l] + beam_az[l]);
+      sin_d[l] = std::sin(col_az[l] + beam_az[l]);
     }
     azimuth0 = t.azimuth0;
     column_angle = static_cast<double>(t.direction) * (kTwoPi / static_cast<double>(t.columns));
@@ -90,10 +101,21 @@ struct Beams {
   struct Trig {
     double ca, sa, cb, sb;
   };
+  /// The cosine and sine of a column's azimuth (shifted by `shift` units), shared by its
+  /// lasers: one sine and cosine a column, not two a point.
+  struct ColumnTrig {
+    double c, s;
+  };
+  [[nodiscard]] ColumnTrig column_trig(std::uint32_t c, std::int64_t shift) const {
+    const double a = azimuth0 + column_angle * static_cast<double>(c) + static_cast<double>(shift) * shift_unit;
+    return {std::cos(a), std::sin(a)};
+  }
+  [[nodiscard]] Trig trig(std::uint32_t l, const ColumnTrig& k) const {
+    return {k.c * cos_o[l] - k.s * sin_o[l], k.s * cos_o[l] + k.c * sin_o[l], k.c * cos_d[l] - k.s * sin_d[l],
+            k.s * cos_d[l] + k.c * sin_d[l]};
+  }
   [[nodiscard]] Trig trig(std::uint32_t l, std::uint32_t c, std::int64_t shift) const {
-    const double alpha = azimuth0 + column_angle * static_cast<double>(c) + col_az[l] + static_cast<double>(shift) * shift_unit;
-    const double beta = alpha + beam_az[l];
-    return {std::cos(alpha), std::sin(alpha), std::cos(beta), std::sin(beta)};
+    return trig(l, column_trig(c, shift));
   }
   [[nodiscard]] Beam beam(std::uint32_t l, const Trig& t) const {
     const double ca = t.ca, sa = t.sa, cb = t.cb, sb = t.sb;
@@ -1836,10 +1858,11 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
       return LaserDecodeError{"column azimuth shift beyond 2^30 units", 0};
     pc.set_shift(shift);
     pc.start_column(c, dc);
+    const Beams::ColumnTrig column_trig = beams.column_trig(c, shift);
     for (std::uint32_t l = 0; l < table.lasers() && remaining > 0; ++l) {
       if (!pc.get_occupancy(dec, l)) continue;
       pc.occupied(l);
-      const auto b = beams.beam(l, c, shift);
+      const auto b = beams.beam(l, beams.trig(l, column_trig));
       for (;;) {
         const auto pred = pc.predict(l);
         std::int64_t pk = pred.k;
