@@ -1642,9 +1642,12 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
   shift.assign(coded.size(), 0);
   beam_of.resize(order.size());
   offset.resize(order.size());
+  // (a column's azimuth, shared by its lasers: one sine and cosine a column)
+  std::vector<Beams::ColumnTrig> unshifted(table.columns);
+  for (std::uint32_t c = 0; c < table.columns; ++c) unshifted[c] = beams.column_trig(c, 0);
   parallel_for(order.size(), threads, [&](std::size_t j) {
     const std::uint32_t i = coded[order[j]];
-    beam_of[j] = beams.trig(a.ring[i], a.column[i], 0);
+    beam_of[j] = beams.trig(a.ring[i], unshifted[a.column[i]]);
     offset[j] = T_head_cloud * input[i].cast<double>() - beams.beam(a.ring[i], beam_of[j]).o;
   }, 4096);
   if (table.shift_unit > 0.0 && !order.empty()) {
@@ -1663,12 +1666,14 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
       const std::uint32_t column = a.column[coded[order[at]]];
       std::size_t end = at;
       off.clear();
+      // (the beams' azimuth before the shift: the column's plus the laser's offsets)
+      const double column_azimuth =
+          beams.azimuth0 + beams.column_angle * static_cast<double>(column);
       for (; end < order.size() && a.column[coded[order[end]]] == column; ++end) {
         const Eigen::Vector3d& v = offset[end];
-        if (std::hypot(v.x(), v.y()) < 1.0) continue;
-        const Beams::Trig& t = beam_of[end];
-        const double cos_el = beams.cos_el[a.ring[coded[order[end]]]];
-        const double beam = std::atan2(t.sb * cos_el, t.cb * cos_el);
+        if (v.x() * v.x() + v.y() * v.y() < 1.0) continue;
+        const std::uint16_t l = a.ring[coded[order[end]]];
+        const double beam = column_azimuth + beams.col_az[l] + beams.beam_az[l];
         off.push_back(std::remainder(std::atan2(v.y(), v.x()) - beam, kTwoPi));
       }
       std::int64_t s = last;
@@ -1680,10 +1685,17 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
       last = s;
       at = end;
     }
+    // (each shifted column's azimuth once, at its first point in `order`)
+    std::vector<Beams::ColumnTrig> shifted(order.size());
+    for (std::size_t j = 0; j < order.size(); ++j) {
+      if (shift[j] == 0) continue;
+      const bool first = j == 0 || a.column[coded[order[j - 1]]] != a.column[coded[order[j]]];
+      shifted[j] = first ? beams.column_trig(a.column[coded[order[j]]], shift[j]) : shifted[j - 1];
+    }
     parallel_for(order.size(), threads, [&](std::size_t j) {
       if (shift[j] == 0) return;
       const std::uint32_t i = coded[order[j]];
-      beam_of[j] = beams.trig(a.ring[i], a.column[i], shift[j]);
+      beam_of[j] = beams.trig(a.ring[i], shifted[j]);
       offset[j] = T_head_cloud * input[i].cast<double>() - beams.beam(a.ring[i], beam_of[j]).o;
     }, 4096);
   }
