@@ -493,6 +493,16 @@ void run_info(const InfoOptions& o) {
           .value("firing_times", fit->firing_times)
           .end_object();
     if (c.georef) georef_json(j, *c.georef);
+    if (!c.fields.empty()) {
+      j.begin_array("fields");
+      for (const IntegerField& f : c.fields) {
+        const auto mm = std::minmax_element(f.values.begin(), f.values.end());
+        j.begin_object().value("name", f.name);
+        if (!f.values.empty()) j.value("min", static_cast<std::int64_t>(*mm.first)).value("max", static_cast<std::int64_t>(*mm.second));
+        j.end_object();
+      }
+      j.end_array();
+    }
     if (!r.dropped_fields.empty()) {
       j.begin_array("fields_not_kept");
       for (const auto& f : r.dropped_fields) j.value({}, f);
@@ -530,6 +540,11 @@ void run_info(const InfoOptions& o) {
                 res->elevation_rad * rad2deg);
   if (c.has_world_pose) std::printf("world pose     yes\n");
   if (c.georef) print_georef(*c.georef, true);
+  for (const IntegerField& f : c.fields) {
+    if (f.values.empty()) continue;
+    const auto mm = std::minmax_element(f.values.begin(), f.values.end());
+    std::printf("field          %s %d .. %d\n", f.name.c_str(), *mm.first, *mm.second);
+  }
   for (const auto& f : r.dropped_fields) std::printf("not kept       %s\n", f.c_str());
 }
 

@@ -134,6 +134,8 @@ py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alp
       for (py::ssize_t k = 0; k < 3; ++k) c(i, k) = cloud.rgb[static_cast<std::size_t>(i)][static_cast<std::size_t>(k)];
     fields["rgb"] = rgb;
   }
+  for (const lex3d::IntegerField& x : cloud.fields)
+    if (x.values.size() == cloud.size()) fields[py::str(x.name)] = py::array_t<std::int32_t>(n, x.values.data());
   return py::make_tuple(out, fields);
 }
 
@@ -201,8 +203,9 @@ scan that does not fit it.)");
 
 alphabet: the alphabet file (bytes) the model references, if it references one.
 attributes: also return the per-point fields the file keeps, as (points, fields) with fields a
-dict of (M,) arrays by name: "intensity" (float32), "ring" (uint16), "time" (float64, seconds)
-and "rgb" ((M, 3) uint8).
+dict of (M,) arrays by name: "intensity" (float32), "ring" (uint16), "time" (float64, seconds),
+"rgb" ((M, 3) uint8) and each named integer field (int32; a LAS file's "classification",
+"return_number", "scan_angle_rank"...).
 Raises ValueError for a malformed, truncated or corrupt file (the message names the byte offset)
 or a missing or mismatched alphabet.)");
   lex3d::python::bind_place(m);

@@ -38,6 +38,8 @@ std::vector<std::string> attribute_fields(const Cloud& cloud) {
   if (cloud.has_intensity()) f.emplace_back("intensity");
   if (cloud.has_time()) f.emplace_back("time");
   if (cloud.has_rgb()) f.emplace_back("rgb");
+  for (const IntegerField& x : cloud.fields)
+    if (x.values.size() == cloud.size()) f.push_back(x.name);
   return f;
 }
 

@@ -280,11 +280,19 @@ class Builder {
     if (intensity_) r_.cloud.intensity.push_back(i);
     if (color_) r_.colors.push_back(c);
     if (time_) r_.cloud.time.push_back(next_time_);
+    push_fields();
   }
 
   /// Records each point's time (Cloud::time): the value given to next_time before its add.
   void set_time(bool on) { time_ = on; }
   void next_time(double t) { next_time_ = t; }
+  /// Records named integer fields (Cloud::fields) `names`: field k of each point is the
+  /// value given to next_field(k, ...) before its add.
+  void set_fields(const std::vector<std::string>& names) {
+    for (const std::string& name : names) r_.cloud.fields.push_back({name, {}});
+    next_fields_.assign(names.size(), 0);
+  }
+  void next_field(std::size_t k, std::int32_t v) { next_fields_[k] = v; }
 
   /// Records each point's laser (`rings`) and column (`columns`) from add_at; with
   /// `organised`, NaN/Inf and exact (0, 0, 0) points are the sensor's no-returns (counted in
@@ -325,6 +333,7 @@ class Builder {
     if (intensity_) r_.cloud.intensity.push_back(i);
     if (color_) r_.colors.push_back(c);
     if (time_) r_.cloud.time.push_back(next_time_);
+    push_fields();
     if (rings_) r_.cloud.ring.push_back(ring);
     if (columns_) r_.cloud.column.push_back(column);
   }
@@ -335,6 +344,10 @@ class Builder {
   Status finish(const std::string& path);
 
  private:
+  void push_fields() {
+    for (std::size_t k = 0; k < next_fields_.size(); ++k) r_.cloud.fields[k].values.push_back(next_fields_[k]);
+  }
+  std::vector<std::int32_t> next_fields_;
   bool time_ = false;
   double next_time_ = 0.0;
   ReadResult& r_;
@@ -374,6 +387,9 @@ Status read_las(const std::string& path, const std::uint8_t* data, std::size_t s
 
 /// A LAS file of `cloud` (write_las.cpp): the version, point format, scale, offset and CRS
 /// records of its georeference when it came from LAS, else LAS 1.2 format 0 (2 with colours).
+/// The named fields of `cloud` (Cloud::fields) that build_las has no place for in the point
+/// format it writes.
+std::vector<std::string> las_fields_not_written(const Cloud& cloud, const WriteOptions& o);
 Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions& o,
                  std::vector<std::uint8_t>& out);  // write_las.cpp
 

@@ -32,6 +32,48 @@ inline int rgb_offset(int format) {
   }
 }
 
+/// A per-point field of a point record that Cloud keeps as an IntegerField (LAS 1.4 R15
+/// §2.6): `size` 1 (bits `shift`.. of width given by `mask`) or 2 bytes (all of them),
+/// signed or not. `plain` is the value the writer puts where a cloud lacks the field (the
+/// return number and count: 1 of 1; the rest 0); a field whose every value is plain is
+/// not kept (the writer gives it back as it was).
+struct PointField {
+  const char* name;
+  std::uint16_t offset;
+  std::uint8_t size;
+  std::uint8_t shift;
+  std::uint16_t mask;
+  bool is_signed;
+  std::int32_t plain;
+  /// The field's value in record `p`.
+  [[nodiscard]] std::int32_t get(const std::uint8_t* p) const {
+    if (size == 1) return is_signed ? static_cast<std::int32_t>(static_cast<std::int8_t>(p[offset]))
+                                    : static_cast<std::int32_t>((p[offset] >> shift) & mask);
+    const auto u = static_cast<std::uint16_t>(p[offset] | (p[offset + 1] << 8));
+    return is_signed ? static_cast<std::int32_t>(static_cast<std::int16_t>(u)) : static_cast<std::int32_t>(u);
+  }
+  /// Whether `v` fits the field.
+  [[nodiscard]] bool fits(std::int32_t v) const {
+    if (size == 1) return is_signed ? v >= -128 && v <= 127 : v >= 0 && v <= static_cast<std::int32_t>(mask);
+    return is_signed ? v >= -32768 && v <= 32767 : v >= 0 && v <= 65535;
+  }
+  /// Stores `v` (which fits) into record `p`, whose other bits it leaves alone.
+  void put(std::uint8_t* p, std::int32_t v) const {
+    if (size == 1) {
+      if (is_signed) p[offset] = static_cast<std::uint8_t>(static_cast<std::int8_t>(v));
+      else p[offset] = static_cast<std::uint8_t>((p[offset] & ~(mask << shift)) | ((static_cast<unsigned>(v) & mask) << shift));
+      return;
+    }
+    const auto u = static_cast<std::uint16_t>(v);
+    p[offset] = static_cast<std::uint8_t>(u & 0xFFU);
+    p[offset + 1] = static_cast<std::uint8_t>(u >> 8);
+  }
+};
+
+/// The fields of point format `format` (0-10) that Cloud keeps as IntegerFields, in the
+/// order of the record.
+std::vector<PointField> point_fields(int format);
+
 /// Whether a VLR/EVLR describes the coordinate reference system (and is carried through).
 inline bool is_crs_record(const std::string& user_id, std::uint16_t record_id) {
   if (user_id == "LASF_Projection") return record_id == 34735 || record_id == 34736 || record_id == 34737 ||

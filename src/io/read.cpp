@@ -83,8 +83,10 @@ Status Builder::finish(const std::string& path) {
       if (time_) r_.cloud.time[kept] = r_.cloud.time[i];
       if (rings_) r_.cloud.ring[kept] = r_.cloud.ring[i];
       if (columns_) r_.cloud.column[kept] = r_.cloud.column[i];
+      for (IntegerField& field : r_.cloud.fields) field.values[kept] = field.values[i];
       ++kept;
     }
+    for (IntegerField& field : r_.cloud.fields) field.values.resize(kept);
     r_.cloud.points.resize(kept);
     if (intensity_) r_.cloud.intensity.resize(kept);
     if (color_) r_.colors.resize(kept);

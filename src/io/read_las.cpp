@@ -306,6 +306,34 @@ CrsInfo describe_crs(const std::vector<CrsRecord>& records, bool prefer_wkt) {
   return out;
 }
 
+std::vector<PointField> point_fields(int format) {
+  std::vector<PointField> f;
+  if (format <= 5) {
+    f = {{"return_number", 14, 1, 0, 0x07, false, 1},
+         {"number_of_returns", 14, 1, 3, 0x07, false, 1},
+         {"scan_direction_flag", 14, 1, 6, 0x01, false, 0},
+         {"edge_of_flight_line", 14, 1, 7, 0x01, false, 0},
+         {"classification", 15, 1, 0, 0x1F, false, 0},
+         {"classification_flags", 15, 1, 5, 0x07, false, 0},  // synthetic, key-point, withheld
+         {"scan_angle_rank", 16, 1, 0, 0xFF, true, 0},         // degrees
+         {"user_data", 17, 1, 0, 0xFF, false, 0},
+         {"point_source_id", 18, 2, 0, 0xFFFF, false, 0}};
+  } else {
+    f = {{"return_number", 14, 1, 0, 0x0F, false, 1},
+         {"number_of_returns", 14, 1, 4, 0x0F, false, 1},
+         {"classification_flags", 15, 1, 0, 0x0F, false, 0},  // synthetic, key-point, withheld, overlap
+         {"scanner_channel", 15, 1, 4, 0x03, false, 0},
+         {"scan_direction_flag", 15, 1, 6, 0x01, false, 0},
+         {"edge_of_flight_line", 15, 1, 7, 0x01, false, 0},
+         {"classification", 16, 1, 0, 0xFF, false, 0},
+         {"user_data", 17, 1, 0, 0xFF, false, 0},
+         {"scan_angle", 18, 2, 0, 0xFFFF, true, 0},  // 0.006 degrees
+         {"point_source_id", 20, 2, 0, 0xFFFF, false, 0}};
+    if (format == 8 || format == 10) f.push_back({"nir", 36, 2, 0, 0xFFFF, false, 0});
+  }
+  return f;
+}
+
 }  // namespace las
 
 namespace {
@@ -315,41 +343,22 @@ T le(const std::uint8_t* p) {
   return load<T>(p, kHostBigEndian);
 }
 
-/// A field of a point record lex3d does not keep: where it is and which bits count.
+/// A part of a point record lex3d does not keep: where it is.
 struct LasField {
   const char* name;
   std::uint16_t offset;
   std::uint16_t size;
-  std::uint8_t mask;  // for one-byte fields; 0xFF otherwise
-  std::uint8_t plain = 0;  // a one-byte value that carries nothing either (return 1 of 1)
 };
 
+/// The waveform packet and NIR fields are not kept (NIR is: see point_fields).
 std::vector<LasField> dropped_fields_of(int format) {
-  std::vector<LasField> f;
-  if (format <= 5) {
-    f = {{"return number / number of returns", 14, 1, 0x3F, 0x09},
-         {"scan direction / edge of flight line", 14, 1, 0xC0},
-         {"classification", 15, 1, 0x1F},
-         {"classification flags", 15, 1, 0xE0},
-         {"scan angle", 16, 1, 0xFF},
-         {"user data", 17, 1, 0xFF},
-         {"point source id", 18, 2, 0xFF}};
-    if (format == 4) f.push_back({"waveform packet", 28, 29, 0xFF});
-    if (format == 5) f.push_back({"waveform packet", 34, 29, 0xFF});
-  } else {
-    f = {{"return number / number of returns", 14, 1, 0xFF, 0x11},
-         {"classification flags", 15, 1, 0x0F},
-         {"scanner channel", 15, 1, 0x30},
-         {"scan direction / edge of flight line", 15, 1, 0xC0},
-         {"classification", 16, 1, 0xFF},
-         {"user data", 17, 1, 0xFF},
-         {"scan angle", 18, 2, 0xFF},
-         {"point source id", 20, 2, 0xFF}};
-    if (format == 8 || format == 10) f.push_back({"NIR", 36, 2, 0xFF});
-    if (format == 9) f.push_back({"waveform packet", 30, 29, 0xFF});
-    if (format == 10) f.push_back({"waveform packet", 38, 29, 0xFF});
+  switch (format) {
+    case 4: return {{"waveform packet", 28, 29}};
+    case 5: return {{"waveform packet", 34, 29}};
+    case 9: return {{"waveform packet", 30, 29}};
+    case 10: return {{"waveform packet", 38, 29}};
+    default: return {};
   }
-  return f;
 }
 
 /// The largest power of ten (times the grid step) not above half the extent: the origin is
@@ -576,6 +585,10 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   std::uint16_t rgb_max = 0;
   const std::vector<LasField> fields = dropped_fields_of(format);
   std::vector<std::uint8_t> seen(fields.size(), 0);
+  // the fields Cloud keeps, each until it shows a value other than its plain one
+  const std::vector<PointField> kept_fields = point_fields(format);
+  std::vector<std::vector<std::int32_t>> kept_values(kept_fields.size(), std::vector<std::int32_t>(n));
+  std::vector<std::uint8_t> kept_seen(kept_fields.size(), 0);
   bool extra_seen = false;
   double worst2 = 0.0;
   std::array<double, 3> worst_axis{0.0, 0.0, 0.0};
@@ -606,14 +619,12 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
         rgb_max = std::max(rgb_max, rgb16[i][static_cast<std::size_t>(c)]);
       }
     }
-    for (std::size_t k = 0; k < fields.size(); ++k) {
-      const LasField& f = fields[k];
-      if (f.size == 1) {
-        const std::uint8_t v = p[f.offset] & f.mask;
-        seen[k] |= static_cast<std::uint8_t>(v != f.plain ? v : 0);
-      } else {
-        for (std::uint16_t b = 0; b < f.size; ++b) seen[k] |= static_cast<std::uint8_t>(p[f.offset + b] & f.mask);
-      }
+    for (std::size_t k = 0; k < fields.size(); ++k)
+      for (std::uint16_t b = 0; b < fields[k].size; ++b) seen[k] |= p[fields[k].offset + b];
+    for (std::size_t k = 0; k < kept_fields.size(); ++k) {
+      const std::int32_t v = kept_fields[k].get(p);
+      kept_values[k][i] = v;
+      kept_seen[k] |= static_cast<std::uint8_t>(v != kept_fields[k].plain ? 1 : 0);
     }
     if (!extra_seen)
       for (std::size_t b = kMinRecord[format]; b < record_len; ++b) extra_seen = extra_seen || p[b] != 0;
@@ -639,6 +650,8 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   }
   for (std::size_t k = 0; k < fields.size(); ++k)
     if (seen[k] != 0) r.dropped_fields.emplace_back(fields[k].name);
+  for (std::size_t k = 0; k < kept_fields.size(); ++k)
+    if (kept_seen[k] != 0) r.cloud.fields.push_back({kept_fields[k].name, std::move(kept_values[k])});
   if (time_seen && !time_finite) r.dropped_fields.emplace_back("GPS time (a value is not finite)");
   if (!time_seen || !time_finite) r.cloud.time.clear();
   if (extra_seen) r.dropped_fields.emplace_back("extra bytes (" + std::to_string(record_len - kMinRecord[format]) + " a record)");

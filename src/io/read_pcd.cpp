@@ -3,6 +3,7 @@
 // bytes left before anything is allocated.
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <initializer_list>
@@ -252,6 +253,27 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   const PcdField* fc = find({"rgb", "rgba"});
   const PcdField* ft = find({"time", "t", "timestamp"});
   if (fc != nullptr && fc->size != 4) fc = nullptr;  // only packed 32-bit colours
+  // Every other field: a single integer of up to 32 bits (signed) or 16 bits (unsigned) with
+  // a plain name is kept as a named field (Cloud::fields); the rest are named as not kept
+  // (PCL's "_" padding fields hold nothing).
+  std::vector<const PcdField*> extras;
+  std::vector<std::string> extra_names;
+  for (const PcdField& f : fields) {
+    const PcdField* p = &f;
+    if (p == fx || p == fy || p == fz || p == fi || p == fr || p == fc || p == ft || f.name == "_") continue;
+    bool plain = !f.name.empty() && f.name.size() <= 64;
+    for (const char ch : f.name) plain = plain && (std::isalnum(static_cast<unsigned char>(ch)) != 0 || ch == '_');
+    bool repeated = false;
+    for (const std::string& n : extra_names) repeated = repeated || n == f.name;
+    const bool integer = (f.type == 'I' && f.size <= 4) || (f.type == 'U' && f.size <= 2);
+    if (f.count == 1 && integer && plain && !repeated) {
+      extras.push_back(p);
+      extra_names.push_back(f.name);
+    } else {
+      r.dropped_fields.push_back(printable(f.name, 64) + (f.count > 1 ? " (" + std::to_string(f.count) + " values a point)"
+                                                          : integer ? "" : f.type == 'F' ? " (floating point)" : " (unsigned 32/64-bit)"));
+    }
+  }
 
   r.encoding = encoding;
   r.cloud.T_cloud_sensor = viewpoint;
@@ -260,6 +282,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   const bool wide = fx->scalar == Scalar::kF64 || fy->scalar == Scalar::kF64 || fz->scalar == Scalar::kF64;
   Builder out(r, fi != nullptr, fc != nullptr, wide);
   out.set_time(ft != nullptr);
+  out.set_fields(extra_names);
   // An organised cloud (HEIGHT > 1): rows are lasers, columns azimuth steps, NaN or (0, 0, 0)
   // pixels no-returns; a ring field gives each point's laser.
   const bool organised = height > 1 && height <= 0xFFFF && width <= 0xFFFFFFFFULL;
@@ -326,6 +349,14 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (fi != nullptr && col == fi->token) slot = &v[3];
         else if (fr != nullptr && col == fr->token) return parse_number(b, e, ring_value);
         else if (ft != nullptr && col == ft->token) return parse_number(b, e, time_value);
+        for (std::size_t x = 0; x < extras.size(); ++x)
+          if (col == extras[x]->token) {
+            double value = 0.0;
+            if (!parse_number(b, e, value) || value != std::floor(value) || value < -2147483648.0 || value > 2147483647.0)
+              return false;
+            out.next_field(x, static_cast<std::int32_t>(value));
+            return true;
+          }
         return slot != nullptr ? parse_number(b, e, *slot) : is_number(b, e);
       });
       const std::uint64_t line_no = first_line + data_lines.line_no() - 1;
@@ -427,6 +458,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   };
   const PcdAccess ax = access(fx), ay = access(fy), az = access(fz), ai = access(fi), ac = access(fc),
                   ar = access(fr), at = access(ft);
+  std::vector<PcdAccess> extra_at;
+  for (const PcdField* f : extras) extra_at.push_back(access(f));
   out.reserve(static_cast<std::size_t>(points));
   const bool swap = kHostBigEndian;
   for (std::uint64_t i = 0; i < points; ++i) {
@@ -440,6 +473,8 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     Status rs = ring_of(i, fr != nullptr ? load_scalar(block + ar.base + i * ar.stride, fr->scalar, swap) : 0.0, ring);
     if (!rs.ok()) return rs;
     if (ft != nullptr) out.next_time(load_scalar(block + at.base + i * at.stride, ft->scalar, swap));
+    for (std::size_t e = 0; e < extras.size(); ++e)
+      out.next_field(e, static_cast<std::int32_t>(load_scalar(block + extra_at[e].base + i * extra_at[e].stride, extras[e]->scalar, swap)));
     if (wide)
       out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
                    load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),

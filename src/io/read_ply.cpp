@@ -3,6 +3,7 @@
 // `vertex` element gives x y z, an intensity and red green blue when present.
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <initializer_list>
 #include <string>
@@ -247,6 +248,37 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                                   (ix < 0 ? "x" : iy < 0 ? "y" : "z") + "' property"));
   }
   const bool color = ir >= 0 && ig >= 0 && ib >= 0;
+  // Every other vertex property: a single integer of up to 32 bits (signed) or 16 bits
+  // (unsigned) with a plain name is kept as a named field (Cloud::fields); the rest are
+  // named as not kept.
+  std::vector<int> extras;  // property indexes
+  std::vector<std::string> extra_names;
+  for (std::size_t k = 0; k < vertex.props.size(); ++k) {
+    const PlyProperty& p = vertex.props[k];
+    const int kk = static_cast<int>(k);
+    if (kk == ix || kk == iy || kk == iz || kk == ii || kk == il || kk == it || (color && (kk == ir || kk == ig || kk == ib)))
+      continue;
+    bool plain = !p.name.empty() && p.name.size() <= 64;
+    for (const char ch : p.name) plain = plain && (std::isalnum(static_cast<unsigned char>(ch)) != 0 || ch == '_');
+    bool repeated = false;
+    for (const std::string& n : extra_names) repeated = repeated || n == p.name;
+    const bool integer = p.type == Scalar::kI8 || p.type == Scalar::kU8 || p.type == Scalar::kI16 ||
+                         p.type == Scalar::kU16 || p.type == Scalar::kI32;
+    if (!p.is_list && integer && plain && !repeated) {
+      extras.push_back(kk);
+      extra_names.push_back(p.name);
+    } else {
+      r.dropped_fields.push_back(printable(p.name, 64) + (p.is_list ? " (a list)" : integer ? ""
+                                                         : p.type == Scalar::kF32 || p.type == Scalar::kF64 ? " (floating point)"
+                                                                                                            : " (unsigned 32/64-bit)"));
+    }
+  }
+  // the named field of property index kk, or -1
+  const auto extra_of = [&](int kk) {
+    for (std::size_t x = 0; x < extras.size(); ++x)
+      if (extras[x] == kk) return static_cast<int>(x);
+    return -1;
+  };
   r.encoding = format;
   // double coordinates may be georeferenced (Builder::finish)
   const bool wide = vertex.props[static_cast<std::size_t>(ix)].type == Scalar::kF64 ||
@@ -259,6 +291,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   // A time property gives each point's time (Cloud::time), seconds.
   const bool times = it >= 0;
   out.set_time(times);
+  out.set_fields(extra_names);
   auto ring_of = [&](std::uint64_t item, double value, std::uint16_t& ring) -> Status {
     if (!(value >= 0.0 && value <= 65535.0) || value != std::floor(value))
       return bad_data(msg(path, "vertex " + std::to_string(item) + ": " + vertex.props[static_cast<std::size_t>(il)].name +
@@ -369,7 +402,11 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (color && kk == ib) ok = parse_number(b, e, c[2]);
         else if (rings && kk == il) ok = parse_number(b, e, lv);
         else if (times && kk == it) ok = parse_number(b, e, tv);
-        else ok = is_number(b, e);
+        else if (const int x = extra_of(kk); x >= 0) {
+          double value = 0.0;
+          ok = parse_number(b, e, value) && value == std::floor(value) && value >= -2147483648.0 && value <= 2147483647.0;
+          if (ok) out.next_field(static_cast<std::size_t>(x), static_cast<std::int32_t>(value));
+        } else ok = is_number(b, e);
         if (!ok) return not_number();
       }
       Status added = add_vertex(item, v, w, c, lv, tv);
@@ -471,6 +508,10 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         const auto u = static_cast<std::size_t>(it);
         out.next_time(load_scalar(p + offsets[u], vertex.props[u].type, swap));
       }
+      for (std::size_t e = 0; e < extras.size(); ++e) {
+        const auto u = static_cast<std::size_t>(extras[e]);
+        out.next_field(e, static_cast<std::int32_t>(load_scalar(p + offsets[u], vertex.props[u].type, swap)));
+      }
       if (wide)
         out.add_wide(load_scalar(p + offsets[static_cast<std::size_t>(ix)], sx, swap),
                      load_scalar(p + offsets[static_cast<std::size_t>(iy)], sy, swap),
@@ -502,7 +543,11 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       else if (color && kk == ib) ok = bc.scalar(p.type, c[2]);
       else if (rings && kk == il) ok = bc.scalar(p.type, lv);
       else if (times && kk == it) ok = bc.scalar(p.type, tv);
-      else ok = bc.skip(scalar_size(p.type));
+      else if (const int x = extra_of(kk); x >= 0) {
+        double value = 0.0;
+        ok = bc.scalar(p.type, value);
+        if (ok) out.next_field(static_cast<std::size_t>(x), static_cast<std::int32_t>(value));
+      } else ok = bc.skip(scalar_size(p.type));
       if (!ok) {
         return bad_data(msg(path, "truncated binary data: vertex " + std::to_string(item) + " of " +
                                       std::to_string(vertex.count) + " ends past the end of the file"),

@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
+#include <cctype>
 #include <cstring>
 #include <limits>
 #include <new>
@@ -128,6 +129,15 @@ class Bytes {
       text(cloud.time[i]);
     }
   }
+  /// " v1 v2 ..." of point i's named fields as text (no end of line).
+  void named(const Cloud& cloud, std::size_t i) {
+    for (const IntegerField& x : cloud.fields) {
+      u8(' ');
+      const std::int32_t v = x.values[i];
+      if (v < 0) u8('-');
+      text(static_cast<std::uint64_t>(v < 0 ? -static_cast<std::int64_t>(v) : v));
+    }
+  }
   std::vector<std::uint8_t>& vec() { return b_; }
 
  private:
@@ -144,8 +154,8 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
                  bool with_c, const Georeference* g, std::vector<std::uint8_t>& out, std::size_t height = 1) {
   const std::size_t n = cloud.size();
   const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
-  const std::size_t point_size =
-      (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0) + (with_r ? 2 : 0) + (with_t ? 8 : 0);
+  const std::size_t point_size = (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0) + (with_r ? 2 : 0) +
+                                 (with_t ? 8 : 0) + 4 * cloud.fields.size();
   Bytes b(256 + n * point_size + (o.pcd_encoding == PcdEncoding::kAscii ? n * 40 : 0));
   std::string fields = "x y z", sizes = g != nullptr ? "8 8 8" : "4 4 4", types = "F F F", counts = "1 1 1";
   if (with_i) {
@@ -174,6 +184,12 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
     types += " F";
     counts += " 1";
   }
+  for (const IntegerField& x : cloud.fields) {  // named fields (a LAS classification...) as int32
+    fields += " " + x.name;
+    sizes += " 4";
+    types += " I";
+    counts += " 1";
+  }
   // true coordinates: the viewpoint moves with the points (in the CRS's units when they are metres)
   Pose viewpoint = cloud.T_cloud_sensor;
   if (g != nullptr) viewpoint.translation() = g->to_crs(cloud.T_cloud_sensor.translation().cast<float>());
@@ -193,6 +209,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
           b.text(static_cast<std::uint64_t>(pack_rgb(o.colors[i])));
         }
         b.ring_time(cloud, i, with_r, with_t);
+        b.named(cloud, i);
         b.u8('\n');
       }
       break;
@@ -203,6 +220,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
         if (with_c) b.le(pack_rgb(o.colors[i]));
         if (with_r) b.le(cloud.ring[i]);
         if (with_t) b.f64(cloud.time[i]);
+        for (const IntegerField& x : cloud.fields) b.le(x.values[i]);
       }
       break;
     case PcdEncoding::kBinaryCompressed: {
@@ -231,6 +249,8 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
       if (with_t) {
         for (std::size_t i = 0; i < n; ++i) raw.f64(cloud.time[i]);
       }
+      for (const IntegerField& x : cloud.fields)
+        for (std::size_t i = 0; i < n; ++i) raw.le(x.values[i]);
       std::vector<std::uint8_t> comp;
       unsigned comp_size = 0;
       if (raw_size > 0) {
@@ -263,6 +283,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
   const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
   if (with_r) h += "property ushort ring\n";
   if (with_t) h += "property double time\n";
+  for (const IntegerField& x : cloud.fields) h += "property int " + x.name + "\n";
   h += "end_header\n";
   b.str(h);
   for (std::size_t i = 0; i < n; ++i) {
@@ -276,6 +297,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
       }
       if (with_r) b.le(cloud.ring[i]);
       if (with_t) b.f64(cloud.time[i]);
+      for (const IntegerField& x : cloud.fields) b.le(x.values[i]);
     } else {
       b.text_point(cloud, i, with_i, g);
       if (with_c) {
@@ -285,6 +307,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
         }
       }
       b.ring_time(cloud, i, with_r, with_t);
+      b.named(cloud, i);
       b.u8('\n');
     }
   }
@@ -364,6 +387,14 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
   const auto format = output_format(path, options);
   if (!format.ok()) return format.status();
   const Format f = format.value();
+  for (const IntegerField& x : cloud.fields) {
+    if (x.values.size() != cloud.points.size())
+      return invalid(path, "field " + detail::printable(x.name, 64) + " has " + std::to_string(x.values.size()) +
+                               " values for " + std::to_string(cloud.points.size()) + " points");
+    bool plain = !x.name.empty() && x.name.size() <= 64;
+    for (const char c : x.name) plain = plain && (std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_');
+    if (!plain) return invalid(path, "field name '" + detail::printable(x.name, 64) + "' is not 1-64 letters, digits or underscores");
+  }
   if (!cloud.intensity.empty() && cloud.intensity.size() != cloud.points.size()) {
     return invalid(path, "cloud has " + std::to_string(cloud.intensity.size()) + " intensities for " +
                              std::to_string(cloud.points.size()) + " points");
@@ -404,6 +435,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
         grid.ring.resize(at.size());  // a no-return pixel keeps its row as its laser
         for (std::size_t k = 0; k < at.size(); ++k) grid.ring[k] = static_cast<std::uint16_t>(k / cloud.columns);
         if (cloud.has_time()) grid.time.assign(at.size(), 0.0);
+        for (const IntegerField& x : cloud.fields) grid.fields.push_back({x.name, std::vector<std::int32_t>(at.size(), 0)});
         for (std::size_t k = 0; k < at.size(); ++k) {
           if (at[k] < 0) continue;
           const auto i = static_cast<std::size_t>(at[k]);
@@ -411,6 +443,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
           if (with_i) grid.intensity[k] = cloud.intensity[i];
           if (with_c) go.colors[k] = options.colors[i];
           if (cloud.has_time()) grid.time[k] = cloud.time[i];
+          for (std::size_t x = 0; x < cloud.fields.size(); ++x) grid.fields[x].values[k] = cloud.fields[x].values[i];
         }
         s = build_pcd(path, grid, go, with_i, with_c, g, bytes, cloud.rows);
       } else {
@@ -449,6 +482,10 @@ std::vector<std::string> fields_not_written(const std::string& path, const Cloud
   if (cloud.has_rings() && (text_or_bin || f == Format::kLas)) out.emplace_back("ring");
   if (cloud.has_time() && text_or_bin) out.emplace_back("time");
   if ((cloud.has_rgb() || !options.colors.empty()) && text_or_bin) out.emplace_back("rgb");
+  if (text_or_bin)
+    for (const IntegerField& x : cloud.fields) out.push_back(x.name);
+  if (f == Format::kLas)
+    for (std::string& name : detail::las_fields_not_written(cloud, options)) out.push_back(std::move(name));
   return out;
 }
 

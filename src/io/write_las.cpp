@@ -2,7 +2,10 @@
 // LAS georeference; otherwise the source's version and point format (waveform formats
 // without their packets: 4 -> 1, 5 -> 3, 9 -> 6, 10 -> 8), its scale and offset (a new
 // offset when the points would not fit 32-bit steps about it) and its CRS records, in the
-// CRS's units. Fields lex3d does not keep are written as zeros, the return number as 1 of 1.
+// CRS's units. The point fields a cloud keeps by name (Cloud::fields: classification,
+// return_number, ... as the reader names them) go back into their places; a scan angle
+// kept in the other family's units (scan_angle_rank in degrees, scan_angle in 0.006°) is
+// converted. Fields the cloud lacks are written as zeros, the return number as 1 of 1.
 // Output is deterministic (no creation date is written).
 
 #include <algorithm>
@@ -53,7 +56,46 @@ double step_for(double max_abs) {
   return std::pow(10.0, std::floor(std::log10(ulp)) + 1.0);
 }
 
+/// The point format (and LAS minor version) build_las writes `cloud` in.
+int output_format(const Cloud& cloud, const WriteOptions& o, int& minor) {
+  const bool with_c = !o.colors.empty();
+  const bool with_t = cloud.has_time();
+  minor = 2;
+  int format = with_t ? (with_c ? 3 : 1) : (with_c ? 2 : 0);
+  if (o.true_coordinates && cloud.georef.has_value() && cloud.georef->is_las()) {
+    const Georeference& g = *cloud.georef;
+    minor = std::clamp<int>(g.las_version_minor, 2, 4);
+    format = g.las_point_format;
+    if (format == 4) format = 1;
+    if (format == 5) format = 3;
+    if (format == 9) format = 6;
+    if (format == 10) format = 8;
+    if (format > las::kMaxFormat) format = with_c ? 2 : 0;
+    if (with_t && format == 0) format = 1;  // a format with GPS time for the points' times
+    if (with_t && format == 2) format = 3;
+    if (format >= 6) minor = 4;
+  }
+  return format;
+}
+
+/// The scan angle's name in the other family of point formats (0-5: degrees; 6-10: 0.006°).
+std::string other_scan_angle(const std::string& name) {
+  return name == "scan_angle" ? "scan_angle_rank" : name == "scan_angle_rank" ? "scan_angle" : "";
+}
+
 }  // namespace
+
+std::vector<std::string> las_fields_not_written(const Cloud& cloud, const WriteOptions& o) {
+  int minor = 0;
+  const std::vector<las::PointField> fields = las::point_fields(output_format(cloud, o, minor));
+  std::vector<std::string> out;
+  for (const IntegerField& x : cloud.fields) {
+    bool placed = false;
+    for (const las::PointField& f : fields) placed = placed || x.name == f.name || x.name == other_scan_angle(f.name);
+    if (!placed) out.push_back(x.name);
+  }
+  return out;
+}
 
 Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions& o, std::vector<std::uint8_t>& out) {
   auto invalid = [&](const std::string& what) { return Status{ErrorCode::kInvalidArgument, msg(path, what)}; };
@@ -66,21 +108,49 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
 
   const bool with_t = cloud.has_time();
   int minor = 2;
-  int format = with_t ? (with_c ? 3 : 1) : (with_c ? 2 : 0);
-  if (g.is_las()) {
-    minor = std::clamp<int>(g.las_version_minor, 2, 4);
-    format = g.las_point_format;
-    if (format == 4) format = 1;
-    if (format == 5) format = 3;
-    if (format == 9) format = 6;
-    if (format == 10) format = 8;
-    if (format > las::kMaxFormat) format = with_c ? 2 : 0;
-    if (with_t && format == 0) format = 1;  // a format with GPS time for the points' times
-    if (with_t && format == 2) format = 3;
-    if (format >= 6) minor = 4;
-  }
+  const int format = output_format(cloud, o, minor);
   const int rgb_at = las::rgb_offset(format);
   const std::uint16_t record_len = las::kMinRecord[format];
+
+  // The record's fields the cloud holds, each with its values (a scan angle converted from
+  // the other family's units), checked to fit.
+  struct Put {
+    las::PointField field;
+    std::vector<std::int32_t> values;
+  };
+  std::vector<Put> puts;
+  for (const las::PointField& f : las::point_fields(format)) {
+    Put put{f, {}};
+    if (const IntegerField* have = cloud.field(f.name)) {
+      put.values = have->values;
+    } else if (const IntegerField* other = cloud.field(other_scan_angle(f.name))) {
+      const double to = std::string(f.name) == "scan_angle" ? 1.0 / 0.006 : 0.006;
+      for (const std::int32_t v : other->values)
+        put.values.push_back(static_cast<std::int32_t>(std::clamp(std::round(v * to), f.size == 1 ? -128.0 : -32768.0,
+                                                                  f.size == 1 ? 127.0 : 32767.0)));
+    } else {
+      continue;
+    }
+    if (put.values.size() != n)
+      return invalid(std::string("field ") + f.name + " has " + std::to_string(put.values.size()) + " values for " +
+                     std::to_string(n) + " points");
+    for (std::size_t i = 0; i < n; ++i)
+      if (!f.fits(put.values[i]))
+        return invalid(std::string("field ") + f.name + " of point " + std::to_string(i) + " is " +
+                       std::to_string(put.values[i]) + ", which LAS point format " + std::to_string(format) +
+                       " cannot hold");
+    puts.push_back(std::move(put));
+  }
+  // Points by return number (the header's counts): 1 of 1 where the cloud has no return number.
+  const int returns = format >= 6 ? 15 : 5;
+  std::vector<std::uint64_t> by_return(static_cast<std::size_t>(returns), 0);
+  const IntegerField* return_number = nullptr;
+  for (const Put& p : puts)
+    if (std::string(p.field.name) == "return_number") return_number = cloud.field("return_number");
+  if (return_number == nullptr) by_return[0] = n;
+  else
+    for (const std::int32_t r : return_number->values)
+      if (r >= 1 && r <= returns) ++by_return[static_cast<std::size_t>(r - 1)];
 
   // True coordinates (CRS units) of every point, computed in double.
   const Eigen::Vector3d units = g.units();
@@ -145,8 +215,7 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   w.le<std::uint16_t>(record_len);
   const bool legacy = format < 6 && n <= 0xFFFFFFFFULL;
   w.le<std::uint32_t>(legacy ? static_cast<std::uint32_t>(n) : 0U);
-  w.le<std::uint32_t>(legacy ? static_cast<std::uint32_t>(n) : 0U);  // all first returns
-  w.zeros(16);
+  for (int k = 0; k < 5; ++k) w.le<std::uint32_t>(legacy ? static_cast<std::uint32_t>(by_return[static_cast<std::size_t>(k)]) : 0U);
   for (int a = 0; a < 3; ++a) w.le<double>(scale[a]);
   for (int a = 0; a < 3; ++a) w.le<double>(offset[a]);
   const std::size_t bounds_at = w.b.size();
@@ -158,8 +227,7 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
     w.le<std::uint64_t>(0);
     w.le<std::uint32_t>(static_cast<std::uint32_t>(evlrs.size()));
     w.le<std::uint64_t>(n);
-    w.le<std::uint64_t>(n);  // return 1
-    w.zeros(14 * 8);
+    for (int k = 0; k < 15; ++k) w.le<std::uint64_t>(k < returns ? by_return[static_cast<std::size_t>(k)] : 0U);
   }
   for (const CrsRecord* r : vlrs) {
     w.le<std::uint16_t>(0);
@@ -189,7 +257,8 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
       const double c = std::isfinite(in) ? std::clamp(std::round(static_cast<double>(in)), 0.0, 65535.0) : 0.0;
       w.put_at<std::uint16_t>(at + 12, static_cast<std::uint16_t>(c));
     }
-    w.b[at + 14] = format >= 6 ? 0x11 : 0x09;  // return 1 of 1
+    w.b[at + 14] = format >= 6 ? 0x11 : 0x09;  // return 1 of 1, unless the cloud says otherwise
+    for (const Put& p : puts) p.field.put(w.b.data() + at, p.values[i]);
     if (with_t) w.put_at<double>(at + (format >= 6 ? 22U : 20U), cloud.time[i]);
     if (rgb_at >= 0 && with_c)
       for (std::size_t c = 0; c < 3; ++c)

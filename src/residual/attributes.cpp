@@ -18,6 +18,8 @@
 //    intensities follow its calibration and its neighbours; the models learn their
 //    distribution given those neighbours, not only a difference;
 //  - method 5 (mixed tree): method 4 over the history of methods 0-2.
+// Named integer fields (kind 5, a LAS file's classification, return number...) are coded
+// as the others, losslessly, their name after their descriptor.
 // For methods 0-2 and 5 "previous" is the last value of the same laser when the chunk also
 // holds the ring field (coded first), else the last value in the decoded order. The
 // encoder codes each field every way that applies and keeps the smallest.
@@ -50,7 +52,17 @@ using detail::IntModel;
 using detail::RangeDecoder;
 using detail::RangeEncoder;
 
-enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4 };
+enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4, kNamed = 5 };
+/// A named field's name: 1-64 of [A-Za-z0-9_] (a PCD or PLY header can carry it as it is).
+constexpr std::size_t kMaxNameBytes = 64;
+bool valid_name(const std::string& name) {
+  if (name.empty() || name.size() > kMaxNameBytes) return false;
+  for (const char c : name)
+    if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_')) return false;
+  return true;
+}
+/// At most this many fields in a chunk (the count is a byte).
+constexpr std::size_t kMaxFields = 255;
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
 constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3,
                        kMethodLayerTree = 4, kMethodMixedTree = 5;
@@ -72,6 +84,7 @@ const char* kind_name(std::uint8_t k) {
     case kIntensity: return "intensity";
     case kTime: return "time";
     case kRgb: return "rgb";
+    case kNamed: return "named field";
     default: return "unknown";
   }
 }
@@ -346,6 +359,7 @@ std::size_t key_count(const std::vector<std::uint16_t>& keys) {
 }
 
 struct FieldOut {
+  std::string name;  // kNamed only
   std::uint8_t kind;
   std::uint8_t repr;
   std::uint8_t channels;
@@ -399,7 +413,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   std::vector<std::uint16_t> laser;  // per decoded point, when the ring field is kept
   std::size_t lasers = 1;
   if (options.ring && input.has_rings()) {
-    FieldOut f{kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+    FieldOut f{{}, kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
     f.u.assign(1, std::vector<std::int64_t>(n));
     laser.resize(n);
     for (std::size_t j = 0; j < n; ++j) {
@@ -415,7 +429,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     std::vector<double> vals(n);
     for (std::size_t j = 0; j < n; ++j) vals[j] = all[sources[j]];
     const Quant q = quantise_field(vals, is_f32, bound, bits, fallback, kind_name(kind));
-    FieldOut f{kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
+    FieldOut f{{}, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
     f.u.assign(1, std::vector<std::int64_t>(n));
     std::int64_t kmin = std::numeric_limits<std::int64_t>::max(), kmax = std::numeric_limits<std::int64_t>::min();
     for (std::size_t j = 0; j < n; ++j) {
@@ -438,13 +452,43 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   }
   if (options.time && input.has_time()) scalar(kTime, input.time, false, 0.0, false, options.time_error);
   if (options.rgb && input.has_rgb()) {
-    FieldOut f{kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}};
+    FieldOut f{{}, kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}};
     f.u.assign(3, std::vector<std::int64_t>(n));
     for (std::size_t j = 0; j < n; ++j)
       for (int c = 0; c < 3; ++c) f.u[static_cast<std::size_t>(c)][j] = input.rgb[sources[j]][static_cast<std::size_t>(c)];
     fields.push_back(std::move(f));
   }
+  if (options.fields) {
+    for (std::size_t k = 0; k < input.fields.size(); ++k) {
+      const IntegerField& x = input.fields[k];
+      if (!valid_name(x.name))
+        throw std::invalid_argument("attribute field name '" + x.name + "' is not 1-64 letters, digits or underscores");
+      for (std::size_t e = 0; e < k; ++e)
+        if (input.fields[e].name == x.name) throw std::invalid_argument("attribute field " + x.name + " is given twice");
+      check_size(x.values.size(), n_in, x.name.c_str());
+      if (x.values.size() != n_in) continue;
+      FieldOut f{x.name, kNamed, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+      f.u.assign(1, std::vector<std::int64_t>(n));
+      std::int64_t lo = 0, hi = 0;
+      for (std::size_t j = 0; j < n; ++j) {
+        const std::int64_t v = x.values[sources[j]];
+        f.u[0][j] = v;
+        lo = j == 0 ? v : std::min(lo, v);
+        hi = j == 0 ? v : std::max(hi, v);
+      }
+      if (static_cast<std::uint64_t>(hi - lo) > kMaxSpan)
+        throw std::invalid_argument("attribute field " + x.name + " spans " + std::to_string(lo) + " to " + std::to_string(hi) +
+                                    ", more than 2^31 apart");
+      f.kmin = lo;
+      f.span = static_cast<std::uint64_t>(hi - lo);
+      for (auto& v : f.u[0]) v -= lo;
+      fields.push_back(std::move(f));
+    }
+  }
   if (fields.empty()) return {};
+  if (fields.size() > kMaxFields)
+    throw std::invalid_argument("attribute fields: " + std::to_string(fields.size()) + " to keep, at most " +
+                                std::to_string(kMaxFields) + " fit a model file");
 
   std::vector<std::uint8_t> out;
   codec::bytes::put_u64(out, n);
@@ -482,10 +526,14 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     codec::bytes::put_u64(out, static_cast<std::uint64_t>(f.kmin));
     codec::bytes::put_u64(out, f.span);
     codec::bytes::put_u64(out, best.size());
+    if (f.kind == kNamed) {
+      out.push_back(static_cast<std::uint8_t>(f.name.size()));
+      out.insert(out.end(), f.name.begin(), f.name.end());
+    }
     out.insert(out.end(), best.begin(), best.end());
     if (fields_out) {
       AttributeField info;
-      info.name = kind_name(f.kind);
+      info.name = f.kind == kNamed ? f.name : kind_name(f.kind);
       info.step = f.step;
       info.max_error = f.max_error;
       info.method = best_method;
@@ -504,6 +552,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
 namespace {
 
 struct Descriptor {
+  std::string name;  // kNamed: its name; else the kind's
   std::uint8_t kind, repr, method, channels;
   double step, base, max_error;
   std::int64_t kmin;
@@ -513,7 +562,7 @@ struct Descriptor {
 StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_t>& p) {
   if (p.size() < 9) return bad_data("attribute chunk is " + std::to_string(p.size()) + " bytes, at least 9 expected", 0);
   const std::uint8_t count = p[8];
-  if (count == 0 || count > 4) return bad_data("attribute chunk field count " + std::to_string(count) + " is not in 1..4", 8);
+  if (count == 0) return bad_data("attribute chunk field count is 0", 8);
   std::vector<Descriptor> out;
   std::uint64_t at = 9;
   std::uint8_t previous_kind = 0;
@@ -521,14 +570,29 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (p.size() - at < kDescriptorBytes)
       return bad_data("attribute field " + std::to_string(i) + " is truncated", at);
     const std::uint8_t* d = p.data() + at;
-    Descriptor f{d[0], d[1], d[2], d[3], codec::bytes::ld_f64(d + 8), codec::bytes::ld_f64(d + 16),
+    Descriptor f{kind_name(d[0]), d[0], d[1], d[2], d[3], codec::bytes::ld_f64(d + 8), codec::bytes::ld_f64(d + 16),
                  codec::bytes::ld_f64(d + 24), static_cast<std::int64_t>(codec::bytes::ld_u64(d + 32)),
                  codec::bytes::ld_u64(d + 40), codec::bytes::ld_u64(d + 48), at, at + kDescriptorBytes};
-    const std::string name = kind_name(f.kind);
-    if (f.kind < kRing || f.kind > kRgb) return bad_data("attribute field kind " + std::to_string(f.kind) + " is unknown", at);
-    if (f.kind <= previous_kind)
-      return bad_data("attribute field " + name + " is out of order or repeated", at);
+    if (f.kind < kRing || f.kind > kNamed) return bad_data("attribute field kind " + std::to_string(f.kind) + " is unknown", at);
+    if (f.kind < previous_kind || (f.kind == previous_kind && f.kind != kNamed))
+      return bad_data("attribute field " + f.name + " is out of order or repeated", at);
     previous_kind = f.kind;
+    if (f.kind == kNamed) {
+      // its name: a byte of length, then the name (after the descriptor, before the stream)
+      if (p.size() - f.stream_offset < 1) return bad_data("attribute field name is truncated", f.stream_offset);
+      const std::size_t len = p[f.stream_offset];
+      if (p.size() - f.stream_offset - 1 < len) return bad_data("attribute field name is truncated", f.stream_offset);
+      f.name.assign(reinterpret_cast<const char*>(p.data() + f.stream_offset + 1), len);
+      if (!valid_name(f.name)) return bad_data("attribute field name is not 1-64 letters, digits or underscores", f.stream_offset);
+      for (const Descriptor& e : out)
+        if (e.kind == kNamed && e.name == f.name) return bad_data("attribute field " + f.name + " is repeated", at);
+      f.stream_offset += 1 + len;
+      if (f.repr != kQuantised || f.step != 1.0 || f.base != 0.0 || f.max_error != 0.0)
+        return bad_data("attribute field " + f.name + " is not lossless integers (step 1, base 0)", at + 1);
+      if (f.kmin < -2147483648LL || f.kmin + static_cast<std::int64_t>(std::min<std::uint64_t>(f.span, kMaxSpan)) > 2147483647LL)
+        return bad_data("attribute field " + f.name + " values are not 32-bit integers", at + 32);
+    }
+    const std::string& name = f.name;
     if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
@@ -570,7 +634,7 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
   std::vector<AttributeField> out;
   for (const Descriptor& f : d.value()) {
     AttributeField a;
-    a.name = kind_name(f.kind);
+    a.name = f.name;
     a.step = f.repr == kFloatBits ? 0.0 : f.step;
     a.max_error = f.max_error;
     a.method = f.method;
@@ -578,7 +642,7 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
     std::ostringstream s;
     s << std::setprecision(6);
     if (f.repr == kFloatBits) s << "float32 bit patterns, lossless";
-    else if (f.kind == kRing || f.kind == kRgb) s << "integers, lossless";
+    else if (f.kind == kRing || f.kind == kRgb || f.kind == kNamed) s << "integers, lossless";
     else {
       s << "step " << f.step;
       if (f.base != 0.0) s << " from " << std::setprecision(17) << f.base << std::setprecision(6);
@@ -612,7 +676,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
   std::vector<std::uint16_t> laser;
   std::size_t lasers = 1;
   for (const Descriptor& f : desc.value()) {
-    const std::string name = kind_name(f.kind);
+    const std::string& name = f.name;
     const bool by_layer = is_by_layer(f.method), flags = f.method == kMethodLayerLaser;
     if (by_layer && layer_lasers.empty())
       return bad_data("attribute field " + name + " is coded by the lasers of a sensor-geometry layer (method " +
@@ -678,6 +742,12 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         for (std::size_t j = 0; j < n; ++j)
           for (std::size_t c = 0; c < 3; ++c) decoded.rgb[j][c] = static_cast<std::uint8_t>(u[c][j]);
         break;
+      case kNamed: {
+        IntegerField x{f.name, std::vector<std::int32_t>(n)};
+        for (std::size_t j = 0; j < n; ++j) x.values[j] = static_cast<std::int32_t>(f.kmin + u[0][j]);
+        decoded.fields.push_back(std::move(x));
+        break;
+      }
       default: break;
     }
   }

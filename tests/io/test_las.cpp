@@ -147,7 +147,21 @@ TEST(LasRead, AutzenIsInInternationalFeet) {
   ASSERT_TRUE(r.cloud.has_time());
   EXPECT_NE(*std::min_element(r.cloud.time.begin(), r.cloud.time.end()),
             *std::max_element(r.cloud.time.begin(), r.cloud.time.end()));
-  EXPECT_TRUE(has_field(r, "classification"));
+  // the record's other fields, kept by name (formats/model.md §2.10): Autzen has ground
+  // (class 2) and unclassified (1) points, first to third returns
+  EXPECT_FALSE(has_field(r, "classification"));
+  const IntegerField* cls = r.cloud.field("classification");
+  ASSERT_NE(cls, nullptr);
+  ASSERT_EQ(cls->values.size(), r.cloud.size());
+  EXPECT_EQ(*std::min_element(cls->values.begin(), cls->values.end()), 1);
+  EXPECT_EQ(*std::max_element(cls->values.begin(), cls->values.end()), 2);
+  const IntegerField* ret = r.cloud.field("return_number");
+  ASSERT_NE(ret, nullptr);
+  EXPECT_EQ(*std::max_element(ret->values.begin(), ret->values.end()), 4);
+  for (const char* name : {"number_of_returns", "scan_direction_flag", "scan_angle_rank", "user_data", "point_source_id"})
+    EXPECT_NE(r.cloud.field(name), nullptr) << name;
+  EXPECT_EQ(r.cloud.field("edge_of_flight_line"), nullptr);  // all 0, as a writer puts it
+  EXPECT_TRUE(r.dropped_fields.empty());
   EXPECT_EQ(r.colors.size(), r.cloud.size());  // PDRF 3 has RGB
   ASSERT_TRUE(r.cloud.has_intensity());
 }
@@ -208,14 +222,25 @@ TEST(LasWrite, SharedFilesRoundTripExactly) {
     ASSERT_EQ(back.cloud.georef->crs_records.size(), r.cloud.georef->crs_records.size());
     for (std::size_t k = 0; k < r.cloud.georef->crs_records.size(); ++k)
       EXPECT_EQ(back.cloud.georef->crs_records[k].data, r.cloud.georef->crs_records[k].data);
-    // the same integers at the same scale and offset
+    // the same integers at the same scale and offset, and every other field of the record
+    // (returns, flags, classification, scan angle, user data, point source, GPS time, RGB)
     const Bytes a = file_bytes(shared_data(name)), b = file_bytes(out);
     const RawHeader ha = raw_header(a), hb = raw_header(b);
+    ASSERT_EQ(ha.record_len, hb.record_len) << name;
+    // (colours are kept as 8 bits and written back as v·257: compared as colours below)
+    const int rgb = ha.format == 3 ? 28 : ha.format == 7 ? 30 : -1;
     std::size_t differ = 0;
     for (std::size_t i = 0; i < r.cloud.size(); ++i)
-      for (std::size_t k = 0; k < 14; ++k)  // x y z intensity
-        differ += a[ha.point_offset + i * ha.record_len + k] != b[hb.point_offset + i * hb.record_len + k];
+      for (std::size_t k = 0; k < ha.record_len; ++k) {
+        const bool colour = rgb >= 0 && k >= static_cast<std::size_t>(rgb) && k < static_cast<std::size_t>(rgb) + 6;
+        if (!colour) differ += a[ha.point_offset + i * ha.record_len + k] != b[hb.point_offset + i * hb.record_len + k];
+      }
     EXPECT_EQ(differ, 0U) << name;
+    // the header's points by return number (LAS 1.4: the 64-bit counts)
+    for (std::size_t k = 0; k < 5; ++k) {
+      if (a[25] >= 4) EXPECT_EQ(get<std::uint64_t>(a, 255 + 8 * k), get<std::uint64_t>(b, 255 + 8 * k)) << name << " " << k;
+      else EXPECT_EQ(get<std::uint32_t>(a, 111 + 4 * k), get<std::uint32_t>(b, 111 + 4 * k)) << name << " " << k;
+    }
     EXPECT_EQ(back.colors, r.colors) << name;
     for (int ax = 0; ax < 3; ++ax) {  // the written bounds are the points' (hexbin's header is 0.4 mm loose)
       EXPECT_NEAR(hb.min[ax], ha.min[ax], ha.scale[ax]) << name;
@@ -285,6 +310,58 @@ TEST(LasFixture, Las14Format6WithWktEvlrRoundTrips) {
     EXPECT_LE((want - got).cwiseAbs().maxCoeff(), 0.0005 + 1e-9) << i;  // half the 1 mm step
     EXPECT_EQ(r.cloud.intensity[i], c.intensity[i]);
   }
+}
+
+TEST(LasFixture, NamedFieldsGoBackIntoTheirPlaces) {
+  // Format 6 (LAS 1.4) fields from the cloud, written and read back; one the format has no
+  // place for is named as not written, and a value that does not fit is refused.
+  Cloud c = fixture_cloud();
+  const std::size_t n = c.size();
+  const auto field = [n](const char* name, auto value) {
+    IntegerField f{name, std::vector<std::int32_t>(n)};
+    for (std::size_t i = 0; i < n; ++i) f.values[i] = static_cast<std::int32_t>(value(static_cast<int>(i)));
+    return f;
+  };
+  c.fields = {field("classification", [](int i) { return i % 7 == 0 ? 200 : 2; }),
+              field("return_number", [](int i) { return 1 + i % 3; }),
+              field("number_of_returns", [](int) { return 3; }),
+              field("scan_angle", [](int i) { return i * 50 - 5000; }),
+              field("scanner_channel", [](int i) { return i % 4; }),
+              field("user_data", [](int i) { return i % 256; }),
+              field("point_source_id", [](int i) { return 60000 + i; }),
+              field("not_a_las_field", [](int i) { return i; })};
+  const std::string path = (temp_dir("las_named") / "named.las").string();
+  const std::vector<std::string> not_written = fields_not_written(path, c, {});
+  EXPECT_EQ(not_written, std::vector<std::string>{"not_a_las_field"});
+  ASSERT_TRUE(write_cloud(path, c, {}).ok());
+  const ReadResult r = read_ok(path);
+  ASSERT_EQ(r.cloud.size(), n);
+  for (const IntegerField& f : c.fields) {
+    const IntegerField* back = r.cloud.field(f.name);
+    if (f.name == "not_a_las_field") {
+      EXPECT_EQ(back, nullptr);
+      continue;
+    }
+    ASSERT_NE(back, nullptr) << f.name;
+    EXPECT_EQ(back->values, f.values) << f.name;
+  }
+  const Bytes b = file_bytes(path);
+  EXPECT_EQ(get<std::uint64_t>(b, 255), 67U);  // points by return: 1, 2, 3 (a third each)
+  EXPECT_EQ(get<std::uint64_t>(b, 263), 67U);
+  EXPECT_EQ(get<std::uint64_t>(b, 271), 66U);
+  // format 1 (LAS 1.2): scan_angle goes back as the rank in degrees; classification 200 does not fit 5 bits
+  c.georef->las_version_minor = 2;
+  c.georef->las_point_format = 1;
+  c.georef->crs_records.clear();
+  EXPECT_FALSE(write_cloud(path, c, {}).ok());
+  c.fields[0] = field("classification", [](int i) { return i % 32; });
+  ASSERT_TRUE(write_cloud(path, c, {}).ok());
+  const ReadResult r12 = read_ok(path);
+  const IntegerField* rank = r12.cloud.field("scan_angle_rank");
+  ASSERT_NE(rank, nullptr);
+  for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(rank->values[i], std::lround((static_cast<double>(i) * 50 - 5000) * 0.006)) << i;
+  EXPECT_EQ(r12.cloud.field("classification")->values, c.fields[0].values);
+  EXPECT_EQ(r12.cloud.field("scanner_channel"), nullptr);  // format 1 has none
 }
 
 TEST(LasFixture, FeetFromGeoKeysAreReadIntoMetres) {

@@ -165,6 +165,13 @@ TEST(WriteRoundTrip, RingAndTimeAreKeptWhereTheFormatHoldsThem) {
     cloud.time.push_back(1.7e9 + 0.1 * static_cast<double>(i) + 1e-7);  // needs double precision
   }
   cloud.rgb = colours_for(cloud.size());
+  // named integer fields (a LAS classification and scan angle), negative values too
+  IntegerField cls{"classification", {}}, angle{"scan_angle", {}};
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    cls.values.push_back(static_cast<std::int32_t>((i * 3) % 32));
+    angle.values.push_back((static_cast<std::int32_t>(i % 11) - 5) * 500);  // 0.006° units: 3° steps
+  }
+  cloud.fields = {cls, angle};
   for (const Case& c : all_cases()) {
     SCOPED_TRACE(c.name);
     std::optional<ReadResult> r;
@@ -182,12 +189,21 @@ TEST(WriteRoundTrip, RingAndTimeAreKeptWhereTheFormatHoldsThem) {
       EXPECT_EQ(back.ring, cloud.ring);
       for (std::size_t i = 0; i < cloud.size(); ++i) ASSERT_EQ(back.time[i], cloud.time[i]) << i;
       EXPECT_EQ(r.value().colors, cloud.rgb);
+      ASSERT_EQ(back.fields.size(), 2U);
+      EXPECT_EQ(back.fields[0].name, "classification");
+      EXPECT_EQ(back.fields[0].values, cls.values);
+      EXPECT_EQ(back.fields[1].name, "scan_angle");
+      EXPECT_EQ(back.fields[1].values, angle.values);
+      EXPECT_TRUE(r.value().dropped_fields.empty());
     } else {
       // each attribute the file did not get is named, and none is read back
       EXPECT_EQ(std::count(missing.begin(), missing.end(), "ring"), 1);
       EXPECT_EQ(std::count(missing.begin(), missing.end(), "time"), 1);
       EXPECT_EQ(std::count(missing.begin(), missing.end(), "rgb"), 1);
       EXPECT_EQ(std::count(missing.begin(), missing.end(), "intensity"), c.keeps_intensity ? 0 : 1);
+      EXPECT_EQ(std::count(missing.begin(), missing.end(), "classification"), 1);
+      EXPECT_EQ(std::count(missing.begin(), missing.end(), "scan_angle"), 1);
+      EXPECT_TRUE(back.fields.empty());
       EXPECT_FALSE(back.has_rings());
       EXPECT_FALSE(back.has_time());
     }
@@ -205,6 +221,38 @@ TEST(WriteRoundTrip, RingAndTimeAreKeptWhereTheFormatHoldsThem) {
   ASSERT_TRUE(r.value().cloud.has_time());
   for (std::size_t i = 0; i < small.size(); ++i) ASSERT_EQ(r.value().cloud.time[i], small.time[i]) << i;
   EXPECT_TRUE(r.value().dropped_fields.empty());
+  // format 3 holds the classification in its place and the scan angle as a rank in degrees
+  const IntegerField* cls_back = r.value().cloud.field("classification");
+  ASSERT_NE(cls_back, nullptr);
+  EXPECT_EQ(cls_back->values, cls.values);
+  const IntegerField* rank = r.value().cloud.field("scan_angle_rank");
+  ASSERT_NE(rank, nullptr);
+  for (std::size_t i = 0; i < small.size(); ++i) EXPECT_EQ(rank->values[i], angle.values[i] / 500 * 3) << i;
+}
+
+// A PCD or PLY field lex3d cannot keep as a named integer field (floating point, several
+// values a point) is named as not kept; PCL's "_" padding is not.
+TEST(ReadFields, FieldsNotKeptAreNamed) {
+  const auto dir = temp_dir("read_fields");
+  const std::string pcd = (dir / "f.pcd").string();
+  std::ofstream(pcd) << "VERSION 0.7\nFIELDS x y z label normal_x _ hist\nSIZE 4 4 4 2 4 1 4\nTYPE F F F U F U F\n"
+                        "COUNT 1 1 1 1 1 1 2\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
+                        "1 2 3 7 0.5 0 1 2\n4 5 6 9 0.25 0 3 4\n";
+  auto r = read_cloud(pcd);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  ASSERT_EQ(r.value().cloud.fields.size(), 1U);
+  EXPECT_EQ(r.value().cloud.fields[0].name, "label");
+  EXPECT_EQ(r.value().cloud.fields[0].values, (std::vector<std::int32_t>{7, 9}));
+  EXPECT_EQ(r.value().dropped_fields, (std::vector<std::string>{"normal_x (floating point)", "hist (2 values a point)"}));
+  const std::string ply = (dir / "f.ply").string();
+  std::ofstream(ply) << "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                        "property float z\nproperty short segment\nproperty float nx\nend_header\n"
+                        "1 2 3 -4 0.5\n4 5 6 12 0.25\n";
+  auto p = read_cloud(ply);
+  ASSERT_TRUE(p.ok()) << p.status().to_string();
+  ASSERT_EQ(p.value().cloud.fields.size(), 1U);
+  EXPECT_EQ(p.value().cloud.fields[0].values, (std::vector<std::int32_t>{-4, 12}));
+  EXPECT_EQ(p.value().dropped_fields, std::vector<std::string>{"nx (floating point)"});
 }
 
 // An organised cloud written as an organised PCD keeps each point's laser and time; the

@@ -180,3 +180,52 @@ def test_a_bad_or_foreign_sensor_profile_raises_value_error(tmp_path):
         lex3d.compress(points, max_error=0.014, sensor=other)
     with pytest.raises(ValueError):
         lex3d.compress(points, sensor=PROFILE / "scene16.json")  # no residual layer
+
+
+def write_las(path, xyz, classification, return_number, scan_angle):
+    """A minimal LAS 1.2 file, point format 1 (no CRS records): mm steps, GPS times, and the
+    fields a test reads back."""
+    import struct
+    n = len(xyz)
+    scale = 0.001
+    ints = np.round(xyz / scale).astype("<i4")
+    header = bytearray(227)
+    header[0:4] = b"LASF"
+    header[24], header[25] = 1, 2
+    header[26:58] = b"test".ljust(32, b"\0")
+    struct.pack_into("<HIIBHI", header, 94, 227, 227, 0, 1, 28, n)
+    struct.pack_into("<5I", header, 111, *[int((return_number == k).sum()) for k in range(1, 6)])
+    struct.pack_into("<3d", header, 131, scale, scale, scale)
+    struct.pack_into("<3d", header, 155, 0.0, 0.0, 0.0)
+    hi, lo = xyz.max(axis=0), xyz.min(axis=0)
+    struct.pack_into("<6d", header, 179, hi[0], lo[0], hi[1], lo[1], hi[2], lo[2])
+    records = bytearray()
+    for i in range(n):
+        flags = int(return_number[i]) | (3 << 3)
+        records += struct.pack("<3iHBBbBHd", *ints[i], 100 + i % 50, flags, int(classification[i]),
+                               int(scan_angle[i]), 0, 7, 1000.0 + i * 1e-5)
+    pathlib.Path(path).write_bytes(bytes(header) + bytes(records))
+
+
+def test_las_point_fields_are_kept_by_name():
+    rng = np.random.default_rng(5)
+    n = 3000
+    xyz = np.column_stack([rng.uniform(0, 50, n), rng.uniform(0, 50, n), rng.uniform(0, 2, n)])
+    classification = np.where(xyz[:, 2] < 1.0, 2, 5)
+    return_number = 1 + (np.arange(n) % 3)
+    scan_angle = (np.arange(n) % 41) - 20
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / "fields.las"
+        write_las(path, xyz, classification, return_number, scan_angle)
+        data, info = lex3d.compress(str(path), max_error=0.005, report=True)
+        for name in ("classification", "return_number", "number_of_returns", "scan_angle_rank", "point_source_id"):
+            assert name in info["attributes"], info
+        back, fields = lex3d.decompress(data, attributes=True)
+    # lossless integers, one per decoded point, the values the file holds
+    assert fields["classification"].dtype == np.int32
+    assert set(np.unique(fields["classification"])) == {2, 5}
+    assert set(np.unique(fields["return_number"])) == {1, 2, 3}
+    assert (fields["number_of_returns"] == 3).all()
+    assert (fields["point_source_id"] == 7).all()
+    assert fields["scan_angle_rank"].min() == -20 and fields["scan_angle_rank"].max() == 20
+    assert len(fields["classification"]) == back.shape[0]

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <random>
 #include <string>
+#include <numeric>
 #include <vector>
 
 #include "lex3d/codec/codec.hpp"
@@ -204,18 +205,22 @@ TEST(Attributes, DeterministicBytes) {
   EXPECT_EQ(code(in, 0.02).file, code(in, 0.02).file);
 }
 
+/// Expects encode_attributes to refuse `c` (every point its own source) with a message
+/// holding `needle`.
+void expect_refused(const Cloud& c, const std::string& needle) {
+  std::vector<std::uint32_t> src(c.size());
+  std::iota(src.begin(), src.end(), 0U);
+  try {
+    (void)residual::encode_attributes(c, src);
+    ADD_FAILURE() << "no error for " << needle;
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
 TEST(Attributes, BadInputNamesTheField) {
   Cloud in = synthetic_scan(4, 50, 8);
-  std::vector<std::uint32_t> src(in.size());
-  for (std::size_t i = 0; i < src.size(); ++i) src[i] = static_cast<std::uint32_t>(i);
-  auto expect_throw = [&](const Cloud& c, const std::string& needle) {
-    try {
-      (void)residual::encode_attributes(c, src);
-      ADD_FAILURE() << "no error for " << needle;
-    } catch (const std::invalid_argument& e) {
-      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
-    }
-  };
+  const auto expect_throw = expect_refused;
   Cloud nan = in;
   nan.intensity[3] = std::numeric_limits<float>::quiet_NaN();
   expect_throw(nan, "intensity");
@@ -228,7 +233,7 @@ TEST(Attributes, BadInputNamesTheField) {
   Cloud short_ring = in;
   short_ring.ring.resize(3);
   expect_throw(short_ring, "ring");
-  std::vector<std::uint32_t> far = src;
+  std::vector<std::uint32_t> far(in.size(), 0U);
   far[0] = static_cast<std::uint32_t>(in.size());
   EXPECT_THROW((void)residual::encode_attributes(in, far), std::invalid_argument);
 }
@@ -294,20 +299,25 @@ TEST(Attributes, CorruptOrTruncatedPayloadsAreRejectedWithoutCrashing) {
   EXPECT_NE(r.status().message().find("points"), std::string::npos);
 }
 
+/// `file` with the header's minor version set to `minor` and its header CRC recomputed
+/// (bytes 0..15, zlib's polynomial, as the container does).
+Bytes with_minor(Bytes file, std::uint8_t minor) {
+  file[10] = minor;
+  std::uint32_t crc = 0xFFFFFFFFU;
+  for (int i = 0; i < 16; ++i) {
+    crc ^= file[static_cast<std::size_t>(i)];
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320U & (0U - (crc & 1U)));
+  }
+  crc ^= 0xFFFFFFFFU;
+  for (int b = 0; b < 4; ++b) file[16 + static_cast<std::size_t>(b)] = static_cast<std::uint8_t>(crc >> (8 * b));
+  return file;
+}
+
 TEST(Attributes, ChunkNeedsFormatOneSix) {
   const Cloud in = synthetic_scan(8, 60, 11);
   Bytes file = code(in, 0.02).file;
   ASSERT_GE(file.size(), 20U);
-  file[10] = 5;  // minor 5; the header CRC must follow
-  auto fixed = file;
-  // recompute the header crc (bytes 0..15) with zlib's polynomial, as the container does
-  std::uint32_t crc = 0xFFFFFFFFU;
-  for (int i = 0; i < 16; ++i) {
-    crc ^= fixed[static_cast<std::size_t>(i)];
-    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320U & (0U - (crc & 1U)));
-  }
-  crc ^= 0xFFFFFFFFU;
-  for (int b = 0; b < 4; ++b) fixed[16 + static_cast<std::size_t>(b)] = static_cast<std::uint8_t>(crc >> (8 * b));
+  const Bytes fixed = with_minor(file, 5);
   auto d = codec::decode_model(fixed);
   ASSERT_FALSE(d.ok());
   EXPECT_NE(d.status().message().find("ATTR"), std::string::npos) << d.status().to_string();
@@ -336,6 +346,131 @@ TEST(Attributes, GoldenFileDecodes) {
   std::sort(ta.begin(), ta.end());
   std::sort(tb.begin(), tb.end());
   EXPECT_EQ(ta, tb);
+}
+
+/// `c` with named integer fields as a LAS file's reader gives them: a classification that
+/// follows the rings, a return number, a signed scan angle, a constant point source and a
+/// field whose values lie far apart.
+Cloud with_named_fields(Cloud c) {
+  const std::size_t n = c.size();
+  IntegerField cls{"classification", {}}, ret{"return_number", {}}, angle{"scan_angle_rank", {}},
+      source{"point_source_id", {}}, wide{"wide_ids", {}};
+  for (std::size_t i = 0; i < n; ++i) {
+    cls.values.push_back(c.ring[i] < 3 ? 2 : 1 + static_cast<std::int32_t>(i % 5 == 0) * 4);
+    ret.values.push_back(1 + static_cast<std::int32_t>(i % 3));
+    angle.values.push_back(static_cast<std::int32_t>(i % 61) - 30);
+    source.values.push_back(65535);
+    wide.values.push_back(i % 2 == 0 ? -1000000000 : 1000000000 - static_cast<std::int32_t>(i));
+  }
+  c.fields = {cls, ret, angle, source, wide};
+  return c;
+}
+
+TEST(Attributes, NamedFieldsRoundTripLosslesslyInFormatOneTen) {
+  const Cloud in = with_named_fields(synthetic_scan(8, 120, 21));
+  const Coded c = code(in, 0.01);
+  ASSERT_EQ(c.fields.size(), 9U);  // ring, intensity, time, rgb, then the five named fields
+  EXPECT_EQ(c.fields[4].name, "classification");
+  EXPECT_EQ(c.fields[8].name, "wide_ids");
+  auto info = codec::inspect(c.file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info.value().minor, 10);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  const Cloud& d = out.value();
+  ASSERT_EQ(d.size(), in.size());
+  ASSERT_EQ(d.fields.size(), in.fields.size());
+  for (std::size_t f = 0; f < in.fields.size(); ++f) {
+    EXPECT_EQ(d.fields[f].name, in.fields[f].name);
+    ASSERT_EQ(d.fields[f].values.size(), d.size());
+    for (std::size_t j = 0; j < d.size(); ++j) EXPECT_EQ(d.fields[f].values[j], in.fields[f].values[c.sources[j]]) << in.fields[f].name << " " << j;
+  }
+  // a constant field costs next to nothing; the flag that follows the rings little
+  EXPECT_LT(c.fields[7].bytes, 80U);
+  EXPECT_LT(c.fields[4].bytes, 80U + in.size() / 8);
+  // without named fields the file keeps format 1.6
+  residual::AttributeOptions no_fields;
+  no_fields.fields = false;
+  const Coded plain = code(in, 0.01, no_fields);
+  EXPECT_EQ(codec::inspect(plain.file).value().minor, 6);
+  ASSERT_TRUE(decode(plain.file).ok());
+  EXPECT_TRUE(decode(plain.file).value().fields.empty());
+}
+
+TEST(Attributes, NamedFieldsThatCannotBeKeptAreRefused) {
+  const Cloud base = with_named_fields(synthetic_scan(4, 20, 22));
+  const auto refused = expect_refused;
+  Cloud c = base;
+  c.fields[0].name = "class ification";
+  refused(c, "class ification");
+  c = base;
+  c.fields[0].name = std::string(65, 'a');
+  refused(c, "letters");
+  c = base;
+  c.fields[1].name = "classification";
+  refused(c, "twice");
+  c = base;
+  c.fields[2].values.pop_back();
+  refused(c, "scan_angle_rank");
+  c = base;
+  c.fields[4].values[0] = -2147483647 - 1;
+  c.fields[4].values[1] = 2147483647;
+  refused(c, "wide_ids");
+}
+
+TEST(Attributes, CorruptNamedFieldPayloadsAreRejectedWithoutCrashing) {
+  const Cloud in = with_named_fields(synthetic_scan(4, 40, 23));
+  const Coded c = code(in, 0.02);
+  auto m = codec::decode_model(c.file);
+  ASSERT_TRUE(m.ok());
+  expect_damaged_payloads_fail(m.value());
+  // a name repeated ("point_source_id" made "scan_angle_rank", as long), or a name that is
+  // not plain, is refused
+  codec::ModelData twice = m.value();
+  Bytes& p = *twice.attributes;
+  const std::string a = "classification", b = "point_source_id", b2 = "scan_angle_rank";
+  const auto at_b = std::search(p.begin(), p.end(), b.begin(), b.end());
+  ASSERT_NE(at_b, p.end());
+  std::copy(b2.begin(), b2.end(), at_b);
+  auto r2 = residual::decode_cloud(twice);
+  ASSERT_FALSE(r2.ok());
+  EXPECT_NE(r2.status().message().find("repeated"), std::string::npos) << r2.status().to_string();
+  codec::ModelData bad = m.value();
+  Bytes& q = *bad.attributes;
+  *std::search(q.begin(), q.end(), a.begin(), a.end()) = ' ';
+  auto r = residual::decode_cloud(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+}
+
+TEST(Attributes, NamedFieldsNeedFormatOneTen) {
+  const Cloud in = with_named_fields(synthetic_scan(4, 30, 24));
+  const Bytes file = with_minor(code(in, 0.02).file, 9);
+  auto d = codec::decode_model(file);
+  ASSERT_FALSE(d.ok());
+  EXPECT_NE(d.status().message().find("1.10"), std::string::npos) << d.status().to_string();
+}
+
+TEST(Attributes, NamedFieldsGoldenFileDecodes) {
+  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/attributes_named_1_10.lex3dm";
+  const Cloud in = with_named_fields(synthetic_scan(4, 48, 25));
+  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) {
+    ASSERT_TRUE(io::write_file_atomic(path, code(in, 0.02).file).ok());
+  }
+  ASSERT_TRUE(std::filesystem::exists(path)) << path;
+  auto bytes = io::read_file(path);
+  ASSERT_TRUE(bytes.ok());
+  auto out = decode(bytes.value());
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  ASSERT_EQ(out.value().size(), in.size());
+  ASSERT_EQ(out.value().fields.size(), 5U);
+  // no thinning: a permutation of the input, each field's values with it
+  for (std::size_t f = 0; f < 5; ++f) {
+    auto x = out.value().fields[f].values, y = in.fields[f].values;
+    std::sort(x.begin(), x.end());
+    std::sort(y.begin(), y.end());
+    EXPECT_EQ(x, y) << in.fields[f].name;
+  }
 }
 
 TEST(Attributes, KittiIntensityIsLosslessAndCostsFewBits) {

@@ -98,6 +98,13 @@ struct Georeference {
 
 /// A point cloud: positions and, when the source has them, per-point attributes
 /// (intensity, laser, column, time, colour), each either empty or one a point.
+/// A per-point integer field that no other member of Cloud holds (a LAS file's
+/// classification, return number, scan angle...): its name and one value a point.
+struct IntegerField {
+  std::string name;
+  std::vector<std::int32_t> values;
+};
+
 struct Cloud {
   /// Point positions in metres.
   std::vector<Eigen::Vector3f> points;
@@ -137,6 +144,17 @@ struct Cloud {
   /// Where the local frame sits in a georeferenced (projected) frame, when the source's
   /// coordinates are large (a LAS file, a UTM cloud): true coordinates are origin + point.
   std::optional<Georeference> georef;
+  /// Further per-point integer fields by name, each with points.size() values (a LAS
+  /// file's: classification, return_number, number_of_returns, scan_angle_rank, ...; see
+  /// formats/model.md §2.10 for how they are kept).
+  std::vector<IntegerField> fields;
+
+  /// The field named `name`, or nullptr.
+  [[nodiscard]] const IntegerField* field(const std::string& name) const noexcept {
+    for (const IntegerField& f : fields)
+      if (f.name == name) return &f;
+    return nullptr;
+  }
 
   [[nodiscard]] bool has_rings() const noexcept { return !ring.empty() && ring.size() == points.size(); }
   [[nodiscard]] bool has_columns() const noexcept { return !column.empty() && column.size() == points.size(); }

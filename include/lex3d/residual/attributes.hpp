@@ -30,6 +30,7 @@ struct AttributeOptions {
   bool time = true;       ///< keep Cloud::time
   bool ring = true;       ///< keep Cloud::ring
   bool rgb = true;        ///< keep Cloud::rgb
+  bool fields = true;     ///< keep Cloud::fields (named integer fields, lossless)
   /// Largest intensity error, in the intensity's units; 0: lossless. [0, 1e9].
   double intensity_error = 0.0;
   /// Largest time error, seconds, when the times have no exact step; (0, 1].
@@ -39,7 +40,7 @@ struct AttributeOptions {
 
 /// One coded field, as `lex3d info` and `compress` report it.
 struct AttributeField {
-  std::string name;            ///< "intensity", "time", "ring", "rgb"
+  std::string name;            ///< "intensity", "time", "ring", "rgb", or a named field's name
   std::string representation;  ///< e.g. "step 0.01", "float32 bits", "step 1e-09 from 1.2e9"
   double step = 0.0;           ///< quantisation step (0 for float32 bits)
   double max_error = 0.0;      ///< 0: lossless
@@ -52,7 +53,9 @@ struct AttributeField {
 /// Encodes the `ATTR` payload for the decoded points: `sources[j]` is the input point
 /// decoded point j stands for. Fields kept: those of `options` the input has. Throws
 /// std::invalid_argument naming the field for a non-finite value, a field whose size is
-/// neither 0 nor the point count, or a source index beyond the input. An empty result
+/// neither 0 nor the point count, a named field whose name is not 1-64 letters, digits or
+/// underscores, repeats, or whose values span more than 2^31, or a source index beyond the
+/// input. An empty result
 /// (no field to keep) means no chunk. `layer_lasers`: with a sensor-geometry residual
 /// layer, each decoded point's laser in its table (LayerStats::layer_lasers), which lets
 /// a field be coded against the last value of the same laser (method 3; a ring that is a
@@ -67,7 +70,7 @@ struct AttributeField {
 [[nodiscard]] StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::uint8_t>& payload);
 
 /// Decodes an `ATTR` payload onto `decoded` (the decoded cloud, whose size the payload
-/// must match): sets its intensity, time, ring and rgb as the payload holds them.
+/// must match): sets its intensity, time, ring, rgb and named fields as the payload holds them.
 /// kBadData with the payload offset on a malformed or truncated payload, and for a field
 /// coded against the sensor-geometry layer's lasers (methods 3 and 4), which only decode_cloud
 /// can decode.
