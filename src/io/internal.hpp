@@ -251,6 +251,15 @@ constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties 
 
 using Rgb = std::array<std::uint8_t, 3>;
 
+/// Whether `name` can be a named integer field's (Cloud::fields): 1-64 letters, digits or
+/// underscores, as a PCD or PLY header and a model file (formats/model.md §2.10) take it.
+inline bool plain_field_name(const std::string& name) {
+  if (name.empty() || name.size() > 64) return false;
+  for (const char c : name)
+    if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_')) return false;
+  return true;
+}
+
 /// Collects the finite points of a file into a ReadResult. With `wide` (a file whose
 /// coordinates are doubles) the points are kept in double until finish(), which either
 /// rounds them to float32 or, when they lie far from their frame's origin, stores them

@@ -163,11 +163,26 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
   const Field* ft = find({"time", "t", "timestamp"});
   const Field* fc = find({"rgb", "rgba"});
   if (fc != nullptr && scalar_size(fc->scalar) != 4) fc = nullptr;  // only packed 32-bit colours
+  // Every other field: a single integer of up to 32 bits (signed) or 16 bits (unsigned) with
+  // a plain name is kept as a named field (Cloud::fields, e.g. an Ouster driver's
+  // reflectivity and ambient); the rest are named as not kept.
+  std::vector<const Field*> extras;
+  std::vector<std::string> extra_names;
   for (const Field& f : fields) {
     const bool used = &f == fx || &f == fy || &f == fz || &f == fi || &f == fr || &f == ft || &f == fc;
-    if (!used) r.dropped_fields.push_back(f.f->name);
-    else if (f.f->count != 1)
-      r.dropped_fields.push_back(f.f->name + " elements 2-" + std::to_string(f.f->count));
+    if (used) {
+      if (f.f->count != 1) r.dropped_fields.push_back(f.f->name + " elements 2-" + std::to_string(f.f->count));
+      continue;
+    }
+    const bool plain = plain_field_name(f.f->name);
+    const bool integer = f.scalar == Scalar::kI8 || f.scalar == Scalar::kU8 || f.scalar == Scalar::kI16 ||
+                         f.scalar == Scalar::kU16 || f.scalar == Scalar::kI32;
+    if (plain && integer && f.f->count == 1) {
+      extras.push_back(&f);
+      extra_names.push_back(f.f->name);
+    } else {
+      r.dropped_fields.push_back(f.f->name);
+    }
   }
   // sizes: row_step holds a row's points, the data holds height rows
   const std::uint64_t row_bytes = static_cast<std::uint64_t>(m.width) * m.point_step;
@@ -187,6 +202,7 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
   const bool wide = fx->scalar == Scalar::kF64 || fy->scalar == Scalar::kF64 || fz->scalar == Scalar::kF64;
   Builder out(r, fi != nullptr, fc != nullptr, wide);
   out.set_time(ft != nullptr);
+  out.set_fields(extra_names);
   const bool organised = m.height > 1 && m.height <= 0xFFFF;
   if (organised) {
     r.cloud.rows = m.height;
@@ -219,6 +235,8 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
         ring = static_cast<std::uint16_t>(v);
       }
       if (ft != nullptr) out.next_time(load_scalar(pt + ft->f->offset, ft->scalar, swap) * time_scale);
+      for (std::size_t e = 0; e < extras.size(); ++e)
+        out.next_field(e, static_cast<std::int32_t>(load_scalar(pt + extras[e]->f->offset, extras[e]->scalar, swap)));
       if (wide)
         out.add_wide(load_scalar(pt + fx->f->offset, fx->scalar, swap), load_scalar(pt + fy->f->offset, fy->scalar, swap),
                      load_scalar(pt + fz->f->offset, fz->scalar, swap), in, c, ring, col);

@@ -3,7 +3,6 @@
 // bytes left before anything is allocated.
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <initializer_list>
@@ -261,8 +260,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   for (const PcdField& f : fields) {
     const PcdField* p = &f;
     if (p == fx || p == fy || p == fz || p == fi || p == fr || p == fc || p == ft || f.name == "_") continue;
-    bool plain = !f.name.empty() && f.name.size() <= 64;
-    for (const char ch : f.name) plain = plain && (std::isalnum(static_cast<unsigned char>(ch)) != 0 || ch == '_');
+    const bool plain = plain_field_name(f.name);
     bool repeated = false;
     for (const std::string& n : extra_names) repeated = repeated || n == f.name;
     const bool integer = (f.type == 'I' && f.size <= 4) || (f.type == 'U' && f.size <= 2);

@@ -3,7 +3,6 @@
 // `vertex` element gives x y z, an intensity and red green blue when present.
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <initializer_list>
 #include <string>
@@ -258,8 +257,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     const int kk = static_cast<int>(k);
     if (kk == ix || kk == iy || kk == iz || kk == ii || kk == il || kk == it || (color && (kk == ir || kk == ig || kk == ib)))
       continue;
-    bool plain = !p.name.empty() && p.name.size() <= 64;
-    for (const char ch : p.name) plain = plain && (std::isalnum(static_cast<unsigned char>(ch)) != 0 || ch == '_');
+    const bool plain = plain_field_name(p.name);
     bool repeated = false;
     for (const std::string& n : extra_names) repeated = repeated || n == p.name;
     const bool integer = p.type == Scalar::kI8 || p.type == Scalar::kU8 || p.type == Scalar::kI16 ||

@@ -508,13 +508,14 @@ auto guarded(const std::string& path, Fn&& fn) -> decltype(fn()) {
 }
 
 /// PointField datatypes.
-constexpr std::uint8_t kU16 = 4, kF32 = 7, kF64 = 8;
+constexpr std::uint8_t kU16 = 4, kI32 = 5, kF32 = 7, kF64 = 8;
 
 /// A PointCloud2 message to write: the plugin's view of it (`view()`) points into it.
 struct Message {
   lex3d_bag_time stamp{};
   std::string frame_id;
   std::vector<lex3d_bag_point_field> fields;
+  std::vector<std::string> names;  // of the named fields, which `fields` point to (reserved, never grown)
   std::uint32_t height = 0, width = 0, point_step = 0, row_step = 0;
   bool is_dense = false;
   std::vector<std::uint8_t> data;
@@ -555,6 +556,13 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   const std::uint32_t oring = ring ? field("ring", kU16, 2) : 0;
   step = (step + 7U) & ~7U;  // the double time aligned
   const std::uint32_t ot = time ? field("time", kF64, 8) : 0;
+  // named integer fields (Cloud::fields) as INT32
+  m.names.reserve(c.fields.size());
+  std::vector<std::uint32_t> onamed;
+  for (const IntegerField& f : c.fields) {
+    m.names.push_back(f.name);
+    onamed.push_back(field(m.names.back().c_str(), kI32, 4));
+  }
   m.point_step = step;
   // organised: every point has a distinct pixel (row, column) of the shape
   std::vector<std::size_t> pixel;  // point -> pixel
@@ -596,6 +604,7 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
     }
     if (ring) std::memcpy(p + oring, &c.ring[i], 2);
     if (time) std::memcpy(p + ot, &c.time[i], 8);
+    for (std::size_t k = 0; k < c.fields.size(); ++k) std::memcpy(p + onamed[k], &c.fields[k].values[i], 4);
   }
   return m;
 }
@@ -646,6 +655,12 @@ StatusOr<BagScans> read_bag(const std::string& path, const std::string& topic, c
 Status write_bag(const std::string& path, const std::vector<BagScan>& scans, const std::string& topic) {
   if (topic.empty() || topic.front() != '/')
     return Status(ErrorCode::kInvalidArgument, "write_bag: topic must start with '/', got '" + topic + "'");
+  for (const BagScan& scan : scans)
+    for (const IntegerField& f : scan.cloud.fields)
+      if (f.values.size() != scan.cloud.size())
+        return Status(ErrorCode::kInvalidArgument, detail::msg(path, "field " + detail::printable(f.name, 64) + " has " +
+                                                                         std::to_string(f.values.size()) + " values for " +
+                                                                         std::to_string(scan.cloud.size()) + " points"));
   auto api = plugin_for(path);
   if (!api.ok()) return api.status();
   const std::string tmp = temporary_path_for(path);

@@ -13,7 +13,6 @@
 #include <cerrno>
 #include <charconv>
 #include <cstdio>
-#include <cctype>
 #include <cstring>
 #include <limits>
 #include <new>
@@ -391,9 +390,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
     if (x.values.size() != cloud.points.size())
       return invalid(path, "field " + detail::printable(x.name, 64) + " has " + std::to_string(x.values.size()) +
                                " values for " + std::to_string(cloud.points.size()) + " points");
-    bool plain = !x.name.empty() && x.name.size() <= 64;
-    for (const char c : x.name) plain = plain && (std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_');
-    if (!plain) return invalid(path, "field name '" + detail::printable(x.name, 64) + "' is not 1-64 letters, digits or underscores");
+    if (!detail::plain_field_name(x.name)) return invalid(path, "field name '" + detail::printable(x.name, 64) + "' is not 1-64 letters, digits or underscores");
   }
   if (!cloud.intensity.empty() && cloud.intensity.size() != cloud.points.size()) {
     return invalid(path, "cloud has " + std::to_string(cloud.intensity.size()) + " intensities for " +

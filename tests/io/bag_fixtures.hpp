@@ -78,7 +78,7 @@ inline double driver_value(std::size_t field, std::size_t i) {
     case 3: return static_cast<double>(i % 97);            // intensity
     case 4: return static_cast<double>(i / 25);             // ring
     case 5: return 1000.0 * static_cast<double>(i);         // t, ns
-    case 6: return static_cast<double>(3 * i % 1000);       // reflectivity (not kept)
+    case 6: return static_cast<double>(3 * i % 1000);       // reflectivity (a named field)
   }
   return 0.0;
 }

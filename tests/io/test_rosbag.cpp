@@ -146,8 +146,11 @@ TEST_F(Bags, DriverCloudFieldsAreKeptAndOthersReported) {
     ASSERT_EQ(c.ring[i], i / 25);
     ASSERT_NEAR(c.time[i], 1e-6 * static_cast<double>(i), 1e-15);  // t in ns
   }
-  ASSERT_EQ(b.dropped_fields.size(), 1U);
-  EXPECT_EQ(b.dropped_fields[0], "reflectivity");
+  // the driver's reflectivity (uint16) is kept as a named integer field
+  EXPECT_TRUE(b.dropped_fields.empty());
+  const IntegerField* reflectivity = c.field("reflectivity");
+  ASSERT_NE(reflectivity, nullptr);
+  for (std::size_t i = 0; i < c.size(); ++i) ASSERT_EQ(reflectivity->values[i], static_cast<std::int32_t>(3 * i % 1000)) << i;
 }
 
 TEST_F(Bags, OrganisedCloudStaysOrganised) {
@@ -176,6 +179,11 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
     c.column.push_back(static_cast<std::uint32_t>(i / 5));
     c.time.push_back(1700000000.0 + 1e-4 * i);
     c.rgb.push_back({static_cast<std::uint8_t>(i), 7, 200});
+  }
+  c.fields = {{"classification", {}}, {"scan_angle", {}}};  // named integer fields, as INT32
+  for (int i = 0; i < 50; ++i) {
+    c.fields[0].values.push_back(i % 9);
+    c.fields[1].values.push_back(-3000 + 97 * i);
   }
   c.rows = 5;
   c.columns = 12;  // 60 pixels, 50 points: 10 no-returns written as NaN
@@ -209,6 +217,10 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
     EXPECT_EQ(a.cloud.intensity[i], c.intensity[k]);
     EXPECT_EQ(a.cloud.time[i], c.time[k]);
     EXPECT_EQ(a.cloud.rgb[i], c.rgb[k]);
+    ASSERT_EQ(a.cloud.fields.size(), 2U);
+    EXPECT_EQ(a.cloud.fields[0].name, "classification");
+    EXPECT_EQ(a.cloud.fields[0].values[i], c.fields[0].values[k]);
+    EXPECT_EQ(a.cloud.fields[1].values[i], c.fields[1].values[k]);
   }
   const io::BagScan& b = r.value().scans[1];
   EXPECT_EQ(b.stamp_sec, 1700000124U);  // no stamp: 1 s after the scan before
