@@ -146,7 +146,11 @@ void drop_far_points(ReadResult& r) {
     if (c.intensity.size() == n) c.intensity[kept] = c.intensity[i];
     if (c.ring.size() == n) c.ring[kept] = c.ring[i];
     if (c.column.size() == n) c.column[kept] = c.column[i];
+    if (c.time.size() == n) c.time[kept] = c.time[i];
+    if (c.rgb.size() == n) c.rgb[kept] = c.rgb[i];
     if (r.colors.size() == n) r.colors[kept] = r.colors[i];
+    for (IntegerField& field : c.fields)
+      if (field.values.size() == n) field.values[kept] = field.values[i];
     ++kept;
   }
   if (kept == n) return;
@@ -155,7 +159,11 @@ void drop_far_points(ReadResult& r) {
   if (c.intensity.size() == n) c.intensity.resize(kept);
   if (c.ring.size() == n) c.ring.resize(kept);
   if (c.column.size() == n) c.column.resize(kept);
+  if (c.time.size() == n) c.time.resize(kept);
+  if (c.rgb.size() == n) c.rgb.resize(kept);
   if (r.colors.size() == n) r.colors.resize(kept);
+  for (IntegerField& field : c.fields)
+    if (field.values.size() == n) field.values.resize(kept);
   char buf[160];
   std::snprintf(buf, sizeof buf, "%zu point%s farther than %.0f m from the sensor dropped (beyond any lidar's reach)",
                 r.far_dropped, r.far_dropped == 1 ? "" : "s", limit);

@@ -385,6 +385,21 @@ TEST(ReadText, PointsBeyondAnyLidarAreDroppedAndCounted) {
   EXPECT_EQ(r.cloud.intensity[199], 0.9F);  // channels stay in step
   ASSERT_EQ(r.notes.size(), 1U);
   EXPECT_NE(r.notes[0].find("2 points farther than 10000 m"), std::string::npos) << r.notes[0];
+  // a PCD's time and named fields stay in step too
+  const std::string p = (dir / "far.pcd").string();
+  std::string pcd = "VERSION 0.7\nFIELDS x y z time label\nSIZE 4 4 4 8 2\nTYPE F F F F I\nCOUNT 1 1 1 1 1\n"
+                    "WIDTH 101\nHEIGHT 1\nPOINTS 101\nDATA ascii\n";
+  for (int i = 0; i < 100; ++i) pcd += std::to_string(i % 10) + " " + std::to_string(i / 10) + " 1 " + std::to_string(i) + " " + std::to_string(i) + "\n";
+  pcd += "30000 0 0 100 100\n";
+  write_bytes(p, pcd);
+  const ReadResult f = read_ok(p);
+  EXPECT_EQ(f.far_dropped, 1U);
+  ASSERT_EQ(f.cloud.size(), 100U);
+  ASSERT_TRUE(f.cloud.has_time());
+  EXPECT_EQ(f.cloud.time[99], 99.0);
+  ASSERT_EQ(f.cloud.fields.size(), 1U);
+  ASSERT_EQ(f.cloud.fields[0].values.size(), 100U);
+  EXPECT_EQ(f.cloud.fields[0].values[99], 99);
 }
 
 TEST(ReadBin, KittiRecordsForcedToBinXyzAreRefused) {
