@@ -328,8 +328,10 @@ void run_compress(const CompressOptions& o) {
         std::printf("  sensor profile %s: %zu of %zu lasers hit, points a median %.2f mm from the beams; layer coded %s\n",
                     o.sensor.c_str(), coded.profile_fit->lasers_hit, coded.profile_fit->lasers,
                     coded.profile_fit->median_off_beam_m * 1e3, coded.layer.laser ? "by sensor geometry" : "otherwise (smaller)");
+      int name_width = 10;  // the names in one column (a LAS file's are up to 20 characters)
+      for (const auto& a : coded.attributes) name_width = std::max(name_width, static_cast<int>(std::min<std::size_t>(a.name.size(), 64)));
       for (const auto& a : coded.attributes)
-        std::printf("  kept %-10s %8zu bytes %7.3f bits/pt  %s\n", a.name.c_str(), a.bytes,
+        std::printf("  kept %-*s %8zu bytes %7.3f bits/pt  %s\n", name_width, a.name.c_str(), a.bytes,
                     d.input_points ? 8.0 * static_cast<double>(a.bytes) / static_cast<double>(d.input_points) : 0.0,
                     a.representation.c_str());
       for (const auto& f : coded.dropped)

@@ -350,7 +350,7 @@ struct LasField {
   std::uint16_t size;
 };
 
-/// The waveform packet and NIR fields are not kept (NIR is: see point_fields).
+/// What lex3d does not keep of a record: the waveform packets (formats 4, 5, 9, 10).
 std::vector<LasField> dropped_fields_of(int format) {
   switch (format) {
     case 4: return {{"waveform packet", 28, 29}};
@@ -585,9 +585,9 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   std::uint16_t rgb_max = 0;
   const std::vector<LasField> fields = dropped_fields_of(format);
   std::vector<std::uint8_t> seen(fields.size(), 0);
-  // the fields Cloud keeps, each until it shows a value other than its plain one
+  // the fields Cloud keeps: those with a value other than their plain one (read in a
+  // second pass, so that a field never set costs no memory)
   const std::vector<PointField> kept_fields = point_fields(format);
-  std::vector<std::vector<std::int32_t>> kept_values(kept_fields.size(), std::vector<std::int32_t>(n));
   std::vector<std::uint8_t> kept_seen(kept_fields.size(), 0);
   bool extra_seen = false;
   double worst2 = 0.0;
@@ -621,11 +621,8 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
     }
     for (std::size_t k = 0; k < fields.size(); ++k)
       for (std::uint16_t b = 0; b < fields[k].size; ++b) seen[k] |= p[fields[k].offset + b];
-    for (std::size_t k = 0; k < kept_fields.size(); ++k) {
-      const std::int32_t v = kept_fields[k].get(p);
-      kept_values[k][i] = v;
-      kept_seen[k] |= static_cast<std::uint8_t>(v != kept_fields[k].plain ? 1 : 0);
-    }
+    for (std::size_t k = 0; k < kept_fields.size(); ++k)
+      kept_seen[k] |= static_cast<std::uint8_t>(kept_fields[k].get(p) != kept_fields[k].plain ? 1 : 0);
     if (!extra_seen)
       for (std::size_t b = kMinRecord[format]; b < record_len; ++b) extra_seen = extra_seen || p[b] != 0;
   }
@@ -650,8 +647,12 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   }
   for (std::size_t k = 0; k < fields.size(); ++k)
     if (seen[k] != 0) r.dropped_fields.emplace_back(fields[k].name);
-  for (std::size_t k = 0; k < kept_fields.size(); ++k)
-    if (kept_seen[k] != 0) r.cloud.fields.push_back({kept_fields[k].name, std::move(kept_values[k])});
+  for (std::size_t k = 0; k < kept_fields.size(); ++k) {
+    if (kept_seen[k] == 0) continue;
+    IntegerField field{kept_fields[k].name, std::vector<std::int32_t>(n)};
+    for (std::size_t i = 0; i < n; ++i) field.values[i] = kept_fields[k].get(base + i * record_len);
+    r.cloud.fields.push_back(std::move(field));
+  }
   if (time_seen && !time_finite) r.dropped_fields.emplace_back("GPS time (a value is not finite)");
   if (!time_seen || !time_finite) r.cloud.time.clear();
   if (extra_seen) r.dropped_fields.emplace_back("extra bytes (" + std::to_string(record_len - kMinRecord[format]) + " a record)");

@@ -61,6 +61,13 @@ bool valid_name(const std::string& name) {
     if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_')) return false;
   return true;
 }
+/// `name` for a one-line message: at most 64 characters, anything but printable ASCII as '?'.
+std::string shown(const std::string& name) {
+  std::string out = name.substr(0, kMaxNameBytes);
+  for (char& c : out)
+    if (c < 0x20 || c > 0x7E) c = '?';
+  return name.size() > kMaxNameBytes ? out + "..." : out;
+}
 /// At most this many fields in a chunk (the count is a byte).
 constexpr std::size_t kMaxFields = 255;
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
@@ -462,7 +469,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     for (std::size_t k = 0; k < input.fields.size(); ++k) {
       const IntegerField& x = input.fields[k];
       if (!valid_name(x.name))
-        throw std::invalid_argument("attribute field name '" + x.name + "' is not 1-64 letters, digits or underscores");
+        throw std::invalid_argument("attribute field name '" + shown(x.name) + "' is not 1-64 letters, digits or underscores");
       for (std::size_t e = 0; e < k; ++e)
         if (input.fields[e].name == x.name) throw std::invalid_argument("attribute field " + x.name + " is given twice");
       check_size(x.values.size(), n_in, x.name.c_str());
