@@ -62,8 +62,8 @@ constexpr std::uint64_t kGeorFixedBytes = 96;
 /// The point attributes chunk and the first minor version that has it (model.md §2.10).
 constexpr char kAttrType[] = "ATTR";
 constexpr std::uint16_t kAttrMinor = 6;
-/// An ATTR chunk holding a named integer field (kind 5) and the first minor version that
-/// has it (model.md §2.10).
+/// An ATTR chunk holding a named integer field (kind 5) or colour coded as differences
+/// (rgb `transform` 1) and the first minor version that has them (model.md §2.10).
 constexpr std::uint16_t kAttrNamedMinor = 10;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
@@ -738,14 +738,15 @@ std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
   return predictor >= 4 ? kLaserMixedMinor : predictor >= 2 ? kLaserEdgeMinor : 0;
 }
 
-/// Whether an ATTR payload holds a named integer field (kind 5): its descriptors walked
-/// as far as they go (the attribute decoder checks them).
+/// Whether an ATTR payload holds a named integer field (kind 5) or colour coded as
+/// differences (kind 4 with a transform): its descriptors walked as far as they go (the
+/// attribute decoder checks them).
 bool attributes_named(const std::uint8_t* p, std::uint64_t size) {
   constexpr std::uint64_t kDescriptor = 56;
   if (size < 9) return false;
   std::uint64_t at = 9;
   for (int i = 0; i < p[8] && size - at >= kDescriptor; ++i) {
-    if (p[at] == 5) return true;
+    if (p[at] == 5 || (p[at] == 4 && ld_u32(p + at + 4) != 0)) return true;
     const std::uint64_t stream = ld_u64(p + at + 48);
     if (stream > size - at - kDescriptor) return false;
     at += kDescriptor + stream;
@@ -1083,7 +1084,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     if (c.is(kAttrType)) {
       if (c.length == 0) return ctx.error("chunk 'ATTR' is empty", c.offset + 4);
       if (h.minor < kAttrNamedMinor && attributes_named(c.payload, c.length))
-        return ctx.error("chunk 'ATTR' holds a named field, which needs format version 1." +
+        return ctx.error("chunk 'ATTR' holds a named field or colour differences, which need format version 1." +
                              std::to_string(kAttrNamedMinor) + ", the header says 1." + std::to_string(h.minor),
                          c.payload_offset);
       out.attributes.emplace(c.payload, c.payload + c.length);

@@ -68,6 +68,11 @@ std::string shown(const std::string& name) {
     if (c < 0x20 || c > 0x7E) c = '?';
   return name.size() > kMaxNameBytes ? out + "..." : out;
 }
+/// The rgb field's `transform` (the descriptor's u32 at byte 4, format 1.10): 1 codes green,
+/// then red and blue less green (each + 255, span 510), which takes the correlation of the
+/// three channels out of the two coded last.
+constexpr std::uint32_t kColourDifferences = 1;
+constexpr std::uint64_t kColourDifferenceSpan = 510;
 /// At most this many fields in a chunk (the count is a byte).
 constexpr std::size_t kMaxFields = 255;
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
@@ -506,19 +511,35 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const std::size_t hl = f.kind == kRing ? 1 : lasers;
     std::vector<std::uint8_t> best;
     std::uint8_t best_method = 0;
-    for (const std::uint8_t m :
-         {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree, kMethodMixedTree}) {
-      if (is_tree(m) && f.span > tree_max_span(m)) continue;
-      if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
-      if (is_by_layer(m) && layer_lasers.empty()) continue;
-      // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
-      // scans measured, method 5 never won there): not tried, to save its time.
-      if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
-      std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(f.u, f.span, m, layer_lasers, layer_keys)
-                                                   : code_values(f.u, f.span, m, by, hl);
-      if (best.empty() || s.size() < best.size()) {
-        best = std::move(s);
-        best_method = m;
+    std::uint32_t best_transform = 0;
+    // Colour also as green, red − green and blue − green (kColourDifferences).
+    std::vector<std::vector<std::int64_t>> differences;
+    if (f.kind == kRgb) {
+      differences = {f.u[1], f.u[0], f.u[2]};
+      for (std::size_t j = 0; j < n; ++j) {
+        differences[1][j] += 255 - f.u[1][j];
+        differences[2][j] += 255 - f.u[1][j];
+      }
+    }
+    for (const std::uint32_t transform : {std::uint32_t{0}, kColourDifferences}) {
+      if (transform != 0 && f.kind != kRgb) continue;
+      const std::vector<std::vector<std::int64_t>>& u = transform != 0 ? differences : f.u;
+      const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
+      for (const std::uint8_t m :
+           {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree, kMethodMixedTree}) {
+        if (is_tree(m) && span > tree_max_span(m)) continue;
+        if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
+        if (is_by_layer(m) && layer_lasers.empty()) continue;
+        // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
+        // scans measured, method 5 never won there): not tried, to save its time.
+        if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
+        std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(u, span, m, layer_lasers, layer_keys)
+                                                     : code_values(u, span, m, by, hl);
+        if (best.empty() || s.size() < best.size()) {
+          best = std::move(s);
+          best_method = m;
+          best_transform = transform;
+        }
       }
     }
     const std::size_t at = out.size();
@@ -526,12 +547,12 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     out.push_back(f.repr);
     out.push_back(best_method);
     out.push_back(f.channels);
-    codec::bytes::put_u32(out, 0);
+    codec::bytes::put_u32(out, best_transform);
     codec::bytes::put_f64(out, f.step);
     codec::bytes::put_f64(out, f.base);
     codec::bytes::put_f64(out, f.max_error);
     codec::bytes::put_u64(out, static_cast<std::uint64_t>(f.kmin));
-    codec::bytes::put_u64(out, f.span);
+    codec::bytes::put_u64(out, best_transform != 0 ? kColourDifferenceSpan : f.span);
     codec::bytes::put_u64(out, best.size());
     if (f.kind == kNamed) {
       out.push_back(static_cast<std::uint8_t>(f.name.size()));
@@ -561,6 +582,7 @@ namespace {
 struct Descriptor {
   std::string name;  // kNamed: its name; else the kind's
   std::uint8_t kind, repr, method, channels;
+  std::uint32_t transform;  // rgb: kColourDifferences or 0; else 0
   double step, base, max_error;
   std::int64_t kmin;
   std::uint64_t span, stream_bytes, offset, stream_offset;
@@ -577,7 +599,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (p.size() - at < kDescriptorBytes)
       return bad_data("attribute field " + std::to_string(i) + " is truncated", at);
     const std::uint8_t* d = p.data() + at;
-    Descriptor f{kind_name(d[0]), d[0], d[1], d[2], d[3], codec::bytes::ld_f64(d + 8), codec::bytes::ld_f64(d + 16),
+    Descriptor f{kind_name(d[0]), d[0], d[1], d[2], d[3], codec::bytes::ld_u32(d + 4), codec::bytes::ld_f64(d + 8), codec::bytes::ld_f64(d + 16),
                  codec::bytes::ld_f64(d + 24), static_cast<std::int64_t>(codec::bytes::ld_u64(d + 32)),
                  codec::bytes::ld_u64(d + 40), codec::bytes::ld_u64(d + 48), at, at + kDescriptorBytes};
     if (f.kind < kRing || f.kind > kNamed) return bad_data("attribute field kind " + std::to_string(f.kind) + " is unknown", at);
@@ -600,7 +622,8 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
         return bad_data("attribute field " + f.name + " values are not 32-bit integers", at + 32);
     }
     const std::string& name = f.name;
-    if (codec::bytes::ld_u32(d + 4) != 0) return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
+    if (f.transform != 0 && !(f.kind == kRgb && f.transform == kColourDifferences))
+      return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
     if (f.method > kMethodMixedTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
@@ -612,7 +635,9 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
       return bad_data("attribute field " + name + " base is not finite", at + 16);
     if (!(std::isfinite(f.max_error) && f.max_error >= 0.0 && f.max_error <= 1e9))
       return bad_data("attribute field " + name + " max_error is out of range", at + 24);
-    const std::uint64_t span_cap = f.kind == kRing ? 65535 : f.kind == kRgb ? 255 : f.repr == kFloatBits ? 0xFFFFFFFFULL : kMaxSpan;
+    const std::uint64_t span_cap = f.kind == kRing ? 65535
+                                   : f.kind == kRgb ? (f.transform != 0 ? kColourDifferenceSpan : 255)
+                                   : f.repr == kFloatBits ? 0xFFFFFFFFULL : kMaxSpan;
     if (f.span > span_cap) return bad_data("attribute field " + name + " span " + std::to_string(f.span) + " is too large", at + 40);
     if (f.kmin < -static_cast<std::int64_t>(kMaxSpan) * 4096 || f.kmin > static_cast<std::int64_t>(kMaxSpan) * 4096 ||
         ((f.kind == kRing || f.kind == kRgb) && f.kmin != 0))
@@ -649,6 +674,7 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
     std::ostringstream s;
     s << std::setprecision(6);
     if (f.repr == kFloatBits) s << "float32 bit patterns, lossless";
+    else if (f.kind == kRgb && f.transform == kColourDifferences) s << "integers, lossless (green, red and blue less green)";
     else if (f.kind == kRing || f.kind == kRgb || f.kind == kNamed) s << "integers, lossless";
     else {
       s << "step " << f.step;
@@ -746,8 +772,21 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         break;
       case kRgb:
         decoded.rgb.resize(n);
-        for (std::size_t j = 0; j < n; ++j)
-          for (std::size_t c = 0; c < 3; ++c) decoded.rgb[j][c] = static_cast<std::uint8_t>(u[c][j]);
+        for (std::size_t j = 0; j < n; ++j) {
+          std::int64_t v[3] = {u[0][j], u[1][j], u[2][j]};
+          if (f.transform == kColourDifferences) {  // green, red − green + 255, blue − green + 255
+            const std::int64_t green = u[0][j];
+            v[0] = u[1][j] + green - 255;
+            v[1] = green;
+            v[2] = u[2][j] + green - 255;
+          }
+          for (std::size_t c = 0; c < 3; ++c) {
+            if (v[c] < 0 || v[c] > 255)
+              return bad_data("attribute field rgb of point " + std::to_string(j) + " decodes to a colour outside 0..255",
+                              f.stream_offset);
+            decoded.rgb[j][c] = static_cast<std::uint8_t>(v[c]);
+          }
+        }
         break;
       case kNamed: {
         IntegerField x{f.name, std::vector<std::int32_t>(n)};
