@@ -348,6 +348,16 @@ TEST(Attributes, GoldenFileDecodes) {
   EXPECT_EQ(ta, tb);
 }
 
+/// The golden file `name` (tests/residual/golden), written first from `in` at 0.02 m without
+/// thinning when LEX3D_WRITE_GOLDEN is set; empty (and a failure) when it cannot be read.
+Bytes golden(const std::string& name, const Cloud& in) {
+  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/" + name;
+  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) EXPECT_TRUE(io::write_file_atomic(path, code(in, 0.02).file).ok());
+  auto bytes = io::read_file(path);
+  EXPECT_TRUE(bytes.ok()) << path;
+  return bytes.ok() ? bytes.value() : Bytes{};
+}
+
 /// `c` with named integer fields as a LAS file's reader gives them: a classification that
 /// follows the rings, a return number, a signed scan angle, a constant point source and a
 /// field whose values lie far apart.
@@ -452,15 +462,10 @@ TEST(Attributes, NamedFieldsNeedFormatOneTen) {
 }
 
 TEST(Attributes, NamedFieldsGoldenFileDecodes) {
-  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/attributes_named_1_10.lex3dm";
   const Cloud in = with_named_fields(synthetic_scan(4, 48, 25));
-  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) {
-    ASSERT_TRUE(io::write_file_atomic(path, code(in, 0.02).file).ok());
-  }
-  ASSERT_TRUE(std::filesystem::exists(path)) << path;
-  auto bytes = io::read_file(path);
-  ASSERT_TRUE(bytes.ok());
-  auto out = decode(bytes.value());
+  const Bytes bytes = golden("attributes_named_1_10.lex3dm", in);
+  ASSERT_FALSE(bytes.empty());
+  auto out = decode(bytes);
   ASSERT_TRUE(out.ok()) << out.status().to_string();
   ASSERT_EQ(out.value().size(), in.size());
   ASSERT_EQ(out.value().fields.size(), 5U);
@@ -507,18 +512,13 @@ TEST(Attributes, CorrelatedColoursAreCodedAsDifferencesLosslessly) {
 }
 
 TEST(Attributes, ColourDifferencesGoldenFileDecodes) {
-  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/attributes_colour_1_10.lex3dm";
   const Cloud in = with_correlated_colours(synthetic_scan(4, 48, 27));
-  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) {
-    ASSERT_TRUE(io::write_file_atomic(path, code(in, 0.02).file).ok());
-  }
-  ASSERT_TRUE(std::filesystem::exists(path)) << path;
-  auto bytes = io::read_file(path);
-  ASSERT_TRUE(bytes.ok());
-  auto info = residual::inspect_attributes(*codec::decode_model(bytes.value()).value().attributes);
+  const Bytes bytes = golden("attributes_colour_1_10.lex3dm", in);
+  ASSERT_FALSE(bytes.empty());
+  auto info = residual::inspect_attributes(*codec::decode_model(bytes).value().attributes);
   ASSERT_TRUE(info.ok());
   EXPECT_NE(info.value().back().representation.find("less green"), std::string::npos);
-  auto out = decode(bytes.value());
+  auto out = decode(bytes);
   ASSERT_TRUE(out.ok()) << out.status().to_string();
   ASSERT_EQ(out.value().size(), in.size());
   auto a = out.value().rgb, b = in.rgb;  // no thinning: a permutation of the input's colours
