@@ -64,7 +64,7 @@ constexpr char kAttrType[] = "ATTR";
 constexpr std::uint16_t kAttrMinor = 6;
 /// An ATTR chunk holding a named integer field (kind 5) or colour coded as differences
 /// (rgb `transform` 1) and the first minor version that has them (model.md §2.10).
-constexpr std::uint16_t kAttrNamedMinor = 10;
+constexpr std::uint16_t kAttrExtendedMinor = 10;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -741,7 +741,7 @@ std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
 /// Whether an ATTR payload holds a named integer field (kind 5) or colour coded as
 /// differences (kind 4 with a transform): its descriptors walked as far as they go (the
 /// attribute decoder checks them).
-bool attributes_named(const std::uint8_t* p, std::uint64_t size) {
+bool attributes_extended(const std::uint8_t* p, std::uint64_t size) {
   constexpr std::uint64_t kDescriptor = 56;
   if (size < 9) return false;
   std::uint64_t at = 9;
@@ -1001,8 +1001,8 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   std::uint16_t minor = data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor;
   if (data.residual) minor = std::max(minor, laser_predictor_minor(*data.residual));
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
-  if (data.attributes && attributes_named(data.attributes->data(), data.attributes->size()))
-    minor = std::max(minor, kAttrNamedMinor);
+  if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
+    minor = std::max(minor, kAttrExtendedMinor);
   put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
 
   std::vector<std::uint8_t> mhdr;
@@ -1083,9 +1083,9 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     if (c.is(kGeorType)) return read_geor(c, ctx, out.georef.emplace());
     if (c.is(kAttrType)) {
       if (c.length == 0) return ctx.error("chunk 'ATTR' is empty", c.offset + 4);
-      if (h.minor < kAttrNamedMinor && attributes_named(c.payload, c.length))
+      if (h.minor < kAttrExtendedMinor && attributes_extended(c.payload, c.length))
         return ctx.error("chunk 'ATTR' holds a named field or colour differences, which need format version 1." +
-                             std::to_string(kAttrNamedMinor) + ", the header says 1." + std::to_string(h.minor),
+                             std::to_string(kAttrExtendedMinor) + ", the header says 1." + std::to_string(h.minor),
                          c.payload_offset);
       out.attributes.emplace(c.payload, c.payload + c.length);
       return {};

@@ -2,6 +2,13 @@
 
 namespace lex3d {
 
+bool is_field_name(const std::string& name) noexcept {
+  if (name.empty() || name.size() > 64) return false;
+  for (const char c : name)
+    if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_')) return false;
+  return true;
+}
+
 Bounds compute_bounds(const Cloud& cloud) {
   Bounds b;
   if (cloud.empty()) return b;

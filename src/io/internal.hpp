@@ -128,6 +128,15 @@ bool parse_number(const char* b, const char* e, T& out) {
   return true;
 }
 
+/// Parses a named integer field's value spanning exactly [b, e): a number that is an integer
+/// within 32-bit signed range; false otherwise.
+inline bool parse_field_value(const char* b, const char* e, std::int32_t& out) {
+  double v = 0.0;
+  if (!parse_number(b, e, v) || v != std::floor(v) || v < -2147483648.0 || v > 2147483647.0) return false;
+  out = static_cast<std::int32_t>(v);
+  return true;
+}
+
 /// True when [b, e) is a number as parse_number reads it (for a value that is not kept).
 inline bool is_number(const char* b, const char* e) {
   double ignored = 0.0;
@@ -251,14 +260,30 @@ constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties 
 
 using Rgb = std::array<std::uint8_t, 3>;
 
-/// Whether `name` can be a named integer field's (Cloud::fields): 1-64 letters, digits or
-/// underscores, as a PCD or PLY header and a model file (formats/model.md §2.10) take it.
-inline bool plain_field_name(const std::string& name) {
-  if (name.empty() || name.size() > 64) return false;
-  for (const char c : name)
-    if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_')) return false;
-  return true;
+/// A reader's field that no other Cloud member holds, `values` a point (0: a PLY list):
+/// kept as a named integer field (Cloud::fields; its name appended to `kept`) when it is
+/// one integer of up to 32 bits signed or 16 bits unsigned, its name one is_field_name
+/// takes and not already kept; else named in `not_kept`, with why. True when kept.
+inline bool offer_field(const std::string& name, Scalar type, std::uint64_t values, std::vector<std::string>& kept,
+                        std::vector<std::string>& not_kept) {
+  const bool integer = type == Scalar::kI8 || type == Scalar::kU8 || type == Scalar::kI16 || type == Scalar::kU16 ||
+                       type == Scalar::kI32;
+  if (values == 1 && integer && is_field_name(name) && std::find(kept.begin(), kept.end(), name) == kept.end()) {
+    kept.push_back(name);
+    return true;
+  }
+  std::string why;
+  if (values == 0) why = " (a list)";
+  else if (values > 1) why = " (" + std::to_string(values) + " values a point)";
+  else if (type == Scalar::kF32 || type == Scalar::kF64) why = " (floating point)";
+  else if (!integer) why = " (unsigned 32/64-bit)";
+  not_kept.push_back(printable(name, 64) + why);
+  return false;
 }
+
+/// kInvalidArgument naming `path` when a named field of `cloud` does not hold a value a
+/// point or has a name is_field_name refuses (write.cpp).
+Status check_fields(const std::string& path, const Cloud& cloud);
 
 /// Collects the finite points of a file into a ReadResult. With `wide` (a file whose
 /// coordinates are doubles) the points are kept in double until finish(), which either

@@ -174,15 +174,7 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
       if (f.f->count != 1) r.dropped_fields.push_back(f.f->name + " elements 2-" + std::to_string(f.f->count));
       continue;
     }
-    const bool plain = plain_field_name(f.f->name);
-    const bool integer = f.scalar == Scalar::kI8 || f.scalar == Scalar::kU8 || f.scalar == Scalar::kI16 ||
-                         f.scalar == Scalar::kU16 || f.scalar == Scalar::kI32;
-    if (plain && integer && f.f->count == 1) {
-      extras.push_back(&f);
-      extra_names.push_back(f.f->name);
-    } else {
-      r.dropped_fields.push_back(f.f->name);
-    }
+    if (offer_field(f.f->name, f.scalar, f.f->count, extra_names, r.dropped_fields)) extras.push_back(&f);
   }
   // sizes: row_step holds a row's points, the data holds height rows
   const std::uint64_t row_bytes = static_cast<std::uint64_t>(m.width) * m.point_step;

@@ -49,6 +49,43 @@ std::vector<std::string_view> split_ws(std::string_view line) {
 // box centre rounded to the largest power of ten not above the extent, so that the local
 // coordinates stay within the extent and the origin reads well. Anything else is rounded
 // to float32 as before.
+/// Keeps the points of `r` for which keep(i) holds (called once a point, in order), with
+/// every per-point channel that holds one value a point: intensity, laser, column, time,
+/// colour (the cloud's and the result's) and named fields. Returns how many were kept.
+template <class Keep>
+std::size_t keep_points(ReadResult& r, Keep keep) {
+  Cloud& c = r.cloud;
+  const std::size_t n = c.points.size();
+  const auto compact = [&](auto& channel, std::size_t i, std::size_t to) {
+    if (channel.size() == n) channel[to] = channel[i];
+  };
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!keep(i)) continue;
+    c.points[kept] = c.points[i];
+    compact(c.intensity, i, kept);
+    compact(c.ring, i, kept);
+    compact(c.column, i, kept);
+    compact(c.time, i, kept);
+    compact(c.rgb, i, kept);
+    compact(r.colors, i, kept);
+    for (IntegerField& field : c.fields) compact(field.values, i, kept);
+    ++kept;
+  }
+  const auto shrink = [&](auto& channel) {
+    if (channel.size() == n) channel.resize(kept);
+  };
+  shrink(c.intensity);
+  shrink(c.ring);
+  shrink(c.column);
+  shrink(c.time);
+  shrink(c.rgb);
+  shrink(r.colors);
+  for (IntegerField& field : c.fields) shrink(field.values);
+  c.points.resize(kept);
+  return kept;
+}
+
 Status Builder::finish(const std::string& path) {
   if (!wide_) return {};
   const std::size_t n = wide_points_.size();
@@ -65,34 +102,20 @@ Status Builder::finish(const std::string& path) {
   const bool far = n > 0 && centre.cwiseAbs().maxCoeff() > extent && half_ulp > 1e-6 * std::max(extent, 1.0);
   if (!far) {
     // float32 as before; a value beyond float's range is not finite there: dropped and counted
-    std::size_t kept = 0;
     r_.cloud.points.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Vector3f p = wide_points_[i].cast<float>();
+    for (std::size_t i = 0; i < n; ++i) r_.cloud.points[i] = wide_points_[i].cast<float>();
+    keep_points(r_, [&](std::size_t i) {
+      const Eigen::Vector3f& p = r_.cloud.points[i];
       if (!p.allFinite()) {
         ++r_.non_finite_dropped;
-        continue;
+        return false;
       }
       if (organised_ && p.isZero(0.0F)) {  // underflowed to (0, 0, 0): a no-return, as in float files
         ++r_.no_return_dropped;
-        continue;
+        return false;
       }
-      r_.cloud.points[kept] = p;
-      if (intensity_) r_.cloud.intensity[kept] = r_.cloud.intensity[i];
-      if (color_) r_.colors[kept] = r_.colors[i];
-      if (time_) r_.cloud.time[kept] = r_.cloud.time[i];
-      if (rings_) r_.cloud.ring[kept] = r_.cloud.ring[i];
-      if (columns_) r_.cloud.column[kept] = r_.cloud.column[i];
-      for (IntegerField& field : r_.cloud.fields) field.values[kept] = field.values[i];
-      ++kept;
-    }
-    for (IntegerField& field : r_.cloud.fields) field.values.resize(kept);
-    r_.cloud.points.resize(kept);
-    if (intensity_) r_.cloud.intensity.resize(kept);
-    if (color_) r_.colors.resize(kept);
-    if (time_) r_.cloud.time.resize(kept);
-    if (rings_) r_.cloud.ring.resize(kept);
-    if (columns_) r_.cloud.column.resize(kept);
+      return true;
+    });
     return {};
   }
   if (!(max_abs <= kMaxCoordinateM))
@@ -138,32 +161,9 @@ void drop_far_points(ReadResult& r) {
   sorted.clear();
   sorted.shrink_to_fit();
   r.far_limit_m = limit;
-  const auto keep = [&](std::size_t i) { return static_cast<double>(d[i]) <= limit; };
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!keep(i)) continue;
-    c.points[kept] = c.points[i];
-    if (c.intensity.size() == n) c.intensity[kept] = c.intensity[i];
-    if (c.ring.size() == n) c.ring[kept] = c.ring[i];
-    if (c.column.size() == n) c.column[kept] = c.column[i];
-    if (c.time.size() == n) c.time[kept] = c.time[i];
-    if (c.rgb.size() == n) c.rgb[kept] = c.rgb[i];
-    if (r.colors.size() == n) r.colors[kept] = r.colors[i];
-    for (IntegerField& field : c.fields)
-      if (field.values.size() == n) field.values[kept] = field.values[i];
-    ++kept;
-  }
+  const std::size_t kept = detail::keep_points(r, [&](std::size_t i) { return static_cast<double>(d[i]) <= limit; });
   if (kept == n) return;
   r.far_dropped = n - kept;
-  c.points.resize(kept);
-  if (c.intensity.size() == n) c.intensity.resize(kept);
-  if (c.ring.size() == n) c.ring.resize(kept);
-  if (c.column.size() == n) c.column.resize(kept);
-  if (c.time.size() == n) c.time.resize(kept);
-  if (c.rgb.size() == n) c.rgb.resize(kept);
-  if (r.colors.size() == n) r.colors.resize(kept);
-  for (IntegerField& field : c.fields)
-    if (field.values.size() == n) field.values.resize(kept);
   char buf[160];
   std::snprintf(buf, sizeof buf, "%zu point%s farther than %.0f m from the sensor dropped (beyond any lidar's reach)",
                 r.far_dropped, r.far_dropped == 1 ? "" : "s", limit);

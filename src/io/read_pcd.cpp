@@ -260,17 +260,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   for (const PcdField& f : fields) {
     const PcdField* p = &f;
     if (p == fx || p == fy || p == fz || p == fi || p == fr || p == fc || p == ft || f.name == "_") continue;
-    const bool plain = plain_field_name(f.name);
-    bool repeated = false;
-    for (const std::string& n : extra_names) repeated = repeated || n == f.name;
-    const bool integer = (f.type == 'I' && f.size <= 4) || (f.type == 'U' && f.size <= 2);
-    if (f.count == 1 && integer && plain && !repeated) {
-      extras.push_back(p);
-      extra_names.push_back(f.name);
-    } else {
-      r.dropped_fields.push_back(printable(f.name, 64) + (f.count > 1 ? " (" + std::to_string(f.count) + " values a point)"
-                                                          : integer ? "" : f.type == 'F' ? " (floating point)" : " (unsigned 32/64-bit)"));
-    }
+    if (offer_field(f.name, f.scalar, f.count, extra_names, r.dropped_fields)) extras.push_back(p);
   }
 
   r.encoding = encoding;
@@ -349,10 +339,9 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (ft != nullptr && col == ft->token) return parse_number(b, e, time_value);
         for (std::size_t x = 0; x < extras.size(); ++x)
           if (col == extras[x]->token) {
-            double value = 0.0;
-            if (!parse_number(b, e, value) || value != std::floor(value) || value < -2147483648.0 || value > 2147483647.0)
-              return false;
-            out.next_field(x, static_cast<std::int32_t>(value));
+            std::int32_t value = 0;
+            if (!parse_field_value(b, e, value)) return false;
+            out.next_field(x, value);
             return true;
           }
         return slot != nullptr ? parse_number(b, e, *slot) : is_number(b, e);

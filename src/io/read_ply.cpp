@@ -257,19 +257,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
     const int kk = static_cast<int>(k);
     if (kk == ix || kk == iy || kk == iz || kk == ii || kk == il || kk == it || (color && (kk == ir || kk == ig || kk == ib)))
       continue;
-    const bool plain = plain_field_name(p.name);
-    bool repeated = false;
-    for (const std::string& n : extra_names) repeated = repeated || n == p.name;
-    const bool integer = p.type == Scalar::kI8 || p.type == Scalar::kU8 || p.type == Scalar::kI16 ||
-                         p.type == Scalar::kU16 || p.type == Scalar::kI32;
-    if (!p.is_list && integer && plain && !repeated) {
-      extras.push_back(kk);
-      extra_names.push_back(p.name);
-    } else {
-      r.dropped_fields.push_back(printable(p.name, 64) + (p.is_list ? " (a list)" : integer ? ""
-                                                         : p.type == Scalar::kF32 || p.type == Scalar::kF64 ? " (floating point)"
-                                                                                                            : " (unsigned 32/64-bit)"));
-    }
+    if (offer_field(p.name, p.type, p.is_list ? 0 : 1, extra_names, r.dropped_fields)) extras.push_back(kk);
   }
   // the named field of property index kk, or -1
   const auto extra_of = [&](int kk) {
@@ -401,9 +389,9 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (rings && kk == il) ok = parse_number(b, e, lv);
         else if (times && kk == it) ok = parse_number(b, e, tv);
         else if (const int x = extra_of(kk); x >= 0) {
-          double value = 0.0;
-          ok = parse_number(b, e, value) && value == std::floor(value) && value >= -2147483648.0 && value <= 2147483647.0;
-          if (ok) out.next_field(static_cast<std::size_t>(x), static_cast<std::int32_t>(value));
+          std::int32_t value = 0;
+          ok = parse_field_value(b, e, value);
+          if (ok) out.next_field(static_cast<std::size_t>(x), value);
         } else ok = is_number(b, e);
         if (!ok) return not_number();
       }

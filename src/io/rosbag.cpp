@@ -656,11 +656,7 @@ Status write_bag(const std::string& path, const std::vector<BagScan>& scans, con
   if (topic.empty() || topic.front() != '/')
     return Status(ErrorCode::kInvalidArgument, "write_bag: topic must start with '/', got '" + topic + "'");
   for (const BagScan& scan : scans)
-    for (const IntegerField& f : scan.cloud.fields)
-      if (f.values.size() != scan.cloud.size())
-        return Status(ErrorCode::kInvalidArgument, detail::msg(path, "field " + detail::printable(f.name, 64) + " has " +
-                                                                         std::to_string(f.values.size()) + " values for " +
-                                                                         std::to_string(scan.cloud.size()) + " points"));
+    if (Status s = detail::check_fields(path, scan.cloud); !s.ok()) return s;
   auto api = plugin_for(path);
   if (!api.ok()) return api.status();
   const std::string tmp = temporary_path_for(path);

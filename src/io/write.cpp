@@ -386,12 +386,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
   const auto format = output_format(path, options);
   if (!format.ok()) return format.status();
   const Format f = format.value();
-  for (const IntegerField& x : cloud.fields) {
-    if (x.values.size() != cloud.points.size())
-      return invalid(path, "field " + detail::printable(x.name, 64) + " has " + std::to_string(x.values.size()) +
-                               " values for " + std::to_string(cloud.points.size()) + " points");
-    if (!detail::plain_field_name(x.name)) return invalid(path, "field name '" + detail::printable(x.name, 64) + "' is not 1-64 letters, digits or underscores");
-  }
+  if (Status s = detail::check_fields(path, cloud); !s.ok()) return s;
   if (!cloud.intensity.empty() && cloud.intensity.size() != cloud.points.size()) {
     return invalid(path, "cloud has " + std::to_string(cloud.intensity.size()) + " intensities for " +
                              std::to_string(cloud.points.size()) + " points");
@@ -513,5 +508,20 @@ Status write_cloud(const std::string& path, const Cloud& cloud, const WriteOptio
     return out_of_memory(msg(path, "out of memory building the file"));
   }
 }
+
+namespace detail {
+
+Status check_fields(const std::string& path, const Cloud& cloud) {
+  for (const IntegerField& x : cloud.fields) {
+    if (x.values.size() != cloud.points.size())
+      return invalid(path, "field " + printable(x.name, 64) + " has " + std::to_string(x.values.size()) + " values for " +
+                               std::to_string(cloud.points.size()) + " points");
+    if (!is_field_name(x.name))
+      return invalid(path, "field name '" + printable(x.name, 64) + "' is not 1-64 letters, digits or underscores");
+  }
+  return {};
+}
+
+}  // namespace detail
 
 }  // namespace lex3d::io

@@ -144,9 +144,7 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   // Points by return number (the header's counts): 1 of 1 where the cloud has no return number.
   const int returns = format >= 6 ? 15 : 5;
   std::vector<std::uint64_t> by_return(static_cast<std::size_t>(returns), 0);
-  const IntegerField* return_number = nullptr;
-  for (const Put& p : puts)
-    if (std::string(p.field.name) == "return_number") return_number = cloud.field("return_number");
+  const IntegerField* return_number = cloud.field("return_number");  // every format has it (checked above)
   if (return_number == nullptr) by_return[0] = n;
   else
     for (const std::int32_t r : return_number->values)

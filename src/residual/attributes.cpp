@@ -53,14 +53,8 @@ using detail::RangeDecoder;
 using detail::RangeEncoder;
 
 enum Kind : std::uint8_t { kRing = 1, kIntensity = 2, kTime = 3, kRgb = 4, kNamed = 5 };
-/// A named field's name: 1-64 of [A-Za-z0-9_] (a PCD or PLY header can carry it as it is).
+/// A named field's name is at most this long (is_field_name).
 constexpr std::size_t kMaxNameBytes = 64;
-bool valid_name(const std::string& name) {
-  if (name.empty() || name.size() > kMaxNameBytes) return false;
-  for (const char c : name)
-    if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_')) return false;
-  return true;
-}
 /// `name` for a one-line message: at most 64 characters, anything but printable ASCII as '?'.
 std::string shown(const std::string& name) {
   std::string out = name.substr(0, kMaxNameBytes);
@@ -473,7 +467,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   if (options.fields) {
     for (std::size_t k = 0; k < input.fields.size(); ++k) {
       const IntegerField& x = input.fields[k];
-      if (!valid_name(x.name))
+      if (!is_field_name(x.name))
         throw std::invalid_argument("attribute field name '" + shown(x.name) + "' is not 1-64 letters, digits or underscores");
       for (std::size_t e = 0; e < k; ++e)
         if (input.fields[e].name == x.name) throw std::invalid_argument("attribute field " + x.name + " is given twice");
@@ -612,7 +606,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
       const std::size_t len = p[f.stream_offset];
       if (p.size() - f.stream_offset - 1 < len) return bad_data("attribute field name is truncated", f.stream_offset);
       f.name.assign(reinterpret_cast<const char*>(p.data() + f.stream_offset + 1), len);
-      if (!valid_name(f.name)) return bad_data("attribute field name is not 1-64 letters, digits or underscores", f.stream_offset);
+      if (!is_field_name(f.name)) return bad_data("attribute field name is not 1-64 letters, digits or underscores", f.stream_offset);
       for (const Descriptor& e : out)
         if (e.kind == kNamed && e.name == f.name) return bad_data("attribute field " + f.name + " is repeated", at);
       f.stream_offset += 1 + len;

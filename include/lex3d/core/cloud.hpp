@@ -105,6 +105,10 @@ struct IntegerField {
   std::vector<std::int32_t> values;
 };
 
+/// Whether `name` may name an IntegerField: 1-64 letters, digits or underscores, as a PCD or
+/// PLY header and a model file (formats/model.md §2.10) take it.
+[[nodiscard]] bool is_field_name(const std::string& name) noexcept;
+
 struct Cloud {
   /// Point positions in metres.
   std::vector<Eigen::Vector3f> points;
