@@ -391,7 +391,10 @@ void run_compress(const CompressOptions& o) {
                                         : std::to_string(alphabet_file.size()) + " bytes in " + alphabet_path +
                                               "; no scan's file uses it (the layer alone was smaller; they decode "
                                               "without it), so not counted";
-  std::printf("alphabet: %zu words, %s\n", alphabet.size(), where.c_str());
+  if (embed && alphabet.size() == 0)
+    std::printf("alphabet: none (no words: each model file holds its layer alone)\n");
+  else
+    std::printf("alphabet: %zu words, %s\n", alphabet.size(), where.c_str());
   std::printf("total: %llu bytes for %llu points = %.3f bits per point (alphabet included), %.0f ms\n",
               static_cast<unsigned long long>(total_bytes + alphabet_bytes), static_cast<unsigned long long>(total_points),
               bpp_all, total_ms);

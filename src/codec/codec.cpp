@@ -65,6 +65,10 @@ constexpr std::uint16_t kAttrMinor = 6;
 /// An ATTR chunk holding a named integer field (kind 5) or colour coded as differences
 /// (rgb `transform` 1) and the first minor version that has them (model.md §2.10).
 constexpr std::uint16_t kAttrExtendedMinor = 10;
+/// A model without instances (no INST chunk, the short MHDR) or without words at all (no
+/// alphabet: flag bits 0 and 1 clear) and the first minor version that has it (model.md
+/// §2.1, §2.4).
+constexpr std::uint16_t kNoInstancesMinor = 11;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -77,6 +81,8 @@ constexpr std::size_t kChunkCrcBytes = 4;
 constexpr std::uint32_t kFlagAlphabetEmbedded = 1U << 0;
 constexpr std::uint32_t kFlagAlphabetReferenced = 1U << 1;
 constexpr std::uint64_t kMhdrBytes = 120;
+constexpr std::uint64_t kMhdrShortBytes = 8;       // input_points (identity sensor pose)
+constexpr std::uint64_t kMhdrShortPoseBytes = 104;  // input_points, T_cloud_sensor
 constexpr std::uint64_t kAhdrBytes = 32;
 constexpr std::uint64_t kArefBytes = 8;
 constexpr std::uint64_t kDeflatedHeadBytes = 16;  // count u64 + raw_size u64 (INST, WORD)
@@ -589,10 +595,19 @@ struct MhdrFields {
   double rotation_rad = 0.0;
 };
 
-Status read_mhdr(const Chunk& c, const Ctx& ctx, MhdrFields& h) {
-  if (Status s = expect_length(c, kMhdrBytes, ctx); !s.ok()) return s;
+/// `with_instances`: the file has an INST chunk, whose steps the full MHDR carries; a
+/// file without one (format 1.11) has the short MHDR, 8 bytes, or 104 with a sensor pose.
+Status read_mhdr(const Chunk& c, const Ctx& ctx, bool with_instances, MhdrFields& h) {
+  if (with_instances) {
+    if (Status s = expect_length(c, kMhdrBytes, ctx); !s.ok()) return s;
+  } else if (c.length != kMhdrShortBytes && c.length != kMhdrShortPoseBytes) {
+    return ctx.error("chunk 'MHDR' payload is " + std::to_string(c.length) +
+                         " bytes, expected 8 or 104 in a model file without instances",
+                     c.offset + 4);
+  }
   const std::uint8_t* p = c.payload;
   h.input_points = ld_u64(p);
+  if (c.length == kMhdrShortBytes) return {};
   Eigen::Matrix3d R;
   Eigen::Vector3d t;
   for (int i = 0; i < 12; ++i) {
@@ -609,6 +624,7 @@ Status read_mhdr(const Chunk& c, const Ctx& ctx, MhdrFields& h) {
   h.T_cloud_sensor = Pose::Identity();
   h.T_cloud_sensor.linear() = R;
   h.T_cloud_sensor.translation() = t;
+  if (!with_instances) return {};
   h.translation_m = ld_f64(p + 104);
   h.rotation_rad = ld_f64(p + 112);
   if (!(h.translation_m > 0.0 && h.translation_m <= 0.1))
@@ -1003,25 +1019,34 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
   if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
     minor = std::max(minor, kAttrExtendedMinor);
-  put_header(out, kModelMagic, embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
+  // A model without instances has no INST chunk and the short MHDR; one without words at
+  // all (an empty embedded alphabet) no alphabet either: 292 bytes fewer (format 1.11).
+  const bool instances = !data.model.instances.empty();
+  const bool wordless = embed && !instances && data.alphabet->size() == 0;
+  if (!instances) minor = std::max(minor, kNoInstancesMinor);
+  put_header(out, kModelMagic, wordless ? 0U : embed ? kFlagAlphabetEmbedded : kFlagAlphabetReferenced, minor);
 
   std::vector<std::uint8_t> mhdr;
   put_u64(mhdr, data.input_points);
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) put_f64(mhdr, data.T_cloud_sensor.linear()(r, c));
-  for (int a = 0; a < 3; ++a) put_f64(mhdr, data.T_cloud_sensor.translation()(a));
-  put_f64(mhdr, q.translation_m);
-  put_f64(mhdr, q.rotation_rad);
+  if (instances || !data.T_cloud_sensor.matrix().isIdentity(0.0)) {
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) put_f64(mhdr, data.T_cloud_sensor.linear()(r, c));
+    for (int a = 0; a < 3; ++a) put_f64(mhdr, data.T_cloud_sensor.translation()(a));
+  }
+  if (instances) {
+    put_f64(mhdr, q.translation_m);
+    put_f64(mhdr, q.rotation_rad);
+  }
   put_chunk(out, "MHDR", mhdr);
 
-  if (embed) {
+  if (embed && !wordless) {
     put_chunk(out, "ALPH", encode_alphabet(*data.alphabet, q));
-  } else {
+  } else if (!embed) {
     std::vector<std::uint8_t> aref;
     put_u64(aref, *data.alphabet_hash);
     put_chunk(out, "AREF", aref);
   }
-  put_chunk(out, "INST", inst_payload(data.model, q));
+  if (instances) put_chunk(out, "INST", inst_payload(data.model, q));
   if (data.residual) put_chunk(out, layer_chunk.type, *data.residual);
   if (data.georef) put_chunk(out, kGeorType, geor_payload(*data.georef));
   if (data.attributes) put_chunk(out, kAttrType, *data.attributes);
@@ -1041,9 +1066,18 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                          " set",
                      12);
   const bool embedded = (h.flags & kFlagAlphabetEmbedded) != 0;
-  if (embedded == ((h.flags & kFlagAlphabetReferenced) != 0))
+  const bool referenced = (h.flags & kFlagAlphabetReferenced) != 0;
+  if (embedded && referenced)
     return ctx.error("flags " + hex(h.flags, 8) +
-                         " must set exactly one of bit 0 (alphabet embedded) and bit 1 (alphabet referenced)",
+                         " set both bit 0 (alphabet embedded) and bit 1 (alphabet referenced)",
+                     12);
+  // Neither: a model without words, which has no alphabet (format 1.11).
+  const bool wordless = !embedded && !referenced;
+  if (wordless && h.minor < kNoInstancesMinor)
+    return ctx.error("flags " + hex(h.flags, 8) +
+                         " must set one of bit 0 (alphabet embedded) and bit 1 (alphabet referenced) before format "
+                         "version 1." + std::to_string(kNoInstancesMinor) + ", the header says 1." +
+                         std::to_string(h.minor),
                      12);
 
   ModelData out;
@@ -1074,12 +1108,19 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     return ctx.error("chunk 'ATTR' needs format version 1." + std::to_string(kAttrMinor) + ", the header says 1." +
                          std::to_string(h.minor),
                      10);
+  // INST: required before format 1.11, then only where there are instances; never
+  // without an alphabet.
+  const bool has_inst = !wordless && (h.minor < kNoInstancesMinor || has_chunk(d, bytes.size(), "INST"));
   const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", kGeorType, kAttrType, "IEND"};
-  std::vector<const char*> sequence = {"MHDR", embedded ? "ALPH" : "AREF", "INST", "IEND"};
-  if (has_residual) sequence.insert(sequence.begin() + 3, layer_chunk->type);
-  if (has_geor) sequence.insert(sequence.end() - 1, kGeorType);
-  if (has_attr) sequence.insert(sequence.end() - 1, kAttrType);
-  const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t index, const Chunk& c) -> Status {
+  std::vector<const char*> sequence = {"MHDR"};
+  if (!wordless) sequence.push_back(embedded ? "ALPH" : "AREF");
+  if (has_inst) sequence.push_back("INST");
+  if (has_residual) sequence.push_back(layer_chunk->type);
+  if (has_geor) sequence.push_back(kGeorType);
+  if (has_attr) sequence.push_back(kAttrType);
+  sequence.push_back("IEND");
+  if (wordless) out.alphabet = Alphabet{};
+  const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t, const Chunk& c) -> Status {
     if (c.is(kGeorType)) return read_geor(c, ctx, out.georef.emplace());
     if (c.is(kAttrType)) {
       if (c.length == 0) return ctx.error("chunk 'ATTR' is empty", c.offset + 4);
@@ -1090,66 +1131,62 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
       out.attributes.emplace(c.payload, c.payload + c.length);
       return {};
     }
-    switch (index) {
-      case 0: return read_mhdr(c, ctx, mhdr);
-      case 1: {
-        if (embedded) {
-          auto a = decode_alphabet_at(c.payload, static_cast<std::size_t>(c.length),
-                                      Ctx{"model file: embedded alphabet (ALPH)", c.payload_offset});
-          if (!a.ok()) return a.status();
-          out.alphabet = std::move(a).value();
-          return {};
-        }
-        if (Status e = expect_length(c, kArefBytes, ctx); !e.ok()) return e;
-        const std::uint64_t want = ld_u64(c.payload);
-        out.alphabet_hash = want;
-        if (external_alphabet_file == nullptr)
-          return {ErrorCode::kInvalidArgument,
-                  "model file references an external alphabet file (hash " + hex(want, 16) + "); supply it",
-                  c.payload_offset};
-        const std::uint64_t got = alphabet_hash(*external_alphabet_file);
-        if (got != want)
-          return ctx.error("the alphabet file's hash " + hex(got, 16) + " does not match the model's alphabet_hash " +
-                               hex(want, 16),
-                           c.payload_offset);
-        auto a = decode_alphabet_at(external_alphabet_file->data(), external_alphabet_file->size(),
-                                    Ctx{"external alphabet file", 0});
-        if (!a.ok()) return a.status();
-        out.alphabet = std::move(a).value();
-        return {};
-      }
-      case 2: return read_inst(c, ctx, mhdr, out.alphabet->size(), out.model);
-      case 3:
-        if (has_residual) {
-          if (c.length == 0) return ctx.error(std::string("chunk '") + layer_chunk->type + "' is empty", c.offset + 4);
-          out.residual.emplace(c.payload, c.payload + c.length);
-          const std::uint32_t coding = layer_coding(*out.residual);
-          if (coding >= kLayerCodings)
-            return ctx.error(std::string("chunk '") + layer_chunk->type + "' holds a layer of unknown coding " +
-                                 std::to_string(coding),
-                             c.payload_offset);
-          if (&kLayerChunks[coding] != layer_chunk)
-            return ctx.error(std::string("chunk '") + layer_chunk->type + "' (the " + layer_chunk->coding +
-                                 " coding) holds a layer of the " +
-                                 kLayerChunks[coding].coding + " coding, which belongs in an '" +
-                                 kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8)",
-                             c.payload_offset);
-          if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need)
-            return ctx.error("a sensor-geometry layer with range predictor " +
-                                 std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
-                                 " needs format version 1." + std::to_string(need) + ", the header says 1." +
-                                 std::to_string(h.minor),
-                             c.payload_offset + kLaserPredictorOffset);
-          if (voxel_mixed_layer(*out.residual) && h.minor < kVoxelMixedMinor)
-            return ctx.error("a voxel layer with octree contexts " +
-                                 std::to_string(out.residual->data()[kVoxelContextsOffset]) +
-                                 " needs format version 1." + std::to_string(kVoxelMixedMinor) + ", the header says 1." +
-                                 std::to_string(h.minor),
-                             c.payload_offset + kVoxelContextsOffset);
-        }
-        return {};
-      default: return {};
+    if (c.is("MHDR")) return read_mhdr(c, ctx, has_inst, mhdr);
+    if (c.is("ALPH")) {
+      auto a = decode_alphabet_at(c.payload, static_cast<std::size_t>(c.length),
+                                  Ctx{"model file: embedded alphabet (ALPH)", c.payload_offset});
+      if (!a.ok()) return a.status();
+      out.alphabet = std::move(a).value();
+      return {};
     }
+    if (c.is("AREF")) {
+      if (Status e = expect_length(c, kArefBytes, ctx); !e.ok()) return e;
+      const std::uint64_t want = ld_u64(c.payload);
+      out.alphabet_hash = want;
+      if (external_alphabet_file == nullptr)
+        return {ErrorCode::kInvalidArgument,
+                "model file references an external alphabet file (hash " + hex(want, 16) + "); supply it",
+                c.payload_offset};
+      const std::uint64_t got = alphabet_hash(*external_alphabet_file);
+      if (got != want)
+        return ctx.error("the alphabet file's hash " + hex(got, 16) + " does not match the model's alphabet_hash " +
+                             hex(want, 16),
+                         c.payload_offset);
+      auto a = decode_alphabet_at(external_alphabet_file->data(), external_alphabet_file->size(),
+                                  Ctx{"external alphabet file", 0});
+      if (!a.ok()) return a.status();
+      out.alphabet = std::move(a).value();
+      return {};
+    }
+    if (c.is("INST")) return read_inst(c, ctx, mhdr, out.alphabet->size(), out.model);
+    if (c.is("IEND")) return {};
+    // the layer chunk (the other known chunks are taken above)
+    if (c.length == 0) return ctx.error(std::string("chunk '") + layer_chunk->type + "' is empty", c.offset + 4);
+    out.residual.emplace(c.payload, c.payload + c.length);
+    const std::uint32_t coding = layer_coding(*out.residual);
+    if (coding >= kLayerCodings)
+      return ctx.error(std::string("chunk '") + layer_chunk->type + "' holds a layer of unknown coding " +
+                           std::to_string(coding),
+                       c.payload_offset);
+    if (&kLayerChunks[coding] != layer_chunk)
+      return ctx.error(std::string("chunk '") + layer_chunk->type + "' (the " + layer_chunk->coding +
+                           " coding) holds a layer of the " +
+                           kLayerChunks[coding].coding + " coding, which belongs in an '" +
+                           kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8)",
+                       c.payload_offset);
+    if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need)
+      return ctx.error("a sensor-geometry layer with range predictor " +
+                           std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
+                           " needs format version 1." + std::to_string(need) + ", the header says 1." +
+                           std::to_string(h.minor),
+                       c.payload_offset + kLaserPredictorOffset);
+    if (voxel_mixed_layer(*out.residual) && h.minor < kVoxelMixedMinor)
+      return ctx.error("a voxel layer with octree contexts " +
+                           std::to_string(out.residual->data()[kVoxelContextsOffset]) +
+                           " needs format version 1." + std::to_string(kVoxelMixedMinor) + ", the header says 1." +
+                           std::to_string(h.minor),
+                       c.payload_offset + kVoxelContextsOffset);
+    return {};
   });
   if (!s.ok()) return s;
   out.input_points = mhdr.input_points;

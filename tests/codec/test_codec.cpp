@@ -481,6 +481,117 @@ TEST(CodecRoundTrip, EmbeddedAndReferencedAlphabetsDecodeAlike) {
   EXPECT_TRUE(decode_model(embedded, &other).ok());
 }
 
+/// The chunk types of a model file, in order, and its MHDR's length.
+std::string chunk_list(const Bytes& b) {
+  std::string types;
+  for (const auto& c : File::parse(b).chunks) types += c.type + " ";
+  return types;
+}
+
+TEST(CodecRoundTrip, ModelWithoutWordsHasNoAlphabetNoInstancesAndTheShortHeader) {
+  ModelData d;
+  d.input_points = 123456;
+  d.alphabet = Alphabet{};
+  d.residual = Bytes{1, 2, 3, 4, 5, 6, 7, 8, 9};  // (a previous-point layer as far as the codec sees)
+  const Bytes b = encode_model(d);
+  EXPECT_EQ(b[10] | (b[11] << 8), 11);
+  EXPECT_EQ(b[12] | b[13] | b[14] | b[15], 0) << "flags: neither alphabet bit";
+  EXPECT_EQ(chunk_list(b), "MHDR RESD IEND ");
+  EXPECT_EQ(File::parse(b).chunk("MHDR").payload.size(), 8U);
+  // header, then MHDR, RESD and IEND each with 16 bytes of framing
+  EXPECT_EQ(b.size(), 20U + (16 + 8) + (16 + 9) + 16);
+  const auto back = decode_model(b);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_EQ(back.value().input_points, d.input_points);
+  ASSERT_TRUE(back.value().alphabet.has_value());
+  EXPECT_EQ(back.value().alphabet->size(), 0U);
+  EXPECT_FALSE(back.value().alphabet_hash.has_value());
+  EXPECT_TRUE(back.value().model.instances.empty());
+  EXPECT_TRUE(back.value().T_cloud_sensor.matrix() == Pose::Identity().matrix());
+  EXPECT_EQ(*back.value().residual, *d.residual);
+  EXPECT_EQ(encode_model(back.value()), b) << "decode then encode gives the same bytes";
+
+  // A sensor pose other than the identity is kept exactly: MHDR of 104 bytes.
+  ModelData posed = d;
+  posed.T_cloud_sensor = Pose::Identity();
+  posed.T_cloud_sensor.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  posed.T_cloud_sensor.translation() = Eigen::Vector3d(5403850.25, -0.125, 1e-9);
+  const Bytes p = encode_model(posed);
+  EXPECT_EQ(File::parse(p).chunk("MHDR").payload.size(), 104U);
+  const auto pb = decode_model(p);
+  ASSERT_TRUE(pb.ok()) << pb.status().to_string();
+  EXPECT_TRUE(pb.value().T_cloud_sensor.matrix() == posed.T_cloud_sensor.matrix());
+  EXPECT_EQ(encode_model(pb.value()), p);
+}
+
+TEST(CodecRoundTrip, ModelWithoutInstancesKeepsItsAlphabetReference) {
+  const ModelData words = synthetic_data(43);
+  const Bytes alphabet_file = encode_alphabet(*words.alphabet);
+  ModelData d;
+  d.input_points = 77;
+  d.alphabet_hash = alphabet_hash(alphabet_file);
+  const Bytes b = encode_model(d);
+  EXPECT_EQ(b[10] | (b[11] << 8), 11);
+  EXPECT_EQ(chunk_list(b), "MHDR AREF IEND ");
+  const auto back = decode_model(b, &alphabet_file);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_EQ(back.value().alphabet->size(), words.alphabet->size());
+  EXPECT_TRUE(back.value().model.instances.empty());
+  EXPECT_EQ(back.value().input_points, 77U);
+  // An embedded alphabet with words, no instances: the alphabet stays, INST goes.
+  ModelData e = words;
+  e.model.instances.clear();
+  const Bytes eb = encode_model(e);
+  EXPECT_EQ(chunk_list(eb), "MHDR ALPH IEND ");
+  ASSERT_TRUE(decode_model(eb).ok());
+  EXPECT_EQ(decode_model(eb).value().alphabet->size(), words.alphabet->size());
+  // With instances nothing changes: format 1.0, the 120-byte MHDR, an INST chunk.
+  const Bytes w = encode_model(words);
+  EXPECT_EQ(w[10] | (w[11] << 8), 0);
+  EXPECT_EQ(chunk_list(w), "MHDR ALPH INST IEND ");
+  EXPECT_EQ(File::parse(w).chunk("MHDR").payload.size(), 120U);
+}
+
+TEST(CodecCorruptWordless, LayoutRulesAreChecked) {
+  ModelData d;
+  d.input_points = 10;
+  d.alphabet = Alphabet{};
+  const Bytes b = encode_model(d);
+  ASSERT_TRUE(decode_model(b).ok());
+  // Before format 1.11 a model names its alphabet.
+  File old = File::parse(b);
+  poke(old.head, 10, 10, 2);
+  EXPECT_TRUE(is_bad(decode_model(old.build()), "before format version 1.11, the header says 1.10", 12));
+  // The short MHDR is 8 or 104 bytes; 120 only beside an INST chunk.
+  for (const std::size_t n : {0, 7, 9, 103, 120}) {
+    File f = File::parse(b);
+    f.chunks[0].payload.resize(n, 0);
+    EXPECT_TRUE(is_bad(decode_model(f.build()), "expected 8 or 104 in a model file without instances", 24)) << n;
+  }
+  // No INST without an alphabet.
+  const ModelData word_data = synthetic_data(44);
+  const Bytes words = encode_model(word_data);
+  const Bytes alphabet_file = encode_alphabet(*word_data.alphabet);
+  File with_inst = File::parse(b);
+  with_inst.chunks.insert(with_inst.chunks.begin() + 1, File::parse(words).chunk("INST"));
+  EXPECT_TRUE(is_bad(decode_model(with_inst.build()), "chunk 'INST' does not belong", 44));
+  // An alphabet reference without instances in a file that claims 1.10: the short MHDR is
+  // out of place, and so is the missing INST.
+  ModelData ref;
+  ref.input_points = 10;
+  ref.alphabet_hash = alphabet_hash(alphabet_file);
+  File r = File::parse(encode_model(ref));
+  ASSERT_TRUE(decode_model(r.build(), &alphabet_file).ok());
+  poke(r.head, 10, 10, 2);
+  EXPECT_TRUE(is_bad(decode_model(r.build(), &alphabet_file), "chunk 'MHDR' payload is 8 bytes, expected 120", 24));
+  r.chunks[0].payload = File::parse(words).chunk("MHDR").payload;
+  EXPECT_TRUE(is_bad(decode_model(r.build(), &alphabet_file), "comes before the required chunk 'INST'"));
+  // A non-identity pose in the short MHDR must still be a rigid transform.
+  File bent = File::parse(b);
+  bent.chunks[0].payload.resize(104, 0);
+  EXPECT_TRUE(is_bad(decode_model(bent.build()), "rotation is not orthonormal"));
+}
+
 TEST(CodecRoundTrip, AlphabetHashMismatchIsAnError) {
   const ModelData d = synthetic_data(41);
   const Bytes alphabet_file = encode_alphabet(*d.alphabet);
@@ -641,9 +752,11 @@ TEST_F(CodecCorrupt, ReservedFlagBits) {
 TEST_F(CodecCorrupt, AlphabetFlagsMustNameExactlyOneSource) {
   File f = File::parse(model_);
   poke(f.head, 12, 3, 4);
-  EXPECT_TRUE(is_bad(model_of(f), "exactly one of bit 0", 12));
+  EXPECT_TRUE(is_bad(model_of(f), "set both bit 0 (alphabet embedded) and bit 1", 12));
+  // Neither (a model without words) only from format 1.11.
   poke(f.head, 12, 0, 4);
-  EXPECT_TRUE(is_bad(model_of(f), "exactly one of bit 0", 12));
+  EXPECT_TRUE(is_bad(model_of(f), "must set one of bit 0 (alphabet embedded) and bit 1 (alphabet referenced) before "
+                                  "format version 1.11, the header says 1.0", 12));
   // Flags say referenced, the file embeds: the ALPH chunk does not belong.
   poke(f.head, 12, 2, 4);
   EXPECT_TRUE(is_bad(model_of(f), "chunk 'ALPH' does not belong", f.offset("ALPH")));

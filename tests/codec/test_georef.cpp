@@ -14,6 +14,7 @@
 #include "lex3d/eval/metrics.hpp"
 #include "lex3d/io/io.hpp"
 #include "lex3d/residual/residual.hpp"
+#include "support/model_support.hpp"
 #include "support/test_support.hpp"
 
 namespace lex3d::codec {
@@ -52,7 +53,7 @@ Georeference sample_georef() {
 ModelData sample_model() {
   ModelData d;
   d.input_points = 10;
-  d.alphabet = Alphabet{};
+  test::add_empty_word_instance(d);  // (so that the file is 1.5, not 1.11)
   d.georef = sample_georef();
   return d;
 }

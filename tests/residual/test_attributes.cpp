@@ -24,6 +24,7 @@
 #include "lex3d/io/io.hpp"
 #include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
+#include "support/model_support.hpp"
 #include "test_config.hpp"
 
 namespace lex3d {
@@ -61,10 +62,13 @@ struct Coded {
 };
 
 /// A layer-only model of `input` with bound `e`, attributes kept as `ao`.
-Coded code(const Cloud& input, double e, const residual::AttributeOptions& ao = {}, bool thin = false) {
+Coded code(const Cloud& input, double e, const residual::AttributeOptions& ao = {}, bool thin = false,
+           bool wordless = false) {
   codec::ModelData d;
   d.input_points = input.size();
-  d.alphabet = Alphabet{};
+  // (with an instance of an empty word the file keeps the version its chunks need)
+  if (wordless) d.alphabet = Alphabet{};
+  else test::add_empty_word_instance(d);
   residual::LayerOptions lo;
   lo.thin = thin;
   lo.track_sources = true;
@@ -128,6 +132,29 @@ TEST(Attributes, EveryFieldRoundTripsLosslessly) {
   // the intensity's step was found in the data
   EXPECT_NEAR(c.fields[1].step, 0.01, 1e-12);
   EXPECT_EQ(c.fields[1].name, "intensity");
+}
+
+// A model without words (format 1.11: no alphabet, no instances) carries its layer and
+// ATTR chunk as any other and decodes to the same cloud.
+TEST(Attributes, ModelWithoutWordsCarriesTheChunk) {
+  const Cloud in = synthetic_scan(16, 360, 1);
+  const Coded with = code(in, 0.01);
+  const Coded without = code(in, 0.01, {}, false, true);
+  const auto info = codec::inspect(without.file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info.value().minor, 11);
+  std::string types;
+  for (const auto& ch : info.value().chunks) types += ch.type + " ";
+  EXPECT_EQ(types, "MHDR RESD ATTR IEND ");
+  EXPECT_LT(without.file.size(), with.file.size());
+  const auto a = decode(with.file), b = decode(without.file);
+  ASSERT_TRUE(a.ok() && b.ok()) << b.status().to_string();
+  ASSERT_EQ(a.value().size(), b.value().size());
+  EXPECT_EQ(a.value().points, b.value().points);
+  EXPECT_EQ(a.value().intensity, b.value().intensity);
+  EXPECT_EQ(a.value().time, b.value().time);
+  EXPECT_EQ(a.value().ring, b.value().ring);
+  EXPECT_EQ(a.value().rgb, b.value().rgb);
 }
 
 /// GPS times as a LAS file holds them (seconds of the week, no exact step) spanning more

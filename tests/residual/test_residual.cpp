@@ -24,6 +24,7 @@
 #include "residual/range_coder.hpp"
 #include "residual/voxel.hpp"
 #include "residual/residual_test_util.hpp"
+#include "support/model_support.hpp"
 #include "support/test_support.hpp"
 #include "test_config.hpp"
 
@@ -255,12 +256,12 @@ TEST(ResidualLayer, RealScanThroughTheModelFile) {
 TEST(ResidualLayer, ModelFileVersionRules) {
   codec::ModelData d;
   d.input_points = 3;
-  d.alphabet = Alphabet{};
+  test::add_empty_word_instance(d);  // (a model with instances keeps the version its layer needs)
   const Bytes words_only = codec::encode_model(d);
   EXPECT_EQ(words_only[10], 0) << "no residual layer: format 1.0";
   Cloud scan;
   scan.points = {{1, 2, 3}, {4, 5, 6}, {-7, 8, 1}};
-  residual::add_layer(d, Alphabet{}, scan, 0.01);
+  residual::add_layer(d, *d.alphabet, scan, 0.01);
   Bytes with = codec::encode_model(d);
   ASSERT_EQ(with[10], 1);
   const auto ok = codec::decode_model(with);
@@ -361,10 +362,10 @@ TEST(ResidualSweep, ModelFileVersionRules) {
   const Cloud scan = tilting_scan();
   codec::ModelData d;
   d.input_points = scan.size();
-  d.alphabet = Alphabet{};
+  test::add_empty_word_instance(d);  // (a model with instances keeps the version its layer needs)
   residual::LayerOptions spherical;
   spherical.voxel = false;
-  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, scan, 0.01, spherical);
+  const residual::LayerStats st = residual::add_layer(d, *d.alphabet, scan, 0.01, spherical);
   ASSERT_TRUE(st.sweep);
   const Bytes file = codec::encode_model(d);
   EXPECT_EQ(file[10], 2) << "a sweep-coded layer makes the file format 1.2";
@@ -375,7 +376,7 @@ TEST(ResidualSweep, ModelFileVersionRules) {
   codec::ModelData plain = d;
   residual::LayerOptions no_sweep = spherical;
   no_sweep.sweep = false;
-  residual::add_layer(plain, Alphabet{}, scan, 0.01, no_sweep);
+  residual::add_layer(plain, *plain.alphabet, scan, 0.01, no_sweep);
   const Bytes plain_file = codec::encode_model(plain);
   EXPECT_EQ(plain_file[10], 1);
   expect_rejected(retype_chunk(plain_file, "RESD", "RESW", 2), "sweep");
@@ -603,11 +604,11 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
   const Cloud map = merged_views(3);
   codec::ModelData d;
   d.input_points = map.size();
-  d.alphabet = Alphabet{};
+  test::add_empty_word_instance(d);  // (a model with instances keeps the version its layer needs)
   residual::LayerOptions voxel_only;
   voxel_only.spherical = false;
   voxel_only.laser = false;
-  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, map, 0.02, voxel_only);
+  const residual::LayerStats st = residual::add_layer(d, *d.alphabet, map, 0.02, voxel_only);
   ASSERT_TRUE(st.voxel);
   const Bytes file = codec::encode_model(d);
   EXPECT_EQ(file[10], 8) << "the voxel coding with the octree contexts of format 1.8";
@@ -620,7 +621,7 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
   codec::ModelData sweep = d;
   residual::LayerOptions no_voxel;
   no_voxel.voxel = false;
-  residual::add_layer(sweep, Alphabet{}, tilting_scan(), 0.01, no_voxel);
+  residual::add_layer(sweep, *sweep.alphabet, tilting_scan(), 0.01, no_voxel);
   sweep.input_points = tilting_scan().size();
   const Bytes sweep_file = codec::encode_model(sweep);
   ASSERT_EQ(sweep_file[10], 2);
@@ -633,7 +634,7 @@ TEST(ResidualVoxel, ModelFileVersionRules) {
     codec::ModelData plain = d;
     residual::LayerOptions spherical = no_voxel;
     spherical.sweep = false;
-    residual::add_layer(plain, Alphabet{}, map, 0.02, spherical);
+    residual::add_layer(plain, *plain.alphabet, map, 0.02, spherical);
     const Bytes plain_file = codec::encode_model(plain);
     const std::size_t at = plain_file.size() - 16 - (12 + plain.residual->size() + 4);
     resd_chunk.assign(plain_file.begin() + static_cast<std::ptrdiff_t>(at), plain_file.end() - 16);
