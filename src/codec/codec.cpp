@@ -69,6 +69,10 @@ constexpr std::uint16_t kAttrExtendedMinor = 10;
 /// alphabet: flag bits 0 and 1 clear) and the first minor version that has it (model.md
 /// §2.1, §2.4).
 constexpr std::uint16_t kNoInstancesMinor = 11;
+/// The marker of a sensor-geometry layer whose fields leave out T_sensor_head, the
+/// identity (model.md §2.8), and the first minor version that has it.
+constexpr std::uint32_t kLaserShortMarker = 0xFFFFFFFEU;
+constexpr std::uint16_t kLaserShortMinor = 11;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -737,12 +741,20 @@ void Quantization::validate() const {
 }
 
 std::uint32_t layer_coding(const std::vector<std::uint8_t>& payload) {
-  // coding u32, then the marker 0xFFFFFFFF, which as the high half of a RESD payload's
-  // first field (max_error f64) would make it a NaN.
-  const bool marked =
-      payload.size() >= 8 && payload[4] == 0xFF && payload[5] == 0xFF && payload[6] == 0xFF && payload[7] == 0xFF;
-  return marked ? ld_u32(payload.data()) : 0U;
+  // coding u32, then the marker 0xFFFFFFFF (or, after coding 3, 0xFFFFFFFE: the
+  // sensor-geometry fields without T_sensor_head), which as the high half of a RESD
+  // payload's first field (max_error f64) would make it a NaN.
+  if (payload.size() < 8) return 0U;
+  const std::uint32_t coding = ld_u32(payload.data()), marker = ld_u32(payload.data() + 4);
+  return marker == 0xFFFFFFFFU || (marker == kLaserShortMarker && coding == 3) ? coding : 0U;
 }
+
+namespace {
+/// Whether a layer is a sensor-geometry one without T_sensor_head (model.md §2.8, 1.11).
+bool laser_short_layer(const std::vector<std::uint8_t>& payload) {
+  return payload.size() >= 8 && ld_u32(payload.data() + 4) == kLaserShortMarker && ld_u32(payload.data()) == 3;
+}
+}  // namespace
 
 bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_coding(payload) == 1; }
 
@@ -1016,6 +1028,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   std::vector<std::uint8_t> out;
   std::uint16_t minor = data.attributes ? kAttrMinor : data.georef ? kGeorMinor : data.residual ? layer_chunk.minor : kMinor;
   if (data.residual) minor = std::max(minor, laser_predictor_minor(*data.residual));
+  if (data.residual && laser_short_layer(*data.residual)) minor = std::max(minor, kLaserShortMinor);
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
   if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
     minor = std::max(minor, kAttrExtendedMinor);
@@ -1180,6 +1193,10 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                            " needs format version 1." + std::to_string(need) + ", the header says 1." +
                            std::to_string(h.minor),
                        c.payload_offset + kLaserPredictorOffset);
+    if (laser_short_layer(*out.residual) && h.minor < kLaserShortMinor)
+      return ctx.error("a sensor-geometry layer without T_sensor_head (marker 0xFFFFFFFE) needs format version 1." +
+                           std::to_string(kLaserShortMinor) + ", the header says 1." + std::to_string(h.minor),
+                       c.payload_offset + 4);
     if (voxel_mixed_layer(*out.residual) && h.minor < kVoxelMixedMinor)
       return ctx.error("a voxel layer with octree contexts " +
                            std::to_string(out.residual->data()[kVoxelContextsOffset]) +

@@ -1787,8 +1787,8 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
 // ---------------------------------------------------------------------------------------
 
 std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::uint64_t size, double max_error,
-                                                  LaserTable& table, double& tangential_step) {
-  if (size < kLaserFieldBytes)
+                                                  LaserTable& table, double& tangential_step, bool head_pose) {
+  if (size < (head_pose ? kLaserFieldBytes : kLaserShortFieldBytes))
     return LaserDecodeError{"sensor-geometry layer fields are truncated", 0};
   tangential_step = codec::bytes::ld_f64(f);
   if (!(tangential_step > 0.0 && tangential_step <= 2.0 * max_error))
@@ -1810,6 +1810,9 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   if (table.predictor > 5) return LaserDecodeError{"range predictor " + std::to_string(table.predictor) + " is not in 0..5", 28};
   if (!(std::isfinite(table.azimuth0) && std::abs(table.azimuth0) <= kTwoPi))
     return LaserDecodeError{"azimuth of column 0 is not in [-2pi, 2pi]", 32};
+  table.T_sensor_head = Pose::Identity();
+  for (auto* field : table_fields(table)) field->assign(lasers, 0);
+  if (!head_pose) return std::nullopt;
   Eigen::Matrix3d R;
   Eigen::Vector3d t;
   for (int r = 0; r < 3; ++r)
@@ -1818,10 +1821,8 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   if (!R.allFinite() || !t.allFinite() || (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
       !(R.determinant() > 0.0) || !(t.cwiseAbs().maxCoeff() <= 1e3))
     return LaserDecodeError{"T_sensor_head is not a rigid transform within 1 km", 40};
-  table.T_sensor_head = Pose::Identity();
   table.T_sensor_head.linear() = R;
   table.T_sensor_head.translation() = t;
-  for (auto* field : table_fields(table)) field->assign(lasers, 0);
   return std::nullopt;
 }
 

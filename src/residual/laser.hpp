@@ -71,6 +71,8 @@ struct LaserLayer {
 
 /// Size of `fields` in a payload.
 constexpr std::uint64_t kLaserFieldBytes = 8 + 8 + 4 + 4 + 4 + 4 + 8 + 96;
+/// The same without T_sensor_head, the identity (the layer's marker 0xFFFFFFFE, format 1.11).
+constexpr std::uint64_t kLaserShortFieldBytes = kLaserFieldBytes - 96;
 
 /// Codes the input points `coded` with the table of an assignment for error bound `bound`
 /// (E'), continuing `head` (which holds the keep mask), for each range-step share in
@@ -100,8 +102,10 @@ struct LaserDecodeError {
   std::string message;
   std::uint64_t offset = 0;
 };
+/// `head_pose`: the fields end with T_sensor_head (else it is the identity).
 [[nodiscard]] std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* fields, std::uint64_t size,
-                                                                double max_error, LaserTable& table, double& tangential_step);
+                                                                double max_error, LaserTable& table, double& tangential_step,
+                                                                bool head_pose = true);
 [[nodiscard]] std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double max_error,
                                                                   double range_step,
                                                                   double tangential_step, std::uint64_t coded_points,

@@ -50,6 +50,9 @@ constexpr std::uint64_t kHeadBytes = 32;  // max_error f64, step f64, word_point
 /// An RESW payload (formats/model.md §2.6) starts with coding u32 and this marker, which
 /// no RESD payload can start with (its first field, max_error, would read as a NaN).
 constexpr std::uint32_t kSweepMarker = 0xFFFFFFFFU;
+/// A sensor-geometry payload whose fields leave out T_sensor_head, the identity, has this
+/// marker instead (formats/model.md §2.8, format 1.11).
+constexpr std::uint32_t kLaserShortMarker = 0xFFFFFFFEU;
 constexpr std::uint32_t kCodingSweep = 1;
 constexpr std::uint64_t kSweepPrefixBytes = 8;  // coding u32, marker u32
 constexpr std::uint64_t kSweepExtraBytes = 8;   // cell f64, after the RESD header fields
@@ -513,7 +516,9 @@ std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, co
 
 bool has_coding_field(const std::uint8_t* payload, std::size_t size) {
   // codec::layer_coding: coding u32 and the marker
-  return size >= kSweepPrefixBytes && codec::bytes::ld_u32(payload + 4) == kSweepMarker;
+  if (size < kSweepPrefixBytes) return false;
+  const std::uint32_t marker = codec::bytes::ld_u32(payload + 4);
+  return marker == kSweepMarker || (marker == kLaserShortMarker && codec::bytes::ld_u32(payload) == kCodingLaser);
 }
 
 StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size) {
@@ -524,7 +529,8 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     if (h.coding != kCodingSweep && h.coding != kCodingVoxel && h.coding != kCodingLaser)
       return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1, 2 or 3 expected)", 0);
     at = kSweepPrefixBytes;
-    const std::uint64_t need = kHeadBytes + extra_bytes(h.coding);
+    h.head_pose = codec::bytes::ld_u32(payload + 4) == kSweepMarker;
+    const std::uint64_t need = kHeadBytes + extra_bytes(h.coding) - (h.head_pose ? 0 : 96);
     if (size < need)
       return bad_data("residual layer is " + std::to_string(size) + " bytes, at least " + std::to_string(need) +
                           " expected",
@@ -554,7 +560,7 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     h.lasers = codec::bytes::ld_u32(payload + at + kHeadBytes + 16);
     h.columns = codec::bytes::ld_u32(payload + at + kHeadBytes + 20);
     h.predictor = codec::bytes::ld_u32(payload + at + kHeadBytes + 28);
-    h.stream_offset += detail::kLaserFieldBytes;
+    h.stream_offset += h.head_pose ? detail::kLaserFieldBytes : detail::kLaserShortFieldBytes;
   }
   return h;
 }
@@ -853,13 +859,22 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   if (laser && extra_bytes(kCodingLaser) + laser->stream.size() < others_bytes) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(kCodingLaser) + laser->stream.size());
+    // T_sensor_head, the fields' last 12 f64, left out where it is the identity (marker
+    // 0xFFFFFFFE, format 1.11): 96 bytes a file for any table but a sensor's own with an
+    // offset head (an Ouster's metadata).
+    const std::size_t pose_at = detail::kLaserShortFieldBytes;
+    bool identity = laser->fields.size() == detail::kLaserFieldBytes;
+    for (int k = 0; k < 12 && identity; ++k)
+      identity = codec::bytes::ld_f64(laser->fields.data() + pose_at + 8 * static_cast<std::size_t>(k)) ==
+                 (k == 0 || k == 4 || k == 8 ? 1.0 : 0.0);
     codec::bytes::put_u32(out, kCodingLaser);
-    codec::bytes::put_u32(out, kSweepMarker);
+    codec::bytes::put_u32(out, identity ? kLaserShortMarker : kSweepMarker);
     put_f64(out, max_error);
     put_f64(out, laser->range_step);
     put_u64(out, n_w);
     put_u64(out, laser->coded);
-    out.insert(out.end(), laser->fields.begin(), laser->fields.end());
+    out.insert(out.end(), laser->fields.begin(),
+               laser->fields.begin() + static_cast<std::ptrdiff_t>(identity ? pose_at : laser->fields.size()));
     out.insert(out.end(), laser->stream.begin(), laser->stream.end());
     fill_stats(laser->coded, 0, false, false, true, out.size());
     fill_sources(out, &laser->sources);
@@ -938,7 +953,7 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
     if (!(q > 0.0 && q <= 2.0 * max_error))
       return bad_data("residual layer range step " + std::to_string(q) + " is not in (0, 2*max_error]", at + 8);
     if (auto e = detail::read_laser_fields(payload.data() + at + kHeadBytes, payload.size() - at - kHeadBytes, max_error,
-                                           table, tangential_step))
+                                           table, tangential_step, h.head_pose))
       return bad_data("residual layer " + e->message, at + kHeadBytes + e->offset);
     if (too_many(table.predictor >= 4 ? kMaxMixedPointsPerByte : kMaxPointsPerByte)) return too_many_error();
   }

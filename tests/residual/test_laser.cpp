@@ -35,9 +35,9 @@ double hausdorff(const Cloud& a, const Cloud& b) { return eval::compare_clouds(a
 /// spin axis, with per-laser azimuths and a head turned and raised in the sensor frame (as
 /// Ouster's are), scanning a floor and four walls; `dropout` of the pixels return nothing.
 /// `encoder_jitter`: each column fires that many steps (a standard deviation) off its grid
-/// azimuth, as a motor's speed wanders.
+/// azimuth, as a motor's speed wanders. `turned_head` false: the head is the sensor frame.
 Cloud organised_scan(std::uint32_t lasers, std::uint32_t columns, double dropout = 0.05, std::uint32_t seed = 5,
-                     double encoder_jitter = 0.0) {
+                     double encoder_jitter = 0.0, bool turned_head = true) {
   SensorGeometry g;
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> jitter(-0.002, 0.002);
@@ -52,8 +52,10 @@ Cloud organised_scan(std::uint32_t lasers, std::uint32_t columns, double dropout
   g.azimuth0 = 0.3;
   g.direction = -1;
   g.T_sensor_head = Pose::Identity();
-  g.T_sensor_head.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  g.T_sensor_head.translation() = Eigen::Vector3d(0.0, 0.0, 0.036);
+  if (turned_head) {
+    g.T_sensor_head.linear() = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    g.T_sensor_head.translation() = Eigen::Vector3d(0.0, 0.0, 0.036);
+  }
   g.source = "test table";
   Cloud c;
   c.rows = lasers;
@@ -236,6 +238,37 @@ TEST(ResidualLaser, APredictableScanCodesMoreThan200PointsAByteAndDecodes) {
   ASSERT_GT(layer.size(), 176U);  // the stream starts at byte 176 (formats/model.md §2.8)
   EXPECT_GT(scan.size(), 200 * (layer.size() - 176) + 64) << layer.size() << " bytes";
   expect_layer_bound(layer, scan, Pose::Identity(), 0.02);
+}
+
+// A table whose head is the sensor frame (any estimated from the points) leaves
+// T_sensor_head out: marker 0xFFFFFFFE, 96 bytes fewer, format 1.11.
+TEST(ResidualLaser, IdentityHeadPoseIsLeftOutInFormat1_11) {
+  const Cloud scan = organised_scan(16, 256, 0.05, 5, 0.0, false);
+  codec::ModelData d;
+  d.input_points = scan.size();
+  test::add_empty_word_instance(d);
+  const residual::LayerStats st = residual::add_layer(d, *d.alphabet, scan, 0.01);
+  ASSERT_TRUE(st.laser);
+  const auto h = residual::read_layer_header(d.residual->data(), d.residual->size());
+  ASSERT_TRUE(h.ok()) << h.status().to_string();
+  EXPECT_FALSE(h.value().head_pose);
+  EXPECT_EQ(h.value().stream_offset, 8U + 32U + 40U);
+  const Bytes file = codec::encode_model(d);
+  EXPECT_EQ(file[10], 11);
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+  const auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
+  EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
+  EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 10), "without T_sensor_head (marker 0xFFFFFFFE) needs format version 1.11");
+  // Truncated within the short fields: a clear error, no crash.
+  for (std::size_t n : {std::size_t{8}, std::size_t{40}, std::size_t{79}}) {
+    codec::ModelData cut = decoded.value();
+    cut.residual->resize(n);
+    const auto c = residual::decode_cloud(cut);
+    EXPECT_FALSE(c.ok()) << n;
+  }
 }
 
 TEST(ResidualLaser, ModelFileVersionRules) {
@@ -431,8 +464,8 @@ TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile) {
 
 /// Writes golden file tiny_residual_laser_`version` (and its input and decoded clouds) of
 /// the 8 x 128 scan, whose sensor-geometry layer makes a file of format 1.`minor`.
-void write_laser_golden(const std::string& version, int minor) {
-  const Cloud input = organised_scan(8, 128, 0.1, 21);
+void write_laser_golden(const std::string& version, int minor, bool turned_head = true) {
+  const Cloud input = organised_scan(8, 128, 0.1, 21, 0.0, turned_head);
   codec::ModelData d;
   d.input_points = input.size();
   d.alphabet = Alphabet{};
@@ -490,11 +523,19 @@ TEST(ResidualLaserGolden, Format1_9FileDecodesToTheRecordedCloud) { expect_laser
 
 TEST(ResidualLaserGolden, Format1_4FileDecodesToTheRecordedCloud) { expect_laser_golden("1.4", 4); }
 
-// Format 1.11: the same scan, a model without words (no alphabet, no instances, the short
-// MHDR).
-TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_11) { write_laser_golden("1.11", 11); }
+// Format 1.11: the same scan with its head in the sensor frame, a model without words (no
+// alphabet, no instances, the short MHDR) whose layer leaves out the identity T_sensor_head
+// (marker 0xFFFFFFFE).
+TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_11) { write_laser_golden("1.11", 11, false); }
 
-TEST(ResidualLaserGolden, Format1_11FileDecodesToTheRecordedCloud) { expect_laser_golden("1.11", 11); }
+TEST(ResidualLaserGolden, Format1_11FileDecodesToTheRecordedCloud) {
+  expect_laser_golden("1.11", 11);
+  const Bytes file = read_bytes(golden_path("tiny_residual_laser_1.11.lex3dm"));
+  ASSERT_GT(file.size(), 64U);
+  // the RESL chunk follows the 8-byte MHDR: its payload at 44 + 12, the marker 4 bytes in
+  EXPECT_EQ(std::memcmp(file.data() + 44, "RESL", 4), 0);
+  EXPECT_EQ(file[60] | file[61] << 8 | file[62] << 16 | static_cast<std::uint32_t>(file[63]) << 24, 0xFFFFFFFEU);
+}
 
 }  // namespace
 }  // namespace lex3d

@@ -108,12 +108,14 @@ struct LayerHeader {
   double tangential_step = 0.0;    ///< sensor-geometry coding: step across the beams, metres
   std::uint32_t lasers = 0;        ///< sensor-geometry coding: lasers of the table
   std::uint32_t columns = 0;       ///< sensor-geometry coding: columns a turn
-  std::uint32_t predictor = 0;     ///< sensor-geometry coding: range predictor 0-3 (formats/model.md §2.8.2)
+  std::uint32_t predictor = 0;     ///< sensor-geometry coding: range predictor 0-5 (formats/model.md §2.8.2, §2.8.4)
+  bool head_pose = true;           ///< sensor-geometry coding: T_sensor_head stored (marker 0xFFFFFFFF), else the identity (0xFFFFFFFE, format 1.11)
   std::uint64_t fields_offset = 0; ///< where max_error starts (8 in an RESW payload)
   std::uint64_t stream_offset = 0; ///< where the range-coded stream starts
 };
-/// Whether a payload starts with a coding u32 and the marker 0xFFFFFFFF (the sweep and the
-/// voxel codings; codec::layer_coding names its chunk).
+/// Whether a payload starts with a coding u32 and the marker 0xFFFFFFFF (the sweep, voxel
+/// and sensor-geometry codings), or 3 and 0xFFFFFFFE (the sensor-geometry coding without
+/// its head pose); codec::layer_coding names its chunk.
 [[nodiscard]] bool has_coding_field(const std::uint8_t* payload, std::size_t size);
 /// Reads the header of a residual payload (no checks beyond its length and coding).
 [[nodiscard]] StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t size);
