@@ -59,10 +59,11 @@ struct YoungBitModel {
 /// learn then updates the three models and the set's weights.
 class Mix3 {
  public:
-  Mix3(std::size_t weight_sets, std::int32_t initial_weight) : weights_(3 * weight_sets, initial_weight) {}
+  Mix3(std::size_t weight_sets, std::int32_t initial_weight)
+      : weights_(3 * weight_sets, initial_weight), stretch_(stretch_table().data()) {}
   /// The probability of a 0, in 1/4096, of a bit modelled by a, b and c, weights of `set`.
   std::uint32_t p0(YoungBitModel& a, YoungBitModel& b, YoungBitModel& c, std::size_t set) {
-    const auto& st = stretch_table();
+    const std::int16_t* st = stretch_;  // (kept: no guard of the table's first use a bit)
     model_[0] = &a;
     model_[1] = &b;
     model_[2] = &c;
@@ -88,6 +89,7 @@ class Mix3 {
  private:
   static constexpr std::int32_t kMaxWeight = 1 << 19;
   std::vector<std::int32_t> weights_;
+  const std::int16_t* stretch_;
   YoungBitModel* model_[3] = {nullptr, nullptr, nullptr};
   std::int32_t input_[3] = {0, 0, 0};
   std::int32_t p1_ = 2048;
