@@ -73,6 +73,10 @@ constexpr std::uint16_t kNoInstancesMinor = 11;
 /// identity (model.md §2.8), and the first minor version that has it.
 constexpr std::uint32_t kLaserShortMarker = 0xFFFFFFFEU;
 constexpr std::uint16_t kLaserShortMinor = 11;
+/// Bit 8 of a sensor-geometry layer's predictor field (its table's fields each coded
+/// against its own predictor, model.md §2.8.1) and the first minor version that has it.
+constexpr std::uint32_t kLaserTablePredictorsBit = 1U << 8;
+constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -762,7 +766,9 @@ bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_cod
 /// (predictor 2 or 3), 9 for mixed contexts (4 or 5); 0 for other layers and predictors.
 std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
   if (layer_coding(payload) != 3 || payload.size() < kLaserPredictorOffset + 4) return 0;
-  const std::uint32_t predictor = ld_u32(payload.data() + kLaserPredictorOffset);
+  const std::uint32_t field = ld_u32(payload.data() + kLaserPredictorOffset);
+  if ((field & kLaserTablePredictorsBit) != 0) return kLaserTablePredictorsMinor;
+  const std::uint32_t predictor = field & 0xFFU;
   return predictor >= 4 ? kLaserMixedMinor : predictor >= 2 ? kLaserEdgeMinor : 0;
 }
 
@@ -1187,12 +1193,16 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                            kLayerChunks[coding].coding + " coding, which belongs in an '" +
                            kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8)",
                        c.payload_offset);
-    if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need)
-      return ctx.error("a sensor-geometry layer with range predictor " +
-                           std::to_string(ld_u32(out.residual->data() + kLaserPredictorOffset)) +
+    if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need) {
+      const std::uint32_t field = ld_u32(out.residual->data() + kLaserPredictorOffset);
+      return ctx.error(std::string("a sensor-geometry layer ") +
+                           ((field & kLaserTablePredictorsBit) != 0
+                                ? "whose laser table picks its predictors (predictor field bit 8)"
+                                : "with range predictor " + std::to_string(field)) +
                            " needs format version 1." + std::to_string(need) + ", the header says 1." +
                            std::to_string(h.minor),
                        c.payload_offset + kLaserPredictorOffset);
+    }
     if (laser_short_layer(*out.residual) && h.minor < kLaserShortMinor)
       return ctx.error("a sensor-geometry layer without T_sensor_head (marker 0xFFFFFFFE) needs format version 1." +
                            std::to_string(kLaserShortMinor) + ", the header says 1." + std::to_string(h.minor),

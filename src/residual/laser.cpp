@@ -484,16 +484,57 @@ std::array<std::vector<std::int64_t>*, 5> table_fields(LaserTable& t) {
   return {&t.elevation, &t.beam_azimuth, &t.column_azimuth, &t.z_offset, &t.radial_offset};
 }
 
+/// The prediction of value i of a table field by predictor `kind` (§2.8.1): 0 the
+/// previous value, 1 the line through the two previous, 2 the value four back; 0 before
+/// there are enough values, and 0 for the first.
+std::int64_t table_prediction(const std::vector<std::int64_t>& v, std::size_t i, int kind) {
+  if (kind == 1 && i >= 2) return 2 * v[i - 1] - v[i - 2];
+  if (kind == 2 && i >= 4) return v[i - 4];
+  return i > 0 ? v[i - 1] : 0;
+}
+
+/// Codes one table field against predictor `kind` with the table's integer model.
+void put_table_field(RangeEncoder& enc, IntModel& m, const std::vector<std::int64_t>& v, int kind) {
+  std::int64_t prev_d = 0;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    const std::int64_t d = v[i] - table_prediction(v, i, kind);
+    m.put(enc, IntModel::context_of(prev_d), d);
+    prev_d = d;
+  }
+}
+
+/// With t.table_predictors each field picks, before its values, the predictor that codes it
+/// smallest on its own (two flags; format 1.11); else every field is coded against the
+/// previous value. The integer model is shared by the fields.
 void put_table(RangeEncoder& enc, const LaserTable& t) {
   IntModel m{IntModel::kClasses};
+  BitModel pick[2];
   for (const auto* f : {&t.elevation, &t.beam_azimuth, &t.column_azimuth, &t.z_offset, &t.radial_offset}) {
-    std::int64_t prev = 0, prev_d = 0;
-    for (std::int64_t v : *f) {
-      m.put(enc, IntModel::context_of(prev_d), v - prev);
-      prev_d = v - prev;
-      prev = v;
+    int kind = 0;
+    if (t.table_predictors) {
+      std::size_t best = 0;
+      for (int k = 0; k < 3; ++k) {
+        RangeEncoder alone;
+        IntModel fresh{IntModel::kClasses};
+        put_table_field(alone, fresh, *f, k);
+        const std::size_t bytes = alone.finish().size();
+        if (k == 0 || bytes < best) {
+          best = bytes;
+          kind = k;
+        }
+      }
+      enc.put(pick[0], kind != 0);
+      if (kind != 0) enc.put(pick[1], kind == 2);
     }
+    put_table_field(enc, m, *f, kind);
   }
+}
+
+/// The bytes the table costs coded each way (alone, not in the layer's stream).
+std::size_t table_bytes(const LaserTable& t) {
+  RangeEncoder alone;
+  put_table(alone, t);
+  return alone.finish().size();
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1472,6 +1513,12 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     LaserTable table = a.table;
     table.predictor = predictor;
     table.shift_unit = beams.shift_unit;
+    // each field against its own predictor where that codes the table smaller (format 1.11)
+    {
+      LaserTable picked = table;
+      picked.table_predictors = true;
+      table.table_predictors = table_bytes(picked) < table_bytes(table);
+    }
     LaserLayer out;
     out.range_step = qr;
     out.coded = kept.size();
@@ -1555,7 +1602,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     codec::bytes::put_u32(out.fields, table.lasers());
     codec::bytes::put_u32(out.fields, table.columns);
     codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
-    codec::bytes::put_u32(out.fields, table.predictor);
+    codec::bytes::put_u32(out.fields, table.predictor | (table.table_predictors ? kTablePredictorsBit : 0U));
     codec::bytes::put_f64(out.fields, table.azimuth0);
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
@@ -1799,7 +1846,11 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   const std::uint32_t lasers = codec::bytes::ld_u32(f + 16);
   table.columns = codec::bytes::ld_u32(f + 20);
   const std::uint32_t dir = codec::bytes::ld_u32(f + 24);
-  table.predictor = codec::bytes::ld_u32(f + 28);
+  const std::uint32_t predictor_field = codec::bytes::ld_u32(f + 28);
+  table.predictor = predictor_field & 0xFFU;
+  table.table_predictors = (predictor_field & kTablePredictorsBit) != 0;
+  if ((predictor_field & ~(0xFFU | kTablePredictorsBit)) != 0)
+    return LaserDecodeError{"predictor field " + std::to_string(predictor_field) + " has reserved bits set", 28};
   table.azimuth0 = codec::bytes::ld_f64(f + 32);
   if (lasers < 1 || lasers > kMaxLasers)
     return LaserDecodeError{"laser count " + std::to_string(lasers) + " is not in [1, 1024]", 16};
@@ -1831,18 +1882,22 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
                                                     std::vector<Eigen::Vector3f>& out, std::vector<std::uint16_t>* lasers) {
   {
     IntModel m{IntModel::kClasses};
+    BitModel pick[2];
     const std::array<std::int64_t, 5> bounds = {kMaxAngleUnits, kMaxAngleUnits, kMaxAngleUnits, kMaxLengthUnits,
                                                 kMaxLengthUnits};
     std::size_t f_index = 0;
     for (auto* f : table_fields(table)) {
-      std::int64_t prev = 0, prev_d = 0;
-      for (auto& v : *f) {
+      int kind = 0;
+      if (table.table_predictors && dec.get(pick[0])) kind = dec.get(pick[1]) ? 2 : 1;
+      std::int64_t prev_d = 0;
+      for (std::size_t i = 0; i < f->size(); ++i) {
         const std::int64_t d = m.get(dec, IntModel::context_of(prev_d));
-        v = prev + d;
+        // (values within bounds: the prediction, at most 3 of them, cannot overflow)
+        const std::int64_t v = table_prediction(*f, i, kind) + d;
         if (v < -bounds[f_index] || v > bounds[f_index])
           return LaserDecodeError{"laser table value out of range", 0};
+        (*f)[i] = v;
         prev_d = d;
-        prev = v;
       }
       ++f_index;
     }

@@ -19,6 +19,9 @@ namespace lex3d::residual::detail {
 constexpr double kLaserAngleUnit = 1.0 / 16777216.0;
 constexpr double kLaserLengthUnit = 1.0 / 65536.0;
 constexpr std::uint32_t kMaxLasers = 1024;
+/// Bit 8 of a layer's stored predictor field: the table's fields each coded against the
+/// predictor it picks (formats/model.md §2.8.1, format 1.11); bits 0-7 the range predictor.
+constexpr std::uint32_t kTablePredictorsBit = 1U << 8;
 constexpr std::uint32_t kMaxLaserColumns = 1U << 20;
 
 /// A laser table as a layer stores it: quantised per-laser fields and the azimuth grid.
@@ -32,6 +35,10 @@ struct LaserTable {
   /// Beam lengths predicted by 0: the left neighbour; 1: the median edge detector; 2 and 3:
   /// 1 and 0 with a flag at edges picking the left or upper pixel (formats/model.md §2.8.2).
   std::uint32_t predictor = 0;
+  /// The table's fields each coded against the predictor it picks (the previous laser, the
+  /// line through the two previous, the laser four back), signalled by bit 8 of the stored
+  /// predictor field (formats/model.md §2.8.1, format 1.11); else all against the previous.
+  bool table_predictors = false;
   double azimuth0 = 0.0;
   Pose T_sensor_head = Pose::Identity();
 

@@ -559,7 +559,9 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     // after the step across the beams and the shift unit (f64 each), as laser_layer writes them
     h.lasers = codec::bytes::ld_u32(payload + at + kHeadBytes + 16);
     h.columns = codec::bytes::ld_u32(payload + at + kHeadBytes + 20);
-    h.predictor = codec::bytes::ld_u32(payload + at + kHeadBytes + 28);
+    const std::uint32_t predictor_field = codec::bytes::ld_u32(payload + at + kHeadBytes + 28);
+    h.predictor = predictor_field & 0xFFU;
+    h.table_predictors = (predictor_field & detail::kTablePredictorsBit) != 0;
     h.stream_offset += h.head_pose ? detail::kLaserFieldBytes : detail::kLaserShortFieldBytes;
   }
   return h;

@@ -586,6 +586,27 @@ TEST(CodecCorruptWordless, LayoutRulesAreChecked) {
   EXPECT_TRUE(is_bad(decode_model(r.build(), &alphabet_file), "chunk 'MHDR' payload is 8 bytes, expected 120", 24));
   r.chunks[0].payload = File::parse(words).chunk("MHDR").payload;
   EXPECT_TRUE(is_bad(decode_model(r.build(), &alphabet_file), "comes before the required chunk 'INST'"));
+  // A sensor-geometry layer without its head pose (marker 0xFFFFFFFE) needs 1.11 whatever the
+  // file holds besides (the codec reads the marker and the predictor field, not the rest).
+  {
+    ModelData l = word_data;
+    Bytes layer = {3, 0, 0, 0, 0xFE, 0xFF, 0xFF, 0xFF};
+    layer.resize(120, 0);
+    layer[68] = 5;  // predictor 5, no table predictors
+    l.residual = layer;
+    File lf = File::parse(encode_model(l));
+    EXPECT_EQ(lf.head[10], 11);
+    poke(lf.head, 10, 10, 2);
+    EXPECT_TRUE(is_bad(decode_model(lf.build()), "without T_sensor_head (marker 0xFFFFFFFE) needs format version 1.11"));
+    // and the predictor field's bit 8 (the table's fields pick their predictors) too
+    layer[4] = 0xFF;
+    layer[69] = 1;
+    l.residual = layer;
+    File tf = File::parse(encode_model(l));
+    EXPECT_EQ(tf.head[10], 11);
+    poke(tf.head, 10, 9, 2);
+    EXPECT_TRUE(is_bad(decode_model(tf.build()), "picks its predictors (predictor field bit 8) needs format version 1.11"));
+  }
   // A non-identity pose in the short MHDR must still be a rigid transform.
   File bent = File::parse(b);
   bent.chunks[0].payload.resize(104, 0);

@@ -261,7 +261,8 @@ TEST(ResidualLaser, IdentityHeadPoseIsLeftOutInFormat1_11) {
   ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
-  expect_rejected(retype_chunk(file, "RESL", "RESL", 10), "without T_sensor_head (marker 0xFFFFFFFE) needs format version 1.11");
+  // (its table may also pick its predictors, another feature of 1.11, which is named first)
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 10), "needs format version 1.11");
   // Truncated within the short fields: a clear error, no crash.
   for (std::size_t n : {std::size_t{8}, std::size_t{40}, std::size_t{79}}) {
     codec::ModelData cut = decoded.value();
@@ -279,13 +280,18 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   const residual::LayerStats st = residual::add_layer(d, *d.alphabet, scan, 0.01);
   ASSERT_TRUE(st.laser);
   const Bytes file = codec::encode_model(d);
-  EXPECT_EQ(file[10], 9) << "a sensor-geometry layer with mixed contexts (predictor 4 or 5) makes the file format 1.9";
   ASSERT_TRUE(d.residual);
   ASSERT_GE(d.residual->size(), 72U);
-  std::uint32_t predictor = 0;
-  std::memcpy(&predictor, d.residual->data() + 68, 4);  // (little-endian hosts)
+  std::uint32_t field = 0;
+  std::memcpy(&field, d.residual->data() + 68, 4);  // (little-endian hosts)
+  const std::uint32_t predictor = field & 0xFFU;
+  const bool table_predictors = (field & 0x100U) != 0;  // (this table: its fields pick their predictors)
+  EXPECT_EQ(field & ~0x1FFU, 0U);
   EXPECT_GE(predictor, 4U);
   EXPECT_LE(predictor, 5U);
+  EXPECT_EQ(file[10], table_predictors ? 11 : 9)
+      << "a sensor-geometry layer with mixed contexts (predictor 4 or 5) makes the file format 1.9, 1.11 where its "
+         "table's fields pick their predictors";
   const auto decoded = codec::decode_model(file);
   ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
   const auto cloud = residual::decode_cloud(decoded.value());
@@ -293,10 +299,25 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
   expect_rejected(retype_chunk(file, "RESL", "RESL", 3), "1.4");
-  expect_rejected(retype_chunk(file, "RESL", "RESL", 6), "needs format version 1.9");
-  expect_rejected(retype_chunk(file, "RESL", "RESL", 8), "needs format version 1.9");
+  const std::string need = table_predictors ? "picks its predictors (predictor field bit 8) needs format version 1.11"
+                                            : "with range predictor " + std::to_string(predictor) +
+                                                  " needs format version 1.9";
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 6), need);
+  if (table_predictors) expect_rejected(retype_chunk(file, "RESL", "RESL", 10), need);
   expect_rejected(retype_chunk(file, "RESL", "RESD", 4), "RESL");
   expect_rejected(retype_chunk(file, "RESL", "RESV", 4), "RESL");
+  // The rule of predictors 4 and 5 on a file of format 1.9, whatever the encoder now picks.
+  const Bytes v19 = read_bytes(golden_path("tiny_residual_laser_1.9.lex3dm"));
+  ASSERT_EQ(v19[10], 9);
+  ASSERT_TRUE(codec::decode_model(v19).ok());
+  expect_rejected(retype_chunk(v19, "RESL", "RESL", 6), "needs format version 1.9");
+  expect_rejected(retype_chunk(v19, "RESL", "RESL", 8), "needs format version 1.9");
+  // A reserved bit of the predictor field: a clear error when the layer is decoded.
+  codec::ModelData bad = decoded.value();
+  (*bad.residual)[68 + 2] = 1;  // bit 16
+  const auto r = residual::decode_cloud(bad);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("reserved bits"), std::string::npos) << r.status().to_string();
 }
 
 TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
@@ -525,7 +546,7 @@ TEST(ResidualLaserGolden, Format1_4FileDecodesToTheRecordedCloud) { expect_laser
 
 // Format 1.11: the same scan with its head in the sensor frame, a model without words (no
 // alphabet, no instances, the short MHDR) whose layer leaves out the identity T_sensor_head
-// (marker 0xFFFFFFFE).
+// (marker 0xFFFFFFFE) and whose table's fields pick their predictors.
 TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_11) { write_laser_golden("1.11", 11, false); }
 
 TEST(ResidualLaserGolden, Format1_11FileDecodesToTheRecordedCloud) {
@@ -535,6 +556,8 @@ TEST(ResidualLaserGolden, Format1_11FileDecodesToTheRecordedCloud) {
   // the RESL chunk follows the 8-byte MHDR: its payload at 44 + 12, the marker 4 bytes in
   EXPECT_EQ(std::memcmp(file.data() + 44, "RESL", 4), 0);
   EXPECT_EQ(file[60] | file[61] << 8 | file[62] << 16 | static_cast<std::uint32_t>(file[63]) << 24, 0xFFFFFFFEU);
+  // its table's fields pick their predictors: bit 8 of the predictor field (payload byte 68)
+  EXPECT_EQ(file[56 + 69], 1);
 }
 
 }  // namespace
