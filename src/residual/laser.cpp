@@ -530,7 +530,7 @@ void put_table(RangeEncoder& enc, const LaserTable& t) {
   }
 }
 
-/// The bytes the table costs coded each way (alone, not in the layer's stream).
+/// The bytes the table costs coded alone as put_table codes it (not in the layer's stream).
 std::size_t table_bytes(const LaserTable& t) {
   RangeEncoder alone;
   put_table(alone, t);
@@ -1506,6 +1506,16 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     kept_ring[k] = a.ring[i];
     kept_column[k] = a.column[i];
   }
+  // The table's fields each against its own predictor where that codes the table smaller
+  // (format 1.11): the same for every range predictor.
+  bool table_predictors = false;
+  {
+    LaserTable picked = a.table;
+    picked.table_predictors = true;
+    table_predictors = table_bytes(picked) < table_bytes(a.table);
+  }
+  // T_sensor_head is stored only where it is not the identity (format 1.11).
+  const bool head_pose = !a.table.T_sensor_head.matrix().isIdentity(0.0);
   // The stream, once for each predictor (side by side); the smallest is kept.
   std::vector<std::optional<LaserLayer>> streams(predictors.size());
   parallel_for(predictors.size(), threads, [&](std::size_t pi) {
@@ -1513,13 +1523,9 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     LaserTable table = a.table;
     table.predictor = predictor;
     table.shift_unit = beams.shift_unit;
-    // each field against its own predictor where that codes the table smaller (format 1.11)
-    {
-      LaserTable picked = table;
-      picked.table_predictors = true;
-      table.table_predictors = table_bytes(picked) < table_bytes(table);
-    }
+    table.table_predictors = table_predictors;
     LaserLayer out;
+    out.head_pose = head_pose;
     out.range_step = qr;
     out.coded = kept.size();
     out.sources.resize(kept.size());
@@ -1604,9 +1610,11 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
     codec::bytes::put_u32(out.fields, table.predictor | (table.table_predictors ? kTablePredictorsBit : 0U));
     codec::bytes::put_f64(out.fields, table.azimuth0);
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
-    for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
+    if (head_pose) {
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) codec::bytes::put_f64(out.fields, table.T_sensor_head.linear()(r, c));
+      for (int r = 0; r < 3; ++r) codec::bytes::put_f64(out.fields, table.T_sensor_head.translation()(r));
+    }
     streams[pi] = std::move(out);
   }, 1);
   if (sizes)

@@ -69,7 +69,10 @@ struct LaserAssignment {
 
 /// A coded sensor-geometry layer: the fields after the ones every coding has, and the stream.
 struct LaserLayer {
-  std::vector<std::uint8_t> fields;  ///< cross step, shift unit, lasers, columns, direction, azimuth0, T_sensor_head
+  std::vector<std::uint8_t> fields;  ///< cross step, shift unit, lasers, columns, direction, azimuth0, T_sensor_head (if head_pose)
+  /// T_sensor_head is in `fields`: it is not the identity (else the payload's marker is
+  /// 0xFFFFFFFE and the fields end before it, format 1.11).
+  bool head_pose = true;
   std::vector<std::uint8_t> stream;  ///< the keep mask (as `head` holds it), the table, the points
   double range_step = 0.0;
   std::uint64_t coded = 0;           ///< points coded (after thinning)

@@ -861,22 +861,15 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   if (laser && extra_bytes(kCodingLaser) + laser->stream.size() < others_bytes) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(kCodingLaser) + laser->stream.size());
-    // T_sensor_head, the fields' last 12 f64, left out where it is the identity (marker
-    // 0xFFFFFFFE, format 1.11): 96 bytes a file for any table but a sensor's own with an
-    // offset head (an Ouster's metadata).
-    const std::size_t pose_at = detail::kLaserShortFieldBytes;
-    bool identity = laser->fields.size() == detail::kLaserFieldBytes;
-    for (int k = 0; k < 12 && identity; ++k)
-      identity = codec::bytes::ld_f64(laser->fields.data() + pose_at + 8 * static_cast<std::size_t>(k)) ==
-                 (k == 0 || k == 4 || k == 8 ? 1.0 : 0.0);
+    // Fields without T_sensor_head (the identity) take marker 0xFFFFFFFE (format 1.11): 96
+    // bytes a file for any table but a sensor's own with an offset head (an Ouster's metadata).
     codec::bytes::put_u32(out, kCodingLaser);
-    codec::bytes::put_u32(out, identity ? kLaserShortMarker : kSweepMarker);
+    codec::bytes::put_u32(out, laser->head_pose ? kSweepMarker : kLaserShortMarker);
     put_f64(out, max_error);
     put_f64(out, laser->range_step);
     put_u64(out, n_w);
     put_u64(out, laser->coded);
-    out.insert(out.end(), laser->fields.begin(),
-               laser->fields.begin() + static_cast<std::ptrdiff_t>(identity ? pose_at : laser->fields.size()));
+    out.insert(out.end(), laser->fields.begin(), laser->fields.end());
     out.insert(out.end(), laser->stream.begin(), laser->stream.end());
     fill_stats(laser->coded, 0, false, false, true, out.size());
     fill_sources(out, &laser->sources);
