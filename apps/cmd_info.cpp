@@ -43,7 +43,7 @@ const char* range_predictor_name(std::uint32_t predictor) {
 }
 
 const char* layer_coding_name(std::uint32_t coding) {
-  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : "previous-point";
+  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : coding == 4 ? "acquisition-order" : "previous-point";
 }
 
 struct InfoOptions {

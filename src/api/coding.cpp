@@ -56,6 +56,7 @@ residual::LayerOptions CodingOptions::layer_options() const {
   l.spherical = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kSpherical;
   l.voxel = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kVoxel;
   l.laser = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kLaser;
+  l.acquisition = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kAcquisition;
   l.threads = threads;
   return l;
 }

@@ -29,6 +29,7 @@
 #include "lex3d/model/model.hpp"
 #include "lex3d/range/range_image.hpp"
 #include "codec/bytes.hpp"
+#include "residual/acquisition.hpp"
 #include "residual/laser.hpp"
 #include "residual/layer_lasers.hpp"
 #include "residual/point_ball_grid.hpp"
@@ -59,6 +60,8 @@ constexpr std::uint64_t kSweepExtraBytes = 8;   // cell f64, after the RESD head
 constexpr std::uint32_t kCodingVoxel = 2;
 constexpr std::uint64_t kVoxelExtraBytes = 28;  // origin 3 f64, depth u32, after the RESD header fields
 constexpr std::uint32_t kCodingLaser = 3;
+constexpr std::uint32_t kCodingAcquisition = 4;
+constexpr std::uint64_t kAcquisitionExtraBytes = 28;  // origin 3 f64, reserved u32, after the RESD header fields
 /// Shares of 2E' the sensor-geometry coding tries for its range step (encoder only): the
 /// largest for a table that reproduces the points (read from a sensor's metadata), the
 /// smaller two for an estimated table, which leave room for corrections across the beams.
@@ -76,6 +79,7 @@ constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
   return coding == kCodingSweep   ? kSweepPrefixBytes + kSweepExtraBytes
          : coding == kCodingVoxel ? kSweepPrefixBytes + kVoxelExtraBytes
          : coding == kCodingLaser ? kSweepPrefixBytes + detail::kLaserFieldBytes
+         : coding == kCodingAcquisition ? kSweepPrefixBytes + kAcquisitionExtraBytes
                                   : 0;
 }
 /// A voxel layer's origin lies within this many metres of the model frame's origin.
@@ -526,8 +530,8 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
   std::size_t at = 0;
   if (has_coding_field(payload, size)) {
     h.coding = codec::bytes::ld_u32(payload);
-    if (h.coding != kCodingSweep && h.coding != kCodingVoxel && h.coding != kCodingLaser)
-      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1, 2 or 3 expected)", 0);
+    if (h.coding != kCodingSweep && h.coding != kCodingVoxel && h.coding != kCodingLaser && h.coding != kCodingAcquisition)
+      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1, 2, 3 or 4 expected)", 0);
     at = kSweepPrefixBytes;
     h.head_pose = codec::bytes::ld_u32(payload + 4) == kSweepMarker;
     const std::uint64_t need = kHeadBytes + extra_bytes(h.coding) - (h.head_pose ? 0 : 96);
@@ -554,6 +558,10 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     h.octree_contexts = (depth_field >> 8) & 0xFFU;
     h.voxel_reserved = depth_field >> 16;
     h.stream_offset += kVoxelExtraBytes;
+  } else if (h.coding == kCodingAcquisition) {
+    for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
+    h.voxel_reserved = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
+    h.stream_offset += kAcquisitionExtraBytes;
   } else if (h.coding == kCodingLaser) {
     h.tangential_step = ld_f64(payload + at + kHeadBytes);
     // after the step across the beams and the shift unit (f64 each), as laser_layer writes them
@@ -696,7 +704,12 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                 options.thin, shares, threads, &chosen);
     if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
-  const bool others = !laser || options.spherical || options.voxel;
+  // The acquisition-order coding (§2.11) where the points come in the order they were
+  // fired (their times rise): an airborne or mobile-mapping scanner's file.
+  std::optional<detail::AcquisitionLayer> acquisition;
+  if (options.acquisition && input.has_time() && detail::acquisition_ordered(input.time, coded))
+    acquisition = detail::acquisition_layer(head, input.points, input.time, coded, check_error, options.thin);
+  const bool others = (!laser && !acquisition) || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (others && !voxel) {
     const bool try_voxel = voxel_allowed && options.spherical;
@@ -858,7 +871,26 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const std::size_t others_bytes = !others || !coded_others ? std::numeric_limits<std::size_t>::max()
                                    : use_voxel ? extra_bytes(kCodingVoxel) + voxel->stream.size()
                                                : extra_bytes(sweep ? kCodingSweep : 0) + streams[best].size();
-  if (laser && extra_bytes(kCodingLaser) + laser->stream.size() < others_bytes) {
+  const std::size_t laser_bytes =
+      laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
+  if (acquisition && extra_bytes(kCodingAcquisition) + acquisition->stream.size() < std::min(others_bytes, laser_bytes)) {
+    std::vector<std::uint8_t> out;
+    out.reserve(kHeadBytes + extra_bytes(kCodingAcquisition) + acquisition->stream.size());
+    codec::bytes::put_u32(out, kCodingAcquisition);
+    codec::bytes::put_u32(out, kSweepMarker);
+    put_f64(out, max_error);
+    put_f64(out, acquisition->step);
+    put_u64(out, n_w);
+    put_u64(out, acquisition->sources.size());
+    for (int a = 0; a < 3; ++a) put_f64(out, acquisition->origin[a]);
+    codec::bytes::put_u32(out, 0);  // reserved
+    out.insert(out.end(), acquisition->stream.begin(), acquisition->stream.end());
+    fill_stats(acquisition->sources.size(), 0, false, false, false, out.size());
+    if (stats) stats->acquisition = true;
+    fill_sources(out, &acquisition->sources);
+    return out;
+  }
+  if (laser && laser_bytes < others_bytes) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(kCodingLaser) + laser->stream.size());
     // Fields without T_sensor_head (the identity) take marker 0xFFFFFFFE (format 1.11): 96
@@ -932,6 +964,7 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
   const bool voxel = h.coding == kCodingVoxel;
   const bool sweep = h.coding == kCodingSweep;
   const bool laser = h.coding == kCodingLaser;
+  const bool acquisition = h.coding == kCodingAcquisition;
   const auto too_many = [&](std::uint64_t per_byte) {
     return n_c > max_points || n_c > per_byte * stream_bytes + 64;
   };
@@ -999,6 +1032,21 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
       if (!c.allFinite()) return bad_data("residual layer voxel decodes to a non-finite position", h.stream_offset);
       out.points.push_back(c);
     }
+    return out;
+  }
+  if (acquisition) {
+    const Eigen::Vector3d origin(h.origin[0], h.origin[1], h.origin[2]);
+    if (!(q >= 1e-7))
+      return bad_data("residual layer grid step " + std::to_string(q) + " m is below 1e-7 m", at + 8);
+    if (!origin.allFinite() || !(origin.cwiseAbs().maxCoeff() <= kMaxVoxelOrigin))
+      return bad_data("residual layer grid origin is not finite or lies beyond 1e9 m", at + kHeadBytes);
+    if (h.voxel_reserved != 0)
+      return bad_data("residual layer acquisition-order reserved field is " + std::to_string(h.voxel_reserved) + ", not 0",
+                      at + kHeadBytes + 24);
+    if (auto e = detail::decode_acquisition_points(dec, origin, q, n_c, out.points))
+      return bad_data("residual layer " + *e, h.stream_offset);
+    if (dec.overrun() > 8)
+      return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());
     return out;
   }
   if (laser) {

@@ -37,6 +37,7 @@ enum class LayerCoding : std::uint8_t {
   kSpherical,  ///< the sensor-centred spherical codings only
   kVoxel,      ///< the voxel (octree) coding only
   kLaser,      ///< the sensor-geometry coding (spherical where the lasers are unknown)
+  kAcquisition,  ///< the acquisition-order coding (spherical where the points carry no rising times)
 };
 
 /// How a scan is coded. Defaults: words only, no residual layer (as `lex3d compress`).

@@ -56,6 +56,10 @@ struct LayerOptions {
   /// the scan's lasers and columns are known (an organised cloud, a `ring` field, a raw
   /// sensor log) and keep it when it codes smaller.
   bool laser = true;
+  /// Also try the acquisition-order coding (formats/model.md §2.11: a file of format 1.12)
+  /// where the points carry times that rise in their order (a LAS file's GPS times) and keep
+  /// it when it codes smaller.
+  bool acquisition = true;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
   /// Fill LayerStats::sources (the input point each decoded point stands for, which the
@@ -75,6 +79,7 @@ struct LayerStats {
   bool sweep = false;                  ///< coded with the sweep coding (an RESW chunk)
   bool voxel = false;                  ///< coded with the voxel coding (an RESV chunk)
   bool laser = false;                  ///< coded with the sensor-geometry coding (an RESL chunk)
+  bool acquisition = false;            ///< coded in acquisition order (an RESA chunk)
   /// Where the laser table came from when the sensor-geometry coding was tried (empty
   /// when it was not), and the RMS distance of the points from their table's beams.
   std::string laser_table_source;
@@ -99,12 +104,12 @@ struct LayerHeader {
   double step = 0.0;               ///< q, metres
   std::uint64_t word_points = 0;   ///< reconstruction points the keep mask covers
   std::uint64_t coded_points = 0;  ///< points coded by the layer
-  std::uint32_t coding = 0;        ///< 0: previous-point (RESD); 1: sweep (RESW); 2: voxel (RESV); 3: sensor geometry (RESL)
+  std::uint32_t coding = 0;        ///< 0: previous-point (RESD); 1: sweep (RESW); 2: voxel (RESV); 3: sensor geometry (RESL); 4: acquisition order (RESA)
   double cell = 0.0;               ///< sweep coding: direction cell, radians
-  std::array<double, 3> origin{};  ///< voxel coding: the grid's corner, model frame, metres
+  std::array<double, 3> origin{};  ///< voxel and acquisition-order codings: the grid's corner, model frame, metres
   std::uint32_t depth = 0;         ///< voxel coding: octree levels
   std::uint32_t octree_contexts = 0;  ///< voxel coding: 0 face contexts (§2.7.1), 1 mixed contexts (§2.7.4, format 1.8)
-  std::uint32_t voxel_reserved = 0;   ///< voxel coding: the reserved u16 after depth and contexts (0)
+  std::uint32_t voxel_reserved = 0;   ///< voxel coding: the reserved u16 after depth and contexts; acquisition-order coding: its reserved u32 (0)
   double tangential_step = 0.0;    ///< sensor-geometry coding: step across the beams, metres
   std::uint32_t lasers = 0;        ///< sensor-geometry coding: lasers of the table
   std::uint32_t columns = 0;       ///< sensor-geometry coding: columns a turn

@@ -1,0 +1,245 @@
+// Acquisition-order coding of a residual layer (formats/model.md §2.11).
+
+#include "residual/acquisition.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "residual/point_ball_grid.hpp"
+
+namespace lex3d::residual::detail {
+namespace {
+
+using Cell = std::array<std::int64_t, 3>;
+
+constexpr int kKinds = 4;
+/// Predictions are clamped to ±2^31 cells, so that a residual fits IntModel (±(2^32 − 1)).
+constexpr std::int64_t kMaxPrediction = std::int64_t{1} << 31;
+/// Residuals enter the beam-slope sums clamped to ±4095 cells.
+constexpr std::int64_t kSlopeClamp = 4095;
+/// The beam slope is a fixed-point number of 16 fraction bits, at most ±2^20 (±16).
+constexpr int kSlopeBits = 16;
+constexpr std::int64_t kMaxSlope = std::int64_t{1} << 20;
+
+std::int64_t clamp(std::int64_t v, std::int64_t limit) { return std::min(std::max(v, -limit), limit); }
+
+/// s less s/256 rounded toward zero: the sums forget a pulse's share in about 256 pulses.
+std::int64_t decay(std::int64_t s) { return s >= 0 ? s - (s >> 8) : s + ((-s) >> 8); }
+
+/// a / 2^16 rounded half away from zero (integers only, so every platform agrees).
+std::int64_t unfix(std::int64_t a) { return a >= 0 ? (a + 32768) >> kSlopeBits : -((-a + 32768) >> kSlopeBits); }
+
+/// What encoder and decoder both keep (§2.11.2): the last point, the last two pulses, the
+/// kinds of the last two points, the classes of the last residuals and the beam's slope.
+class AcquisitionState {
+ public:
+  AcquisitionState() : z_(kKinds * 8), x_(kKinds * 64), y_(kKinds * 64), gap_(1) {}
+
+  [[nodiscard]] Cell predict(PulseKind kind, std::uint32_t skipped) const {
+    Cell p{};
+    for (int a = 0; a < 3; ++a) {
+      const std::int64_t step = pulse1_[a] - pulse2_[a];
+      std::int64_t v = last_[a];
+      if (kind == PulseKind::kNextPulse) v = pulse1_[a] + step;
+      else if (kind == PulseKind::kSkipped) v = pulse1_[a] + static_cast<std::int64_t>(skipped + 1) * step;
+      p[a] = clamp(v, kMaxPrediction);
+    }
+    return p;
+  }
+  /// The x and y the beam's slope adds to a point whose z lies dz off its prediction.
+  [[nodiscard]] std::int64_t slope_shift(int axis, std::int64_t dz) const {
+    return unfix(slope_[axis] * clamp(dz, kMaxAcquisitionCell));
+  }
+  [[nodiscard]] int kind_ctx() const { return 4 * kind2_ + kind1_; }
+  [[nodiscard]] int z_ctx(PulseKind k) const { return static_cast<int>(k) * 8 + IntModel::context_of(last_dz_); }
+  [[nodiscard]] int xy_ctx(PulseKind k, std::int64_t dz, int axis) const {
+    return (static_cast<int>(k) * 8 + IntModel::context_of(dz)) * 8 + IntModel::context_of(last_xy_[axis]);
+  }
+  /// After a point `c` of kind `k`, predicted at `p`, its x and y `rx`, `ry` off the slope's shift.
+  void update(PulseKind k, const Cell& c, const Cell& p, std::int64_t rx, std::int64_t ry) {
+    const std::int64_t dz = c[2] - p[2];
+    if (k == PulseKind::kSamePulse || k == PulseKind::kNextPulse) {
+      const std::int64_t z = clamp(dz, kSlopeClamp);
+      for (int a = 0; a < 2; ++a) sum_[a] = decay(sum_[a]) + clamp(c[a] - p[a], kSlopeClamp) * z;
+      sum_zz_ = decay(sum_zz_) + z * z;
+      for (int a = 0; a < 2; ++a)
+        slope_[a] = sum_zz_ > 0 ? clamp(sum_[a] * (std::int64_t{1} << kSlopeBits) / sum_zz_, kMaxSlope) : 0;
+    }
+    if (k == PulseKind::kRestart) pulse1_ = pulse2_ = c;
+    else if (k != PulseKind::kSamePulse) {
+      pulse2_ = pulse1_;
+      pulse1_ = c;
+    }
+    last_ = c;
+    kind2_ = kind1_;
+    kind1_ = static_cast<int>(k);
+    last_dz_ = dz;
+    last_xy_ = {rx, ry};
+  }
+
+  std::array<BitModel, 16> kind_high{};
+  std::array<std::array<BitModel, 2>, 16> kind_low{};
+  IntModel z_, x_, y_, gap_;
+
+ private:
+  Cell last_{}, pulse1_{}, pulse2_{};
+  int kind1_ = 3, kind2_ = 3;
+  std::int64_t last_dz_ = 0;
+  std::array<std::int64_t, 2> last_xy_{};
+  std::array<std::int64_t, 2> sum_{};
+  std::int64_t sum_zz_ = 0;
+  std::array<std::int64_t, 2> slope_{};
+};
+
+void encode_point(RangeEncoder& enc, AcquisitionState& s, PulseKind kind, std::uint32_t skipped, const Cell& c) {
+  const int kc = s.kind_ctx();
+  const auto k = static_cast<unsigned>(kind);
+  enc.put(s.kind_high[static_cast<std::size_t>(kc)], (k & 2U) != 0);
+  enc.put(s.kind_low[static_cast<std::size_t>(kc)][(k >> 1) & 1U], (k & 1U) != 0);
+  if (kind == PulseKind::kSkipped) s.gap_.put(enc, 0, static_cast<std::int64_t>(skipped) - 1);
+  const Cell p = s.predict(kind, skipped);
+  const std::int64_t dz = c[2] - p[2];
+  s.z_.put(enc, s.z_ctx(kind), dz);
+  const std::int64_t rx = c[0] - p[0] - s.slope_shift(0, dz);
+  const std::int64_t ry = c[1] - p[1] - s.slope_shift(1, dz);
+  s.x_.put(enc, s.xy_ctx(kind, dz, 0), rx);
+  s.y_.put(enc, s.xy_ctx(kind, dz, 1), ry);
+  s.update(kind, c, p, rx, ry);
+}
+
+Eigen::Vector3f cell_centre(const Eigen::Vector3d& origin, double step, const Cell& c) {
+  return {static_cast<float>(origin.x() + static_cast<double>(c[0]) * step),
+          static_cast<float>(origin.y() + static_cast<double>(c[1]) * step),
+          static_cast<float>(origin.z() + static_cast<double>(c[2]) * step)};
+}
+
+/// The pulse period: the median of the rises between consecutive times (0 without any).
+double pulse_period(const std::vector<double>& time, const std::vector<std::uint32_t>& order) {
+  std::vector<double> rises;
+  rises.reserve(order.size());
+  for (std::size_t j = 1; j < order.size(); ++j) {
+    const double dt = time[order[j]] - time[order[j - 1]];
+    if (dt > 0.0 && std::isfinite(dt)) rises.push_back(dt);
+  }
+  if (rises.empty()) return 0.0;
+  auto mid = rises.begin() + static_cast<std::ptrdiff_t>(rises.size() / 2);
+  std::nth_element(rises.begin(), mid, rises.end());
+  return *mid;
+}
+
+}  // namespace
+
+bool acquisition_ordered(const std::vector<double>& time, const std::vector<std::uint32_t>& coded) {
+  if (coded.size() < 2) return false;
+  std::size_t rise = 0, fall = 0;
+  for (std::size_t j = 1; j < coded.size(); ++j) {
+    const double dt = time[coded[j]] - time[coded[j - 1]];
+    if (dt > 0.0) ++rise;
+    else if (!(dt == 0.0)) ++fall;
+  }
+  const std::size_t pairs = coded.size() - 1;
+  return 10 * fall <= pairs && 10 * rise >= pairs;
+}
+
+std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
+                                                  const std::vector<double>& time, const std::vector<std::uint32_t>& coded,
+                                                  double bound, bool thin) {
+  if (coded.empty()) return std::nullopt;
+  AcquisitionLayer layer;
+  layer.origin = input[coded[0]].cast<double>();
+  for (const std::uint32_t i : coded) layer.origin = layer.origin.cwiseMin(input[i].cast<double>());
+  layer.step = 2.0 * bound / std::sqrt(3.0) * (1.0 - 1e-6);
+  std::vector<Cell> cells;
+  std::vector<std::uint32_t>& kept = layer.sources;
+  const double b2 = bound * bound;
+  for (int attempt = 0;; ++attempt) {
+    if (attempt == 8) return std::nullopt;  // float32 cannot hold centres this close (not seen)
+    cells.clear();
+    kept.clear();
+    PointBallGrid decoded(bound, thin ? coded.size() : 0);
+    const double inv = 1.0 / layer.step;
+    bool miss = false;
+    for (const std::uint32_t i : coded) {
+      const Eigen::Vector3d p = input[i].cast<double>();
+      if (thin && decoded.any_within(p)) continue;
+      Cell c{};
+      for (int a = 0; a < 3; ++a) {
+        const double k = std::round((p[a] - layer.origin[a]) * inv);
+        if (!(k <= static_cast<double>(kMaxAcquisitionCell))) return std::nullopt;
+        c[static_cast<std::size_t>(a)] = static_cast<std::int64_t>(k);
+      }
+      const Eigen::Vector3f centre = cell_centre(layer.origin, layer.step, c);
+      if (!((centre.cast<double>() - p).squaredNorm() <= b2)) {
+        miss = true;
+        break;
+      }
+      if (thin) decoded.insert(centre);
+      cells.push_back(c);
+      kept.push_back(i);
+    }
+    if (!miss) break;
+    layer.step *= 1.0 - 1e-3;
+  }
+
+  // Each point's kind from the times: equal, a return of the same pulse; else the pulses
+  // between, counted in the typical rise (the pulse period).
+  const bool timed = time.size() == input.size();
+  const double period = timed ? pulse_period(time, kept) : 0.0;
+  AcquisitionState state;
+  for (std::size_t j = 0; j < kept.size(); ++j) {
+    PulseKind kind = j == 0 ? PulseKind::kRestart : PulseKind::kNextPulse;
+    std::uint32_t skipped = 0;
+    if (j > 0 && period > 0.0) {
+      const double dt = time[kept[j]] - time[kept[j - 1]];
+      if (dt == 0.0) {
+        kind = PulseKind::kSamePulse;
+      } else if (!(dt > 0.0) || !(dt / period < kMaxSkippedPulses + 1.5)) {
+        kind = PulseKind::kRestart;
+      } else {
+        const auto pulses = static_cast<std::uint32_t>(std::lround(dt / period));
+        if (pulses >= 2) {
+          kind = PulseKind::kSkipped;
+          skipped = pulses - 1;
+        }
+      }
+    }
+    encode_point(enc, state, kind, skipped, cells[j]);
+  }
+  layer.stream = enc.finish();
+  return layer;
+}
+
+std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin, double step,
+                                                     std::uint64_t count, std::vector<Eigen::Vector3f>& out) {
+  AcquisitionState s;
+  for (std::uint64_t j = 0; j < count; ++j) {
+    const int kc = s.kind_ctx();
+    const unsigned high = dec.get(s.kind_high[static_cast<std::size_t>(kc)]) ? 1U : 0U;
+    const unsigned low = dec.get(s.kind_low[static_cast<std::size_t>(kc)][high]) ? 1U : 0U;
+    const auto kind = static_cast<PulseKind>(2U * high + low);
+    std::uint32_t skipped = 0;
+    if (kind == PulseKind::kSkipped) {
+      const std::int64_t g = s.gap_.get(dec, 0);
+      if (g < 0 || g >= static_cast<std::int64_t>(kMaxSkippedPulses))
+        return "point " + std::to_string(j) + " skips " + std::to_string(g + 1) + " pulses (1-16 allowed)";
+      skipped = static_cast<std::uint32_t>(g) + 1;
+    }
+    const Cell p = s.predict(kind, skipped);
+    const std::int64_t dz = s.z_.get(dec, s.z_ctx(kind));
+    const std::int64_t rx = s.x_.get(dec, s.xy_ctx(kind, dz, 0));
+    const std::int64_t ry = s.y_.get(dec, s.xy_ctx(kind, dz, 1));
+    const Cell c{p[0] + s.slope_shift(0, dz) + rx, p[1] + s.slope_shift(1, dz) + ry, p[2] + dz};
+    for (const std::int64_t v : c)
+      if (v < 0 || v > kMaxAcquisitionCell)
+        return "point " + std::to_string(j) + " decodes off the grid (cell " + std::to_string(v) + ")";
+    const Eigen::Vector3f pc = cell_centre(origin, step, c);
+    if (!pc.allFinite()) return "point " + std::to_string(j) + " decodes to a non-finite position";
+    out.push_back(pc);
+    s.update(kind, c, p, rx, ry);
+  }
+  return std::nullopt;
+}
+
+}  // namespace lex3d::residual::detail

@@ -1,0 +1,64 @@
+#pragma once
+// Acquisition-order coding of a residual layer (formats/model.md §2.11): the coded points
+// in the order the scanner recorded them (an airborne or mobile-mapping scanner's pulses,
+// as a LAS file stores them by GPS time), each predicted from the pulses before it. A
+// scanner's mirror sweeps its beam at a steady rate, so consecutive pulses land at nearly
+// equal steps along a scan line: the next pulse is the last one plus the step between the
+// two before, and a later return of the same pulse lies on its beam, which the points
+// coded so far give. The grid's coordinates are coded, not a sensor's spherical ones: no
+// sensor position is needed, which an airborne file (a moving platform) does not have.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "residual/range_coder.hpp"
+
+namespace lex3d::residual::detail {
+
+/// How a point follows the one coded before it (formats/model.md §2.11.2).
+enum class PulseKind : std::uint8_t {
+  kSamePulse = 0,  ///< a later return of the previous point's pulse: predicted at that point
+  kNextPulse = 1,  ///< the next pulse: the last pulse plus the step between the two before
+  kSkipped = 2,    ///< 1-16 pulses later (pulses without a return between): that many steps on
+  kRestart = 3,    ///< no step known (the first point, a new scan line or flight line)
+};
+/// Most pulses a kSkipped point steps over.
+constexpr std::uint32_t kMaxSkippedPulses = 16;
+/// Grid coordinates lie in [0, kMaxAcquisitionCell].
+constexpr std::int64_t kMaxAcquisitionCell = std::int64_t{1} << 30;
+
+/// An acquisition-order layer: its grid and the coded stream.
+struct AcquisitionLayer {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< the grid's corner, model frame, metres
+  double step = 0.0;                                 ///< cell width, metres
+  std::vector<std::uint8_t> stream;
+  std::vector<std::uint32_t> sources;  ///< the input point of each coded point, in order
+};
+
+/// Whether `time` (one a point) orders the points `coded` as a scanner fired them: at least
+/// nine in ten consecutive times rise or repeat, and one in ten rises.
+[[nodiscard]] bool acquisition_ordered(const std::vector<double>& time, const std::vector<std::uint32_t>& coded);
+
+/// Codes the input points `coded`, in their order, after what `enc` holds already (the keep
+/// mask): each to the centre of its cell in a grid of cells at most 2·bound/√3 wide (every
+/// decoded point within `bound` of its input point, as a float32 decoder computes it); with
+/// `thin`, a point within `bound` of a point decoded before it is left out. `time` (empty,
+/// or one a point) says which points are returns of one pulse and how many pulses lie
+/// between the others. nullopt when there is nothing to code or the grid would be wider
+/// than kMaxAcquisitionCell cells.
+[[nodiscard]] std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
+                                                                const std::vector<double>& time,
+                                                                const std::vector<std::uint32_t>& coded, double bound,
+                                                                bool thin);
+
+/// Decodes `count` points of an acquisition-order stream (after its keep mask) onto `out`.
+/// A message when the stream is malformed (a gap out of range, a point off the grid).
+[[nodiscard]] std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin,
+                                                                   double step, std::uint64_t count,
+                                                                   std::vector<Eigen::Vector3f>& out);
+
+}  // namespace lex3d::residual::detail
