@@ -179,7 +179,7 @@ bool info_lex3d_file(const InfoOptions& o) {
   std::uint64_t layer_bytes = 0;
   if (fi.kind == "model")
     for (const auto& c : fi.chunks)
-      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV" || c.type == "RESL") && c.crc_ok) {
+      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV" || c.type == "RESL" || c.type == "RESA") && c.crc_ok) {
         auto h = residual::read_layer_header(b.data() + c.offset + 12, static_cast<std::size_t>(c.length));
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
@@ -238,6 +238,11 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.end_array();
     }
     if (layer && layer->coding == 1) j.value("direction_cell_rad", layer->cell);
+    if (layer && layer->coding == 4) {
+      j.begin_array("grid_origin_m");
+      for (double c : layer->origin) j.value({}, c);
+      j.end_array();
+    }
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
     if (fi.kind == "model") {
@@ -280,6 +285,9 @@ bool info_lex3d_file(const InfoOptions& o) {
                     layer->step, layer->origin[0], layer->origin[1], layer->origin[2],
                     octree_contexts_name(layer->octree_contexts));
       if (layer && layer->coding == 1) std::printf("sweep          direction cell %.4g rad\n", layer->cell);
+      if (layer && layer->coding == 4)
+        std::printf("grid           from (%.4g, %.4g, %.4g) m, points in the order they were fired\n", layer->origin[0],
+                    layer->origin[1], layer->origin[2]);
     }
     if (translation_step)
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);

@@ -31,6 +31,15 @@ std::int64_t decay(std::int64_t s) { return s >= 0 ? s - (s >> 8) : s + ((-s) >>
 /// a / 2^16 rounded half away from zero (integers only, so every platform agrees).
 std::int64_t unfix(std::int64_t a) { return a >= 0 ? (a + 32768) >> kSlopeBits : -((-a + 32768) >> kSlopeBits); }
 
+/// a / b, b > 0, rounded half away from zero.
+std::int64_t divide(std::int64_t a, std::int64_t b) { return a >= 0 ? (a + b / 2) / b : -((-a + b / 2) / b); }
+
+/// Pulses the step to the next pulse is averaged over (formats/model.md §2.11.1): the
+/// step between two consecutive pulses carries the quantisation of both, over four the
+/// quarter of it. Measured on Autzen: 5.6 % fewer bits than the last step alone at
+/// 1.6 cm cells, 5.4 % at 20 cm (eight pulses: the same; sixteen: 3 %).
+constexpr int kStepPulses = 4;
+
 /// What encoder and decoder both keep (§2.11.2): the last point, the last two pulses, the
 /// kinds of the last two points, the classes of the last residuals and the beam's slope.
 class AcquisitionState {
@@ -38,14 +47,18 @@ class AcquisitionState {
   AcquisitionState() : z_(kKinds * 8), x_(kKinds * 64), y_(kKinds * 64), gap_(1) {}
 
   [[nodiscard]] Cell predict(PulseKind kind, std::uint32_t skipped) const {
-    Cell p{};
-    for (int a = 0; a < 3; ++a) {
-      const std::int64_t step = pulse1_[a] - pulse2_[a];
-      std::int64_t v = last_[a];
-      if (kind == PulseKind::kNextPulse) v = pulse1_[a] + step;
-      else if (kind == PulseKind::kSkipped) v = pulse1_[a] + static_cast<std::int64_t>(skipped + 1) * step;
-      p[a] = clamp(v, kMaxPrediction);
+    Cell p = last_;
+    if (kind == PulseKind::kNextPulse || kind == PulseKind::kSkipped) {
+      // The last pulse plus the mean step a pulse over up to kStepPulses pulses before it.
+      const int back = std::max(0, std::min(held_ - 1, kStepPulses));
+      const std::int64_t ahead = static_cast<std::int64_t>(skipped) + 1;
+      for (int a = 0; a < 3; ++a) {
+        const std::int64_t from = pulses_[0][a];
+        p[a] = back == 0 ? from
+                         : from + divide((from - pulses_[back][a]) * ahead, index_[0] - index_[back]);
+      }
     }
+    for (std::int64_t& v : p) v = clamp(v, kMaxPrediction);
     return p;
   }
   /// The x and y the beam's slope adds to a point whose z lies dz off its prediction.
@@ -57,8 +70,9 @@ class AcquisitionState {
   [[nodiscard]] int xy_ctx(PulseKind k, std::int64_t dz, int axis) const {
     return (static_cast<int>(k) * 8 + IntModel::context_of(dz)) * 8 + IntModel::context_of(last_xy_[axis]);
   }
-  /// After a point `c` of kind `k`, predicted at `p`, its x and y `rx`, `ry` off the slope's shift.
-  void update(PulseKind k, const Cell& c, const Cell& p, std::int64_t rx, std::int64_t ry) {
+  /// After a point `c` of kind `k` (`skipped` pulses skipped), predicted at `p`, its x and y
+  /// `rx`, `ry` off the slope's shift.
+  void update(PulseKind k, std::uint32_t skipped, const Cell& c, const Cell& p, std::int64_t rx, std::int64_t ry) {
     const std::int64_t dz = c[2] - p[2];
     if (k == PulseKind::kSamePulse || k == PulseKind::kNextPulse) {
       const std::int64_t z = clamp(dz, kSlopeClamp);
@@ -67,10 +81,19 @@ class AcquisitionState {
       for (int a = 0; a < 2; ++a)
         slope_[a] = sum_zz_ > 0 ? clamp(sum_[a] * (std::int64_t{1} << kSlopeBits) / sum_zz_, kMaxSlope) : 0;
     }
-    if (k == PulseKind::kRestart) pulse1_ = pulse2_ = c;
-    else if (k != PulseKind::kSamePulse) {
-      pulse2_ = pulse1_;
-      pulse1_ = c;
+    if (k == PulseKind::kRestart) {
+      held_ = 1;
+      pulses_[0] = c;
+      index_[0] = 0;
+    } else if (k != PulseKind::kSamePulse) {
+      const std::int64_t index = index_[0] + static_cast<std::int64_t>(skipped) + 1;
+      held_ = std::min(held_ + 1, kStepPulses + 1);
+      for (int j = held_ - 1; j > 0; --j) {
+        pulses_[static_cast<std::size_t>(j)] = pulses_[static_cast<std::size_t>(j - 1)];
+        index_[static_cast<std::size_t>(j)] = index_[static_cast<std::size_t>(j - 1)];
+      }
+      pulses_[0] = c;
+      index_[0] = index;
     }
     last_ = c;
     kind2_ = kind1_;
@@ -84,7 +107,12 @@ class AcquisitionState {
   IntModel z_, x_, y_, gap_;
 
  private:
-  Cell last_{}, pulse1_{}, pulse2_{};
+  Cell last_{};
+  /// The last pulses (their first points), latest first, and their pulse numbers since the
+  /// last restart; held_ of them are valid (0 before the first point).
+  std::array<Cell, kStepPulses + 1> pulses_{};
+  std::array<std::int64_t, kStepPulses + 1> index_{};
+  int held_ = 0;
   int kind1_ = 3, kind2_ = 3;
   std::int64_t last_dz_ = 0;
   std::array<std::int64_t, 2> last_xy_{};
@@ -106,7 +134,7 @@ void encode_point(RangeEncoder& enc, AcquisitionState& s, PulseKind kind, std::u
   const std::int64_t ry = c[1] - p[1] - s.slope_shift(1, dz);
   s.x_.put(enc, s.xy_ctx(kind, dz, 0), rx);
   s.y_.put(enc, s.xy_ctx(kind, dz, 1), ry);
-  s.update(kind, c, p, rx, ry);
+  s.update(kind, skipped, c, p, rx, ry);
 }
 
 Eigen::Vector3f cell_centre(const Eigen::Vector3d& origin, double step, const Cell& c) {
@@ -237,7 +265,7 @@ std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Ei
     const Eigen::Vector3f pc = cell_centre(origin, step, c);
     if (!pc.allFinite()) return "point " + std::to_string(j) + " decodes to a non-finite position";
     out.push_back(pc);
-    s.update(kind, c, p, rx, ry);
+    s.update(kind, skipped, c, p, rx, ry);
   }
   return std::nullopt;
 }

@@ -705,9 +705,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
   // The acquisition-order coding (§2.11) where the points come in the order they were
-  // fired (their times rise): an airborne or mobile-mapping scanner's file.
+  // fired (their times rise): an airborne or mobile-mapping scanner's file. Not beside a
+  // laser table read from the sensor, whose coding follows the firing order already (on
+  // the Ouster and Velodyne captures it won every turn).
   std::optional<detail::AcquisitionLayer> acquisition;
-  if (options.acquisition && input.has_time() && detail::acquisition_ordered(input.time, coded))
+  if (options.acquisition && !exact_table && input.has_time() && detail::acquisition_ordered(input.time, coded))
     acquisition = detail::acquisition_layer(head, input.points, input.time, coded, check_error, options.thin);
   const bool others = (!laser && !acquisition) || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
