@@ -148,6 +148,7 @@ void run_compress(const CompressOptions& o) {
                         : o.layer_coding == "voxel"   ? LayerCoding::kVoxel
                         : o.layer_coding == "laser"   ? LayerCoding::kLaser
                         : o.layer_coding == "acquisition" ? LayerCoding::kAcquisition
+                        : o.layer_coding == "lattice" ? LayerCoding::kLattice
                                                       : LayerCoding::kAuto;
   coding.quantization = o.quantization;
   coding.threads = mp.threads;
@@ -278,7 +279,8 @@ void run_compress(const CompressOptions& o) {
             .value("explained_points", coded.layer.explained_points)
             .value("coded_points", coded.layer.residual_points)
             .value("escaped_points", coded.layer.escaped_points)
-            .value("coding", coded.layer.acquisition ? "acquisition-order"
+            .value("coding", coded.layer.lattice ? "lattice"
+                             : coded.layer.acquisition ? "acquisition-order"
                              : coded.layer.laser   ? "sensor-geometry"
                              : coded.layer.voxel ? "voxel"
                              : coded.layer.sweep ? "sweep"
@@ -455,12 +457,13 @@ void register_compress(CLI::App& app) {
                 "those that would cost more than their neighbours)");
   sub->add_option("--layer-coding", o->layer_coding,
                   "Residual layer: try the sensor-centred spherical codings, the voxel (octree) coding and, where "
-                  "the scan's lasers and columns are known, the sensor-geometry coding, and where the points' "
-                  "times rise in their order (a LAS file's GPS times), the acquisition-order coding, and keep "
+                  "the scan's lasers and columns are known, the sensor-geometry coding, where the points' "
+                  "times rise in their order (a LAS file's GPS times), the acquisition-order coding, and where "
+                  "they lie on a square lattice in x and y (a gridded product), the lattice coding, and keep "
                   "the smallest (auto), or use only one kind; voxel needs no sensor pose and suits maps merged "
-                  "from many viewpoints; laser and acquisition fall back to spherical where the lasers or the "
-                  "times are unknown (formats/model.md §2.5-2.8, §2.11)")
-      ->check(CLI::IsMember({"auto", "spherical", "voxel", "laser", "acquisition"}))
+                  "from many viewpoints; laser, acquisition and lattice fall back to spherical where the "
+                  "lasers, the times or a lattice are not found (formats/model.md §2.5-2.8, §2.11, §2.12)")
+      ->check(CLI::IsMember({"auto", "spherical", "voxel", "laser", "acquisition", "lattice"}))
       ->capture_default_str();
   sub->add_option("--intensity-error", o->intensity_error,
                   "Largest intensity error kept in the model file, in the intensity's own units; 0 keeps the "

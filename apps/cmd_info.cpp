@@ -43,7 +43,7 @@ const char* range_predictor_name(std::uint32_t predictor) {
 }
 
 const char* layer_coding_name(std::uint32_t coding) {
-  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : coding == 4 ? "acquisition-order" : "previous-point";
+  return coding == 1 ? "sweep" : coding == 2 ? "voxel" : coding == 3 ? "sensor-geometry" : coding == 4 ? "acquisition-order" : coding == 5 ? "lattice" : "previous-point";
 }
 
 struct InfoOptions {
@@ -179,7 +179,7 @@ bool info_lex3d_file(const InfoOptions& o) {
   std::uint64_t layer_bytes = 0;
   if (fi.kind == "model")
     for (const auto& c : fi.chunks)
-      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV" || c.type == "RESL" || c.type == "RESA") && c.crc_ok) {
+      if ((c.type == "RESD" || c.type == "RESW" || c.type == "RESV" || c.type == "RESL" || c.type == "RESA" || c.type == "RESG") && c.crc_ok) {
         auto h = residual::read_layer_header(b.data() + c.offset + 12, static_cast<std::size_t>(c.length));
         if (h.ok()) layer = h.value();
         layer_bytes = c.length;
@@ -238,6 +238,13 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.end_array();
     }
     if (layer && layer->coding == 1) j.value("direction_cell_rad", layer->cell);
+    if (layer && layer->coding == 5) {
+      j.value("lattice_pitch_m", layer->pitch).value("lattice_columns", static_cast<std::uint64_t>(layer->columns))
+          .value("lattice_rows", static_cast<std::uint64_t>(layer->rows));
+      j.begin_array("lattice_origin_m");
+      for (double c : layer->origin) j.value({}, c);
+      j.end_array();
+    }
     if (layer && layer->coding == 4) {
       j.begin_array("grid_origin_m");
       for (double c : layer->origin) j.value({}, c);
@@ -285,6 +292,9 @@ bool info_lex3d_file(const InfoOptions& o) {
                     layer->step, layer->origin[0], layer->origin[1], layer->origin[2],
                     octree_contexts_name(layer->octree_contexts));
       if (layer && layer->coding == 1) std::printf("sweep          direction cell %.4g rad\n", layer->cell);
+      if (layer && layer->coding == 5)
+        std::printf("lattice        %u x %u cells of %.4g m from (%.4g, %.4g) m\n", layer->columns, layer->rows, layer->pitch,
+                    layer->origin[0], layer->origin[1]);
       if (layer && layer->coding == 4)
         std::printf("grid           from (%.4g, %.4g, %.4g) m, points in the order they were fired\n", layer->origin[0],
                     layer->origin[1], layer->origin[2]);

@@ -40,7 +40,9 @@ lex3d::LayerCoding layer_coding(const std::string& s) {
   if (s == "voxel") return lex3d::LayerCoding::kVoxel;
   if (s == "laser") return lex3d::LayerCoding::kLaser;
   if (s == "acquisition") return lex3d::LayerCoding::kAcquisition;
-  throw py::value_error("layer_coding must be 'auto', 'spherical', 'voxel', 'laser' or 'acquisition', got '" + s + "'");
+  if (s == "lattice") return lex3d::LayerCoding::kLattice;
+  throw py::value_error("layer_coding must be 'auto', 'spherical', 'voxel', 'laser', 'acquisition' or 'lattice', got '" + s +
+                        "'");
 }
 
 py::object compress(const py::object& points, const py::object& intensity, std::optional<double> max_error,
@@ -187,7 +189,7 @@ max_error: residual-layer bound in metres, [1e-4, 10]: every point has a decoded
     and vice versa. None: words only (an alphabet is learned on the scan), unless target_bpp.
 target_bpp: bits per point the file should fit; the smallest bound that fits is taken.
 words: None (off with a residual layer, on without), 'on', 'off' or 'auto' (the smaller file).
-layer_coding: 'auto', 'spherical', 'voxel', 'laser' or 'acquisition'.
+layer_coding: 'auto', 'spherical', 'voxel', 'laser', 'acquisition' or 'lattice'.
 keep_all_points: give every input point its own decoded point.
 alphabet: an alphabet file (bytes, from learn_alphabet) to reuse; the model then references it.
 word_radius: metres, 0 derives it from the scan. iterations, seed: the learner's.

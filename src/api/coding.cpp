@@ -57,6 +57,7 @@ residual::LayerOptions CodingOptions::layer_options() const {
   l.voxel = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kVoxel;
   l.laser = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kLaser;
   l.acquisition = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kAcquisition;
+  l.lattice = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kLattice;
   l.threads = threads;
   return l;
 }

@@ -35,7 +35,7 @@ constexpr std::size_t kMaxScanNameBytes = 255;  // sequence.md §2
 constexpr std::uint16_t kMajor = 1;
 constexpr std::uint16_t kMinor = 0;        // written for files without a residual layer
 /// The chunk of a residual layer by its coding (layer_coding), with the first minor
-/// version that has it: RESD 1.1, RESW 1.2, RESV 1.3, RESL 1.4, RESA 1.12.
+/// version that has it: RESD 1.1, RESW 1.2, RESV 1.3, RESL 1.4, RESA and RESG 1.12.
 struct LayerChunk {
   const char* type;
   std::uint16_t minor;
@@ -43,8 +43,8 @@ struct LayerChunk {
 };
 constexpr LayerChunk kLayerChunks[] = {
     {"RESD", 1, "previous-point"}, {"RESW", 2, "sweep"}, {"RESV", 3, "voxel"}, {"RESL", 4, "sensor-geometry"},
-    {"RESA", 12, "acquisition-order"}};
-constexpr std::uint32_t kLayerCodings = 5;
+    {"RESA", 12, "acquisition-order"}, {"RESG", 12, "lattice"}};
+constexpr std::uint32_t kLayerCodings = 6;
 /// A sensor-geometry layer whose range predictor is 2 or 3 (edge flags, model.md §2.8.2)
 /// and the first minor version that has it.
 constexpr std::uint16_t kLaserEdgeMinor = 7;
@@ -1110,7 +1110,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
   for (const LayerChunk& lc : kLayerChunks) {
     if (!has_chunk(d, bytes.size(), lc.type)) continue;
     if (layer_chunk != nullptr)
-      return ctx.error(std::string("a model file holds at most one of the chunks 'RESD', 'RESW', 'RESV', 'RESL' and 'RESA' ('") +
+      return ctx.error(std::string("a model file holds at most one of the chunks 'RESD', 'RESW', 'RESV', 'RESL', 'RESA' and 'RESG' ('") +
                            layer_chunk->type + "' and '" + lc.type + "' found)",
                        20);
     layer_chunk = &lc;
@@ -1133,7 +1133,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
   // INST: required before format 1.11, then only where there are instances; never
   // without an alphabet.
   const bool has_inst = !wordless && (h.minor < kNoInstancesMinor || has_chunk(d, bytes.size(), "INST"));
-  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", "RESA", kGeorType, kAttrType, "IEND"};
+  const std::vector<const char*> known = {"MHDR", "ALPH", "AREF", "INST", "RESD", "RESW", "RESV", "RESL", "RESA", "RESG", kGeorType, kAttrType, "IEND"};
   std::vector<const char*> sequence = {"MHDR"};
   if (!wordless) sequence.push_back(embedded ? "ALPH" : "AREF");
   if (has_inst) sequence.push_back("INST");
@@ -1194,7 +1194,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
       return ctx.error(std::string("chunk '") + layer_chunk->type + "' (the " + layer_chunk->coding +
                            " coding) holds a layer of the " +
                            kLayerChunks[coding].coding + " coding, which belongs in an '" +
-                           kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8, §2.11)",
+                           kLayerChunks[coding].type + "' chunk (formats/model.md §2.5-2.8, §2.11, §2.12)",
                        c.payload_offset);
     if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need) {
       const std::uint32_t field = ld_u32(out.residual->data() + kLaserPredictorOffset);

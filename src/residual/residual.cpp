@@ -31,6 +31,7 @@
 #include "codec/bytes.hpp"
 #include "residual/acquisition.hpp"
 #include "residual/laser.hpp"
+#include "residual/lattice.hpp"
 #include "residual/layer_lasers.hpp"
 #include "residual/point_ball_grid.hpp"
 #include "residual/range_coder.hpp"
@@ -62,6 +63,10 @@ constexpr std::uint64_t kVoxelExtraBytes = 28;  // origin 3 f64, depth u32, afte
 constexpr std::uint32_t kCodingLaser = 3;
 constexpr std::uint32_t kCodingAcquisition = 4;
 constexpr std::uint64_t kAcquisitionExtraBytes = 28;  // origin 3 f64, reserved u32, after the RESD header fields
+constexpr std::uint32_t kCodingLattice = 5;
+constexpr std::uint64_t kLatticeExtraBytes = 44;  // origin 3 f64, pitch f64, columns u32, rows u32, reserved u32
+/// A lattice layer has at most this many cells a coded point, and 64 more (formats/model.md §2.12).
+constexpr std::uint64_t kMaxLatticeCellsPerPoint = 4;
 /// Shares of 2E' the sensor-geometry coding tries for its range step (encoder only): the
 /// largest for a table that reproduces the points (read from a sensor's metadata), the
 /// smaller two for an estimated table, which leave room for corrections across the beams.
@@ -80,6 +85,7 @@ constexpr std::uint64_t extra_bytes(std::uint32_t coding) {
          : coding == kCodingVoxel ? kSweepPrefixBytes + kVoxelExtraBytes
          : coding == kCodingLaser ? kSweepPrefixBytes + detail::kLaserFieldBytes
          : coding == kCodingAcquisition ? kSweepPrefixBytes + kAcquisitionExtraBytes
+         : coding == kCodingLattice ? kSweepPrefixBytes + kLatticeExtraBytes
                                   : 0;
 }
 /// A voxel layer's origin lies within this many metres of the model frame's origin.
@@ -530,8 +536,8 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
   std::size_t at = 0;
   if (has_coding_field(payload, size)) {
     h.coding = codec::bytes::ld_u32(payload);
-    if (h.coding != kCodingSweep && h.coding != kCodingVoxel && h.coding != kCodingLaser && h.coding != kCodingAcquisition)
-      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1, 2, 3 or 4 expected)", 0);
+    if (h.coding < kCodingSweep || h.coding > kCodingLattice)
+      return bad_data("residual layer coding " + std::to_string(h.coding) + " is unknown (1-5 expected)", 0);
     at = kSweepPrefixBytes;
     h.head_pose = codec::bytes::ld_u32(payload + 4) == kSweepMarker;
     const std::uint64_t need = kHeadBytes + extra_bytes(h.coding) - (h.head_pose ? 0 : 96);
@@ -562,6 +568,13 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
     h.voxel_reserved = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
     h.stream_offset += kAcquisitionExtraBytes;
+  } else if (h.coding == kCodingLattice) {
+    for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
+    h.pitch = ld_f64(payload + at + kHeadBytes + 24);
+    h.columns = codec::bytes::ld_u32(payload + at + kHeadBytes + 32);
+    h.rows = codec::bytes::ld_u32(payload + at + kHeadBytes + 36);
+    h.voxel_reserved = codec::bytes::ld_u32(payload + at + kHeadBytes + 40);
+    h.stream_offset += kLatticeExtraBytes;
   } else if (h.coding == kCodingLaser) {
     h.tangential_step = ld_f64(payload + at + kHeadBytes);
     // after the step across the beams and the shift unit (f64 each), as laser_layer writes them
@@ -711,7 +724,13 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<detail::AcquisitionLayer> acquisition;
   if (options.acquisition && !exact_table && input.has_time() && detail::acquisition_ordered(input.time, coded))
     acquisition = detail::acquisition_layer(head, input.points, input.time, coded, check_error, options.thin);
-  const bool others = (!laser && !acquisition) || options.spherical || options.voxel;
+  // The lattice coding (§2.12) where the points gather at the points of a square lattice
+  // in x and y, one or a few a cell (a gridded product).
+  std::optional<detail::LatticeLayer> lattice;
+  if (options.lattice && !exact_table)
+    if (const auto found = detail::find_lattice(input.points, coded))
+      lattice = detail::lattice_layer(head, input.points, coded, *found, check_error);
+  const bool others = (!laser && !acquisition && !lattice) || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (others && !voxel) {
     const bool try_voxel = voxel_allowed && options.spherical;
@@ -875,7 +894,29 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                                : extra_bytes(sweep ? kCodingSweep : 0) + streams[best].size();
   const std::size_t laser_bytes =
       laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
-  if (acquisition && extra_bytes(kCodingAcquisition) + acquisition->stream.size() < std::min(others_bytes, laser_bytes)) {
+  const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + acquisition->stream.size()
+                                                    : std::numeric_limits<std::size_t>::max();
+  if (lattice && extra_bytes(kCodingLattice) + lattice->stream.size() < std::min({others_bytes, laser_bytes, acquisition_bytes})) {
+    std::vector<std::uint8_t> out;
+    out.reserve(kHeadBytes + extra_bytes(kCodingLattice) + lattice->stream.size());
+    codec::bytes::put_u32(out, kCodingLattice);
+    codec::bytes::put_u32(out, kSweepMarker);
+    put_f64(out, max_error);
+    put_f64(out, lattice->step);
+    put_u64(out, n_w);
+    put_u64(out, lattice->sources.size());
+    for (int a = 0; a < 3; ++a) put_f64(out, lattice->origin[a]);
+    put_f64(out, lattice->pitch);
+    codec::bytes::put_u32(out, lattice->columns);
+    codec::bytes::put_u32(out, lattice->rows);
+    codec::bytes::put_u32(out, 0);  // reserved
+    out.insert(out.end(), lattice->stream.begin(), lattice->stream.end());
+    fill_stats(lattice->sources.size(), 0, false, false, false, out.size());
+    if (stats) stats->lattice = true;
+    fill_sources(out, &lattice->sources);
+    return out;
+  }
+  if (acquisition && acquisition_bytes < std::min(others_bytes, laser_bytes)) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(kCodingAcquisition) + acquisition->stream.size());
     codec::bytes::put_u32(out, kCodingAcquisition);
@@ -967,6 +1008,7 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
   const bool sweep = h.coding == kCodingSweep;
   const bool laser = h.coding == kCodingLaser;
   const bool acquisition = h.coding == kCodingAcquisition;
+  const bool lattice = h.coding == kCodingLattice;
   const auto too_many = [&](std::uint64_t per_byte) {
     return n_c > max_points || n_c > per_byte * stream_bytes + 64;
   };
@@ -1034,6 +1076,29 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
       if (!c.allFinite()) return bad_data("residual layer voxel decodes to a non-finite position", h.stream_offset);
       out.points.push_back(c);
     }
+    return out;
+  }
+  if (lattice) {
+    const Eigen::Vector3d origin(h.origin[0], h.origin[1], h.origin[2]);
+    if (!(q >= 1e-7))
+      return bad_data("residual layer grid step " + std::to_string(q) + " m is below 1e-7 m", at + 8);
+    if (!origin.allFinite() || !(origin.cwiseAbs().maxCoeff() <= kMaxVoxelOrigin))
+      return bad_data("residual layer lattice origin is not finite or lies beyond 1e9 m", at + kHeadBytes);
+    if (!(h.pitch >= q && h.pitch <= 1e4))
+      return bad_data("residual layer lattice pitch " + std::to_string(h.pitch) + " m is not in [step, 1e4]",
+                      at + kHeadBytes + 24);
+    if (h.columns == 0 || h.rows == 0 ||
+        static_cast<std::uint64_t>(h.columns) * h.rows > kMaxLatticeCellsPerPoint * n_c + 64)
+      return bad_data("residual layer lattice of " + std::to_string(h.columns) + " x " + std::to_string(h.rows) +
+                          " cells is empty or has more than 4 a coded point",
+                      at + kHeadBytes + 32);
+    if (h.voxel_reserved != 0)
+      return bad_data("residual layer lattice reserved field is " + std::to_string(h.voxel_reserved) + ", not 0",
+                      at + kHeadBytes + 40);
+    if (auto e = detail::decode_lattice_points(dec, origin, h.pitch, q, h.columns, h.rows, n_c, out.points))
+      return bad_data("residual layer " + *e, h.stream_offset);
+    if (dec.overrun() > 8)
+      return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());
     return out;
   }
   if (acquisition) {

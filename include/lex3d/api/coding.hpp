@@ -38,6 +38,7 @@ enum class LayerCoding : std::uint8_t {
   kVoxel,      ///< the voxel (octree) coding only
   kLaser,      ///< the sensor-geometry coding (spherical where the lasers are unknown)
   kAcquisition,  ///< the acquisition-order coding (spherical where the points carry no rising times)
+  kLattice,      ///< the lattice coding (spherical where the points lie on no lattice)
 };
 
 /// How a scan is coded. Defaults: words only, no residual layer (as `lex3d compress`).

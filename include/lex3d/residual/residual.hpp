@@ -60,6 +60,10 @@ struct LayerOptions {
   /// where the points carry times that rise in their order (a LAS file's GPS times) and keep
   /// it when it codes smaller.
   bool acquisition = true;
+  /// Also try the lattice coding (formats/model.md §2.12: a file of format 1.12) where the
+  /// points gather one or a few a cell at the points of a square lattice in x and y (a
+  /// gridded product) and keep it when it codes smaller.
+  bool lattice = true;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
   /// Fill LayerStats::sources (the input point each decoded point stands for, which the
@@ -80,6 +84,7 @@ struct LayerStats {
   bool voxel = false;                  ///< coded with the voxel coding (an RESV chunk)
   bool laser = false;                  ///< coded with the sensor-geometry coding (an RESL chunk)
   bool acquisition = false;            ///< coded in acquisition order (an RESA chunk)
+  bool lattice = false;                ///< coded on a lattice (an RESG chunk)
   /// Where the laser table came from when the sensor-geometry coding was tried (empty
   /// when it was not), and the RMS distance of the points from their table's beams.
   std::string laser_table_source;
@@ -104,7 +109,7 @@ struct LayerHeader {
   double step = 0.0;               ///< q, metres
   std::uint64_t word_points = 0;   ///< reconstruction points the keep mask covers
   std::uint64_t coded_points = 0;  ///< points coded by the layer
-  std::uint32_t coding = 0;        ///< 0: previous-point (RESD); 1: sweep (RESW); 2: voxel (RESV); 3: sensor geometry (RESL); 4: acquisition order (RESA)
+  std::uint32_t coding = 0;        ///< 0: previous-point (RESD); 1: sweep (RESW); 2: voxel (RESV); 3: sensor geometry (RESL); 4: acquisition order (RESA); 5: lattice (RESG)
   double cell = 0.0;               ///< sweep coding: direction cell, radians
   std::array<double, 3> origin{};  ///< voxel and acquisition-order codings: the grid's corner, model frame, metres
   std::uint32_t depth = 0;         ///< voxel coding: octree levels
@@ -112,7 +117,9 @@ struct LayerHeader {
   std::uint32_t voxel_reserved = 0;   ///< voxel coding: the reserved u16 after depth and contexts; acquisition-order coding: its reserved u32 (0)
   double tangential_step = 0.0;    ///< sensor-geometry coding: step across the beams, metres
   std::uint32_t lasers = 0;        ///< sensor-geometry coding: lasers of the table
-  std::uint32_t columns = 0;       ///< sensor-geometry coding: columns a turn
+  std::uint32_t columns = 0;       ///< sensor-geometry coding: columns a turn; lattice coding: the lattice's columns
+  std::uint32_t rows = 0;          ///< lattice coding: the lattice's rows
+  double pitch = 0.0;              ///< lattice coding: the lattice's pitch, metres
   std::uint32_t predictor = 0;     ///< sensor-geometry coding: range predictor 0-5 (formats/model.md §2.8.2, §2.8.4)
   bool table_predictors = false;   ///< sensor-geometry coding: the laser table's fields each against its own predictor (format 1.11)
   bool head_pose = true;           ///< sensor-geometry coding: T_sensor_head stored (marker 0xFFFFFFFF), else the identity (0xFFFFFFFE, format 1.11)

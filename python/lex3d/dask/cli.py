@@ -58,7 +58,7 @@ def _parser():
                         "or the bound --target-bpp finds; none: words alone")
     c.add_argument("--target-bpp", type=float, help="bits a point each file should fit")
     c.add_argument("--words", choices=["on", "off", "auto"])
-    c.add_argument("--layer-coding", choices=["auto", "spherical", "voxel", "laser", "acquisition"], default="auto")
+    c.add_argument("--layer-coding", choices=["auto", "spherical", "voxel", "laser", "acquisition", "lattice"], default="auto")
     c.add_argument("--keep-all-points", action="store_true")
     c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
     c.add_argument("--manifest", help="default OUT.manifest.jsonl")

@@ -1,0 +1,298 @@
+// The lattice coding of the residual layer (formats/model.md §2.12): gridded points (one
+// or a few a cell of a square lattice, each near its lattice point), synthetic and a real
+// Geiger-mode airborne product; how the lattice is found, the bound, the encoder's choice,
+// the model files and the decoder on corrupt payloads.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "lex3d/codec/codec.hpp"
+#include "lex3d/eval/metrics.hpp"
+#include "lex3d/residual/residual.hpp"
+#include "residual/lattice.hpp"
+#include "residual/residual_test_util.hpp"
+#include "support/model_support.hpp"
+#include "support/test_support.hpp"
+
+namespace lex3d {
+namespace {
+
+using Bytes = std::vector<std::uint8_t>;
+using namespace residual_test;  // NOLINT: the shared helpers of the layer's tests
+
+/// A gridded product: a lattice of `pitch` from (13.3, −7.9), the cells of a disc of 40
+/// pitches' radius, seven in ten of them holding a point `jitter` (σ a side) off its
+/// lattice point and one in twenty a second point; the heights follow rolling ground with
+/// 3 cm of noise and a few roofs. Sorted by row, as such products are.
+Cloud gridded(double pitch, double jitter, std::uint32_t seed = 4) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> offset(0.0, jitter), noise(0.0, 0.03);
+  Cloud c;
+  for (int j = -40; j <= 40; ++j)
+    for (int i = -40; i <= 40; ++i) {
+      if (i * i + j * j > 1600 || u(rng) > 0.7) continue;
+      const int points = u(rng) < 0.05 ? 2 : 1;
+      for (int k = 0; k < points; ++k) {
+        const double x = 13.3 + i * pitch + offset(rng), y = -7.9 + j * pitch + offset(rng);
+        double z = 100.0 + 2.0 * std::sin(x / 9.0) + 1.5 * std::cos(y / 13.0) + noise(rng);
+        if (std::abs(x - 20.0) < 6.0 && std::abs(y) < 5.0) z += 6.0;
+        c.points.emplace_back(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+      }
+    }
+  return c;
+}
+
+std::vector<std::uint32_t> all_of(const Cloud& c) {
+  std::vector<std::uint32_t> v(c.size());
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<std::uint32_t>(i);
+  return v;
+}
+
+double hausdorff(const Cloud& a, const Cloud& b) { return eval::compare_clouds(a, b).hausdorff; }
+
+residual::LayerOptions only_lattice() {
+  residual::LayerOptions o;
+  o.spherical = false;
+  o.voxel = false;
+  o.laser = false;
+  o.acquisition = false;
+  return o;
+}
+
+TEST(ResidualLattice, FindsThePitchAndPhase) {
+  for (const double pitch : {0.5, 1.0, 2.5}) {
+    for (const double jitter : {0.0, 0.1}) {
+      const Cloud c = gridded(pitch, jitter * pitch);
+      const auto l = residual::detail::find_lattice(c.points, all_of(c));
+      ASSERT_TRUE(l.has_value()) << pitch << " " << jitter;
+      EXPECT_NEAR(l->pitch, pitch, 2e-4 * pitch) << jitter;
+      // the phase: a lattice point at (13.3, -7.9), up to whole pitches
+      for (int a = 0; a < 2; ++a) {
+        const double at = a == 0 ? 13.3 : -7.9;
+        const double off = std::remainder(l->origin[a] - at, l->pitch);
+        EXPECT_LT(std::abs(off), 0.02 * pitch) << pitch << " " << jitter << " axis " << a;
+      }
+      if (jitter == 0.0) EXPECT_GT(l->concentration, 0.999);
+    }
+  }
+  // Points without a lattice: uniform at random, and a lattice turned by 30 degrees.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0.0, 80.0);
+  Cloud random;
+  for (int k = 0; k < 5000; ++k)
+    random.points.emplace_back(static_cast<float>(u(rng)), static_cast<float>(u(rng)), 1.0F);
+  EXPECT_FALSE(residual::detail::find_lattice(random.points, all_of(random)).has_value());
+  Cloud turned = gridded(1.0, 0.0);
+  const double ca = std::cos(M_PI / 6.0), sa = std::sin(M_PI / 6.0);
+  for (auto& p : turned.points)
+    p = Eigen::Vector3f(static_cast<float>(ca * p.x() - sa * p.y()), static_cast<float>(sa * p.x() + ca * p.y()), p.z());
+  EXPECT_FALSE(residual::detail::find_lattice(turned.points, all_of(turned)).has_value());
+}
+
+TEST(ResidualLattice, GriddedPointsTakeItAndKeepTheBound) {
+  const Cloud c = gridded(1.0, 0.08);
+  ASSERT_GT(c.size(), 3000U);
+  for (const double e : {0.014, 0.05, 0.2}) {
+    residual::LayerStats st, voxel_st;
+    const Bytes layer = residual::encode_layer(c, Cloud{}, Pose::Identity(), e, &st);
+    EXPECT_TRUE(st.lattice) << e;
+    EXPECT_EQ(codec::layer_coding(layer), 5U) << e;
+    EXPECT_EQ(st.residual_points, c.size()) << "every point has its own decoded point";
+    residual::LayerOptions voxel_only = only_lattice();
+    voxel_only.lattice = false;
+    voxel_only.voxel = true;
+    const Bytes voxel = residual::encode_layer(c, Cloud{}, Pose::Identity(), e, &voxel_st, voxel_only);
+    ASSERT_TRUE(voxel_st.voxel);
+    EXPECT_LT(static_cast<double>(layer.size()), 0.9 * static_cast<double>(voxel.size())) << e;
+    const auto d = residual::decode_layer(layer, Cloud{}, Pose::Identity(), c.size());
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    EXPECT_EQ(d.value().size(), c.size());
+    EXPECT_LE(hausdorff(c, d.value()), e) << e;
+    EXPECT_LE(hausdorff(d.value(), c), e) << e;
+    EXPECT_EQ(layer, residual::encode_layer(c, Cloud{}, Pose::Identity(), e, nullptr)) << "deterministic";
+  }
+  // An exact lattice (a surface model exported as points): the offsets cost next to nothing.
+  const Cloud exact = gridded(1.0, 0.0);
+  residual::LayerStats st;
+  const Bytes layer = residual::encode_layer(exact, Cloud{}, Pose::Identity(), 0.014, &st);
+  ASSERT_TRUE(st.lattice);
+  const Bytes jittered = residual::encode_layer(c, Cloud{}, Pose::Identity(), 0.014, nullptr);
+  EXPECT_LT(static_cast<double>(layer.size()), 0.6 * static_cast<double>(jittered.size()));
+  const auto d = residual::decode_layer(layer, Cloud{}, Pose::Identity(), exact.size());
+  ASSERT_TRUE(d.ok());
+  EXPECT_LE(hausdorff(exact, d.value()), 0.014);
+  EXPECT_LE(hausdorff(d.value(), exact), 0.014);
+}
+
+TEST(ResidualLattice, SourcesFollowTheCells) {
+  // The decoded points come cell by cell; each stands for its own input point (the
+  // attributes follow it), within the bound.
+  const Cloud c = gridded(1.0, 0.08);
+  residual::LayerOptions o = only_lattice();
+  o.track_sources = true;
+  residual::LayerStats st;
+  const double e = 0.01;
+  const Bytes layer = residual::encode_layer(c, Cloud{}, Pose::Identity(), e, &st, o);
+  ASSERT_TRUE(st.lattice);
+  const auto d = residual::decode_layer(layer, Cloud{}, Pose::Identity(), c.size());
+  ASSERT_TRUE(d.ok());
+  ASSERT_EQ(st.sources.size(), c.size());
+  std::vector<int> seen(c.size(), 0);
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    ++seen[st.sources[k]];
+    EXPECT_LE((d.value().points[k] - c.points[st.sources[k]]).cast<double>().norm(), e) << k;
+  }
+  EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](int s) { return s == 1; }));
+}
+
+TEST(ResidualLattice, ModelFileVersionRules) {
+  const Cloud c = gridded(1.0, 0.08);
+  codec::ModelData d;
+  d.input_points = c.size();
+  test::add_empty_word_instance(d);  // (a model with instances keeps the version its layer needs)
+  const residual::LayerStats st = residual::add_layer(d, *d.alphabet, c, 0.02);
+  ASSERT_TRUE(st.lattice);
+  const Bytes file = codec::encode_model(d);
+  EXPECT_EQ(file[10], 12) << "a lattice layer makes the file format 1.12";
+  ASSERT_TRUE(codec::decode_model(file).ok());
+  expect_rejected(retype_chunk(file, "RESG", "RESG", 11), "1.12");
+  expect_rejected(retype_chunk(file, "RESG", "RESA", 12), "lattice");
+  const auto info = codec::inspect(file);
+  ASSERT_TRUE(info.ok());
+  std::string types;
+  for (const auto& k : info.value().chunks) types += k.type + " ";
+  EXPECT_EQ(types, "MHDR ALPH INST RESG IEND ");
+}
+
+TEST(ResidualLattice, CorruptPayloadsAreRejectedOrDecodeBounded) {
+  const Cloud c = gridded(1.0, 0.08);
+  const Bytes good = residual::encode_layer(c, Cloud{}, Pose::Identity(), 0.01, nullptr, only_lattice());
+  ASSERT_EQ(codec::layer_coding(good), 5U);
+  const std::uint64_t n = residual::read_layer_header(good.data(), good.size()).value().coded_points;
+  const auto decode = [&](const Bytes& b) { return residual::decode_layer(b, Cloud{}, Pose::Identity(), c.size()); };
+  for (std::size_t k = 0; k < good.size(); k += (k < 100 ? 1 : 53)) {
+    const auto d = decode(Bytes(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(k)));
+    if (k < 84) EXPECT_FALSE(d.ok()) << k;
+    if (d.ok()) EXPECT_EQ(d.value().size(), n) << k;
+  }
+  auto poke_f64 = [](Bytes b, std::size_t at, double v) {
+    std::uint64_t w = 0;
+    std::memcpy(&w, &v, 8);
+    for (int i = 0; i < 8; ++i) b[at + i] = static_cast<std::uint8_t>(w >> (8 * i));
+    return b;
+  };
+  auto poke_u32 = [](Bytes b, std::size_t at, std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
+    return b;
+  };
+  for (const double step : {0.0, -0.01, 0.1, std::nan("")}) EXPECT_FALSE(decode(poke_f64(good, 16, step)).ok()) << step;
+  for (const double o : {std::nan(""), 1e10, -std::numeric_limits<double>::infinity()})
+    for (const std::size_t at : {40U, 48U, 56U}) EXPECT_FALSE(decode(poke_f64(good, at, o)).ok()) << o;
+  for (const double pitch : {0.0, 0.001, 2e4, std::nan("")}) EXPECT_FALSE(decode(poke_f64(good, 64, pitch)).ok()) << pitch;
+  for (const std::uint32_t cells : {0U, 0xFFFFFFFFU, 100000U}) {
+    EXPECT_FALSE(decode(poke_u32(good, 72, cells)).ok()) << cells;
+    EXPECT_FALSE(decode(poke_u32(good, 76, cells)).ok()) << cells;
+  }
+  EXPECT_FALSE(decode(poke_u32(good, 80, 1)).ok()) << "reserved field";
+  Bytes fewer = good;
+  const std::uint64_t less = n - 5;
+  for (int i = 0; i < 8; ++i) fewer[32 + i] = static_cast<std::uint8_t>(less >> (8 * i));
+  EXPECT_FALSE(decode(fewer).ok()) << "more points in the cells than the header states";
+  for (std::size_t at = 84; at < good.size(); at += 29) {
+    Bytes b = good;
+    b[at] ^= 0x5A;
+    const auto d = decode(b);
+    if (d.ok()) EXPECT_EQ(d.value().size(), n);
+  }
+}
+
+TEST(ResidualLattice, RealGriddedAirborneLas) {
+  // hexbin (a Geiger-mode product: one point per cell of a 1 m lattice, 10 cm off it): the
+  // lattice codes it smaller than the octree at 14 mm, the bound holds.
+  LEX3D_REQUIRE_SHARED("las/hexbin-crop.las");
+  const Cloud las = test::load_or_fail(test::shared_data("las/hexbin-crop.las"));
+  ASSERT_EQ(las.size(), 38367U);
+  const double e = 0.014;
+  residual::LayerStats st, voxel_st;
+  const Bytes layer = residual::encode_layer(las, Cloud{}, las.T_cloud_sensor, e, &st);
+  EXPECT_TRUE(st.lattice);
+  residual::LayerOptions voxel_only = only_lattice();
+  voxel_only.lattice = false;
+  voxel_only.voxel = true;
+  const Bytes voxel = residual::encode_layer(las, Cloud{}, las.T_cloud_sensor, e, &voxel_st, voxel_only);
+  ASSERT_TRUE(voxel_st.voxel);
+  // Measured: 15.8 against 18.4 bits a point.
+  EXPECT_LT(static_cast<double>(layer.size()), 0.9 * static_cast<double>(voxel.size()));
+  const auto d = residual::decode_layer(layer, Cloud{}, las.T_cloud_sensor, las.size());
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_LE(hausdorff(las, d.value()), e);
+  EXPECT_LE(hausdorff(d.value(), las), e);
+}
+
+// Golden file of format 1.12: decoded forever, the decoded cloud recorded bit for bit.
+constexpr double kGoldenMaxError = 0.01;
+
+Cloud golden_input() {
+  Cloud c = gridded(0.8, 0.06, 21);
+  c.points.resize(c.size() / 5);  // the first rows
+  return c;
+}
+
+TEST(ResidualLattice, DISABLED_WriteGoldenFile) {
+  const Cloud input = golden_input();
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError);
+  ASSERT_TRUE(st.lattice);
+  const Bytes file = codec::encode_model(d);
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok());
+  const auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok());
+  std::FILE* f = std::fopen(golden_path("tiny_residual_lattice_1.12.lex3dm").c_str(), "wb");
+  ASSERT_NE(f, nullptr);
+  std::fwrite(file.data(), 1, file.size(), f);
+  std::fclose(f);
+  write_xyz(golden_path("tiny_residual_lattice_1.12.input.xyz"), input);
+  write_xyz(golden_path("tiny_residual_lattice_1.12.decoded.xyz"), cloud.value());
+}
+
+TEST(ResidualLattice, Format1_12FileDecodesToTheRecordedCloudAndIsWrittenAgain) {
+  const Bytes file = read_bytes(golden_path("tiny_residual_lattice_1.12.lex3dm"));
+  const Cloud input = read_xyz(golden_path("tiny_residual_lattice_1.12.input.xyz"));
+  const Cloud recorded = read_xyz(golden_path("tiny_residual_lattice_1.12.decoded.xyz"));
+  ASSERT_FALSE(file.empty());
+  ASSERT_FALSE(recorded.empty());
+  const auto d = codec::decode_model(file);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_EQ(d.value().input_points, input.size());
+  const auto cloud = residual::decode_cloud(d.value());
+  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
+  ASSERT_EQ(cloud.value().size(), recorded.size());
+  for (std::size_t i = 0; i < recorded.size(); ++i) EXPECT_TRUE(cloud.value().points[i] == recorded.points[i]) << i;
+  EXPECT_LE(hausdorff(input, cloud.value()), kGoldenMaxError);
+  EXPECT_LE(hausdorff(cloud.value(), input), kGoldenMaxError);
+  const auto info = codec::inspect(file);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info.value().minor, 12);
+  std::string types;
+  for (const auto& c : info.value().chunks) types += c.type + " ";
+  EXPECT_EQ(types, "MHDR RESG IEND ");
+  // This writer still writes the recorded input's file byte for byte.
+  codec::ModelData w;
+  w.input_points = input.size();
+  w.alphabet = Alphabet{};
+  residual::add_layer(w, Alphabet{}, input, kGoldenMaxError);
+  EXPECT_EQ(codec::encode_model(w), file);
+}
+
+}  // namespace
+}  // namespace lex3d
