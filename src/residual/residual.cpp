@@ -896,43 +896,42 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
   const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + acquisition->stream.size()
                                                     : std::numeric_limits<std::size_t>::max();
-  if (lattice && extra_bytes(kCodingLattice) + lattice->stream.size() < std::min({others_bytes, laser_bytes, acquisition_bytes})) {
+  // A payload of the codings on a grid from an origin (§2.11, §2.12): the coding and marker,
+  // the fields every coding has, the origin, `fields` (the coding's own), the stream; its
+  // coded points each stand for their own input point, `sources`.
+  const auto grid_payload = [&](std::uint32_t coding, double step, const Eigen::Vector3d& origin,
+                                const std::vector<std::uint32_t>& sources, const std::vector<std::uint8_t>& stream,
+                                const auto& fields) {
     std::vector<std::uint8_t> out;
-    out.reserve(kHeadBytes + extra_bytes(kCodingLattice) + lattice->stream.size());
-    codec::bytes::put_u32(out, kCodingLattice);
+    out.reserve(kHeadBytes + extra_bytes(coding) + stream.size());
+    codec::bytes::put_u32(out, coding);
     codec::bytes::put_u32(out, kSweepMarker);
     put_f64(out, max_error);
-    put_f64(out, lattice->step);
+    put_f64(out, step);
     put_u64(out, n_w);
-    put_u64(out, lattice->sources.size());
-    for (int a = 0; a < 3; ++a) put_f64(out, lattice->origin[a]);
-    put_f64(out, lattice->pitch);
-    codec::bytes::put_u32(out, lattice->columns);
-    codec::bytes::put_u32(out, lattice->rows);
+    put_u64(out, sources.size());
+    for (int a = 0; a < 3; ++a) put_f64(out, origin[a]);
+    fields(out);
     codec::bytes::put_u32(out, 0);  // reserved
-    out.insert(out.end(), lattice->stream.begin(), lattice->stream.end());
-    fill_stats(lattice->sources.size(), 0, false, false, false, out.size());
-    if (stats) stats->lattice = true;
-    fill_sources(out, &lattice->sources);
+    out.insert(out.end(), stream.begin(), stream.end());
+    fill_stats(sources.size(), 0, false, false, false, out.size());
+    if (stats) {
+      stats->lattice = coding == kCodingLattice;
+      stats->acquisition = coding == kCodingAcquisition;
+    }
+    fill_sources(out, &sources);
     return out;
-  }
-  if (acquisition && acquisition_bytes < std::min(others_bytes, laser_bytes)) {
-    std::vector<std::uint8_t> out;
-    out.reserve(kHeadBytes + extra_bytes(kCodingAcquisition) + acquisition->stream.size());
-    codec::bytes::put_u32(out, kCodingAcquisition);
-    codec::bytes::put_u32(out, kSweepMarker);
-    put_f64(out, max_error);
-    put_f64(out, acquisition->step);
-    put_u64(out, n_w);
-    put_u64(out, acquisition->sources.size());
-    for (int a = 0; a < 3; ++a) put_f64(out, acquisition->origin[a]);
-    codec::bytes::put_u32(out, 0);  // reserved
-    out.insert(out.end(), acquisition->stream.begin(), acquisition->stream.end());
-    fill_stats(acquisition->sources.size(), 0, false, false, false, out.size());
-    if (stats) stats->acquisition = true;
-    fill_sources(out, &acquisition->sources);
-    return out;
-  }
+  };
+  if (lattice && extra_bytes(kCodingLattice) + lattice->stream.size() < std::min({others_bytes, laser_bytes, acquisition_bytes}))
+    return grid_payload(kCodingLattice, lattice->step, lattice->origin, lattice->sources, lattice->stream,
+                        [&](std::vector<std::uint8_t>& out) {
+                          put_f64(out, lattice->pitch);
+                          codec::bytes::put_u32(out, lattice->columns);
+                          codec::bytes::put_u32(out, lattice->rows);
+                        });
+  if (acquisition && acquisition_bytes < std::min(others_bytes, laser_bytes))
+    return grid_payload(kCodingAcquisition, acquisition->step, acquisition->origin, acquisition->sources,
+                        acquisition->stream, [](std::vector<std::uint8_t>&) {});
   if (laser && laser_bytes < others_bytes) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(kCodingLaser) + laser->stream.size());
@@ -1078,40 +1077,31 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
     }
     return out;
   }
-  if (lattice) {
+  if (lattice || acquisition) {
+    // The codings on a grid from an origin (§2.11, §2.12): the step, the origin, the reserved field.
     const Eigen::Vector3d origin(h.origin[0], h.origin[1], h.origin[2]);
-    if (!(q >= 1e-7))
-      return bad_data("residual layer grid step " + std::to_string(q) + " m is below 1e-7 m", at + 8);
-    if (!origin.allFinite() || !(origin.cwiseAbs().maxCoeff() <= kMaxVoxelOrigin))
-      return bad_data("residual layer lattice origin is not finite or lies beyond 1e9 m", at + kHeadBytes);
-    if (!(h.pitch >= q && h.pitch <= 1e4))
-      return bad_data("residual layer lattice pitch " + std::to_string(h.pitch) + " m is not in [step, 1e4]",
-                      at + kHeadBytes + 24);
-    if (h.columns == 0 || h.rows == 0 ||
-        static_cast<std::uint64_t>(h.columns) * h.rows > kMaxLatticeCellsPerPoint * n_c + 64)
-      return bad_data("residual layer lattice of " + std::to_string(h.columns) + " x " + std::to_string(h.rows) +
-                          " cells is empty or has more than 4 a coded point",
-                      at + kHeadBytes + 32);
-    if (h.voxel_reserved != 0)
-      return bad_data("residual layer lattice reserved field is " + std::to_string(h.voxel_reserved) + ", not 0",
-                      at + kHeadBytes + 40);
-    if (auto e = detail::decode_lattice_points(dec, origin, h.pitch, q, h.columns, h.rows, n_c, out.points))
-      return bad_data("residual layer " + *e, h.stream_offset);
-    if (dec.overrun() > 8)
-      return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());
-    return out;
-  }
-  if (acquisition) {
-    const Eigen::Vector3d origin(h.origin[0], h.origin[1], h.origin[2]);
+    const std::uint64_t reserved_at = at + kHeadBytes + (lattice ? 40 : 24);
     if (!(q >= 1e-7))
       return bad_data("residual layer grid step " + std::to_string(q) + " m is below 1e-7 m", at + 8);
     if (!origin.allFinite() || !(origin.cwiseAbs().maxCoeff() <= kMaxVoxelOrigin))
       return bad_data("residual layer grid origin is not finite or lies beyond 1e9 m", at + kHeadBytes);
     if (h.voxel_reserved != 0)
-      return bad_data("residual layer acquisition-order reserved field is " + std::to_string(h.voxel_reserved) + ", not 0",
-                      at + kHeadBytes + 24);
-    if (auto e = detail::decode_acquisition_points(dec, origin, q, n_c, out.points))
-      return bad_data("residual layer " + *e, h.stream_offset);
+      return bad_data("residual layer reserved field is " + std::to_string(h.voxel_reserved) + ", not 0", reserved_at);
+    std::optional<std::string> e;
+    if (lattice) {
+      if (!(h.pitch >= q && h.pitch <= 1e4))
+        return bad_data("residual layer lattice pitch " + std::to_string(h.pitch) + " m is not in [step, 1e4]",
+                        at + kHeadBytes + 24);
+      if (h.columns == 0 || h.rows == 0 ||
+          static_cast<std::uint64_t>(h.columns) * h.rows > kMaxLatticeCellsPerPoint * n_c + 64)
+        return bad_data("residual layer lattice of " + std::to_string(h.columns) + " x " + std::to_string(h.rows) +
+                            " cells is empty or has more than 4 a coded point",
+                        at + kHeadBytes + 32);
+      e = detail::decode_lattice_points(dec, origin, h.pitch, q, h.columns, h.rows, n_c, out.points);
+    } else {
+      e = detail::decode_acquisition_points(dec, origin, q, n_c, out.points);
+    }
+    if (e) return bad_data("residual layer " + *e, h.stream_offset);
     if (dec.overrun() > 8)
       return bad_data("residual layer stream ends " + std::to_string(dec.overrun()) + " bytes early", payload.size());
     return out;

@@ -824,43 +824,15 @@ constexpr std::size_t kVoxelGoldenPoints = 2880;  // the input points of tiny_re
 /// Writes `d` (with its layer) as golden file `stem`.lex3dm, with the input and the
 /// decoded cloud as `stem`.input.xyz / .decoded.xyz.
 void write_golden(const std::string& stem, const codec::ModelData& d, const Cloud& input) {
-  const Bytes file = codec::encode_model(d);
-  const auto decoded = codec::decode_model(file);
-  ASSERT_TRUE(decoded.ok());
-  const auto cloud = residual::decode_cloud(decoded.value());
-  ASSERT_TRUE(cloud.ok());
-  std::ofstream out(golden_path(stem + ".lex3dm"), std::ios::binary);
-  out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
-  ASSERT_TRUE(out.good());
-  write_xyz(golden_path(stem + ".input.xyz"), input);
-  write_xyz(golden_path(stem + ".decoded.xyz"), cloud.value());
+  write_golden_files(stem, codec::encode_model(d), input);
 }
 
 /// Decodes golden file `stem` and checks it against its recorded clouds: the same points
 /// bit for bit, the bound both ways, the minor version and the chunk sequence.
 void check_golden(const std::string& stem, std::size_t input_points, int minor, const std::string& chunk_types) {
-  const Bytes file = read_bytes(golden_path(stem + ".lex3dm"));
   const Cloud input = read_xyz(golden_path(stem + ".input.xyz"));
-  const Cloud recorded = read_xyz(golden_path(stem + ".decoded.xyz"));
-  ASSERT_FALSE(file.empty());
   ASSERT_EQ(input.size(), input_points);
-  ASSERT_FALSE(recorded.empty());
-  const auto d = codec::decode_model(file);
-  ASSERT_TRUE(d.ok()) << d.status().to_string();
-  EXPECT_EQ(d.value().input_points, input_points);
-  ASSERT_TRUE(d.value().residual.has_value());
-  const auto cloud = residual::decode_cloud(d.value());
-  ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
-  ASSERT_EQ(cloud.value().size(), recorded.size());
-  for (std::size_t i = 0; i < recorded.size(); ++i) EXPECT_TRUE(cloud.value().points[i] == recorded.points[i]) << i;
-  EXPECT_LE(hausdorff(input, cloud.value()), kGoldenMaxError);
-  EXPECT_LE(hausdorff(cloud.value(), input), kGoldenMaxError);
-  const auto info = codec::inspect(file);
-  ASSERT_TRUE(info.ok());
-  EXPECT_EQ(info.value().minor, minor);
-  std::string types;
-  for (const auto& c : info.value().chunks) types += c.type + " ";
-  EXPECT_EQ(types, chunk_types);
+  expect_golden(stem, input, kGoldenMaxError, minor, chunk_types);
 }
 
 // Files of an existing format version must never change: add new ones instead.
