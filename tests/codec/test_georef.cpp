@@ -22,7 +22,10 @@ namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Georeference sample_georef() {
+/// A georeference with two CRS records. Their bytes are `deflatable` (a WKT string, as LAS
+/// files carry, which the writer deflates: format 1.12) or not (a third record of
+/// pseudo-random bytes, which deflate cannot shrink: the records stay raw, format 1.5).
+Georeference sample_georef(bool deflatable = false) {
   Georeference g;
   g.origin = Eigen::Vector3d(194032.632, 258842.256, 141.1224);
   g.unit_m = 0.3048;
@@ -47,14 +50,39 @@ Georeference sample_georef() {
   r.extended = true;
   r.data = {1, 0, 1, 0, 0, 0, 0, 0};
   g.crs_records.push_back(r);
+  if (deflatable) {
+    const std::string wkt =
+        "PROJCS[\"NAD83(HARN) / Oregon GIC Lambert (ft)\",GEOGCS[\"NAD83(HARN)\",DATUM[\"NAD83_High_Accuracy_"
+        "Reference_Network\",SPHEROID[\"GRS 1980\",6378137,298.257222101]],PRIMEM[\"Greenwich\",0],UNIT[\"degree\","
+        "0.0174532925199433]],PROJECTION[\"Lambert_Conformal_Conic_2SP\"],UNIT[\"foot\",0.3048]]";
+    g.crs_records[0].data.assign(wkt.begin(), wkt.end());
+  } else {
+    // every byte of the records pseudo-random (never NUL), their names to full length
+    std::uint32_t x = 12345;
+    const auto next = [&x] {
+      x = x * 1664525U + 1013904223U;
+      return static_cast<char>(1 + (x >> 24) % 255);
+    };
+    r.record_id = 7;
+    r.extended = false;
+    r.data.resize(300);
+    g.crs_records.push_back(r);
+    for (CrsRecord& rec : g.crs_records) {
+      rec.user_id.clear();
+      rec.description.clear();
+      for (int i = 0; i < 16; ++i) rec.user_id.push_back(next());
+      for (int i = 0; i < 32; ++i) rec.description.push_back(next());
+      for (auto& byte : rec.data) byte = static_cast<std::uint8_t>(next());
+    }
+  }
   return g;
 }
 
-ModelData sample_model() {
+ModelData sample_model(bool deflatable = false) {
   ModelData d;
   d.input_points = 10;
   test::add_empty_word_instance(d);  // (so that the file is 1.5, not 1.11)
-  d.georef = sample_georef();
+  d.georef = sample_georef(deflatable);
   return d;
 }
 
@@ -106,8 +134,8 @@ TEST(Georef, RoundTripIsExactAndUsesMinorVersion5) {
   EXPECT_EQ(g.las_point_format, w.las_point_format);
   EXPECT_EQ(g.las_system_id, w.las_system_id);
   EXPECT_EQ(g.las_software, w.las_software);
-  ASSERT_EQ(g.crs_records.size(), 2U);
-  for (std::size_t i = 0; i < 2; ++i) {
+  ASSERT_EQ(g.crs_records.size(), w.crs_records.size());
+  for (std::size_t i = 0; i < w.crs_records.size(); ++i) {
     EXPECT_EQ(g.crs_records[i].user_id, w.crs_records[i].user_id);
     EXPECT_EQ(g.crs_records[i].record_id, w.crs_records[i].record_id);
     EXPECT_EQ(g.crs_records[i].description, w.crs_records[i].description);
@@ -179,6 +207,55 @@ TEST(GeorefCorrupt, EachFieldIsChecked) {
   expect_geor_rejected(records, u32_bytes(100000), "record count");
   expect_geor_rejected(records + 4 + 51, u32_bytes(0x7FFFFFFF), "record 0 length");
   expect_geor_rejected(records + 4 + 18, Bytes{2}, "extended flag");
+}
+
+TEST(Georef, CompressibleRecordsAreDeflatedInFormat1_12) {
+  const ModelData d = sample_model(true);
+  const Bytes b = encode_model(d);
+  EXPECT_EQ(b[10] | (b[11] << 8), 12);
+  const Bytes raw = encode_model(sample_model(false));
+  const std::size_t at = geor_at(b);
+  ASSERT_GT(at, 0U);
+  const auto back = decode_model(b);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  const Georeference& g = *back.value().georef;
+  ASSERT_EQ(g.crs_records.size(), 2U);
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(g.crs_records[i].data, d.georef->crs_records[i].data) << i;
+    EXPECT_EQ(g.crs_records[i].user_id, d.georef->crs_records[i].user_id) << i;
+    EXPECT_EQ(g.crs_records[i].description, d.georef->crs_records[i].description) << i;
+    EXPECT_EQ(g.crs_records[i].record_id, d.georef->crs_records[i].record_id) << i;
+  }
+  EXPECT_EQ(g.crs_name, d.georef->crs_name);
+  // the records' bytes and heads take less room deflated than raw
+  std::uint64_t raw_records = 0;
+  for (const auto& r : d.georef->crs_records) raw_records += 55 + r.data.size();
+  const std::size_t records = 96 + 8 + d.georef->crs_name.size() + d.georef->unit_name.size() +
+                              d.georef->las_system_id.size() + d.georef->las_software.size();
+  EXPECT_LT(u64_at(b, at + 4), records + 4 + raw_records);
+  EXPECT_EQ(b[at + 12 + records + 3] & 0x80, 0x80) << "bit 31 of the record count";
+  // claimed as 1.11: refused
+  Bytes old = b;
+  old[10] = 11;
+  fix_header_crc(old);
+  auto r = decode_model(old);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("need format version 1.12"), std::string::npos) << r.status().message();
+  // its size and stream corrupted, its payload cut: refused, never a crash
+  const auto corrupt = [&](std::size_t offset, std::uint8_t mask) {
+    Bytes c = b;
+    c[at + 12 + offset] ^= mask;
+    fix_crc(c, at);
+    return decode_model(c);
+  };
+  EXPECT_FALSE(corrupt(records + 4, 0xFF).ok()) << "raw size";
+  EXPECT_FALSE(corrupt(records + 7, 0x7F).ok()) << "raw size";
+  const std::uint64_t len = u64_at(b, at + 4);
+  for (std::size_t k = records + 8; k < len; ++k) {
+    const auto c = corrupt(k, 0x24);
+    if (c.ok()) EXPECT_EQ(c.value().georef->crs_records.size(), 2U) << k;  // (zlib's check makes this rare)
+  }
+  (void)raw;
 }
 
 TEST(GeorefCorrupt, NeedsMinorVersion5) {
