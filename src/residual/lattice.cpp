@@ -161,6 +161,8 @@ std::optional<Lattice> find_lattice(const std::vector<Eigen::Vector3f>& input, c
   const double area = (x_hi - x_lo) * (y_hi - y_lo);
   if (!(area > 0.0) || !std::isfinite(area)) return std::nullopt;
   const double spacing = std::sqrt(area / static_cast<double>(coded.size()));
+  // (cells of the neighbour search within 2^30 a side: not for a cloud flat as a line)
+  if (!((x_hi - x_lo) / spacing < 1073741824.0 && (y_hi - y_lo) / spacing < 1073741824.0)) return std::nullopt;
   // The points in cells `spacing` wide (x and y), to find each sampled point's neighbours.
   // (cells of at most 2^31 a side: the bounding box over `spacing` is below sqrt(n) + 1)
   const auto key = [&](double x, double y) {

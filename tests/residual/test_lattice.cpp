@@ -94,6 +94,11 @@ TEST(ResidualLattice, FindsThePitchAndPhase) {
   for (auto& p : turned.points)
     p = Eigen::Vector3f(static_cast<float>(ca * p.x() - sa * p.y()), static_cast<float>(sa * p.x() + ca * p.y()), p.z());
   EXPECT_FALSE(residual::detail::find_lattice(turned.points, all_of(turned)).has_value());
+  // A line whose width float32 barely holds: no lattice (and no neighbour grid of 10^20 cells).
+  Cloud line;
+  for (int k = 0; k < 1000; ++k)
+    line.points.emplace_back(0.1F * static_cast<float>(k), (k % 2) != 0 ? 1e-37F : 0.0F, 0.0F);
+  EXPECT_FALSE(residual::detail::find_lattice(line.points, all_of(line)).has_value());
 }
 
 TEST(ResidualLattice, GriddedPointsTakeItAndKeepTheBound) {
