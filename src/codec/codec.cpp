@@ -177,16 +177,23 @@ void put_chunk(std::vector<std::uint8_t>& out, const char* type, const std::vect
   put_u32(out, crc_of(out.data() + start, out.size() - start));
 }
 
-/// count u64, raw_size u64, deflate(raw) at kZlibLevel (deterministic for a zlib build).
-std::vector<std::uint8_t> deflated_payload(std::uint64_t count, const std::vector<std::uint8_t>& raw) {
-  std::vector<std::uint8_t> p;
-  put_u64(p, count);
-  put_u64(p, raw.size());
+/// The zlib stream of `raw` at kZlibLevel (deterministic for a zlib build).
+std::vector<std::uint8_t> deflated(const std::vector<std::uint8_t>& raw) {
   uLongf bound = compressBound(static_cast<uLong>(raw.size()));
   std::vector<std::uint8_t> z(bound);
   if (compress2(z.data(), &bound, raw.data(), static_cast<uLong>(raw.size()), kZlibLevel) != Z_OK)
     throw std::runtime_error("lex3d::codec: zlib compress2 failed");
-  p.insert(p.end(), z.begin(), z.begin() + static_cast<std::ptrdiff_t>(bound));
+  z.resize(bound);
+  return z;
+}
+
+/// count u64, raw_size u64, deflated(raw).
+std::vector<std::uint8_t> deflated_payload(std::uint64_t count, const std::vector<std::uint8_t>& raw) {
+  std::vector<std::uint8_t> p;
+  put_u64(p, count);
+  put_u64(p, raw.size());
+  const std::vector<std::uint8_t> z = deflated(raw);
+  p.insert(p.end(), z.begin(), z.end());
   return p;
 }
 
@@ -874,8 +881,9 @@ void put_string(std::vector<std::uint8_t>& b, const std::string& s, const char* 
   b.insert(b.end(), s.begin(), s.end());
 }
 
-/// The GEOR payload of `g`; its records deflated where that is smaller (`deflated` says so).
-std::vector<std::uint8_t> geor_payload(const Georeference& g, bool& deflated) {
+/// The GEOR payload of `g`; its records deflated where that is smaller (`records_deflated`
+/// says so).
+std::vector<std::uint8_t> geor_payload(const Georeference& g, bool& records_deflated) {
   auto fail = [](const std::string& what) {
     throw std::invalid_argument("lex3d::codec::encode_model: georeference " + what);
   };
@@ -920,15 +928,14 @@ std::vector<std::uint8_t> geor_payload(const Georeference& g, bool& deflated) {
   // Deflated (format 1.12) where that saves bytes: a WKT string and GeoTIFF keys shrink to
   // about a third, 1,660 -> 720 bytes on hexbin's CRS (0.2 bits a point of its 38,367).
   const auto count = static_cast<std::uint32_t>(g.crs_records.size());
-  deflated = false;
+  records_deflated = false;
   if (!records.empty()) {
-    const std::vector<std::uint8_t> z = deflated_payload(0, records);  // count 0 u64, raw_size u64, stream
-    const std::size_t stream = z.size() - 16;
-    if (4 + stream < records.size()) {
-      deflated = true;
+    const std::vector<std::uint8_t> z = deflated(records);
+    if (4 + z.size() < records.size()) {
+      records_deflated = true;
       put_u32(b, count | kGeorDeflatedBit);
       put_u32(b, static_cast<std::uint32_t>(records.size()));
-      b.insert(b.end(), z.begin() + 16, z.end());
+      b.insert(b.end(), z.begin(), z.end());
       return b;
     }
   }

@@ -28,11 +28,6 @@ std::int64_t clamp(std::int64_t v, std::int64_t limit) { return std::min(std::ma
 /// s less s/256 rounded toward zero: the sums forget a pulse's share in about 256 pulses.
 std::int64_t decay(std::int64_t s) { return s >= 0 ? s - (s >> 8) : s + ((-s) >> 8); }
 
-/// a / 2^16 rounded half away from zero (integers only, so every platform agrees).
-std::int64_t unfix(std::int64_t a) { return a >= 0 ? (a + 32768) >> kSlopeBits : -((-a + 32768) >> kSlopeBits); }
-
-/// a / b, b > 0, rounded half away from zero.
-std::int64_t divide(std::int64_t a, std::int64_t b) { return a >= 0 ? (a + b / 2) / b : -((-a + b / 2) / b); }
 
 /// Pulses the step to the next pulse is averaged over (formats/model.md §2.11.1): the
 /// step between two consecutive pulses carries the quantisation of both, over four the
@@ -55,7 +50,7 @@ class AcquisitionState {
       for (int a = 0; a < 3; ++a) {
         const std::int64_t from = pulses_[0][a];
         p[a] = back == 0 ? from
-                         : from + divide((from - pulses_[back][a]) * ahead, index_[0] - index_[back]);
+                         : from + divide_rounded((from - pulses_[back][a]) * ahead, index_[0] - index_[back]);
       }
     }
     for (std::int64_t& v : p) v = clamp(v, kMaxPrediction);
@@ -63,7 +58,7 @@ class AcquisitionState {
   }
   /// The x and y the beam's slope adds to a point whose z lies dz off its prediction.
   [[nodiscard]] std::int64_t slope_shift(int axis, std::int64_t dz) const {
-    return unfix(slope_[axis] * clamp(dz, kMaxAcquisitionCell));
+    return divide_rounded(slope_[axis] * clamp(dz, kMaxAcquisitionCell), std::int64_t{1} << kSlopeBits);
   }
   [[nodiscard]] int kind_ctx() const { return 4 * kind2_ + kind1_; }
   [[nodiscard]] int z_ctx(PulseKind k) const { return static_cast<int>(k) * 8 + IntModel::context_of(last_dz_); }

@@ -25,8 +25,6 @@ constexpr std::uint64_t kMaxCellsPerPoint = 4;
 /// Offsets and heights lie within ±2^30 steps.
 constexpr std::int64_t kMaxOffset = std::int64_t{1} << 30;
 
-/// a / b, b > 0, rounded half away from zero.
-std::int64_t divide(std::int64_t a, std::int64_t b) { return a >= 0 ? (a + b / 2) / b : -((-a + b / 2) / b); }
 
 /// The modulus and phase (radians) of the mean of exp(2πi v / pitch) over `values`.
 std::complex<double> mean_phase(const std::vector<double>& values, double pitch) {
@@ -80,11 +78,11 @@ class LatticeState {
     const bool planes = w != nullptr && w->occupied && n->occupied && nw != nullptr && nw->occupied;
     if (planes && ne != nullptr && ne->occupied) {
       // the mean of the planes through W, N, NW and through W, N, NE: W + (NE - NW) / 2
-      pred = w->z + divide(ne->z - nw->z, 2);
+      pred = w->z + divide_rounded(ne->z - nw->z, 2);
     } else if (planes) {
       pred = w->z + n->z - nw->z;  // the plane through W, N and NW
     } else {
-      pred = divide(sum, count);
+      pred = divide_rounded(sum, count);
     }
   }
   /// The context of a cell's count: how many of W, N, NW and NE hold more than one point

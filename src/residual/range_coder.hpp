@@ -202,6 +202,12 @@ class IntModel {
 /// Largest |value| the layers quantise, in steps.
 constexpr double kMaxSteps = 1073741824.0;  // 2^30
 
+/// a / b for b > 0, rounded half away from zero, in integers alone (so that every decoder
+/// agrees): the predictions of the acquisition-order and lattice codings.
+inline std::int64_t divide_rounded(std::int64_t a, std::int64_t b) {
+  return a >= 0 ? (a + b / 2) / b : -((-a + b / 2) / b);
+}
+
 /// `k` = v / step rounded to the nearest integer; false when |k| would exceed kMaxSteps.
 inline bool quantise(double v, double step, std::int64_t& k) {
   const double x = std::round(v / step);

@@ -731,9 +731,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   }();
   if (lasers_of && std::isfinite(grid_bits) && !exact_table && lasers_of->fit_rms > 4.0 * max_error) lasers_of.reset();
   if (lasers_of) {
-    const bool exact = exact_table;
     const std::vector<double> shares =
-        exact ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
+        exact_table ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
     // Lasers estimated two ways from the points: both are candidates, the smaller kept.
     std::vector<const detail::LaserAssignment*> candidates = {&*lasers_of};
     if (lasers_of->alternative) candidates.push_back(lasers_of->alternative.get());
