@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <iostream>
 #include <optional>
+#include <string>
 
 #include "cli_common.hpp"
 #include "json.hpp"
@@ -249,6 +250,7 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.begin_array("grid_origin_m");
       for (double c : layer->origin) j.value({}, c);
       j.end_array();
+      j.value("fit_pulses", static_cast<std::uint64_t>(layer->fit_pulses));
     }
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
@@ -296,8 +298,10 @@ bool info_lex3d_file(const InfoOptions& o) {
         std::printf("lattice        %u x %u cells of %.4g m from (%.4g, %.4g) m\n", layer->columns, layer->rows, layer->pitch,
                     layer->origin[0], layer->origin[1]);
       if (layer && layer->coding == 4)
-        std::printf("grid           from (%.4g, %.4g, %.4g) m, points in the order they were fired\n", layer->origin[0],
-                    layer->origin[1], layer->origin[2]);
+        std::printf("grid           from (%.4g, %.4g, %.4g) m, points in the order they were fired, %s\n",
+                    layer->origin[0], layer->origin[1], layer->origin[2],
+                    layer->fit_pulses == 0 ? "x and y stepped from the last pulse"
+                                           : ("x and y fitted over " + std::to_string(layer->fit_pulses) + " pulses").c_str());
     }
     if (translation_step)
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);

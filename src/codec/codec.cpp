@@ -78,6 +78,10 @@ constexpr std::uint16_t kLaserShortMinor = 11;
 /// against its own predictor, model.md §2.8.1) and the first minor version that has it.
 constexpr std::uint32_t kLaserTablePredictorsBit = 1U << 8;
 constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
+/// An acquisition-order layer whose x and y are fitted with a line over some pulses (its
+/// fit_pulses field not 0, model.md §2.11.1) and the first minor version that has it.
+constexpr std::uint16_t kAcquisitionFitMinor = 13;
+constexpr std::size_t kAcquisitionFitOffset = 64;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -799,6 +803,11 @@ bool attributes_extended(const std::uint8_t* p, std::uint64_t size) {
   return false;
 }
 
+bool acquisition_fit_layer(const std::vector<std::uint8_t>& payload) {
+  return layer_coding(payload) == 4 && payload.size() >= kAcquisitionFitOffset + 4 &&
+         ld_u32(payload.data() + kAcquisitionFitOffset) != 0;
+}
+
 bool voxel_mixed_layer(const std::vector<std::uint8_t>& payload) {
   return layer_coding(payload) == 2 && payload.size() > kVoxelContextsOffset && payload[kVoxelContextsOffset] >= 1;
 }
@@ -1090,6 +1099,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual) minor = std::max(minor, laser_predictor_minor(*data.residual));
   if (data.residual && laser_short_layer(*data.residual)) minor = std::max(minor, kLaserShortMinor);
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
+  if (data.residual && acquisition_fit_layer(*data.residual)) minor = std::max(minor, kAcquisitionFitMinor);
   if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
     minor = std::max(minor, kAttrExtendedMinor);
   // A model without instances has no INST chunk and the short MHDR; one without words at
@@ -1270,6 +1280,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                            " needs format version 1." + std::to_string(kVoxelMixedMinor) + ", the header says 1." +
                            std::to_string(h.minor),
                        c.payload_offset + kVoxelContextsOffset);
+    if (acquisition_fit_layer(*out.residual) && h.minor < kAcquisitionFitMinor)
+      return ctx.error("an acquisition-order layer fitted over " +
+                           std::to_string(ld_u32(out.residual->data() + kAcquisitionFitOffset)) +
+                           " pulses needs format version 1." + std::to_string(kAcquisitionFitMinor) +
+                           ", the header says 1." + std::to_string(h.minor),
+                       c.payload_offset + kAcquisitionFitOffset);
     return {};
   });
   if (!s.ok()) return s;

@@ -6,7 +6,10 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
+#include "lex3d/core/parallel.hpp"
 #include "residual/point_ball_grid.hpp"
 
 namespace lex3d::residual::detail {
@@ -35,11 +38,24 @@ std::int64_t decay(std::int64_t s) { return s >= 0 ? s - (s >> 8) : s + ((-s) >>
 /// 1.6 cm cells, 5.4 % at 20 cm (eight pulses: the same; sixteen: 3 %).
 constexpr int kStepPulses = 4;
 
+/// The line fit (§2.11.1, format 1.13): offsets entering it are clamped to ±2^20 cells,
+/// its sums to ±2^30 and its moments to ±2^40, so that its products fit signed 64-bit
+/// integers with up to kMaxFitPulses pulses each up to 17 pulse numbers apart.
+constexpr std::int64_t kFitClamp = std::int64_t{1} << 20;
+constexpr std::int64_t kFitSumClamp = std::int64_t{1} << 30;
+constexpr std::int64_t kFitMomentClamp = std::int64_t{1} << 40;
+/// Pulses the state holds: the most a line fit takes.
+constexpr int kHeldPulses = static_cast<int>(kMaxFitPulses);
+/// Points in a block of the line fits' trial (a quarter of the blocks are coded).
+constexpr std::size_t kFitTrialBlock = 4096;
+
 /// What encoder and decoder both keep (§2.11.2): the last point, the last two pulses, the
 /// kinds of the last two points, the classes of the last residuals and the beam's slope.
 class AcquisitionState {
  public:
-  AcquisitionState() : z_(kKinds * 8), x_(kKinds * 64), y_(kKinds * 64), gap_(1) {}
+  /// `fit_pulses`: 0 for format 1.12's prediction, else the pulses of the line fit (§2.11.1).
+  explicit AcquisitionState(std::uint32_t fit_pulses)
+      : z_(kKinds * 8), x_(kKinds * 64), y_(kKinds * 64), gap_(1), fit_(static_cast<int>(fit_pulses)) {}
 
   [[nodiscard]] Cell predict(PulseKind kind, std::uint32_t skipped) const {
     Cell p = last_;
@@ -51,6 +67,14 @@ class AcquisitionState {
         const std::int64_t from = pulses_[0][a];
         p[a] = back == 0 ? from
                          : from + divide_rounded((from - pulses_[back][a]) * ahead, index_[0] - index_[back]);
+      }
+      if (fit_ > 0) {
+        // x and y with the beam's slope taken off (as where z were that of the last pulse),
+        // fitted with a line over up to fit_ pulses and moved back by the slope at the
+        // predicted z.
+        const std::int64_t z0 = pulses_[0][2];
+        for (int a = 0; a < 2; ++a)
+          p[a] = pulses_[0][a] + fitted(a, back, ahead) + slope_shift(a, clamp(p[2], kMaxPrediction) - z0);
       }
     }
     for (std::int64_t& v : p) v = clamp(v, kMaxPrediction);
@@ -82,7 +106,7 @@ class AcquisitionState {
       index_[0] = 0;
     } else if (k != PulseKind::kSamePulse) {
       const std::int64_t index = index_[0] + static_cast<std::int64_t>(skipped) + 1;
-      held_ = std::min(held_ + 1, kStepPulses + 1);
+      held_ = std::min(held_ + 1, kHeldPulses);
       for (int j = held_ - 1; j > 0; --j) {
         pulses_[static_cast<std::size_t>(j)] = pulses_[static_cast<std::size_t>(j - 1)];
         index_[static_cast<std::size_t>(j)] = index_[static_cast<std::size_t>(j - 1)];
@@ -102,12 +126,47 @@ class AcquisitionState {
   IntModel z_, x_, y_, gap_;
 
  private:
+  /// The x or y (`a`) `ahead` pulses after the latest, off the latest pulse's, with the
+  /// part its height explains along the beam taken off: the least-squares line through
+  /// the last min(held_, fit_) pulses' (each pulse's coordinate less the slope's part of
+  /// its z, both off the latest pulse's and clamped to ±kFitClamp; the slope's part taken
+  /// off the sums), or with fewer than three of them the step over `back` pulses.
+  [[nodiscard]] std::int64_t fitted(int a, int back, std::int64_t ahead) const {
+    const int n = std::min(held_, fit_);
+    const auto off = [&](int j, int axis) {
+      return clamp(pulses_[static_cast<std::size_t>(j)][axis] - pulses_[0][axis], kFitClamp);
+    };
+    if (n < 3) {
+      if (back == 0) return 0;
+      const std::int64_t v = off(back, a) - slope_shift(a, off(back, 2));
+      return divide_rounded(-v * ahead, index_[0] - index_[static_cast<std::size_t>(back)]);
+    }
+    std::int64_t si = 0, sii = 0, sx = 0, six = 0, sz = 0, siz = 0;
+    for (int j = 1; j < n; ++j) {  // (pulse 0 adds nothing but its count: its i and offsets are 0)
+      const std::int64_t i = index_[static_cast<std::size_t>(j)] - index_[0];
+      const std::int64_t x = off(j, a), z = off(j, 2);
+      si += i;
+      sii += i * i;
+      sx += x;
+      six += i * x;
+      sz += z;
+      siz += i * z;
+    }
+    // (|sz| < 2^25 and |siz| < 2^35 cells: their products with the slope, at most 2^20, fit)
+    const std::int64_t sv = clamp(sx - divide_rounded(slope_[a] * sz, std::int64_t{1} << kSlopeBits), kFitSumClamp);
+    const std::int64_t siv = clamp(six - divide_rounded(slope_[a] * siz, std::int64_t{1} << kSlopeBits), kFitMomentClamp);
+    const std::int64_t d = n * sii - si * si;
+    if (d <= 0) return 0;
+    return divide_rounded(sv * d + (n * siv - si * sv) * (n * ahead - si), n * d);
+  }
+
   Cell last_{};
   /// The last pulses (their first points), latest first, and their pulse numbers since the
   /// last restart; held_ of them are valid (0 before the first point).
-  std::array<Cell, kStepPulses + 1> pulses_{};
-  std::array<std::int64_t, kStepPulses + 1> index_{};
+  std::array<Cell, kHeldPulses> pulses_{};
+  std::array<std::int64_t, kHeldPulses> index_{};
   int held_ = 0;
+  int fit_ = 0;
   int kind1_ = 3, kind2_ = 3;
   std::int64_t last_dz_ = 0;
   std::array<std::int64_t, 2> last_xy_{};
@@ -168,7 +227,8 @@ bool acquisition_ordered(const std::vector<double>& time, const std::vector<std:
 
 std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                                   const std::vector<double>& time, const std::vector<std::uint32_t>& coded,
-                                                  double bound, bool thin) {
+                                                  double bound, bool thin,
+                                                  const std::vector<std::uint32_t>& fit_candidates, int threads) {
   if (coded.empty()) return std::nullopt;
   AcquisitionLayer layer;
   layer.origin = input[coded[0]].cast<double>();
@@ -210,10 +270,11 @@ std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::v
   // between, counted in the typical rise (the pulse period).
   const bool timed = time.size() == input.size();
   const double period = timed ? pulse_period(time, kept) : 0.0;
-  AcquisitionState state;
+  std::vector<PulseKind> kinds(kept.size(), PulseKind::kNextPulse);
+  std::vector<std::uint32_t> skips(kept.size(), 0);
   for (std::size_t j = 0; j < kept.size(); ++j) {
-    PulseKind kind = j == 0 ? PulseKind::kRestart : PulseKind::kNextPulse;
-    std::uint32_t skipped = 0;
+    PulseKind& kind = kinds[j];
+    if (j == 0) kind = PulseKind::kRestart;
     if (j > 0 && period > 0.0) {
       const double dt = time[kept[j]] - time[kept[j - 1]];
       if (dt == 0.0) {
@@ -224,19 +285,48 @@ std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::v
         const auto pulses = static_cast<std::uint32_t>(std::lround(dt / period));
         if (pulses >= 2) {
           kind = PulseKind::kSkipped;
-          skipped = pulses - 1;
+          skips[j] = pulses - 1;
         }
       }
     }
-    encode_point(enc, state, kind, skipped, cells[j]);
   }
-  layer.stream = enc.finish();
+  // The line fit: with several candidates, each codes a sample (every fourth block of
+  // kFitTrialBlock points, each block from a restart) side by side, and the one with the
+  // fewest bytes (the first of equals) codes the points.
+  if (fit_candidates.empty()) throw std::invalid_argument("acquisition_layer: no line fit to try");
+  for (const std::uint32_t fit : fit_candidates)
+    if (fit != 0 && (fit < 3 || fit > kMaxFitPulses))
+      throw std::invalid_argument("acquisition_layer: a line fit over " + std::to_string(fit) +
+                                  " pulses (0 or 3-32 allowed)");
+  const auto code = [&](std::uint32_t fit, RangeEncoder e, bool sample) {
+    AcquisitionState state(fit);
+    for (std::size_t j = 0; j < kept.size(); ++j) {
+      if (!sample) {
+        encode_point(e, state, kinds[j], skips[j], cells[j]);
+      } else if ((j / kFitTrialBlock) % 4 == 0) {
+        const bool first = j % kFitTrialBlock == 0;
+        encode_point(e, state, first ? PulseKind::kRestart : kinds[j], first ? 0 : skips[j], cells[j]);
+      }
+    }
+    return e.finish();
+  };
+  layer.fit_pulses = fit_candidates.front();
+  if (fit_candidates.size() > 1) {
+    std::vector<std::size_t> sizes(fit_candidates.size());
+    parallel_for(fit_candidates.size(), threads,
+                 [&](std::size_t c) { sizes[c] = code(fit_candidates[c], RangeEncoder{}, true).size(); }, 1);
+    layer.fit_pulses = fit_candidates[static_cast<std::size_t>(std::min_element(sizes.begin(), sizes.end()) - sizes.begin())];
+  }
+  layer.stream = code(layer.fit_pulses, enc, false);
   return layer;
 }
 
 std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin, double step,
-                                                     std::uint64_t count, std::vector<Eigen::Vector3f>& out) {
-  AcquisitionState s;
+                                                     std::uint32_t fit_pulses, std::uint64_t count,
+                                                     std::vector<Eigen::Vector3f>& out) {
+  if (fit_pulses != 0 && (fit_pulses < 3 || fit_pulses > kMaxFitPulses))
+    return "line fit over " + std::to_string(fit_pulses) + " pulses (0 or 3-32 allowed)";
+  AcquisitionState s(fit_pulses);
   for (std::uint64_t j = 0; j < count; ++j) {
     const int kc = s.kind_ctx();
     const unsigned high = dec.get(s.kind_high[static_cast<std::size_t>(kc)]) ? 1U : 0U;

@@ -28,6 +28,9 @@ enum class PulseKind : std::uint8_t {
 };
 /// Most pulses a kSkipped point steps over.
 constexpr std::uint32_t kMaxSkippedPulses = 16;
+/// Most pulses the line fit of x and y takes (formats/model.md §2.11.1, format 1.13); a
+/// fit over fewer than three is not stored.
+constexpr std::uint32_t kMaxFitPulses = 32;
 /// Grid coordinates lie in [0, kMaxAcquisitionCell].
 constexpr std::int64_t kMaxAcquisitionCell = std::int64_t{1} << 30;
 
@@ -35,6 +38,8 @@ constexpr std::int64_t kMaxAcquisitionCell = std::int64_t{1} << 30;
 struct AcquisitionLayer {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< the grid's corner, model frame, metres
   double step = 0.0;                                 ///< cell width, metres
+  /// 0: x and y predicted as format 1.12 does; else the pulses their line fit takes (1.13)
+  std::uint32_t fit_pulses = 0;
   std::vector<std::uint8_t> stream;
   std::vector<std::uint32_t> sources;  ///< the input point of each coded point, in order
 };
@@ -48,17 +53,23 @@ struct AcquisitionLayer {
 /// decoded point within `bound` of its input point, as a float32 decoder computes it); with
 /// `thin`, a point within `bound` of a point decoded before it is left out. `time` (empty,
 /// or one a point) says which points are returns of one pulse and how many pulses lie
-/// between the others. nullopt when there is nothing to code or the grid would be wider
+/// between the others. x and y are fitted as the one of `fit_candidates` (fit_pulses
+/// values) that codes a quarter of the points smallest says (tried on up to `threads`
+/// threads). nullopt when there is nothing to code or the grid would be wider
 /// than kMaxAcquisitionCell cells.
 [[nodiscard]] std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                                                 const std::vector<double>& time,
                                                                 const std::vector<std::uint32_t>& coded, double bound,
-                                                                bool thin);
+                                                                bool thin,
+                                                                const std::vector<std::uint32_t>& fit_candidates = {0},
+                                                                int threads = 1);
 
-/// Decodes `count` points of an acquisition-order stream (after its keep mask) onto `out`.
+/// Decodes `count` points of an acquisition-order stream (after its keep mask) onto `out`;
+/// `fit_pulses` as AcquisitionLayer's (0, or 3 to kMaxFitPulses).
 /// A message when the stream is malformed (a gap out of range, a point off the grid).
 [[nodiscard]] std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin,
-                                                                   double step, std::uint64_t count,
+                                                                   double step, std::uint32_t fit_pulses,
+                                                                   std::uint64_t count,
                                                                    std::vector<Eigen::Vector3f>& out);
 
 }  // namespace lex3d::residual::detail
