@@ -251,6 +251,7 @@ bool info_lex3d_file(const InfoOptions& o) {
       for (double c : layer->origin) j.value({}, c);
       j.end_array();
       j.value("fit_pulses", static_cast<std::uint64_t>(layer->fit_pulses));
+      j.value("cell_height_m", layer->step_z == 0.0 ? layer->step : layer->step_z);
     }
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
@@ -298,8 +299,8 @@ bool info_lex3d_file(const InfoOptions& o) {
         std::printf("lattice        %u x %u cells of %.4g m from (%.4g, %.4g) m\n", layer->columns, layer->rows, layer->pitch,
                     layer->origin[0], layer->origin[1]);
       if (layer && layer->coding == 4)
-        std::printf("grid           from (%.4g, %.4g, %.4g) m, points in the order they were fired, %s\n",
-                    layer->origin[0], layer->origin[1], layer->origin[2],
+        std::printf("grid           cells %.4g m wide, %.4g m tall, from (%.4g, %.4g, %.4g) m, points in the order they were fired, %s\n",
+                    layer->step, layer->step_z == 0.0 ? layer->step : layer->step_z, layer->origin[0], layer->origin[1], layer->origin[2],
                     layer->fit_pulses == 0 ? "x and y stepped from the last pulse"
                                            : ("x and y fitted over " + std::to_string(layer->fit_pulses) + " pulses").c_str());
     }

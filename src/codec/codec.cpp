@@ -78,8 +78,9 @@ constexpr std::uint16_t kLaserShortMinor = 11;
 /// against its own predictor, model.md §2.8.1) and the first minor version that has it.
 constexpr std::uint32_t kLaserTablePredictorsBit = 1U << 8;
 constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
-/// An acquisition-order layer whose x and y are fitted with a line over some pulses (its
-/// fit_pulses field not 0, model.md §2.11.1) and the first minor version that has it.
+/// An acquisition-order layer whose x and y are fitted with a line over some pulses or
+/// whose cells are taller than wide (its prediction field not 0, model.md §2.11) and the
+/// first minor version that has it.
 constexpr std::uint16_t kAcquisitionFitMinor = 13;
 constexpr std::size_t kAcquisitionFitOffset = 64;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
@@ -1281,9 +1282,9 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                            std::to_string(h.minor),
                        c.payload_offset + kVoxelContextsOffset);
     if (acquisition_fit_layer(*out.residual) && h.minor < kAcquisitionFitMinor)
-      return ctx.error("an acquisition-order layer fitted over " +
+      return ctx.error("an acquisition-order layer with prediction field " +
                            std::to_string(ld_u32(out.residual->data() + kAcquisitionFitOffset)) +
-                           " pulses needs format version 1." + std::to_string(kAcquisitionFitMinor) +
+                           " (a line fit or tall cells) needs format version 1." + std::to_string(kAcquisitionFitMinor) +
                            ", the header says 1." + std::to_string(h.minor),
                        c.payload_offset + kAcquisitionFitOffset);
     return {};

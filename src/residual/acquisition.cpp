@@ -191,10 +191,11 @@ void encode_point(RangeEncoder& enc, AcquisitionState& s, PulseKind kind, std::u
   s.update(kind, skipped, c, p, rx, ry);
 }
 
-Eigen::Vector3f cell_centre(const Eigen::Vector3d& origin, double step, const Cell& c) {
+/// A cell's centre: x and y `step` apart, z `step_z` apart.
+Eigen::Vector3f cell_centre(const Eigen::Vector3d& origin, double step, double step_z, const Cell& c) {
   return {static_cast<float>(origin.x() + static_cast<double>(c[0]) * step),
           static_cast<float>(origin.y() + static_cast<double>(c[1]) * step),
-          static_cast<float>(origin.z() + static_cast<double>(c[2]) * step)};
+          static_cast<float>(origin.z() + static_cast<double>(c[2]) * step_z)};
 }
 
 /// The pulse period: the median of the rises between consecutive times (0 without any).
@@ -225,58 +226,21 @@ bool acquisition_ordered(const std::vector<double>& time, const std::vector<std:
   return 10 * fall <= pairs && 10 * rise >= pairs;
 }
 
-std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
-                                                  const std::vector<double>& time, const std::vector<std::uint32_t>& coded,
-                                                  double bound, bool thin,
-                                                  const std::vector<std::uint32_t>& fit_candidates, int threads) {
-  if (coded.empty()) return std::nullopt;
-  AcquisitionLayer layer;
-  layer.origin = input[coded[0]].cast<double>();
-  for (const std::uint32_t i : coded) layer.origin = layer.origin.cwiseMin(input[i].cast<double>());
-  layer.step = 2.0 * bound / std::sqrt(3.0) * (1.0 - 1e-6);
-  std::vector<Cell> cells;
-  std::vector<std::uint32_t>& kept = layer.sources;
-  const double b2 = bound * bound;
-  for (int attempt = 0;; ++attempt) {
-    if (attempt == 8) return std::nullopt;  // float32 cannot hold centres this close (not seen)
-    cells.clear();
-    kept.clear();
-    PointBallGrid decoded(bound, thin ? coded.size() : 0);
-    const double inv = 1.0 / layer.step;
-    bool miss = false;
-    for (const std::uint32_t i : coded) {
-      const Eigen::Vector3d p = input[i].cast<double>();
-      if (thin && decoded.any_within(p)) continue;
-      Cell c{};
-      for (int a = 0; a < 3; ++a) {
-        const double k = std::round((p[a] - layer.origin[a]) * inv);
-        if (!(k <= static_cast<double>(kMaxAcquisitionCell))) return std::nullopt;
-        c[static_cast<std::size_t>(a)] = static_cast<std::int64_t>(k);
-      }
-      const Eigen::Vector3f centre = cell_centre(layer.origin, layer.step, c);
-      if (!((centre.cast<double>() - p).squaredNorm() <= b2)) {
-        miss = true;
-        break;
-      }
-      if (thin) decoded.insert(centre);
-      cells.push_back(c);
-      kept.push_back(i);
-    }
-    if (!miss) break;
-    layer.step *= 1.0 - 1e-3;
-  }
+namespace {
 
-  // Each point's kind from the times: equal, a return of the same pulse; else the pulses
-  // between, counted in the typical rise (the pulse period).
-  const bool timed = time.size() == input.size();
-  const double period = timed ? pulse_period(time, kept) : 0.0;
-  std::vector<PulseKind> kinds(kept.size(), PulseKind::kNextPulse);
-  std::vector<std::uint32_t> skips(kept.size(), 0);
-  for (std::size_t j = 0; j < kept.size(); ++j) {
+/// Each of the points `order`'s kind from their times (§2.11.2): equal, a return of the
+/// same pulse; else the pulses between, counted in the typical rise (the pulse period).
+void kinds_from_times(const std::vector<double>& time, std::size_t points, const std::vector<std::uint32_t>& order,
+                      std::vector<PulseKind>& kinds, std::vector<std::uint32_t>& skips) {
+  const bool timed = time.size() == points;
+  const double period = timed ? pulse_period(time, order) : 0.0;
+  kinds.assign(order.size(), PulseKind::kNextPulse);
+  skips.assign(order.size(), 0);
+  for (std::size_t j = 0; j < order.size(); ++j) {
     PulseKind& kind = kinds[j];
     if (j == 0) kind = PulseKind::kRestart;
     if (j > 0 && period > 0.0) {
-      const double dt = time[kept[j]] - time[kept[j - 1]];
+      const double dt = time[order[j]] - time[order[j - 1]];
       if (dt == 0.0) {
         kind = PulseKind::kSamePulse;
       } else if (!(dt > 0.0) || !(dt / period < kMaxSkippedPulses + 1.5)) {
@@ -290,39 +254,130 @@ std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::v
       }
     }
   }
-  // The line fit: with several candidates, each codes a sample (every fourth block of
-  // kFitTrialBlock points, each block from a restart) side by side, and the one with the
-  // fewest bytes (the first of equals) codes the points.
+}
+
+/// The bytes of the cells' stream with line fit `fit`, after what `e` holds: every point,
+/// or (`sample`) every fourth block of kFitTrialBlock points, each block from a restart.
+std::vector<std::uint8_t> code_cells(RangeEncoder e, std::uint32_t fit, const std::vector<Cell>& cells,
+                                     const std::vector<PulseKind>& kinds, const std::vector<std::uint32_t>& skips,
+                                     bool sample) {
+  AcquisitionState state(fit);
+  for (std::size_t j = 0; j < cells.size(); ++j) {
+    if (!sample) {
+      encode_point(e, state, kinds[j], skips[j], cells[j]);
+    } else if ((j / kFitTrialBlock) % 4 == 0) {
+      const bool first = j % kFitTrialBlock == 0;
+      encode_point(e, state, first ? PulseKind::kRestart : kinds[j], first ? 0 : skips[j], cells[j]);
+    }
+  }
+  return e.finish();
+}
+
+/// The line fit of most candidates the trial takes for the cells' shapes (§2.11.2).
+constexpr std::uint32_t kShapeTrialFit = 12;
+
+}  // namespace
+
+std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
+                                                  const std::vector<double>& time, const std::vector<std::uint32_t>& coded,
+                                                  double bound, bool thin,
+                                                  const std::vector<std::uint32_t>& fit_candidates, int threads,
+                                                  const std::vector<CellShape>& shapes) {
+  if (coded.empty()) return std::nullopt;
   if (fit_candidates.empty()) throw std::invalid_argument("acquisition_layer: no line fit to try");
   for (const std::uint32_t fit : fit_candidates)
     if (fit != 0 && (fit < 3 || fit > kMaxFitPulses))
       throw std::invalid_argument("acquisition_layer: a line fit over " + std::to_string(fit) +
                                   " pulses (0 or 3-32 allowed)");
-  const auto code = [&](std::uint32_t fit, RangeEncoder e, bool sample) {
-    AcquisitionState state(fit);
-    for (std::size_t j = 0; j < kept.size(); ++j) {
-      if (!sample) {
-        encode_point(e, state, kinds[j], skips[j], cells[j]);
-      } else if ((j / kFitTrialBlock) % 4 == 0) {
-        const bool first = j % kFitTrialBlock == 0;
-        encode_point(e, state, first ? PulseKind::kRestart : kinds[j], first ? 0 : skips[j], cells[j]);
-      }
-    }
-    return e.finish();
+  if (shapes.empty()) throw std::invalid_argument("acquisition_layer: no cell shape to try");
+  for (const CellShape& c : shapes)
+    if (!(c.height >= 1.0 && c.height <= kMaxCellHeight) || !(c.phase >= 0.0 && c.phase < 1.0))
+      throw std::invalid_argument("acquisition_layer: a cell shape of height " + std::to_string(c.height) +
+                                  " and phase " + std::to_string(c.phase) + " (heights 1-4, phases [0, 1))");
+  Eigen::Vector3d low = input[coded[0]].cast<double>();
+  for (const std::uint32_t i : coded) low = low.cwiseMin(input[i].cast<double>());
+  // A shape's grid: cells `height` times taller than wide whose half-diagonal is the bound,
+  // from the points' lowest corner, z planes moved down `phase` of a cell.
+  const auto grid_of = [&](const CellShape& c, AcquisitionLayer& l) {
+    l.step = 2.0 * bound / std::sqrt(2.0 + c.height * c.height) * (1.0 - 1e-6);
+    l.step_z = c.height == 1.0 ? l.step : l.step * c.height;
+    l.origin = low;
+    l.origin.z() -= c.phase * l.step_z;
   };
+  const auto cell_of = [](const AcquisitionLayer& l, const Eigen::Vector3d& p, Cell& c) {
+    for (int a = 0; a < 3; ++a) {
+      const double k = std::round((p[a] - l.origin[a]) / (a == 2 ? l.step_z : l.step));
+      if (!(k <= static_cast<double>(kMaxAcquisitionCell))) return false;
+      c[static_cast<std::size_t>(a)] = static_cast<std::int64_t>(k);
+    }
+    return true;
+  };
+  AcquisitionLayer layer;
+  std::vector<PulseKind> kinds;
+  std::vector<std::uint32_t> skips;
+  std::size_t shape = 0;
+  if (shapes.size() > 1) {
+    // Each shape codes the sample of all the points (no thinning) with a middle fit, side by
+    // side; the one of fewest bytes (the first of equals) is kept.
+    kinds_from_times(time, input.size(), coded, kinds, skips);
+    std::vector<std::size_t> sizes(shapes.size(), std::numeric_limits<std::size_t>::max());
+    parallel_for(shapes.size(), threads, [&](std::size_t k) {
+      AcquisitionLayer l;
+      grid_of(shapes[k], l);
+      std::vector<Cell> cells(coded.size());
+      for (std::size_t j = 0; j < coded.size(); ++j)
+        if ((j / kFitTrialBlock) % 4 == 0 && !cell_of(l, input[coded[j]].cast<double>(), cells[j])) return;
+      const std::uint32_t fit = std::find(fit_candidates.begin(), fit_candidates.end(), kShapeTrialFit) !=
+                                        fit_candidates.end() ? kShapeTrialFit : fit_candidates.front();
+      sizes[k] = code_cells(RangeEncoder{}, fit, cells, kinds, skips, true).size();
+    }, 1);
+    shape = static_cast<std::size_t>(std::min_element(sizes.begin(), sizes.end()) - sizes.begin());
+  }
+  grid_of(shapes[shape], layer);
+  std::vector<Cell> cells;
+  std::vector<std::uint32_t>& kept = layer.sources;
+  const double b2 = bound * bound;
+  for (int attempt = 0;; ++attempt) {
+    if (attempt == 8) return std::nullopt;  // float32 cannot hold centres this close (not seen)
+    cells.clear();
+    kept.clear();
+    PointBallGrid decoded(bound, thin ? coded.size() : 0);
+    bool miss = false;
+    for (const std::uint32_t i : coded) {
+      const Eigen::Vector3d p = input[i].cast<double>();
+      if (thin && decoded.any_within(p)) continue;
+      Cell c{};
+      if (!cell_of(layer, p, c)) return std::nullopt;
+      const Eigen::Vector3f centre = cell_centre(layer.origin, layer.step, layer.step_z, c);
+      if (!((centre.cast<double>() - p).squaredNorm() <= b2)) {
+        miss = true;
+        break;
+      }
+      if (thin) decoded.insert(centre);
+      cells.push_back(c);
+      kept.push_back(i);
+    }
+    if (!miss) break;
+    layer.step *= 1.0 - 1e-3;
+    layer.step_z *= 1.0 - 1e-3;
+  }
+  kinds_from_times(time, input.size(), kept, kinds, skips);
+  // The line fit: with several candidates, each codes the sample side by side, and the one
+  // with the fewest bytes (the first of equals) codes the points.
   layer.fit_pulses = fit_candidates.front();
   if (fit_candidates.size() > 1) {
     std::vector<std::size_t> sizes(fit_candidates.size());
-    parallel_for(fit_candidates.size(), threads,
-                 [&](std::size_t c) { sizes[c] = code(fit_candidates[c], RangeEncoder{}, true).size(); }, 1);
+    parallel_for(fit_candidates.size(), threads, [&](std::size_t c) {
+      sizes[c] = code_cells(RangeEncoder{}, fit_candidates[c], cells, kinds, skips, true).size();
+    }, 1);
     layer.fit_pulses = fit_candidates[static_cast<std::size_t>(std::min_element(sizes.begin(), sizes.end()) - sizes.begin())];
   }
-  layer.stream = code(layer.fit_pulses, enc, false);
+  layer.stream = code_cells(enc, layer.fit_pulses, cells, kinds, skips, false);
   return layer;
 }
 
 std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin, double step,
-                                                     std::uint32_t fit_pulses, std::uint64_t count,
+                                                     double step_z, std::uint32_t fit_pulses, std::uint64_t count,
                                                      std::vector<Eigen::Vector3f>& out) {
   if (fit_pulses != 0 && (fit_pulses < 3 || fit_pulses > kMaxFitPulses))
     return "line fit over " + std::to_string(fit_pulses) + " pulses (0 or 3-32 allowed)";
@@ -347,7 +402,7 @@ std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Ei
     for (const std::int64_t v : c)
       if (v < 0 || v > kMaxAcquisitionCell)
         return "point " + std::to_string(j) + " decodes off the grid (cell " + std::to_string(v) + ")";
-    const Eigen::Vector3f pc = cell_centre(origin, step, c);
+    const Eigen::Vector3f pc = cell_centre(origin, step, step_z, c);
     if (!pc.allFinite()) return "point " + std::to_string(j) + " decodes to a non-finite position";
     out.push_back(pc);
     s.update(kind, skipped, c, p, rx, ry);

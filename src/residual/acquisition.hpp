@@ -31,17 +31,32 @@ constexpr std::uint32_t kMaxSkippedPulses = 16;
 /// Most pulses the line fit of x and y takes (formats/model.md §2.11.1, format 1.13); a
 /// fit over fewer than three is not stored.
 constexpr std::uint32_t kMaxFitPulses = 32;
+/// Bit 8 of an RESA payload's prediction field (§2.11): cells taller than wide, their
+/// height an f64 after the field (format 1.13). Bits 0-7 hold fit_pulses.
+constexpr std::uint32_t kTallCellsBit = 1U << 8;
+/// Tallest cells, in cell widths (format 1.13).
+constexpr double kMaxCellHeight = 4.0;
 /// Grid coordinates lie in [0, kMaxAcquisitionCell].
 constexpr std::int64_t kMaxAcquisitionCell = std::int64_t{1} << 30;
 
 /// An acquisition-order layer: its grid and the coded stream.
 struct AcquisitionLayer {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  ///< the grid's corner, model frame, metres
-  double step = 0.0;                                 ///< cell width, metres
+  double step = 0.0;                                 ///< cell width (x and y), metres
+  double step_z = 0.0;                               ///< cell height, metres (step, or taller: format 1.13)
   /// 0: x and y predicted as format 1.12 does; else the pulses their line fit takes (1.13)
   std::uint32_t fit_pulses = 0;
   std::vector<std::uint8_t> stream;
   std::vector<std::uint32_t> sources;  ///< the input point of each coded point, in order
+};
+
+/// A grid's cells: `height` times taller than wide (1 to kMaxCellHeight; the half-diagonal
+/// the bound), their z planes moved down `phase` of a cell (in [0, 1)) from the points'
+/// lowest corner. Any box within the ball of the bound errs by the same E²/3 squared on
+/// average; a taller one codes z in fewer bits where x and y cost little more.
+struct CellShape {
+  double height = 1.0;
+  double phase = 0.0;
 };
 
 /// Whether `time` (one a point) orders the points `coded` as a scanner fired them: at least
@@ -53,22 +68,24 @@ struct AcquisitionLayer {
 /// decoded point within `bound` of its input point, as a float32 decoder computes it); with
 /// `thin`, a point within `bound` of a point decoded before it is left out. `time` (empty,
 /// or one a point) says which points are returns of one pulse and how many pulses lie
-/// between the others. x and y are fitted as the one of `fit_candidates` (fit_pulses
-/// values) that codes a quarter of the points smallest says (tried on up to `threads`
-/// threads). nullopt when there is nothing to code or the grid would be wider
+/// between the others. The grid's cells are the one of `shapes`, and x and y fitted as the
+/// one of `fit_candidates` (fit_pulses values), that codes a quarter of the points smallest
+/// (tried on up to `threads` threads). nullopt when there is nothing to code or the grid would be wider
 /// than kMaxAcquisitionCell cells.
 [[nodiscard]] std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                                                 const std::vector<double>& time,
                                                                 const std::vector<std::uint32_t>& coded, double bound,
                                                                 bool thin,
                                                                 const std::vector<std::uint32_t>& fit_candidates = {0},
-                                                                int threads = 1);
+                                                                int threads = 1,
+                                                                const std::vector<CellShape>& shapes = {CellShape{}});
 
 /// Decodes `count` points of an acquisition-order stream (after its keep mask) onto `out`;
-/// `fit_pulses` as AcquisitionLayer's (0, or 3 to kMaxFitPulses).
+/// `step_z`, `fit_pulses` as AcquisitionLayer's.
 /// A message when the stream is malformed (a gap out of range, a point off the grid).
 [[nodiscard]] std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin,
-                                                                   double step, std::uint32_t fit_pulses,
+                                                                   double step, double step_z,
+                                                                   std::uint32_t fit_pulses,
                                                                    std::uint64_t count,
                                                                    std::vector<Eigen::Vector3f>& out);
 

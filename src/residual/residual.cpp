@@ -68,6 +68,10 @@ constexpr std::uint64_t kAcquisitionExtraBytes = 28;  // origin 3 f64, fit_pulse
 /// at E = 14 mm, 2.8 % at 0.1 m, 4.9 % at 0.15 m and 7.1 % at 0.2 m: it averages out the
 /// grid's rounding of the pulses before, which a step from the last pulse carries whole.
 const std::vector<std::uint32_t> kAcquisitionFits = {0, 8, 12, 16};
+/// The cell shapes the encoder tries (§2.11.2): cubes and cells 1.5 and 2 times taller
+/// than wide, each with its z planes from the lowest point and half a cell lower.
+const std::vector<detail::CellShape> kAcquisitionShapes = {{1.0, 0.0}, {1.0, 0.5}, {1.5, 0.0},
+                                                           {1.5, 0.5}, {2.0, 0.0}, {2.0, 0.5}};
 constexpr std::uint32_t kCodingLattice = 5;
 constexpr std::uint64_t kLatticeExtraBytes = 44;  // origin 3 f64, pitch f64, columns u32, rows u32, reserved u32
 /// A lattice layer has at most this many cells a coded point, and 64 more (formats/model.md §2.12).
@@ -571,8 +575,17 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     h.stream_offset += kVoxelExtraBytes;
   } else if (h.coding == kCodingAcquisition) {
     for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
-    h.fit_pulses = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
+    const std::uint32_t prediction = codec::bytes::ld_u32(payload + at + kHeadBytes + 24);
+    h.fit_pulses = prediction & ~detail::kTallCellsBit;
     h.stream_offset += kAcquisitionExtraBytes;
+    if ((prediction & detail::kTallCellsBit) != 0) {
+      if (size < h.stream_offset + 8)
+        return bad_data("residual layer is " + std::to_string(size) + " bytes, at least " +
+                            std::to_string(h.stream_offset + 8) + " expected (the cells' height)",
+                        0);
+      h.step_z = ld_f64(payload + h.stream_offset);
+      h.stream_offset += 8;
+    }
   } else if (h.coding == kCodingLattice) {
     for (int a = 0; a < 3; ++a) h.origin[static_cast<std::size_t>(a)] = ld_f64(payload + at + kHeadBytes + 8 * a);
     h.pitch = ld_f64(payload + at + kHeadBytes + 24);
@@ -716,7 +729,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<detail::AcquisitionLayer> acquisition;
   if (options.acquisition && !exact_table && input.has_time() && detail::acquisition_ordered(input.time, coded))
     acquisition = detail::acquisition_layer(head, input.points, input.time, coded, check_error, options.thin,
-                                            kAcquisitionFits, threads);
+                                            kAcquisitionFits, threads, kAcquisitionShapes);
   // The lattice coding (§2.12) where the points gather at the points of a square lattice
   // in x and y, one or a few a cell (a gridded product).
   std::optional<detail::LatticeLayer> lattice;
@@ -916,15 +929,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                                : extra_bytes(sweep ? kCodingSweep : 0) + streams[best].size();
   const std::size_t laser_bytes =
       laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
-  const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + acquisition->stream.size()
+  const bool tall = acquisition && acquisition->step_z != acquisition->step;
+  const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + (tall ? 8 : 0) +
+                                                          acquisition->stream.size()
                                                     : std::numeric_limits<std::size_t>::max();
   // A payload of the codings on a grid from an origin (§2.11, §2.12): the coding and marker,
-  // the fields every coding has, the origin, `fields` (the coding's own), `last` (the
-  // acquisition coding's line fit, the lattice coding's reserved field), the stream; its
+  // the fields every coding has, the origin, `fields` (the coding's own), the stream; its
   // coded points each stand for their own input point, `sources`.
   const auto grid_payload = [&](std::uint32_t coding, double step, const Eigen::Vector3d& origin,
                                 const std::vector<std::uint32_t>& sources, const std::vector<std::uint8_t>& stream,
-                                const auto& fields, std::uint32_t last) {
+                                const auto& fields) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(coding) + stream.size());
     codec::bytes::put_u32(out, coding);
@@ -935,7 +949,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     put_u64(out, sources.size());
     for (int a = 0; a < 3; ++a) put_f64(out, origin[a]);
     fields(out);
-    codec::bytes::put_u32(out, last);
     out.insert(out.end(), stream.begin(), stream.end());
     fill_stats(sources.size(), 0, false, false, false, out.size());
     if (stats) {
@@ -951,11 +964,14 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                           put_f64(out, lattice->pitch);
                           codec::bytes::put_u32(out, lattice->columns);
                           codec::bytes::put_u32(out, lattice->rows);
-                        },
-                        0U);
+                          codec::bytes::put_u32(out, 0);  // reserved
+                        });
   if (acquisition && acquisition_bytes < std::min(others_bytes, laser_bytes))
     return grid_payload(kCodingAcquisition, acquisition->step, acquisition->origin, acquisition->sources,
-                        acquisition->stream, [](std::vector<std::uint8_t>&) {}, acquisition->fit_pulses);
+                        acquisition->stream, [&](std::vector<std::uint8_t>& out) {
+                          codec::bytes::put_u32(out, acquisition->fit_pulses | (tall ? detail::kTallCellsBit : 0U));
+                          if (tall) put_f64(out, acquisition->step_z);
+                        });
   if (laser && laser_bytes < others_bytes) {
     std::vector<std::uint8_t> out;
     out.reserve(kHeadBytes + extra_bytes(kCodingLaser) + laser->stream.size());
@@ -1114,8 +1130,13 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
                       at + kHeadBytes + 40);
     if (h.fit_pulses != 0 && (h.fit_pulses < 3 || h.fit_pulses > detail::kMaxFitPulses))
       return bad_data("residual layer line fit over " + std::to_string(h.fit_pulses) + " pulses (0 or 3-" +
-                          std::to_string(detail::kMaxFitPulses) + " allowed)",
+                          std::to_string(detail::kMaxFitPulses) + " allowed; bits 9-31 clear)",
                       at + kHeadBytes + 24);
+    // (cells taller than wide, at most kMaxCellHeight times; cubes without the field)
+    const double step_z = h.step_z == 0.0 ? q : h.step_z;
+    if (acquisition && !(step_z >= q && step_z <= detail::kMaxCellHeight * q))
+      return bad_data("residual layer cell height " + std::to_string(h.step_z) + " m is not within 1-4 cell widths",
+                      at + kHeadBytes + 28);
     std::optional<std::string> e;
     if (lattice) {
       if (!(h.pitch >= q && h.pitch <= 1e4))
@@ -1128,7 +1149,7 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
                         at + kHeadBytes + 32);
       e = detail::decode_lattice_points(dec, origin, h.pitch, q, h.columns, h.rows, n_c, out.points);
     } else {
-      e = detail::decode_acquisition_points(dec, origin, q, h.fit_pulses, n_c, out.points);
+      e = detail::decode_acquisition_points(dec, origin, q, step_z, h.fit_pulses, n_c, out.points);
     }
     if (e) return bad_data("residual layer " + *e, h.stream_offset);
     if (dec.overrun() > 8)

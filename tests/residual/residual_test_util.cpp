@@ -91,11 +91,12 @@ void write_golden_files(const std::string& stem, const Bytes& file, const Cloud&
   write_xyz(golden_path(stem + ".decoded.xyz"), cloud.value());
 }
 
-void expect_format_1_12(const Bytes& file, const char* chunk, const char* other, const std::string& coding) {
-  EXPECT_EQ(file[10], 12) << "a layer in " << chunk << " makes the file format 1.12";
+void expect_format_1_12(const Bytes& file, const char* chunk, const char* other, const std::string& coding,
+                        int minor) {
+  EXPECT_EQ(file[10], minor) << "a layer in " << chunk << " makes the file format 1." << minor;
   ASSERT_TRUE(codec::decode_model(file).ok());
-  expect_rejected(retype_chunk(file, chunk, chunk, 11), "1.12");
-  expect_rejected(retype_chunk(file, chunk, other, 12), coding);
+  expect_rejected(retype_chunk(file, chunk, chunk, 11), "1.1");
+  expect_rejected(retype_chunk(file, chunk, other, static_cast<std::uint8_t>(minor)), coding);
   const auto info = codec::inspect(file);
   ASSERT_TRUE(info.ok());
   std::string types;

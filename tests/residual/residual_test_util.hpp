@@ -36,9 +36,10 @@ void write_golden_files(const std::string& stem, const Bytes& file, const Cloud&
 void expect_golden(const std::string& stem, const Cloud& input, double max_error, int minor,
                    const std::string& chunk_types);
 /// Model file `file` (with instances and a layer in chunk `chunk`, a coding of format 1.12)
-/// decodes and is format 1.12; claiming 1.11 is refused, and so is its layer in chunk
-/// `other` (the message naming `coding`).
-void expect_format_1_12(const Bytes& file, const char* chunk, const char* other, const std::string& coding);
+/// decodes and is format 1.`minor` (12, or 13 for what that version adds); claiming 1.11 is
+/// refused, and so is its layer in chunk `other` (the message naming `coding`).
+void expect_format_1_12(const Bytes& file, const char* chunk, const char* other, const std::string& coding,
+                        int minor = 12);
 /// The layer of `cloud` at bound `e` (every coding tried) is `chosen` (its LayerStats flag),
 /// smaller than `ratio` times the voxel coding's, and meets the bound both ways.
 void expect_beats_voxel(const Cloud& cloud, double e, bool residual::LayerStats::*chosen, double ratio);

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "codec/bytes.hpp"
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/eval/metrics.hpp"
 #include "lex3d/residual/residual.hpp"
@@ -190,7 +191,11 @@ TEST(ResidualAcquisition, ModelFileVersionRules) {
   test::add_empty_word_instance(d);  // (a model with instances keeps the version its layer needs)
   const residual::LayerStats st = residual::add_layer(d, *d.alphabet, strip, 0.01);
   ASSERT_TRUE(st.acquisition);
-  expect_format_1_12(codec::encode_model(d), "RESA", "RESV", "acquisition-order");
+  // 1.13 where the layer fits x and y with a line or has cells taller than wide
+  const auto h = residual::read_layer_header(d.residual->data(), d.residual->size());
+  ASSERT_TRUE(h.ok());
+  const bool v13 = h.value().fit_pulses != 0 || h.value().step_z != 0.0;
+  expect_format_1_12(codec::encode_model(d), "RESA", "RESV", "acquisition-order", v13 ? 13 : 12);
 }
 
 /// The layer of `cloud` at bound `e` with the acquisition coding alone, and its header.
@@ -213,7 +218,7 @@ std::size_t stream_with_fit(const Cloud& cloud, double e, std::uint32_t fit) {
   if (!layer || layer->fit_pulses != fit) return 0;
   residual::detail::RangeDecoder dec(layer->stream.data(), layer->stream.size());
   std::vector<Eigen::Vector3f> out;
-  if (residual::detail::decode_acquisition_points(dec, layer->origin, layer->step, fit, all.size(), out)) return 0;
+  if (residual::detail::decode_acquisition_points(dec, layer->origin, layer->step, layer->step_z, fit, all.size(), out)) return 0;
   for (std::size_t j = 0; j < out.size(); ++j)
     if (!((out[j] - cloud.points[layer->sources[j]]).norm() <= e)) return 0;
   return layer->stream.size();
@@ -246,6 +251,48 @@ TEST(ResidualAcquisition, LineFitOfXAndY) {
                                                                        strip.time, {0, 1, 2}, 0.1, false, {bad})),
                  std::invalid_argument)
         << bad;
+  }
+}
+
+TEST(ResidualAcquisition, TallCells) {
+  // Cells twice as tall as wide (half-diagonal the bound), z planes half a cell down: every
+  // point decodes within the bound, the payload says so (bit 8 and the height after the
+  // prediction field), and a height outside 1-4 widths is refused.
+  const Cloud strip = flight_strip(6000, 5);
+  std::vector<std::uint32_t> all(strip.size());
+  for (std::uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  const double e = 0.02;
+  const auto l = residual::detail::acquisition_layer(residual::detail::RangeEncoder{}, strip.points, strip.time, all, e,
+                                                     false, {0}, 1, {{2.0, 0.5}});
+  ASSERT_TRUE(l);
+  EXPECT_NEAR(l->step_z, 2.0 * l->step, 1e-12);
+  const double half_diagonal = std::sqrt(2.0 * l->step * l->step + l->step_z * l->step_z) / 2.0;
+  EXPECT_LE(half_diagonal, e);
+  EXPECT_GT(half_diagonal, 0.999 * e);
+  residual::detail::RangeDecoder dec(l->stream.data(), l->stream.size());
+  std::vector<Eigen::Vector3f> out;
+  ASSERT_FALSE(residual::detail::decode_acquisition_points(dec, l->origin, l->step, l->step_z, 0, all.size(), out));
+  ASSERT_EQ(out.size(), all.size());
+  for (std::size_t j = 0; j < out.size(); ++j) ASSERT_LE((out[j] - strip.points[l->sources[j]]).norm(), e) << j;
+  for (const residual::detail::CellShape bad : {residual::detail::CellShape{0.5, 0.0}, residual::detail::CellShape{5.0, 0.0},
+                                                residual::detail::CellShape{1.5, 1.0}, residual::detail::CellShape{1.5, -0.1}})
+    EXPECT_THROW(static_cast<void>(residual::detail::acquisition_layer(residual::detail::RangeEncoder{}, strip.points,
+                                                                       strip.time, all, e, false, {0}, 1, {bad})),
+                 std::invalid_argument);
+  // Through the encoder, which tries the shapes: where it picks tall cells, the layer holds
+  // bit 8 and the height; a height below the width, above 4 widths or not finite is refused.
+  const auto [layer, h] = acquisition_alone(strip, e);
+  const auto decode = [&](const Bytes& b) { return residual::decode_layer(b, Cloud{}, Pose::Identity(), strip.size()); };
+  const auto d = decode(layer);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  EXPECT_LE(hausdorff(strip, d.value()), e);
+  EXPECT_LE(hausdorff(d.value(), strip), e);
+  ASSERT_GT(h.step_z, h.step) << "the encoder keeps tall cells on this strip at 2 cm (measured: 1.5 widths)";
+  {
+    EXPECT_EQ(codec::bytes::ld_u32(layer.data() + 64) & residual::detail::kTallCellsBit, residual::detail::kTallCellsBit);
+    for (const double z : {0.5 * h.step, 4.5 * h.step, std::nan(""), -h.step})
+      EXPECT_FALSE(decode(poke_f64(layer, 68, z)).ok()) << z;
+    EXPECT_FALSE(decode(Bytes(layer.begin(), layer.begin() + 72)).ok());
   }
 }
 
@@ -313,34 +360,54 @@ std::vector<double> read_times(const std::string& path) {
   return time;
 }
 
-TEST(ResidualAcquisition, DISABLED_WriteGoldenFile) {
-  const Cloud input = flight_strip(600, 11);
+/// A wordless model file of `input`'s layer at bound `e`; `acquisition`: whether the
+/// acquisition-order coding codes it.
+Bytes layer_file(const Cloud& input, double e, bool* acquisition = nullptr) {
   codec::ModelData d;
   d.input_points = input.size();
   d.alphabet = Alphabet{};
-  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGoldenMaxError);
-  ASSERT_TRUE(st.acquisition);
-  write_golden_files("tiny_residual_acquisition_1.12", codec::encode_model(d), input);
-  write_times(golden_path("tiny_residual_acquisition_1.12.time.txt"), input.time);
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, e);
+  if (acquisition) *acquisition = st.acquisition;
+  return codec::encode_model(d);
+}
+
+void write_acquisition_golden(const std::string& stem, const Cloud& input, double e) {
+  bool acquisition = false;
+  const Bytes file = layer_file(input, e, &acquisition);
+  ASSERT_TRUE(acquisition);
+  write_golden_files(stem, file, input);
+  write_times(golden_path(stem + ".time.txt"), input.time);
+}
+
+/// Golden file `stem` decodes to its recorded cloud (format 1.`minor`), and this writer
+/// still writes the recorded input's file byte for byte; its layer header.
+residual::LayerHeader expect_acquisition_golden(const std::string& stem, double e, int minor) {
+  Cloud input = read_xyz(golden_path(stem + ".input.xyz"));
+  input.time = read_times(golden_path(stem + ".time.txt"));
+  EXPECT_EQ(input.time.size(), input.size());
+  expect_golden(stem, input, e, minor, "MHDR RESA IEND ");
+  const Bytes file = read_bytes(golden_path(stem + ".lex3dm"));
+  EXPECT_EQ(layer_file(input, e), file);
+  const auto decoded = codec::decode_model(file);
+  if (!decoded.ok() || !decoded.value().residual) return {};
+  const auto h = residual::read_layer_header(decoded.value().residual->data(), decoded.value().residual->size());
+  return h.ok() ? h.value() : residual::LayerHeader{};
+}
+
+TEST(ResidualAcquisition, DISABLED_WriteGoldenFile) {
+  write_acquisition_golden("tiny_residual_acquisition_1.12", flight_strip(600, 11), kGoldenMaxError);
 }
 
 TEST(ResidualAcquisition, Format1_12FileDecodesToTheRecordedCloudAndIsWrittenAgain) {
-  Cloud input = read_xyz(golden_path("tiny_residual_acquisition_1.12.input.xyz"));
-  input.time = read_times(golden_path("tiny_residual_acquisition_1.12.time.txt"));
-  ASSERT_TRUE(input.has_time());
-  expect_golden("tiny_residual_acquisition_1.12", input, kGoldenMaxError, 12, "MHDR RESA IEND ");
-  // This writer still writes the recorded input's file byte for byte.
-  codec::ModelData w;
-  w.input_points = input.size();
-  w.alphabet = Alphabet{};
-  residual::add_layer(w, Alphabet{}, input, kGoldenMaxError);
-  EXPECT_EQ(codec::encode_model(w), read_bytes(golden_path("tiny_residual_acquisition_1.12.lex3dm")));
+  const residual::LayerHeader h = expect_acquisition_golden("tiny_residual_acquisition_1.12", kGoldenMaxError, 12);
+  EXPECT_EQ(h.fit_pulses, 0U);
+  EXPECT_EQ(h.step_z, 0.0);
 }
 
 // ---------------------------------------------------------------------------------------
-// Golden file of format 1.13 (the line fit): 2,000 points of Autzen (PDAL's test data, BSD,
-// golden/LICENSE.PDAL) from its 50,000th, in GPS-time order, at 5 cm, where a fit over
-// 8 pulses codes smaller than the step (measured: 2,003 against 2,038 stream bytes).
+// Golden file of format 1.13 (the line fit and tall cells): 2,000 points of Autzen (PDAL's
+// test data, BSD, golden/LICENSE.PDAL) from its 50,000th, in GPS-time order, at 5 cm,
+// where the encoder picks cells 1.5 widths tall and a fit over 8 pulses.
 // ---------------------------------------------------------------------------------------
 
 constexpr double kGolden13MaxError = 0.05;
@@ -353,32 +420,13 @@ TEST(ResidualAcquisition, DISABLED_WriteGoldenFile1_13) {
     input.points.push_back(las.points[i]);
     input.time.push_back(las.time[i]);
   }
-  codec::ModelData d;
-  d.input_points = input.size();
-  d.alphabet = Alphabet{};
-  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, kGolden13MaxError);
-  ASSERT_TRUE(st.acquisition);
-  write_golden_files("tiny_residual_acquisition_1.13", codec::encode_model(d), input);
-  write_times(golden_path("tiny_residual_acquisition_1.13.time.txt"), input.time);
+  write_acquisition_golden("tiny_residual_acquisition_1.13", input, kGolden13MaxError);
 }
 
 TEST(ResidualAcquisition, Format1_13FileDecodesToTheRecordedCloudAndIsWrittenAgain) {
-  Cloud input = read_xyz(golden_path("tiny_residual_acquisition_1.13.input.xyz"));
-  input.time = read_times(golden_path("tiny_residual_acquisition_1.13.time.txt"));
-  ASSERT_EQ(input.time.size(), input.size());
-  expect_golden("tiny_residual_acquisition_1.13", input, kGolden13MaxError, 13, "MHDR RESA IEND ");
-  const Bytes file = read_bytes(golden_path("tiny_residual_acquisition_1.13.lex3dm"));
-  const auto decoded = codec::decode_model(file);
-  ASSERT_TRUE(decoded.ok());
-  const auto h = residual::read_layer_header(decoded.value().residual->data(), decoded.value().residual->size());
-  ASSERT_TRUE(h.ok());
-  EXPECT_GE(h.value().fit_pulses, 3U) << "the golden file holds a line fit";
-  // This writer still writes the recorded input's file byte for byte.
-  codec::ModelData w;
-  w.input_points = input.size();
-  w.alphabet = Alphabet{};
-  residual::add_layer(w, Alphabet{}, input, kGolden13MaxError);
-  EXPECT_EQ(codec::encode_model(w), file);
+  const residual::LayerHeader h = expect_acquisition_golden("tiny_residual_acquisition_1.13", kGolden13MaxError, 13);
+  EXPECT_GE(h.fit_pulses, 3U) << "the golden file holds a line fit";
+  EXPECT_GT(h.step_z, h.step) << "and tall cells";
 }
 
 }  // namespace
