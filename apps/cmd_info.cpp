@@ -241,7 +241,8 @@ bool info_lex3d_file(const InfoOptions& o) {
     if (layer && layer->coding == 1) j.value("direction_cell_rad", layer->cell);
     if (layer && layer->coding == 5) {
       j.value("lattice_pitch_m", layer->pitch).value("lattice_columns", static_cast<std::uint64_t>(layer->columns))
-          .value("lattice_rows", static_cast<std::uint64_t>(layer->rows));
+          .value("lattice_rows", static_cast<std::uint64_t>(layer->rows))
+          .value("lattice_stacked", layer->voxel_reserved != 0);
       j.begin_array("lattice_origin_m");
       for (double c : layer->origin) j.value({}, c);
       j.end_array();
@@ -296,8 +297,9 @@ bool info_lex3d_file(const InfoOptions& o) {
                     octree_contexts_name(layer->octree_contexts));
       if (layer && layer->coding == 1) std::printf("sweep          direction cell %.4g rad\n", layer->cell);
       if (layer && layer->coding == 5)
-        std::printf("lattice        %u x %u cells of %.4g m from (%.4g, %.4g) m\n", layer->columns, layer->rows, layer->pitch,
-                    layer->origin[0], layer->origin[1]);
+        std::printf("lattice        %u x %u cells of %.4g m from (%.4g, %.4g) m, %s\n", layer->columns, layer->rows,
+                    layer->pitch, layer->origin[0], layer->origin[1],
+                    layer->voxel_reserved != 0 ? "a cell's points stacked" : "a cell's points in input order");
       if (layer && layer->coding == 4)
         std::printf("grid           cells %.4g m wide, %.4g m tall, from (%.4g, %.4g, %.4g) m, points in the order they were fired, %s\n",
                     layer->step, layer->step_z == 0.0 ? layer->step : layer->step_z, layer->origin[0], layer->origin[1], layer->origin[2],

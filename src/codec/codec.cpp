@@ -83,6 +83,9 @@ constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
 /// first minor version that has it.
 constexpr std::uint16_t kAcquisitionFitMinor = 13;
 constexpr std::size_t kAcquisitionFitOffset = 64;
+/// A lattice layer whose cells' points are stacked (its order field not 0, model.md
+/// §2.12) needs the same minor version.
+constexpr std::size_t kLatticeOrderOffset = 80;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
 constexpr std::size_t kGeorMaxString = 4096;
@@ -809,6 +812,11 @@ bool acquisition_fit_layer(const std::vector<std::uint8_t>& payload) {
          ld_u32(payload.data() + kAcquisitionFitOffset) != 0;
 }
 
+bool lattice_stacked_layer(const std::vector<std::uint8_t>& payload) {
+  return layer_coding(payload) == 5 && payload.size() >= kLatticeOrderOffset + 4 &&
+         ld_u32(payload.data() + kLatticeOrderOffset) != 0;
+}
+
 bool voxel_mixed_layer(const std::vector<std::uint8_t>& payload) {
   return layer_coding(payload) == 2 && payload.size() > kVoxelContextsOffset && payload[kVoxelContextsOffset] >= 1;
 }
@@ -1100,7 +1108,8 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual) minor = std::max(minor, laser_predictor_minor(*data.residual));
   if (data.residual && laser_short_layer(*data.residual)) minor = std::max(minor, kLaserShortMinor);
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
-  if (data.residual && acquisition_fit_layer(*data.residual)) minor = std::max(minor, kAcquisitionFitMinor);
+  if (data.residual && (acquisition_fit_layer(*data.residual) || lattice_stacked_layer(*data.residual)))
+    minor = std::max(minor, kAcquisitionFitMinor);
   if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
     minor = std::max(minor, kAttrExtendedMinor);
   // A model without instances has no INST chunk and the short MHDR; one without words at
@@ -1287,6 +1296,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                            " (a line fit or tall cells) needs format version 1." + std::to_string(kAcquisitionFitMinor) +
                            ", the header says 1." + std::to_string(h.minor),
                        c.payload_offset + kAcquisitionFitOffset);
+    if (lattice_stacked_layer(*out.residual) && h.minor < kAcquisitionFitMinor)
+      return ctx.error("a lattice layer with stacked cells (order field " +
+                           std::to_string(ld_u32(out.residual->data() + kLatticeOrderOffset)) +
+                           ") needs format version 1." + std::to_string(kAcquisitionFitMinor) + ", the header says 1." +
+                           std::to_string(h.minor),
+                       c.payload_offset + kLatticeOrderOffset);
     return {};
   });
   if (!s.ok()) return s;

@@ -39,12 +39,13 @@ std::complex<double> mean_phase(const std::vector<double>& values, double pitch)
 class LatticeState {
  public:
   explicit LatticeState(std::uint32_t columns)
-      : above_(columns), here_(columns), x_(8), y_(8), z_(9 * 4), extra_(5), x2_(1), y2_(1), z2_(1) {}
+      : above_(columns), here_(columns), x_(8), y_(8), z_(9 * 4), extra_(5), x2_(1), y2_(1), z2_(2) {}
 
   struct Cell {
     bool occupied = false;
     std::int64_t z = 0;
     bool several = false;  ///< it holds more than one point
+    std::int64_t gap = 0;  ///< stacked cells: its second point's height over its first's
   };
 
   [[nodiscard]] int occupancy_ctx(std::uint32_t i) const {
@@ -101,10 +102,25 @@ class LatticeState {
     return spread_ctx * 4 + (c < 3 ? 0 : c < 5 ? 1 : c < 7 ? 2 : 3);
   }
   void last_residual(std::int64_t r) { last_rz_ = r; }
+  /// Stacked cells (§2.12.1, format 1.13): the mean gap of those of W, N, NW and NE that
+  /// hold several points, false where none does.
+  [[nodiscard]] bool neighbour_gap(std::uint32_t i, std::int64_t& gap) const {
+    std::int64_t sum = 0;
+    std::int64_t count = 0;
+    for (const Cell* c : {i > 0 ? &here_[i - 1] : nullptr, &above_[i], i > 0 ? &above_[i - 1] : nullptr,
+                          i + 1 < above_.size() ? &above_[i + 1] : nullptr}) {
+      if (c == nullptr || !c->several) continue;
+      sum += c->gap;
+      ++count;
+    }
+    if (count == 0) return false;
+    gap = divide_rounded(sum, count);
+    return true;
+  }
   [[nodiscard]] int x_ctx() const { return IntModel::context_of(last_dx_); }
   [[nodiscard]] int y_ctx() const { return IntModel::context_of(last_dy_); }
-  void set(std::uint32_t i, bool occupied, std::int64_t z, bool several) {
-    here_[i] = {occupied, z, several};
+  void set(std::uint32_t i, bool occupied, std::int64_t z, bool several, std::int64_t gap = 0) {
+    here_[i] = {occupied, z, several, gap};
     if (occupied) last_z_ = z;
   }
   void first_offsets(std::int64_t dx, std::int64_t dy) {
@@ -253,8 +269,57 @@ std::optional<Lattice> find_lattice(const std::vector<Eigen::Vector3f>& input, c
   return best;
 }
 
+namespace {
+
+/// The stream of `points` (row by row, cell by cell) after what `enc` holds. `stacked`
+/// (format 1.13): a cell's points come lowest first, each extra one's height against the
+/// one below it, the second's against the gap its neighbours hold (§2.12.1).
+std::vector<std::uint8_t> code_cells(RangeEncoder enc, const LatticeLayer& layer, const std::vector<LatticePoint>& points,
+                                     bool stacked) {
+  LatticeState s(layer.columns);
+  std::size_t at = 0;
+  for (std::uint32_t j = 0; j < layer.rows; ++j) {
+    for (std::uint32_t i = 0; i < layer.columns; ++i) {
+      std::size_t end = at;
+      while (end < points.size() && points[end].j == j && points[end].i == i) ++end;
+      const bool occupied = end > at;
+      enc.put(s.occupancy[static_cast<std::size_t>(s.occupancy_ctx(i))], occupied);
+      if (!occupied) {
+        s.set(i, false, 0, false);
+        continue;
+      }
+      s.extra().put(enc, s.extra_ctx(i), static_cast<std::int64_t>(end - at - 1));
+      const LatticePoint& first = points[at];
+      s.x().put(enc, s.x_ctx(), first.dx);
+      s.y().put(enc, s.y_ctx(), first.dy);
+      std::int64_t pred = 0;
+      int ctx = 0;
+      s.predict_z(i, pred, ctx);
+      s.z().put(enc, s.z_ctx(ctx), first.z - pred);
+      s.last_residual(first.z - pred);
+      s.first_offsets(first.dx, first.dy);
+      std::int64_t gap = 0;
+      const bool known = stacked && s.neighbour_gap(i, gap);
+      for (std::size_t k = at + 1; k < end; ++k) {  // each its own offsets, its height against the first's
+        s.x2().put(enc, 0, points[k].dx);
+        s.y2().put(enc, 0, points[k].dy);
+        if (!stacked) s.z2().put(enc, 0, points[k].z - first.z);
+        else if (k == at + 1 && known) s.z2().put(enc, 1, points[k].z - first.z - gap);
+        else s.z2().put(enc, 0, points[k].z - points[k - 1].z);
+      }
+      s.set(i, true, first.z, end - at > 1, end - at > 1 ? points[at + 1].z - first.z : 0);
+      at = end;
+    }
+    s.next_row();
+  }
+  return enc.finish();
+}
+
+}  // namespace
+
 std::optional<LatticeLayer> lattice_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
-                                          const std::vector<std::uint32_t>& coded, const Lattice& lattice, double bound) {
+                                          const std::vector<std::uint32_t>& coded, const Lattice& lattice, double bound,
+                                          bool try_stacked) {
   if (coded.empty() || !(lattice.pitch > 0.0)) return std::nullopt;
   LatticeLayer layer;
   layer.pitch = lattice.pitch;
@@ -308,49 +373,26 @@ std::optional<LatticeLayer> lattice_layer(RangeEncoder enc, const std::vector<Ei
     if (!miss) break;
     layer.step *= 1.0 - 1e-3;
   }
-  // Row by row, cell by cell; the points of a cell in input order.
+  // Row by row, cell by cell; the points of a cell in input order, or stacked (lowest
+  // first), whichever codes smaller (the first of equals).
   std::stable_sort(points.begin(), points.end(), [](const LatticePoint& a, const LatticePoint& b) {
     return a.j != b.j ? a.j < b.j : a.i < b.i;
   });
-  LatticeState s(layer.columns);
-  std::size_t at = 0;
-  for (std::uint32_t j = 0; j < layer.rows; ++j) {
-    for (std::uint32_t i = 0; i < layer.columns; ++i) {
-      std::size_t end = at;
-      while (end < points.size() && points[end].j == j && points[end].i == i) ++end;
-      const bool occupied = end > at;
-      enc.put(s.occupancy[static_cast<std::size_t>(s.occupancy_ctx(i))], occupied);
-      if (!occupied) {
-        s.set(i, false, 0, false);
-        continue;
-      }
-      s.extra().put(enc, s.extra_ctx(i), static_cast<std::int64_t>(end - at - 1));
-      const LatticePoint& first = points[at];
-      s.x().put(enc, s.x_ctx(), first.dx);
-      s.y().put(enc, s.y_ctx(), first.dy);
-      std::int64_t pred = 0;
-      int ctx = 0;
-      s.predict_z(i, pred, ctx);
-      s.z().put(enc, s.z_ctx(ctx), first.z - pred);
-      s.last_residual(first.z - pred);
-      s.first_offsets(first.dx, first.dy);
-      for (std::size_t k = at + 1; k < end; ++k) {  // each its own offsets, its height against the first's
-        s.x2().put(enc, 0, points[k].dx);
-        s.y2().put(enc, 0, points[k].dy);
-        s.z2().put(enc, 0, points[k].z - first.z);
-      }
-      s.set(i, true, first.z, end - at > 1);
-      for (std::size_t k = at; k < end; ++k) layer.sources.push_back(points[k].source);
-      at = end;
-    }
-    s.next_row();
-  }
-  layer.stream = enc.finish();
+  std::vector<LatticePoint> stacked = points;
+  std::stable_sort(stacked.begin(), stacked.end(), [](const LatticePoint& a, const LatticePoint& b) {
+    return a.j != b.j ? a.j < b.j : a.i != b.i ? a.i < b.i : a.z < b.z;
+  });
+  std::vector<std::uint8_t> plain_stream = code_cells(enc, layer, points, false);
+  std::vector<std::uint8_t> stacked_stream;
+  if (try_stacked) stacked_stream = code_cells(enc, layer, stacked, true);
+  layer.stacked = try_stacked && stacked_stream.size() < plain_stream.size();
+  layer.stream = std::move(layer.stacked ? stacked_stream : plain_stream);
+  for (const LatticePoint& p : layer.stacked ? stacked : points) layer.sources.push_back(p.source);
   return layer;
 }
 
 std::optional<std::string> decode_lattice_points(RangeDecoder& dec, const Eigen::Vector3d& origin, double pitch,
-                                                 double step, std::uint32_t columns, std::uint32_t rows,
+                                                 double step, std::uint32_t columns, std::uint32_t rows, bool stacked,
                                                  std::uint64_t count, std::vector<Eigen::Vector3f>& out) {
   LatticeState s(columns);
   std::uint64_t decoded = 0;
@@ -374,12 +416,19 @@ std::optional<std::string> decode_lattice_points(RangeDecoder& dec, const Eigen:
       s.last_residual(rz);
       const std::int64_t z = pred + rz;
       s.first_offsets(dx, dy);
+      std::int64_t gap = 0;
+      const bool known = stacked && s.neighbour_gap(i, gap);
+      std::int64_t below = z, second = z;
       for (std::int64_t k = 0; k <= extra; ++k) {
         std::int64_t px = dx, py = dy, pz = z;
         if (k > 0) {
           px = s.x2().get(dec, 0);
           py = s.y2().get(dec, 0);
-          pz += s.z2().get(dec, 0);
+          if (!stacked) pz = z + s.z2().get(dec, 0);
+          else if (k == 1 && known) pz = z + gap + s.z2().get(dec, 1);
+          else pz = below + s.z2().get(dec, 0);
+          below = pz;
+          if (k == 1) second = pz;
         }
         if (std::max({std::abs(px), std::abs(py), std::abs(pz)}) > kMaxOffset)
           return "point " + std::to_string(decoded) + " lies beyond 2^30 steps of its lattice point";
@@ -388,7 +437,7 @@ std::optional<std::string> decode_lattice_points(RangeDecoder& dec, const Eigen:
         out.push_back(p);
         ++decoded;
       }
-      s.set(i, true, z, extra > 0);
+      s.set(i, true, z, extra > 0, extra > 0 ? second - z : 0);
     }
     s.next_row();
   }

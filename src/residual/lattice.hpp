@@ -37,22 +37,25 @@ struct LatticeLayer {
   double pitch = 0.0;                                ///< lattice pitch, metres
   double step = 0.0;                                 ///< offsets' and heights' step, metres
   std::uint32_t columns = 0, rows = 0;
+  /// a cell's points lowest first, each against the one below (format 1.13, §2.12.1)
+  bool stacked = false;
   std::vector<std::uint8_t> stream;
   std::vector<std::uint32_t> sources;  ///< the input point of each coded point, in order
 };
 
 /// Codes the input points `coded` on `lattice` after what `enc` holds already (the keep
 /// mask), every point within `bound` of its decoded position (float32). nullopt when
-/// there is nothing to code or the lattice has more than four cells a point.
+/// there is nothing to code or the lattice has more than four cells a point. A cell's
+/// points are coded in input order or (with `try_stacked`) stacked, whichever codes smaller.
 [[nodiscard]] std::optional<LatticeLayer> lattice_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
                                                         const std::vector<std::uint32_t>& coded, const Lattice& lattice,
-                                                        double bound);
+                                                        double bound, bool try_stacked = true);
 
 /// Decodes `count` points of a lattice stream (after its keep mask) onto `out`. A message
 /// when the stream is malformed (more points than `count`, a height off the grid).
 [[nodiscard]] std::optional<std::string> decode_lattice_points(RangeDecoder& dec, const Eigen::Vector3d& origin,
                                                                double pitch, double step, std::uint32_t columns,
-                                                               std::uint32_t rows, std::uint64_t count,
+                                                               std::uint32_t rows, bool stacked, std::uint64_t count,
                                                                std::vector<Eigen::Vector3f>& out);
 
 }  // namespace lex3d::residual::detail

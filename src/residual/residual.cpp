@@ -68,6 +68,9 @@ constexpr std::uint64_t kAcquisitionExtraBytes = 28;  // origin 3 f64, fit_pulse
 /// at E = 14 mm, 2.8 % at 0.1 m, 4.9 % at 0.15 m and 7.1 % at 0.2 m: it averages out the
 /// grid's rounding of the pulses before, which a step from the last pulse carries whole.
 const std::vector<std::uint32_t> kAcquisitionFits = {0, 8, 12, 16};
+/// Bit 0 of an RESG payload's order field (formats/model.md §2.12): the cells' points
+/// stacked, lowest first (format 1.13).
+constexpr std::uint32_t kLatticeStackedBit = 1U;
 /// The cell shapes the encoder tries (§2.11.2): cubes and cells 1.5 and 2 times taller
 /// than wide, each with its z planes from the lowest point and half a cell lower.
 const std::vector<detail::CellShape> kAcquisitionShapes = {{1.0, 0.0}, {1.0, 0.5}, {1.5, 0.0},
@@ -964,7 +967,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                           put_f64(out, lattice->pitch);
                           codec::bytes::put_u32(out, lattice->columns);
                           codec::bytes::put_u32(out, lattice->rows);
-                          codec::bytes::put_u32(out, 0);  // reserved
+                          codec::bytes::put_u32(out, lattice->stacked ? kLatticeStackedBit : 0U);
                         });
   if (acquisition && acquisition_bytes < std::min(others_bytes, laser_bytes))
     return grid_payload(kCodingAcquisition, acquisition->step, acquisition->origin, acquisition->sources,
@@ -1125,8 +1128,8 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
       return bad_data("residual layer grid step " + std::to_string(q) + " m is below 1e-7 m", at + 8);
     if (!origin.allFinite() || !(origin.cwiseAbs().maxCoeff() <= kMaxVoxelOrigin))
       return bad_data("residual layer grid origin is not finite or lies beyond 1e9 m", at + kHeadBytes);
-    if (h.voxel_reserved != 0)
-      return bad_data("residual layer reserved field is " + std::to_string(h.voxel_reserved) + ", not 0",
+    if ((h.voxel_reserved & ~kLatticeStackedBit) != 0)
+      return bad_data("residual layer lattice order field is " + std::to_string(h.voxel_reserved) + ", not 0 or 1",
                       at + kHeadBytes + 40);
     if (h.fit_pulses != 0 && (h.fit_pulses < 3 || h.fit_pulses > detail::kMaxFitPulses))
       return bad_data("residual layer line fit over " + std::to_string(h.fit_pulses) + " pulses (0 or 3-" +
@@ -1147,7 +1150,8 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
         return bad_data("residual layer lattice of " + std::to_string(h.columns) + " x " + std::to_string(h.rows) +
                             " cells is empty or has more than 4 a coded point",
                         at + kHeadBytes + 32);
-      e = detail::decode_lattice_points(dec, origin, h.pitch, q, h.columns, h.rows, n_c, out.points);
+      e = detail::decode_lattice_points(dec, origin, h.pitch, q, h.columns, h.rows,
+                                        (h.voxel_reserved & kLatticeStackedBit) != 0, n_c, out.points);
     } else {
       e = detail::decode_acquisition_points(dec, origin, q, step_z, h.fit_pulses, n_c, out.points);
     }

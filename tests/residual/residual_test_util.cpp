@@ -122,12 +122,13 @@ void expect_beats_voxel(const Cloud& cloud, double e, bool residual::LayerStats:
   EXPECT_LE(eval::compare_clouds(d.value(), cloud).hausdorff, e);
 }
 
-void expect_grid_fields_checked(const Bytes& good, std::size_t reserved_at, const std::function<bool(const Bytes&)>& decodes) {
+void expect_grid_fields_checked(const Bytes& good, std::size_t reserved_at, const std::function<bool(const Bytes&)>& decodes,
+                                std::uint32_t bad) {
   ASSERT_TRUE(decodes(good));
   for (const double step : {0.0, -0.01, 0.1, std::nan("")}) EXPECT_FALSE(decodes(poke_f64(good, 16, step))) << step;
   for (const double o : {std::nan(""), 1e10, -std::numeric_limits<double>::infinity()})
     for (const std::size_t at : {40U, 48U, 56U}) EXPECT_FALSE(decodes(poke_f64(good, at, o))) << o << " at " << at;
-  EXPECT_FALSE(decodes(poke_u32(good, reserved_at, 1))) << "reserved field";
+  EXPECT_FALSE(decodes(poke_u32(good, reserved_at, bad))) << "reserved field";
   Bytes many = good;
   for (int i = 0; i < 8; ++i) many[32 + static_cast<std::size_t>(i)] = 0xFF;
   EXPECT_FALSE(decodes(many)) << "coded points";

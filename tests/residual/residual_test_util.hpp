@@ -45,8 +45,9 @@ void expect_format_1_12(const Bytes& file, const char* chunk, const char* other,
 void expect_beats_voxel(const Cloud& cloud, double e, bool residual::LayerStats::*chosen, double ratio);
 /// A payload of a coding on a grid (formats/model.md §2.11, §2.12) is refused (`decodes`
 /// false) with a step out of range, an origin not finite or beyond 10^9 m, a reserved field
-/// (at `reserved_at`) not 0, or more coded points than its bytes can hold.
-void expect_grid_fields_checked(const Bytes& good, std::size_t reserved_at, const std::function<bool(const Bytes&)>& decodes);
+/// (at `reserved_at`) of `bad`, or more coded points than its bytes can hold.
+void expect_grid_fields_checked(const Bytes& good, std::size_t reserved_at, const std::function<bool(const Bytes&)>& decodes,
+                                std::uint32_t bad = 1);
 /// A layer payload cut anywhere is refused within its first `header` bytes and else decodes
 /// to `points` points or is refused; so is one with a byte flipped from `header` on.
 void expect_cuts_and_flips_bounded(const Bytes& good, std::size_t header, std::uint64_t points,

@@ -114,7 +114,7 @@ struct LayerHeader {
   std::array<double, 3> origin{};  ///< voxel and acquisition-order codings: the grid's corner, model frame, metres
   std::uint32_t depth = 0;         ///< voxel coding: octree levels
   std::uint32_t octree_contexts = 0;  ///< voxel coding: 0 face contexts (§2.7.1), 1 mixed contexts (§2.7.4, format 1.8)
-  std::uint32_t voxel_reserved = 0;   ///< voxel coding: the reserved u16 after depth and contexts; lattice coding: its reserved u32 (0)
+  std::uint32_t voxel_reserved = 0;   ///< voxel coding: the reserved u16 after depth and contexts; lattice coding: its order field (0 input order, 1 stacked: format 1.13)
   std::uint32_t fit_pulses = 0;    ///< acquisition-order coding: pulses of the line fit of x and y, 0 for format 1.12's step (formats/model.md §2.11.1)
   double step_z = 0.0;             ///< acquisition-order coding: the cells' height where taller than wide (format 1.13), else 0 (cubes of `step`)
   double tangential_step = 0.0;    ///< sensor-geometry coding: step across the beams, metres
