@@ -587,6 +587,7 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
                             std::to_string(h.stream_offset + 8) + " expected (the cells' height)",
                         0);
       h.step_z = ld_f64(payload + h.stream_offset);
+      if (!(h.step_z > 0.0)) h.step_z = std::numeric_limits<double>::quiet_NaN();  // (refused as a height)
       h.stream_offset += 8;
     }
   } else if (h.coding == kCodingLattice) {

@@ -290,7 +290,7 @@ TEST(ResidualAcquisition, TallCells) {
   ASSERT_GT(h.step_z, h.step) << "the encoder keeps tall cells on this strip at 2 cm (measured: 1.5 widths)";
   {
     EXPECT_EQ(codec::bytes::ld_u32(layer.data() + 64) & residual::detail::kTallCellsBit, residual::detail::kTallCellsBit);
-    for (const double z : {0.5 * h.step, 4.5 * h.step, std::nan(""), -h.step})
+    for (const double z : {0.5 * h.step, 4.5 * h.step, std::nan(""), -h.step, 0.0})
       EXPECT_FALSE(decode(poke_f64(layer, 68, z)).ok()) << z;
     EXPECT_FALSE(decode(Bytes(layer.begin(), layer.begin() + 72)).ok());
   }
