@@ -91,6 +91,15 @@ void write_golden_files(const std::string& stem, const Bytes& file, const Cloud&
   write_xyz(golden_path(stem + ".decoded.xyz"), cloud.value());
 }
 
+Bytes wordless_layer_file(const Cloud& input, double e, residual::LayerStats* stats) {
+  codec::ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, e);
+  if (stats) *stats = st;
+  return codec::encode_model(d);
+}
+
 void expect_format_1_12(const Bytes& file, const char* chunk, const char* other, const std::string& coding,
                         int minor) {
   EXPECT_EQ(file[10], minor) << "a layer in " << chunk << " makes the file format 1." << minor;

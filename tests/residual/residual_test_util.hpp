@@ -30,6 +30,9 @@ Bytes poke_u32(Bytes b, std::size_t at, std::uint32_t v);
 /// Writes model file `file` as golden file `stem`.lex3dm, with `input` and the cloud it
 /// decodes to as `stem`.input.xyz / .decoded.xyz.
 void write_golden_files(const std::string& stem, const Bytes& file, const Cloud& input);
+/// A model file without words holding `input`'s layer at bound `e` (every coding tried);
+/// `stats`, where given, the layer's.
+Bytes wordless_layer_file(const Cloud& input, double e, residual::LayerStats* stats = nullptr);
 /// Golden file `stem`.lex3dm decodes to its recorded cloud bit for bit, within `max_error`
 /// of `input` both ways, and is a file of format 1.`minor` whose chunks are `chunk_types`
 /// ("MHDR RESL IEND ").

@@ -360,21 +360,10 @@ std::vector<double> read_times(const std::string& path) {
   return time;
 }
 
-/// A wordless model file of `input`'s layer at bound `e`; `acquisition`: whether the
-/// acquisition-order coding codes it.
-Bytes layer_file(const Cloud& input, double e, bool* acquisition = nullptr) {
-  codec::ModelData d;
-  d.input_points = input.size();
-  d.alphabet = Alphabet{};
-  const residual::LayerStats st = residual::add_layer(d, Alphabet{}, input, e);
-  if (acquisition) *acquisition = st.acquisition;
-  return codec::encode_model(d);
-}
-
 void write_acquisition_golden(const std::string& stem, const Cloud& input, double e) {
-  bool acquisition = false;
-  const Bytes file = layer_file(input, e, &acquisition);
-  ASSERT_TRUE(acquisition);
+  residual::LayerStats st;
+  const Bytes file = wordless_layer_file(input, e, &st);
+  ASSERT_TRUE(st.acquisition);
   write_golden_files(stem, file, input);
   write_times(golden_path(stem + ".time.txt"), input.time);
 }
@@ -387,7 +376,7 @@ residual::LayerHeader expect_acquisition_golden(const std::string& stem, double 
   EXPECT_EQ(input.time.size(), input.size());
   expect_golden(stem, input, e, minor, "MHDR RESA IEND ");
   const Bytes file = read_bytes(golden_path(stem + ".lex3dm"));
-  EXPECT_EQ(layer_file(input, e), file);
+  EXPECT_EQ(wordless_layer_file(input, e), file);
   const auto decoded = codec::decode_model(file);
   if (!decoded.ok() || !decoded.value().residual) return {};
   const auto h = residual::read_layer_header(decoded.value().residual->data(), decoded.value().residual->size());
