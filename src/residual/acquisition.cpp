@@ -73,8 +73,9 @@ class AcquisitionState {
         // fitted with a line over up to fit_ pulses and moved back by the slope at the
         // predicted z.
         const std::int64_t z0 = pulses_[0][2];
+        const std::array<std::int64_t, 2> u = fitted(back, ahead);
         for (int a = 0; a < 2; ++a)
-          p[a] = pulses_[0][a] + fitted(a, back, ahead) + slope_shift(a, clamp(p[2], kMaxPrediction) - z0);
+          p[a] = pulses_[0][a] + u[static_cast<std::size_t>(a)] + slope_shift(a, clamp(p[2], kMaxPrediction) - z0);
       }
     }
     for (std::int64_t& v : p) v = clamp(v, kMaxPrediction);
@@ -126,38 +127,52 @@ class AcquisitionState {
   IntModel z_, x_, y_, gap_;
 
  private:
-  /// The x or y (`a`) `ahead` pulses after the latest, off the latest pulse's, with the
+  /// The x and y `ahead` pulses after the latest, off the latest pulse's, with the
   /// part its height explains along the beam taken off: the least-squares line through
   /// the last min(held_, fit_) pulses' (each pulse's coordinate less the slope's part of
   /// its z, both off the latest pulse's and clamped to ±kFitClamp; the slope's part taken
   /// off the sums), or with fewer than three of them the step over `back` pulses.
-  [[nodiscard]] std::int64_t fitted(int a, int back, std::int64_t ahead) const {
+  [[nodiscard]] std::array<std::int64_t, 2> fitted(int back, std::int64_t ahead) const {
     const int n = std::min(held_, fit_);
     const auto off = [&](int j, int axis) {
       return clamp(pulses_[static_cast<std::size_t>(j)][axis] - pulses_[0][axis], kFitClamp);
     };
+    std::array<std::int64_t, 2> u{};
     if (n < 3) {
-      if (back == 0) return 0;
-      const std::int64_t v = off(back, a) - slope_shift(a, off(back, 2));
-      return divide_rounded(-v * ahead, index_[0] - index_[static_cast<std::size_t>(back)]);
+      if (back == 0) return u;
+      const std::int64_t span = index_[0] - index_[static_cast<std::size_t>(back)];
+      for (int a = 0; a < 2; ++a) {
+        const std::int64_t v = off(back, a) - slope_shift(a, off(back, 2));
+        u[static_cast<std::size_t>(a)] = divide_rounded(-v * ahead, span);
+      }
+      return u;
     }
-    std::int64_t si = 0, sii = 0, sx = 0, six = 0, sz = 0, siz = 0;
+    // (the indices' and heights' sums serve both axes)
+    std::int64_t si = 0, sii = 0, sz = 0, siz = 0;
+    std::array<std::int64_t, 2> sx{}, six{};
     for (int j = 1; j < n; ++j) {  // (pulse 0 adds nothing but its count: its i and offsets are 0)
       const std::int64_t i = index_[static_cast<std::size_t>(j)] - index_[0];
-      const std::int64_t x = off(j, a), z = off(j, 2);
+      const std::int64_t z = off(j, 2);
       si += i;
       sii += i * i;
-      sx += x;
-      six += i * x;
       sz += z;
       siz += i * z;
+      for (std::size_t a = 0; a < 2; ++a) {
+        const std::int64_t x = off(j, static_cast<int>(a));
+        sx[a] += x;
+        six[a] += i * x;
+      }
     }
-    // (|sz| < 2^25 and |siz| < 2^35 cells: their products with the slope, at most 2^20, fit)
-    const std::int64_t sv = clamp(sx - divide_rounded(slope_[a] * sz, std::int64_t{1} << kSlopeBits), kFitSumClamp);
-    const std::int64_t siv = clamp(six - divide_rounded(slope_[a] * siz, std::int64_t{1} << kSlopeBits), kFitMomentClamp);
     const std::int64_t d = n * sii - si * si;
-    if (d <= 0) return 0;
-    return divide_rounded(sv * d + (n * siv - si * sv) * (n * ahead - si), n * d);
+    if (d <= 0) return u;
+    for (std::size_t a = 0; a < 2; ++a) {
+      // (|sz| < 2^25 and |siz| < 2^35 cells: their products with the slope, at most 2^20, fit)
+      const std::int64_t sv = clamp(sx[a] - divide_rounded(slope_[a] * sz, std::int64_t{1} << kSlopeBits), kFitSumClamp);
+      const std::int64_t siv =
+          clamp(six[a] - divide_rounded(slope_[a] * siz, std::int64_t{1} << kSlopeBits), kFitMomentClamp);
+      u[a] = divide_rounded(sv * d + (n * siv - si * sv) * (n * ahead - si), n * d);
+    }
+    return u;
   }
 
   Cell last_{};
