@@ -78,13 +78,11 @@ constexpr std::uint16_t kLaserShortMinor = 11;
 /// against its own predictor, model.md §2.8.1) and the first minor version that has it.
 constexpr std::uint32_t kLaserTablePredictorsBit = 1U << 8;
 constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
-/// An acquisition-order layer whose x and y are fitted with a line over some pulses or
-/// whose cells are taller than wide (its prediction field not 0, model.md §2.11) and the
-/// first minor version that has it.
-constexpr std::uint16_t kAcquisitionFitMinor = 13;
+/// The first minor version with an acquisition-order layer whose x and y are fitted with a
+/// line or whose cells are taller than wide (its prediction field not 0, model.md §2.11),
+/// or a lattice layer whose cells' points are stacked (its order field not 0, §2.12).
+constexpr std::uint16_t kLayerFieldsMinor = 13;
 constexpr std::size_t kAcquisitionFitOffset = 64;
-/// A lattice layer whose cells' points are stacked (its order field not 0, model.md
-/// §2.12) needs the same minor version.
 constexpr std::size_t kLatticeOrderOffset = 80;
 constexpr double kGeorMaxOrigin = 1e9;                        // metres
 constexpr double kGeorMinUnit = 1e-3, kGeorMaxUnit = 1e4;     // metres per CRS unit
@@ -807,14 +805,12 @@ bool attributes_extended(const std::uint8_t* p, std::uint64_t size) {
   return false;
 }
 
-bool acquisition_fit_layer(const std::vector<std::uint8_t>& payload) {
-  return layer_coding(payload) == 4 && payload.size() >= kAcquisitionFitOffset + 4 &&
-         ld_u32(payload.data() + kAcquisitionFitOffset) != 0;
-}
-
-bool lattice_stacked_layer(const std::vector<std::uint8_t>& payload) {
-  return layer_coding(payload) == 5 && payload.size() >= kLatticeOrderOffset + 4 &&
-         ld_u32(payload.data() + kLatticeOrderOffset) != 0;
+/// Where a layer holds a field that format 1.13 added, not 0 (an acquisition-order layer's
+/// prediction field, a lattice layer's order field): its offset; else 0.
+std::size_t layer_1_13_field(const std::vector<std::uint8_t>& payload) {
+  const std::uint32_t coding = layer_coding(payload);
+  const std::size_t at = coding == 4 ? kAcquisitionFitOffset : coding == 5 ? kLatticeOrderOffset : 0;
+  return at != 0 && payload.size() >= at + 4 && ld_u32(payload.data() + at) != 0 ? at : 0;
 }
 
 bool voxel_mixed_layer(const std::vector<std::uint8_t>& payload) {
@@ -1108,8 +1104,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual) minor = std::max(minor, laser_predictor_minor(*data.residual));
   if (data.residual && laser_short_layer(*data.residual)) minor = std::max(minor, kLaserShortMinor);
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
-  if (data.residual && (acquisition_fit_layer(*data.residual) || lattice_stacked_layer(*data.residual)))
-    minor = std::max(minor, kAcquisitionFitMinor);
+  if (data.residual && layer_1_13_field(*data.residual) != 0) minor = std::max(minor, kLayerFieldsMinor);
   if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
     minor = std::max(minor, kAttrExtendedMinor);
   // A model without instances has no INST chunk and the short MHDR; one without words at
@@ -1290,18 +1285,15 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                            " needs format version 1." + std::to_string(kVoxelMixedMinor) + ", the header says 1." +
                            std::to_string(h.minor),
                        c.payload_offset + kVoxelContextsOffset);
-    if (acquisition_fit_layer(*out.residual) && h.minor < kAcquisitionFitMinor)
-      return ctx.error("an acquisition-order layer with prediction field " +
-                           std::to_string(ld_u32(out.residual->data() + kAcquisitionFitOffset)) +
-                           " (a line fit or tall cells) needs format version 1." + std::to_string(kAcquisitionFitMinor) +
-                           ", the header says 1." + std::to_string(h.minor),
-                       c.payload_offset + kAcquisitionFitOffset);
-    if (lattice_stacked_layer(*out.residual) && h.minor < kAcquisitionFitMinor)
-      return ctx.error("a lattice layer with stacked cells (order field " +
-                           std::to_string(ld_u32(out.residual->data() + kLatticeOrderOffset)) +
-                           ") needs format version 1." + std::to_string(kAcquisitionFitMinor) + ", the header says 1." +
+    if (const std::size_t at = layer_1_13_field(*out.residual); at != 0 && h.minor < kLayerFieldsMinor) {
+      const std::string field = std::to_string(ld_u32(out.residual->data() + at));
+      return ctx.error((at == kAcquisitionFitOffset
+                            ? "an acquisition-order layer with prediction field " + field + " (a line fit or tall cells)"
+                            : "a lattice layer with stacked cells (order field " + field + ")") +
+                           " needs format version 1." + std::to_string(kLayerFieldsMinor) + ", the header says 1." +
                            std::to_string(h.minor),
-                       c.payload_offset + kLatticeOrderOffset);
+                       c.payload_offset + at);
+    }
     return {};
   });
   if (!s.ok()) return s;

@@ -63,7 +63,7 @@ class AcquisitionState {
       // The last pulse plus the mean step a pulse over up to kStepPulses pulses before it.
       const int back = std::max(0, std::min(held_ - 1, kStepPulses));
       const std::int64_t ahead = static_cast<std::int64_t>(skipped) + 1;
-      for (int a = 0; a < 3; ++a) {
+      for (int a = fit_ > 0 ? 2 : 0; a < 3; ++a) {  // (with a fit, x and y are the fit's)
         const std::int64_t from = pulses_[0][a];
         p[a] = back == 0 ? from
                          : from + divide_rounded((from - pulses_[back][a]) * ahead, index_[0] - index_[back]);
@@ -301,7 +301,7 @@ std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::v
   if (coded.empty()) return std::nullopt;
   if (fit_candidates.empty()) throw std::invalid_argument("acquisition_layer: no line fit to try");
   for (const std::uint32_t fit : fit_candidates)
-    if (fit != 0 && (fit < 3 || fit > kMaxFitPulses))
+    if (!valid_fit_pulses(fit))
       throw std::invalid_argument("acquisition_layer: a line fit over " + std::to_string(fit) +
                                   " pulses (0 or 3-32 allowed)");
   if (shapes.empty()) throw std::invalid_argument("acquisition_layer: no cell shape to try");
@@ -394,7 +394,7 @@ std::optional<AcquisitionLayer> acquisition_layer(RangeEncoder enc, const std::v
 std::optional<std::string> decode_acquisition_points(RangeDecoder& dec, const Eigen::Vector3d& origin, double step,
                                                      double step_z, std::uint32_t fit_pulses, std::uint64_t count,
                                                      std::vector<Eigen::Vector3f>& out) {
-  if (fit_pulses != 0 && (fit_pulses < 3 || fit_pulses > kMaxFitPulses))
+  if (!valid_fit_pulses(fit_pulses))
     return "line fit over " + std::to_string(fit_pulses) + " pulses (0 or 3-32 allowed)";
   AcquisitionState s(fit_pulses);
   for (std::uint64_t j = 0; j < count; ++j) {

@@ -31,6 +31,10 @@ constexpr std::uint32_t kMaxSkippedPulses = 16;
 /// Most pulses the line fit of x and y takes (formats/model.md §2.11.1, format 1.13); a
 /// fit over fewer than three is not stored.
 constexpr std::uint32_t kMaxFitPulses = 32;
+/// Whether `fit_pulses` is a line fit a layer may hold: 0 (none) or 3 to kMaxFitPulses.
+constexpr bool valid_fit_pulses(std::uint32_t fit_pulses) {
+  return fit_pulses == 0 || (fit_pulses >= 3 && fit_pulses <= kMaxFitPulses);
+}
 /// Bit 8 of an RESA payload's prediction field (§2.11): cells taller than wide, their
 /// height an f64 after the field (format 1.13). Bits 0-7 hold fit_pulses.
 constexpr std::uint32_t kTallCellsBit = 1U << 8;

@@ -300,7 +300,7 @@ std::vector<std::uint8_t> code_cells(RangeEncoder enc, const LatticeLayer& layer
       s.first_offsets(first.dx, first.dy);
       std::int64_t gap = 0;
       const bool known = stacked && s.neighbour_gap(i, gap);
-      for (std::size_t k = at + 1; k < end; ++k) {  // each its own offsets, its height against the first's
+      for (std::size_t k = at + 1; k < end; ++k) {  // each its own offsets; its height as the order says
         s.x2().put(enc, 0, points[k].dx);
         s.y2().put(enc, 0, points[k].dy);
         if (!stacked) s.z2().put(enc, 0, points[k].z - first.z);
@@ -378,13 +378,16 @@ std::optional<LatticeLayer> lattice_layer(RangeEncoder enc, const std::vector<Ei
   std::stable_sort(points.begin(), points.end(), [](const LatticePoint& a, const LatticePoint& b) {
     return a.j != b.j ? a.j < b.j : a.i < b.i;
   });
-  std::vector<LatticePoint> stacked = points;
-  std::stable_sort(stacked.begin(), stacked.end(), [](const LatticePoint& a, const LatticePoint& b) {
-    return a.j != b.j ? a.j < b.j : a.i != b.i ? a.i < b.i : a.z < b.z;
-  });
   std::vector<std::uint8_t> plain_stream = code_cells(enc, layer, points, false);
+  std::vector<LatticePoint> stacked;
   std::vector<std::uint8_t> stacked_stream;
-  if (try_stacked) stacked_stream = code_cells(enc, layer, stacked, true);
+  if (try_stacked) {
+    stacked = points;
+    std::stable_sort(stacked.begin(), stacked.end(), [](const LatticePoint& a, const LatticePoint& b) {
+      return a.j != b.j ? a.j < b.j : a.i != b.i ? a.i < b.i : a.z < b.z;
+    });
+    stacked_stream = code_cells(enc, layer, stacked, true);
+  }
   layer.stacked = try_stacked && stacked_stream.size() < plain_stream.size();
   layer.stream = std::move(layer.stacked ? stacked_stream : plain_stream);
   for (const LatticePoint& p : layer.stacked ? stacked : points) layer.sources.push_back(p.source);

@@ -1132,7 +1132,7 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
     if ((h.voxel_reserved & ~kLatticeStackedBit) != 0)
       return bad_data("residual layer lattice order field is " + std::to_string(h.voxel_reserved) + ", not 0 or 1",
                       at + kHeadBytes + 40);
-    if (h.fit_pulses != 0 && (h.fit_pulses < 3 || h.fit_pulses > detail::kMaxFitPulses))
+    if (!detail::valid_fit_pulses(h.fit_pulses))
       return bad_data("residual layer line fit over " + std::to_string(h.fit_pulses) + " pulses (0 or 3-" +
                           std::to_string(detail::kMaxFitPulses) + " allowed; bits 9-31 clear)",
                       at + kHeadBytes + 24);
