@@ -172,8 +172,7 @@ class RangeModel {
     if (v == 0) return;
     enc.put(m.sign[sign_ctx], v < 0);
     const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
-    int e = 0;
-    while ((mag >> (e + 1)) != 0) ++e;
+    const int e = bit_length(mag) - 1;
     for (int j = 0; j < e; ++j) enc.put(m.exponent[static_cast<std::size_t>(j)], true);
     if (e < kMaxExponent) enc.put(m.exponent[static_cast<std::size_t>(e)], false);
     mant_.put(enc, ctx / kClasses, e, mag);
@@ -219,21 +218,22 @@ class MixedRangeModel {
     for (int m = 0; m < 3; ++m) models_[m].resize(static_cast<std::size_t>(kContexts[m]) * kSlots);
   }
   void put(RangeEncoder& enc, const Contexts& x, std::int64_t v) {
-    bit(enc, x, 0, 0, v != 0);
+    const Slots s = slots(x);
+    bit(enc, s, 0, 0, v != 0);
     if (v == 0) return;
-    bit(enc, x, 1 + x.sign, 1, v < 0);
+    bit(enc, s, 1 + x.sign, 1, v < 0);
     const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
-    int e = 0;
-    while ((mag >> (e + 1)) != 0) ++e;
-    for (int j = 0; j < e; ++j) bit(enc, x, 4 + j, 2 + std::min(j, 3), true);
-    if (e < kMaxExponent) bit(enc, x, 4 + e, 2 + std::min(e, 3), false);
+    const int e = bit_length(mag) - 1;
+    for (int j = 0; j < e; ++j) bit(enc, s, 4 + j, 2 + std::min(j, 3), true);
+    if (e < kMaxExponent) bit(enc, s, 4 + e, 2 + std::min(e, 3), false);
     mant_.put(enc, x.mantissa, e, mag);
   }
   std::int64_t get(RangeDecoder& dec, const Contexts& x) {
-    if (!bit(dec, x, 0, 0)) return 0;
-    const bool negative = bit(dec, x, 1 + x.sign, 1);
+    const Slots s = slots(x);
+    if (!bit(dec, s, 0, 0)) return 0;
+    const bool negative = bit(dec, s, 1 + x.sign, 1);
     int e = 0;
-    while (e < kMaxExponent && bit(dec, x, 4 + e, 2 + std::min(e, 3))) ++e;
+    while (e < kMaxExponent && bit(dec, s, 4 + e, 2 + std::min(e, 3))) ++e;
     const auto v = static_cast<std::int64_t>(mant_.get(dec, x.mantissa, e));
     return negative ? -v : v;
   }
@@ -242,16 +242,24 @@ class MixedRangeModel {
   static constexpr int kSlots = 4 + kMaxExponent + 1;  // zero, sign in 3 contexts, exponent bits
   static constexpr int kWeightSets = 6;                // zero, sign, exponent bits 0, 1, 2, 3 and on
   static constexpr std::int32_t kInitialWeight = 19661;  // 0.3 in 1/65536
-  std::uint32_t p0(const Contexts& x, int slot, int set) {
-    const auto at = [&](int m) -> YoungBitModel& { return models_[m][static_cast<std::size_t>(x.at[m] * kSlots + slot)]; };
-    return mix_.p0(at(0), at(1), at(2), static_cast<std::size_t>(set));
+  /// The three models' slots of one value's contexts.
+  struct Slots {
+    YoungBitModel* m[3];
+  };
+  Slots slots(const Contexts& x) {
+    Slots s{};
+    for (int m = 0; m < 3; ++m) s.m[m] = models_[m].data() + static_cast<std::size_t>(x.at[m]) * kSlots;
+    return s;
   }
-  void bit(RangeEncoder& enc, const Contexts& x, int slot, int set, bool b) {
-    enc.put(p0(x, slot, set), b);
+  std::uint32_t p0(const Slots& s, int slot, int set) {
+    return mix_.p0(s.m[0][slot], s.m[1][slot], s.m[2][slot], static_cast<std::size_t>(set));
+  }
+  void bit(RangeEncoder& enc, const Slots& s, int slot, int set, bool b) {
+    enc.put(p0(s, slot, set), b);
     mix_.learn(b);
   }
-  bool bit(RangeDecoder& dec, const Contexts& x, int slot, int set) {
-    const bool b = dec.get(p0(x, slot, set));
+  bool bit(RangeDecoder& dec, const Slots& s, int slot, int set) {
+    const bool b = dec.get(p0(s, slot, set));
     mix_.learn(b);
     return b;
   }
@@ -417,13 +425,8 @@ class PointCoder {
   /// with the class of the laser's last residual and the laser's eighth of the table.
   MixedRangeModel::Contexts mixed_contexts(std::uint32_t l, const Prediction& p, std::int64_t pk) const {
     const int activity = p.ctx / kClasses, second = p.ctx % kClasses;
-    std::uint64_t a = pk < 0 ? static_cast<std::uint64_t>(-pk) : static_cast<std::uint64_t>(pk);
-    int size = 0;
-    while (a != 0) {
-      a >>= 1;
-      ++size;
-    }
-    size = std::clamp(size - 4, 0, 15);
+    const std::uint64_t a = pk < 0 ? static_cast<std::uint64_t>(-pk) : static_cast<std::uint64_t>(pk);
+    const int size = std::clamp(bit_length(a) - 4, 0, 15);
     const int eighth = static_cast<int>((static_cast<std::uint64_t>(l) * 8) / lasers_);
     const int gradient = IntModel::context_of(p.gradient);
     return {{p.ctx, size * kClasses + activity, (gradient * kClasses + second) * 8 + eighth}, sign_ctx(l), activity};

@@ -23,6 +23,16 @@ inline std::int32_t squash(std::int32_t d) {
   return std::clamp((kSquashKnots[k] * (128 - f) + kSquashKnots[k + 1] * f + 64) >> 7, 1, 4095);
 }
 
+/// squash(d) for every d in [-2047, 2047], at d + 2047: the mixer's one lookup a bit.
+inline const std::array<std::int16_t, 4095>& squash_table() {
+  static const std::array<std::int16_t, 4095> table = [] {
+    std::array<std::int16_t, 4095> t{};
+    for (std::int32_t d = -2047; d <= 2047; ++d) t[static_cast<std::size_t>(d + 2047)] = static_cast<std::int16_t>(squash(d));
+    return t;
+  }();
+  return table;
+}
+
 /// stretch(p): the least d in [-2047, 2047] with squash(d) >= p, for p in [0, 4095] (the
 /// inverse of squash, as a table).
 inline const std::array<std::int16_t, 4096>& stretch_table() {
@@ -44,13 +54,16 @@ struct YoungBitModel {
   std::uint16_t p1 = 32768;
   std::uint8_t seen = 0;
   void update(bool bit) {
-    static constexpr std::uint8_t kShift[16] = {1, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 5};
-    static constexpr std::uint8_t kNext[16] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 15};
-    const unsigned shift = kShift[seen & 15U];
-    seen = kNext[seen & 15U];
+    // (per `seen`, 0-15: the shift in the low 3 bits, the next `seen` above them)
+    static constexpr std::uint8_t kStep[16] = {1 | 1 << 3,  2 | 2 << 3,  2 | 3 << 3,  3 | 4 << 3,  3 | 5 << 3,  3 | 6 << 3,
+                                               3 | 7 << 3,  4 | 8 << 3,  4 | 9 << 3,  4 | 10 << 3, 4 | 11 << 3, 4 | 12 << 3,
+                                               4 | 13 << 3, 4 | 14 << 3, 4 | 15 << 3, 5 | 15 << 3};
+    const unsigned step = kStep[seen & 15U];
+    const unsigned shift = step & 7U;
+    seen = static_cast<std::uint8_t>(step >> 3);
     const std::uint32_t p = p1;
-    const std::uint32_t moved = bit ? p + ((65536U - p) >> shift) : p - (p >> shift);
-    p1 = static_cast<std::uint16_t>(std::clamp<std::uint32_t>(moved, 256, 65280));
+    p1 = static_cast<std::uint16_t>(bit ? std::min<std::uint32_t>(p + ((65536U - p) >> shift), 65280)
+                                        : std::max<std::uint32_t>(p - (p >> shift), 256));
   }
 };
 
@@ -60,20 +73,25 @@ struct YoungBitModel {
 class Mix3 {
  public:
   Mix3(std::size_t weight_sets, std::int32_t initial_weight)
-      : weights_(3 * weight_sets, initial_weight), stretch_(stretch_table().data()) {}
+      : weights_(3 * weight_sets, initial_weight), stretch_(stretch_table().data()), squash_(squash_table().data()) {}
+  // (learn uses the weight set p0 chose, by pointer: a move keeps the weights where they are)
+  Mix3(const Mix3&) = delete;
+  Mix3& operator=(const Mix3&) = delete;
+  Mix3(Mix3&&) noexcept = default;
+  Mix3& operator=(Mix3&&) noexcept = default;
   /// The probability of a 0, in 1/4096, of a bit modelled by a, b and c, weights of `set`.
   std::uint32_t p0(YoungBitModel& a, YoungBitModel& b, YoungBitModel& c, std::size_t set) {
-    const std::int16_t* st = stretch_;  // (kept: no guard of the table's first use a bit)
+    // (the tables are kept: no guard of their first use a bit)
     model_[0] = &a;
     model_[1] = &b;
     model_[2] = &c;
-    at_ = 3 * set;
-    std::int64_t dot = 0;
-    for (int m = 0; m < 3; ++m) {
-      input_[m] = st[model_[m]->p1 >> 4];
-      dot += static_cast<std::int64_t>(weights_[at_ + static_cast<std::size_t>(m)]) * input_[m];
-    }
-    p1_ = squash(static_cast<std::int32_t>(std::clamp<std::int64_t>(dot >> 16, -2047, 2047)));  // (>>: floor)
+    w_ = weights_.data() + 3 * set;
+    input_[0] = stretch_[a.p1 >> 4];
+    input_[1] = stretch_[b.p1 >> 4];
+    input_[2] = stretch_[c.p1 >> 4];
+    const std::int64_t dot = static_cast<std::int64_t>(w_[0]) * input_[0] + static_cast<std::int64_t>(w_[1]) * input_[1] +
+                             static_cast<std::int64_t>(w_[2]) * input_[2];
+    p1_ = squash_[std::clamp<std::int64_t>(dot >> 16, -2047, 2047) + 2047];  // (>>: floor)
     return static_cast<std::uint32_t>(4096 - p1_);
   }
   /// Learns the bit whose probability p0 gave last.
@@ -81,8 +99,7 @@ class Mix3 {
     const std::int32_t error = (bit ? 4096 : 0) - p1_;
     for (int m = 0; m < 3; ++m) {
       model_[m]->update(bit);
-      std::int32_t& w = weights_[at_ + static_cast<std::size_t>(m)];
-      w = std::clamp(w + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
+      w_[m] = std::clamp(w_[m] + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
     }
   }
 
@@ -90,10 +107,11 @@ class Mix3 {
   static constexpr std::int32_t kMaxWeight = 1 << 19;
   std::vector<std::int32_t> weights_;
   const std::int16_t* stretch_;
+  const std::int16_t* squash_;
   YoungBitModel* model_[3] = {nullptr, nullptr, nullptr};
+  std::int32_t* w_ = nullptr;
   std::int32_t input_[3] = {0, 0, 0};
   std::int32_t p1_ = 2048;
-  std::size_t at_ = 0;
 };
 
 }  // namespace lex3d::residual::detail

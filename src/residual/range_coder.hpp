@@ -9,6 +9,7 @@
 // unbounded work. Every operation is integer arithmetic, so the bits are identical
 // on every platform.
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -142,6 +143,17 @@ class RangeDecoder {
   std::uint32_t range_ = 0xFFFFFFFFU;
 };
 
+/// The number of bits of a: 0 for 0, else the place of its highest 1 plus one.
+inline int bit_length(std::uint64_t a) {
+#if defined(__GNUC__) || defined(__clang__)
+  return a == 0 ? 0 : 64 - __builtin_clzll(a);
+#else
+  int bits = 0;
+  for (; a != 0; a >>= 1) ++bits;
+  return bits;
+#endif
+}
+
 /// Signed integers in [-(2^32 - 1), 2^32 - 1] under a number of conditioning contexts.
 class IntModel {
  public:
@@ -152,13 +164,8 @@ class IntModel {
 
   /// The class of a context value: 0 for 0, else its bit length, capped at 7.
   static int context_of(std::int64_t previous) {
-    std::uint64_t a = previous < 0 ? static_cast<std::uint64_t>(-previous) : static_cast<std::uint64_t>(previous);
-    int bits = 0;
-    while (a != 0 && bits < kClasses - 1) {
-      a >>= 1;
-      ++bits;
-    }
-    return bits;
+    const std::uint64_t a = previous < 0 ? static_cast<std::uint64_t>(-previous) : static_cast<std::uint64_t>(previous);
+    return std::min(bit_length(a), kClasses - 1);
   }
   /// The context of two context values: their classes as the digits of a base-8 number.
   static int context_of(std::int64_t a, std::int64_t b) { return context_of(a) * kClasses + context_of(b); }
@@ -169,8 +176,7 @@ class IntModel {
     if (v == 0) return;
     enc.put(m.sign, v < 0);
     const std::uint64_t mag = v < 0 ? static_cast<std::uint64_t>(-v) : static_cast<std::uint64_t>(v);
-    int e = 0;
-    while ((mag >> (e + 1)) != 0) ++e;
+    const int e = bit_length(mag) - 1;
     for (int j = 0; j < e; ++j) enc.put(m.exponent[static_cast<std::size_t>(j)], true);
     if (e < kMaxExponent) enc.put(m.exponent[static_cast<std::size_t>(e)], false);
     for (int j = e - 1; j >= 0; --j)
