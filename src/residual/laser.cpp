@@ -23,6 +23,7 @@
 #include "codec/bytes.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/layout.hpp"
+#include "residual/angles.hpp"
 #include "residual/mixing.hpp"
 #include "residual/point_ball_grid.hpp"
 
@@ -117,6 +118,13 @@ struct Beams {
   [[nodiscard]] Trig trig(std::uint32_t l, std::uint32_t c, std::int64_t shift) const {
     return trig(l, column_trig(c, shift));
   }
+  /// Every column's unshifted azimuth (cosine and sine) of a grid of `columns`: for a pass
+  /// over many points, one sine and cosine a column.
+  [[nodiscard]] std::vector<ColumnTrig> column_trigs(std::uint32_t columns) const {
+    std::vector<ColumnTrig> t(columns);
+    for (std::uint32_t c = 0; c < columns; ++c) t[c] = column_trig(c, 0);
+    return t;
+  }
   [[nodiscard]] Beam beam(std::uint32_t l, const Trig& t) const {
     const double ca = t.ca, sa = t.sa, cb = t.cb, sb = t.sb;
     Beam b;
@@ -125,6 +133,10 @@ struct Beams {
     b.e1 = Eigen::Vector3d(-sb, cb, 0.0);
     b.e2 = Eigen::Vector3d(-cb * sin_el[l], -sb * sin_el[l], cos_el[l]);
     return b;
+  }
+  /// The beam of laser l in column c unshifted, given column_trigs (a column beyond them computed here).
+  [[nodiscard]] Beam beam(std::uint32_t l, std::uint32_t c, const std::vector<ColumnTrig>& columns) const {
+    return beam(l, trig(l, c < columns.size() ? columns[c] : column_trig(c, 0)));
   }
   /// The decoded point of beam length index k and corrections (k1, k2), cloud frame.
   [[nodiscard]] Eigen::Vector3f point(const Beam& b, std::int64_t k, std::int64_t k1, std::int64_t k2, double qr,
@@ -1215,8 +1227,9 @@ double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<
   const std::size_t n = p.size();
   std::vector<double> along(n), cost(n);
   constexpr double kScale = 0.01;
+  const std::vector<Beams::ColumnTrig> columns = beams.column_trigs(table.columns);
   for (std::size_t i = 0; i < n; ++i) {
-    const auto b = beams.beam(ring[i], column[i], 0);
+    const auto b = beams.beam(ring[i], column[i], columns);
     const Eigen::Vector3d v = p[i] - b.o;
     along[i] = v.dot(b.u);
     cost[i] = std::log2(1.0 + (v - along[i] * b.u).norm() / kScale);
@@ -1268,9 +1281,10 @@ bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssi
   // How far the points lie from their beams.
   const Beams beams(a.table, T_cloud_sensor);
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
+  const std::vector<Beams::ColumnTrig> columns = beams.column_trigs(a.table.columns);
   double sum = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
-    const auto b = beams.beam(a.ring[i], a.column[i], 0);
+    const auto b = beams.beam(a.ring[i], a.column[i], columns);
     const Eigen::Vector3d v = T_head_cloud * input.points[i].cast<double>() - b.o;
     sum += (v - v.dot(b.u) * b.u).squaredNorm();
   }
@@ -1319,7 +1333,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         const Eigen::Vector3d& u = p[i];
         const Eigen::Vector3d& v = p[i + apart];
         if (std::hypot(u.x(), u.y()) < 0.3 || std::hypot(v.x(), v.y()) < 0.3) continue;
-        const double d = std::abs(std::remainder(std::atan2(v.y(), v.x()) - std::atan2(u.y(), u.x()), kTwoPi));
+        const double d = std::abs(wrap_angle(std::atan2(v.y(), v.x()) - std::atan2(u.y(), u.x())));
         if (d > 1e-7) steps.push_back(d);
       }
       if (steps.size() < 16) return std::nullopt;
@@ -1701,8 +1715,7 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
   beam_of.resize(order.size());
   offset.resize(order.size());
   // (a column's azimuth, shared by its lasers: one sine and cosine a column)
-  std::vector<Beams::ColumnTrig> unshifted(table.columns);
-  for (std::uint32_t c = 0; c < table.columns; ++c) unshifted[c] = beams.column_trig(c, 0);
+  const std::vector<Beams::ColumnTrig> unshifted = beams.column_trigs(table.columns);
   parallel_for(order.size(), threads, [&](std::size_t j) {
     const std::uint32_t i = coded[order[j]];
     beam_of[j] = beams.trig(a.ring[i], unshifted[a.column[i]]);
@@ -1732,7 +1745,7 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
         if (v.x() * v.x() + v.y() * v.y() < 1.0) continue;
         const std::uint16_t l = a.ring[coded[order[end]]];
         const double beam = column_azimuth + beams.col_az[l] + beams.beam_az[l];
-        off.push_back(std::remainder(std::atan2(v.y(), v.x()) - beam, kTwoPi));
+        off.push_back(wrap_angle(std::atan2(v.y(), v.x()) - beam));
       }
       std::int64_t s = last;
       if (!off.empty()) {

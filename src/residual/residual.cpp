@@ -30,6 +30,7 @@
 #include "lex3d/range/range_image.hpp"
 #include "codec/bytes.hpp"
 #include "residual/acquisition.hpp"
+#include "residual/angles.hpp"
 #include "residual/laser.hpp"
 #include "residual/lattice.hpp"
 #include "residual/layer_lasers.hpp"
@@ -145,20 +146,7 @@ constexpr std::uint64_t kMaxMixedPointsPerByte = 12000;
 // The point predictor and quantiser shared by encoder and decoder
 // ---------------------------------------------------------------------------------------
 
-/// IEEE remainder(a, 2π) (formats/model.md §2.5.3), exactly, without the library call
-/// for |a| < 9: there the quotient rounds to 0 (|a| <= π) or to ±1, and a ∓ 2π is exact
-/// (Sterbenz: a is within a factor of two of 2π), so the result is the same double (a
-/// zero keeping a's sign, as remainder's does). 7 % of a KITTI layer's encoding.
-double wrap_angle(double a) {
-  constexpr double kTwoPi = 2.0 * kPi;
-  const double m = std::abs(a);
-  if (m <= kPi) return a;
-  if (m < 9.0) {
-    const double r = a > 0.0 ? a - kTwoPi : a + kTwoPi;
-    return r == 0.0 ? std::copysign(0.0, a) : r;
-  }
-  return std::remainder(a, kTwoPi);
-}
+using detail::wrap_angle;
 
 struct Spherical {
   double r, azimuth, elevation;
@@ -661,11 +649,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const double q = kStepShare * 2.0 * max_error / std::sqrt(3.0);
   const Pose T_sensor_cloud = T_cloud_sensor.inverse();
   // The coded points in sensor-centred spherical coordinates, once for the row order and
-  // every way of coding them (indexed by input point; the others are not read).
+  // every way of coding them (indexed by input point; the others are not read): those of a
+  // trial window first, all of them only where a spherical coding is coded in full (not
+  // beside a laser table read from the sensor that rules it out).
   std::vector<Spherical> spherical(n_in);
-  parallel_for(coded.size(), threads, [&](std::size_t k) {
-    spherical[coded[k]] = to_spherical(T_sensor_cloud * input.points[coded[k]].cast<double>());
-  }, 4096);
+  const auto to_spherical_at = [&](const std::vector<std::uint32_t>& which) {
+    parallel_for(which.size(), threads, [&](std::size_t k) {
+      spherical[which[k]] = to_spherical(T_sensor_cloud * input.points[which[k]].cast<double>());
+    }, 4096);
+  };
+  bool spherical_all = false;
 
   // The keep mask, then the points: in row order and in input order, the smaller wins.
   RangeEncoder head;
@@ -693,6 +686,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // (every coded point in row order: made only when a spherical coding is coded in full)
   std::vector<std::uint32_t> rows;
   const auto need_rows = [&] {
+    if (!spherical_all) to_spherical_at(coded);
+    spherical_all = true;
     if (rows.empty()) rows = row_order(spherical, coded, row_height);
   };
   struct Way {
@@ -777,6 +772,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
       const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
                                               coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
+      to_spherical_at(window);
       const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
@@ -800,7 +796,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         const double step = 2.0 * kPi / static_cast<double>(lasers_of->table.columns);
         const double cell = 2.0 * check_error / std::sqrt(3.0);
         std::size_t close = 0;
-        for (const std::uint32_t i : coded) close += spherical[i].r * step < cell ? 1 : 0;
+        for (const std::uint32_t i : coded)
+          close += (T_sensor_cloud * input.points[i].cast<double>()).norm() * step < cell ? 1 : 0;
         dense = 2 * close >= coded.size();
       }
       // With a laser table read from the sensor, the spherical trial comes first, alone:
