@@ -878,16 +878,20 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
   if (far.size() < 128) return false;
   // Histogram of elevations, 0.01 degree bins over what the points span.
   constexpr double kBin = 0.01 * kPi / 180.0;
+  std::vector<double> elevation;  // (of the points in `far`, one atan2 a point a height)
   const auto histogram = [&](double h, std::vector<double>& hist, double& lo) {
     double mn = 10, mx = -10;
-    for (std::uint32_t i : far) {
+    elevation.resize(far.size());
+    for (std::size_t k = 0; k < far.size(); ++k) {
+      const std::uint32_t i = far[k];
       const double e = std::atan2(p[i].z() - h, rho[i]);
+      elevation[k] = e;
       mn = std::min(mn, e);
       mx = std::max(mx, e);
     }
     lo = mn - 4 * kBin;
     hist.assign(static_cast<std::size_t>((mx - lo) / kBin) + 8, 0.0);
-    for (std::uint32_t i : far) hist[static_cast<std::size_t>((std::atan2(p[i].z() - h, rho[i]) - lo) / kBin)] += 1.0;
+    for (const double e : elevation) hist[static_cast<std::size_t>((e - lo) / kBin)] += 1.0;
   };
   // The height whose elevations are sharpest: the largest sum of squared bin counts, on at
   // most 16384 of the points, searched every 5 cm and then every centimetre around the best.
