@@ -610,15 +610,18 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
   // A beam d sideways of the spin axis reaches a point at horizontal range ρ with its
   // direction asin(d / ρ) off the point's azimuth, and sqrt(ρ² - d²) along it.
   const auto sideways = [&](std::uint16_t l) { return l < tangential.size() ? tangential[l] : 0.0; };
-  const auto beam_rho = [&](std::uint32_t i) {
-    const double d = sideways(ring[i]), r = std::hypot(p[i].x(), p[i].y());
-    return d == 0.0 ? r : std::sqrt(std::max(0.0, r * r - d * d));
-  };
-  const auto beam_azimuth = [&](std::uint32_t i) {
+  // Per point (once: the passes below read them several times): its horizontal range, the
+  // beam's length to it and the beam's azimuth.
+  const std::size_t n_points = p.size();
+  std::vector<double> rho_of(n_points), beam_rho_of(n_points), beam_azimuth_of(n_points);
+  for (std::size_t i = 0; i < n_points; ++i) {
     const double d = sideways(ring[i]), r = std::hypot(p[i].x(), p[i].y());
     const double a = std::atan2(p[i].y(), p[i].x());
-    return d == 0.0 || !(r > 0.0) ? a : a - std::asin(std::clamp(d / r, -1.0, 1.0));
-  };
+    rho_of[i] = r;
+    beam_rho_of[i] = d == 0.0 ? r : std::sqrt(std::max(0.0, r * r - d * d));
+    beam_azimuth_of[i] = d == 0.0 || !(r > 0.0) ? a : a - std::asin(std::clamp(d / r, -1.0, 1.0));
+  }
+  const auto beam_rho = [&](std::uint32_t i) { return beam_rho_of[i]; };
   std::vector<std::vector<std::uint32_t>> of(lasers);
   for (std::size_t i = 0; i < p.size(); ++i) of[ring[i]].push_back(static_cast<std::uint32_t>(i));
   LaserTable t;
@@ -638,9 +641,8 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
       double sc = 0.0, ss = 0.0;
       std::size_t n = 0;
       for (std::uint32_t i : of[l]) {
-        const double rho = std::hypot(p[i].x(), p[i].y());
-        if (!(rho > 1e-3)) continue;
-        const double a = beam_azimuth(i) - dir * kTwoPi * static_cast<double>(column[i]) / columns;
+        if (!(rho_of[i] > 1e-3)) continue;
+        const double a = beam_azimuth_of[i] - dir * kTwoPi * static_cast<double>(column[i]) / columns;
         sc += std::cos(a);
         ss += std::sin(a);
         ++n;
@@ -1238,11 +1240,25 @@ double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<
     along[i] = v.dot(b.u);
     cost[i] = std::log2(1.0 + (v - along[i] * b.u).norm() / kScale);
   }
+  // The points laser by laser, columns in order, then by index: a counting sort over the
+  // pixels where every laser and column lies in the table (as the estimates make them),
+  // else a comparison sort to the same order.
   std::vector<std::uint32_t> order(n);
-  std::iota(order.begin(), order.end(), 0U);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
-    return ring[x] != ring[y] ? ring[x] < ring[y] : column[x] != column[y] ? column[x] < column[y] : x < y;
-  });
+  const std::uint64_t lasers = table.lasers(), grid = table.columns;
+  bool counting = lasers * grid > 0 && lasers * grid <= 4 * static_cast<std::uint64_t>(n) + 65536;
+  for (std::size_t i = 0; i < n && counting; ++i) counting = ring[i] < lasers && column[i] < grid;
+  if (counting) {
+    std::vector<std::uint32_t> start(static_cast<std::size_t>(lasers * grid) + 1, 0);
+    const auto pixel = [&](std::size_t i) { return static_cast<std::size_t>(ring[i] * grid + column[i]); };
+    for (std::size_t i = 0; i < n; ++i) ++start[pixel(i) + 1];
+    for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
+    for (std::size_t i = 0; i < n; ++i) order[start[pixel(i)]++] = static_cast<std::uint32_t>(i);
+  } else {
+    std::iota(order.begin(), order.end(), 0U);
+    std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+      return ring[x] != ring[y] ? ring[x] < ring[y] : column[x] != column[y] ? column[x] < column[y] : x < y;
+    });
+  }
   double total = 0.0;
   for (std::size_t k = 0; k < n; ++k) {
     const std::uint32_t i = order[k];
