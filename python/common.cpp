@@ -74,8 +74,23 @@ Cloud to_cloud(const py::handle& points_obj, const py::object& intensity_obj, co
     throw py::value_error(what + " must have shape (N, 3), got " + shape_of(points));
   if (!is_float(points)) throw py::value_error(what + " must be float32 or float64, got " + dtype_of(points));
   Cloud cloud;
-  if (points.dtype().itemsize() == 4) copy_points<float>(points, cloud, what);
-  else copy_points<double>(points, cloud, what);
+  if (points.dtype().itemsize() == 4) {
+    copy_points<float>(points, cloud, what);
+  } else {
+    // float64: kept to its precision where float32 would round it (coordinates far from the
+    // frame's origin, a UTM cloud): relative to an origin the model keeps (Cloud::georef)
+    const auto v = py::array_t<double, py::array::forcecast>(points).unchecked<2>();
+    std::vector<Eigen::Vector3d> wide(static_cast<std::size_t>(v.shape(0)));
+    for (std::size_t i = 0; i < wide.size(); ++i) {
+      const auto k = static_cast<py::ssize_t>(i);
+      wide[i] = Eigen::Vector3d(v(k, 0), v(k, 1), v(k, 2));
+      if (!wide[i].allFinite())
+        throw py::value_error(what + ": row " + std::to_string(i) + " is not finite (" + std::to_string(wide[i].x()) +
+                              ", " + std::to_string(wide[i].y()) + ", " + std::to_string(wide[i].z()) + ")");
+    }
+    const Status st = io::set_double_points(cloud, wide, what, "metre (the array's unit)");
+    if (!st.ok()) throw py::value_error(st.message());
+  }
   if (!intensity_obj.is_none()) {
     const std::string iwhat = what == "points" ? "intensity" : what + " intensity";
     if (!py::isinstance<py::array>(intensity_obj)) throw py::value_error(iwhat + " must be a numpy array of shape (N,)");

@@ -119,10 +119,23 @@ py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alp
   }
   if (!r->ok()) raise(r->status());
   const lex3d::Cloud& cloud = r->value().cloud;
-  py::array_t<float> out({static_cast<py::ssize_t>(cloud.size()), py::ssize_t{3}});
-  auto w = out.mutable_unchecked<2>();
-  for (std::size_t i = 0; i < cloud.size(); ++i)
-    for (py::ssize_t k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = cloud.points[i][k];
+  py::array out;
+  if (cloud.georef) {
+    // true coordinates, in the CRS's units (as the command's writers give them)
+    py::array_t<double> a({static_cast<py::ssize_t>(cloud.size()), py::ssize_t{3}});
+    auto w = a.mutable_unchecked<2>();
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const Eigen::Vector3d t = cloud.georef->to_crs(cloud.points[i]);
+      for (py::ssize_t k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = t[k];
+    }
+    out = std::move(a);
+  } else {
+    py::array_t<float> a({static_cast<py::ssize_t>(cloud.size()), py::ssize_t{3}});
+    auto w = a.mutable_unchecked<2>();
+    for (std::size_t i = 0; i < cloud.size(); ++i)
+      for (py::ssize_t k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = cloud.points[i][k];
+    out = std::move(a);
+  }
   if (!attributes) return std::move(out);
   // The per-point fields the file keeps (formats/model.md §2.10), by name.
   const auto n = static_cast<py::ssize_t>(cloud.size());
@@ -171,7 +184,7 @@ PYBIND11_MODULE(_lex3d, m) {
       "lex3d: compress lidar scans with a learned alphabet of local 3D structures and a bounded-error "
       "residual layer.\n\n"
       "    data = lex3d.compress(points, max_error=0.014)   # points: (N, 3) float32/float64, metres\n"
-      "    back = lex3d.decompress(data)                    # (M, 3) float32\n\n"
+      "    back = lex3d.decompress(data)                    # (M, 3) float32 (float64 if georeferenced)\n\n"
       "The bytes are those `lex3d compress` writes for the same settings (formats/model.md).";
   m.attr("__version__") = LEX3D_VERSION_STRING;
   m.def("compress", &compress, py::arg("points"), py::arg("intensity") = py::none(), py::kw_only(),
@@ -182,7 +195,9 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("sensor") = py::none(),
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
-points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. Or a path
+points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
+    coordinates that float32 would round (far from their frame's origin, as UTM ones) are kept
+    relative to an origin the file stores; decompress gives them back as they were. Or a path
     (str or os.PathLike) of a point cloud file, read as `lex3d compress PATH` reads it.
 intensity: optional (N,) float array; model files do not store it (a UserWarning says so).
 max_error: residual-layer bound in metres, [1e-4, 10]: every point has a decoded point within it
@@ -202,7 +217,9 @@ Raises ValueError for a bad array or option, an alphabet that does not decode, a
 scan that does not fit it.)");
   m.def("decompress", &decompress, py::arg("data"), py::arg("alphabet") = py::none(), py::kw_only(),
         py::arg("attributes") = false,
-        R"(Decodes a model file (bytes) into an (M, 3) float32 array of points (metres).
+        R"(Decodes a model file (bytes) into an (M, 3) float32 array of points (metres), or, for a
+file that keeps a georeference (a LAS file's, or coordinates far from their frame's origin such
+as UTM ones), a float64 array of their true coordinates in the file's units.
 
 alphabet: the alphabet file (bytes) the model references, if it references one.
 attributes: also return the per-point fields the file keeps, as (points, fields) with fields a

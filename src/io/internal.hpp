@@ -285,6 +285,17 @@ inline bool offer_field(const std::string& name, Scalar type, std::uint64_t valu
 /// point or has a name is_field_name refuses (write.cpp).
 Status check_fields(const std::string& path, const Cloud& cloud);
 
+/// Where double-precision points lie too far from their frame's origin for float32 to hold
+/// them to a millionth of their extent (a UTM cloud): a round origin near their centre (to
+/// the power of ten below their extent); nullopt where float32 holds them as they are.
+std::optional<Eigen::Vector3d> wide_origin(const std::vector<Eigen::Vector3d>& points);
+
+/// Sets `cloud.points` to `points` less `origin` in float32 and `cloud.georef` to that origin
+/// (with `unit_name` and the worst rounding), moving a sensor pose given with the points
+/// (not the identity) with them.
+void set_relative_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& points, const Eigen::Vector3d& origin,
+                         const std::string& unit_name);
+
 /// Collects the finite points of a file into a ReadResult. With `wide` (a file whose
 /// coordinates are doubles) the points are kept in double until finish(), which either
 /// rounds them to float32 or, when they lie far from their frame's origin, stores them

@@ -86,21 +86,55 @@ std::size_t keep_points(ReadResult& r, Keep keep) {
   return kept;
 }
 
-Status Builder::finish(const std::string& path) {
-  if (!wide_) return {};
-  const std::size_t n = wide_points_.size();
-  Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
-  for (std::size_t i = 0; i < n; ++i) {
-    lo = i == 0 ? wide_points_[i] : lo.cwiseMin(wide_points_[i]);
-    hi = i == 0 ? wide_points_[i] : hi.cwiseMax(wide_points_[i]);
+std::optional<Eigen::Vector3d> wide_origin(const std::vector<Eigen::Vector3d>& points) {
+  const std::size_t n = points.size();
+  if (n == 0) return std::nullopt;
+  Eigen::Vector3d lo = points[0], hi = points[0];
+  for (const Eigen::Vector3d& p : points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
   }
   const double extent = (hi - lo).maxCoeff();
   const Eigen::Vector3d centre = 0.5 * (lo + hi);
   const double max_abs = std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
   const auto f = static_cast<float>(max_abs);
   const double half_ulp = 0.5 * (static_cast<double>(std::nextafter(f, INFINITY)) - static_cast<double>(f));
-  const bool far = n > 0 && centre.cwiseAbs().maxCoeff() > extent && half_ulp > 1e-6 * std::max(extent, 1.0);
-  if (!far) {
+  if (!(centre.cwiseAbs().maxCoeff() > extent && half_ulp > 1e-6 * std::max(extent, 1.0))) return std::nullopt;
+  const double step = std::pow(10.0, std::floor(std::log10(std::max(extent, 1e-3))));
+  Eigen::Vector3d origin;
+  for (int a = 0; a < 3; ++a) origin[a] = std::round(centre[a] / step) * step;
+  return origin;
+}
+
+void set_relative_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& points, const Eigen::Vector3d& origin,
+                         const std::string& unit_name) {
+  const std::size_t n = points.size();
+  cloud.points.resize(n);
+  Georeference g;
+  g.origin = origin;
+  g.unit_name = unit_name;
+  double worst2 = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d local = points[i] - origin;
+    cloud.points[i] = local.cast<float>();
+    worst2 = std::max(worst2, (cloud.points[i].cast<double>() - local).squaredNorm());
+  }
+  g.representation_error_m = std::sqrt(worst2);
+  // A sensor pose given with the points (a PCD VIEWPOINT) moves with them; none given (the
+  // identity) leaves the sensor at the local origin, near the points, as a LAS file's is:
+  // at the CRS's origin, thousands of kilometres off, no bound finer than float32's
+  // resolution there (0.5 m) could be kept.
+  if (!cloud.T_cloud_sensor.matrix().isIdentity(0.0)) cloud.T_cloud_sensor.translation() -= origin;
+  cloud.georef = std::move(g);
+}
+
+Status Builder::finish(const std::string& path) {
+  if (!wide_) return {};
+  const std::size_t n = wide_points_.size();
+  double max_abs = 0.0;
+  for (const Eigen::Vector3d& p : wide_points_) max_abs = std::max(max_abs, p.cwiseAbs().maxCoeff());
+  const std::optional<Eigen::Vector3d> origin = wide_origin(wide_points_);
+  if (!origin) {
     // float32 as before; a value beyond float's range is not finite there: dropped and counted
     r_.cloud.points.resize(n);
     for (std::size_t i = 0; i < n; ++i) r_.cloud.points[i] = wide_points_[i].cast<float>();
@@ -121,26 +155,29 @@ Status Builder::finish(const std::string& path) {
   if (!(max_abs <= kMaxCoordinateM))
     return bad_data(msg(path, "the points reach " + std::to_string(max_abs) +
                                   " m, beyond any coordinate frame on Earth (the limit is 1e9 m)"));
-  r_.cloud.points.resize(n);
-  const double step = std::pow(10.0, std::floor(std::log10(std::max(extent, 1e-3))));
-  Georeference g;
-  for (int a = 0; a < 3; ++a) g.origin[a] = std::round(centre[a] / step) * step;
-  g.unit_name = "metre (assumed: the file names no unit)";
-  double worst2 = 0.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3d local = wide_points_[i] - g.origin;
-    r_.cloud.points[i] = local.cast<float>();
-    worst2 = std::max(worst2, (r_.cloud.points[i].cast<double>() - local).squaredNorm());
-  }
-  g.representation_error_m = std::sqrt(worst2);
-  r_.cloud.T_cloud_sensor.translation() -= g.origin;
-  r_.cloud.georef = std::move(g);
+  set_relative_points(r_.cloud, wide_points_, *origin, "metre (assumed: the file names no unit)");
   wide_points_.clear();
   wide_points_.shrink_to_fit();
   return {};
 }
 
 }  // namespace detail
+
+Status set_double_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& points, const std::string& what,
+                         const std::string& unit_name) {
+  double max_abs = 0.0;
+  for (const Eigen::Vector3d& p : points) max_abs = std::max(max_abs, p.cwiseAbs().maxCoeff());
+  if (!(max_abs <= detail::kMaxCoordinateM))
+    return Status(ErrorCode::kBadData, what + ": the points reach " + std::to_string(max_abs) +
+                                           " m, beyond any coordinate frame on Earth (the limit is 1e9 m)");
+  if (const auto origin = detail::wide_origin(points)) {
+    detail::set_relative_points(cloud, points, *origin, unit_name);
+    return {};
+  }
+  cloud.points.resize(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) cloud.points[i] = points[i].cast<float>();
+  return {};
+}
 
 namespace {
 

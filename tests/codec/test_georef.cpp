@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -356,6 +357,90 @@ TEST(GeorefModel, LasScanComesBackInItsTrueCoordinatesWithinTheBound) {
   // and the file says feet and the same CRS records
   EXPECT_DOUBLE_EQ(back.value().cloud.georef->unit_m, 0.3048);
   EXPECT_EQ(back.value().cloud.georef->crs_records.size(), input.georef->crs_records.size());
+}
+
+void write_bytes(const std::string& path, const Bytes& b) {
+  std::ofstream f(path, std::ios::binary);
+  f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+  ASSERT_TRUE(f.good()) << path;
+}
+
+/// A binary PLY of double x y z (no viewpoint) at `path`.
+void write_double_ply(const std::string& path, const std::vector<Eigen::Vector3d>& pts) {
+  const std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(pts.size()) +
+                           "\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+  Bytes b(head.begin(), head.end());
+  for (const auto& p : pts)
+    for (int a = 0; a < 3; ++a) {
+      const std::size_t at = b.size();
+      b.resize(at + 8);
+      std::memcpy(b.data() + at, &p[a], 8);
+    }
+  write_bytes(path, b);
+}
+
+TEST(GeorefModel, UtmPlyWithoutViewpointCodesWithAFineBound) {
+  // Rolling ground 60 m across at UTM coordinates, in a PLY of doubles with no sensor pose:
+  // read relative to a round origin, the sensor left at that origin (not at the CRS's, 5,400 km
+  // off, where float32 steps are 0.5 m), so a 2 cm bound codes and holds in true coordinates.
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 120; ++i)
+    for (int j = 0; j < 120; ++j) {
+      const double x = 0.5 * i + 0.013 * j, y = 0.5 * j;
+      pts.emplace_back(512345.678 + x, 5403850.25 + y, 121.5 + 2.0 * std::sin(x / 9.0) + std::cos(y / 7.0));
+    }
+  const std::string path = (test::temp_dir("georef_utm_ply") / "utm.ply").string();
+  write_double_ply(path, pts);
+  auto read = io::read_cloud(path);
+  ASSERT_TRUE(read.ok()) << read.status().to_string();
+  const Cloud& input = read.value().cloud;
+  ASSERT_TRUE(input.georef);
+  EXPECT_TRUE(input.T_cloud_sensor.matrix().isIdentity(0.0));  // at the local origin
+  const double E = 0.02;
+  ModelData d;
+  d.input_points = input.size();
+  d.alphabet = Alphabet{};
+  d.georef = input.georef;
+  d.T_cloud_sensor = input.T_cloud_sensor;
+  d.residual = residual::encode_layer(input, Cloud{}, d.T_cloud_sensor, E);
+  auto decoded = decode_model(encode_model(d));
+  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+  ASSERT_TRUE(decoded.value().georef);
+  auto cloud = residual::decode_cloud(decoded.value());
+  ASSERT_TRUE(cloud.ok());
+  // every input point within E of a decoded one and back, in true (double) coordinates
+  Cloud a, b;
+  for (const auto& p : pts) a.points.push_back((p - input.georef->origin).cast<float>());
+  for (const auto& p : cloud.value().points)
+    b.points.push_back((decoded.value().georef->to_crs(p) - input.georef->origin).cast<float>());
+  const eval::DistanceResult dist = eval::compare_clouds(a, b);
+  EXPECT_LE(dist.hausdorff, E + 1e-5);
+  EXPECT_GT(dist.hausdorff, 0.0);
+}
+
+TEST(Georeference, ViewpointGivenMovesWithThePoints) {
+  // A PCD whose VIEWPOINT stands among its UTM points: the pose is moved by the same origin.
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 300; ++i) pts.emplace_back(393775.8 + 0.21 * i, 5403850.0 + 0.13 * (i % 29), 310.0 + 0.01 * i);
+  std::string text =
+      "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 300\nHEIGHT 1\n"
+      "VIEWPOINT 393800 5403851 312 1 0 0 0\nPOINTS 300\nDATA binary\n";
+  Bytes b(text.begin(), text.end());
+  for (const auto& p : pts)
+    for (int a = 0; a < 3; ++a) {
+      const std::size_t at = b.size();
+      b.resize(at + 8);
+      std::memcpy(b.data() + at, &p[a], 8);
+    }
+  const std::string path = (test::temp_dir("georef_viewpoint") / "vp.pcd").string();
+  write_bytes(path, b);
+  auto read = io::read_cloud(path);
+  ASSERT_TRUE(read.ok()) << read.status().to_string();
+  const Cloud& c = read.value().cloud;
+  ASSERT_TRUE(c.georef);
+  const Eigen::Vector3d sensor = c.georef->origin + c.T_cloud_sensor.translation();
+  EXPECT_NEAR((sensor - Eigen::Vector3d(393800, 5403851, 312)).norm(), 0.0, 1e-6);
+  EXPECT_LT(c.T_cloud_sensor.translation().norm(), 100.0);
 }
 
 }  // namespace

@@ -101,6 +101,15 @@ struct ReadResult {
 /// names the file and what is wrong, in one line.
 [[nodiscard]] StatusOr<ReadResult> read_cloud(const std::string& path, const ReadOptions& options = {});
 
+/// Sets `cloud.points` from points known in double precision (metres), as the readers do with
+/// a file's double coordinates: as float32 where float32 holds them to a millionth of their
+/// extent, else relative to a round origin near their centre, which becomes the cloud's
+/// georeference (Cloud::georef: true coordinates are origin + point; `unit_name` describes
+/// its unit) and moves a sensor pose set before (not the identity) with it. kBadData naming `what` for a point beyond 1e9 m
+/// from the frame's origin. The points must be finite.
+[[nodiscard]] Status set_double_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& points, const std::string& what,
+                                       const std::string& unit_name);
+
 /// How the PCD writer encodes the data section.
 enum class PcdEncoding : std::uint8_t { kAscii, kBinary, kBinaryCompressed };
 
