@@ -1222,6 +1222,17 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
   return true;
 }
 
+/// The positions 0 .. n-1 ordered by key(k) in [0, keys), ties in position order: a counting
+/// sort (the order a stable sort by key gives).
+template <typename Key>
+std::vector<std::uint32_t> counting_order(std::size_t n, std::size_t keys, const Key& key) {
+  std::vector<std::uint32_t> start(keys + 1, 0), order(n);
+  for (std::size_t k = 0; k < n; ++k) ++start[key(k) + 1];
+  for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+  for (std::size_t k = 0; k < n; ++k) order[start[key(k)]++] = static_cast<std::uint32_t>(k);
+  return order;
+}
+
 /// Roughly what a laser assignment and its table would cost the coder: per point,
 /// log2(1 + x / 1 cm) of its distance off its beam and of the change of its beam length
 /// from its laser's previous point (in column order, up to kMaxColumnGap columns back; a
@@ -1243,17 +1254,15 @@ double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<
   // The points laser by laser, columns in order, then by index: a counting sort over the
   // pixels where every laser and column lies in the table (as the estimates make them),
   // else a comparison sort to the same order.
-  std::vector<std::uint32_t> order(n);
+  std::vector<std::uint32_t> order;
   const std::uint64_t lasers = table.lasers(), grid = table.columns;
   bool counting = lasers * grid > 0 && lasers * grid <= 4 * static_cast<std::uint64_t>(n) + 65536;
   for (std::size_t i = 0; i < n && counting; ++i) counting = ring[i] < lasers && column[i] < grid;
   if (counting) {
-    std::vector<std::uint32_t> start(static_cast<std::size_t>(lasers * grid) + 1, 0);
-    const auto pixel = [&](std::size_t i) { return static_cast<std::size_t>(ring[i] * grid + column[i]); };
-    for (std::size_t i = 0; i < n; ++i) ++start[pixel(i) + 1];
-    for (std::size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
-    for (std::size_t i = 0; i < n; ++i) order[start[pixel(i)]++] = static_cast<std::uint32_t>(i);
+    order = counting_order(n, static_cast<std::size_t>(lasers * grid),
+                           [&](std::size_t i) { return static_cast<std::size_t>(ring[i] * grid + column[i]); });
   } else {
+    order.resize(n);
     std::iota(order.begin(), order.end(), 0U);
     std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
       return ring[x] != ring[y] ? ring[x] < ring[y] : column[x] != column[y] ? column[x] < column[y] : x < y;
@@ -1674,8 +1683,8 @@ std::vector<std::uint32_t> pixel_order(const std::vector<std::uint32_t>& coded, 
     const std::uint32_t i = coded[k];
     counting = (k == 0 || coded[k - 1] < i) && a.ring[i] < lasers && a.column[i] < columns;
   }
-  std::vector<std::uint32_t> order(n);
   if (!counting) {
+    std::vector<std::uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0U);
     std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
       const std::uint32_t ix = coded[x], iy = coded[y];
@@ -1685,15 +1694,10 @@ std::vector<std::uint32_t> pixel_order(const std::vector<std::uint32_t>& coded, 
     });
     return order;
   }
-  const auto pixel = [&](std::size_t k) {
+  return counting_order(n, static_cast<std::size_t>(pixels), [&](std::size_t k) {
     const std::uint32_t i = coded[k];
     return static_cast<std::size_t>(a.column[i]) * lasers + a.ring[i];
-  };
-  std::vector<std::uint32_t> start(static_cast<std::size_t>(pixels) + 1, 0);
-  for (std::size_t k = 0; k < n; ++k) ++start[pixel(k) + 1];
-  for (std::size_t p = 1; p < start.size(); ++p) start[p] += start[p - 1];
-  for (std::size_t k = 0; k < n; ++k) order[start[pixel(k)]++] = static_cast<std::uint32_t>(k);
-  return order;
+  });
 }
 
 }  // namespace

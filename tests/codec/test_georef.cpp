@@ -418,30 +418,5 @@ TEST(GeorefModel, UtmPlyWithoutViewpointCodesWithAFineBound) {
   EXPECT_GT(dist.hausdorff, 0.0);
 }
 
-TEST(Georeference, ViewpointGivenMovesWithThePoints) {
-  // A PCD whose VIEWPOINT stands among its UTM points: the pose is moved by the same origin.
-  std::vector<Eigen::Vector3d> pts;
-  for (int i = 0; i < 300; ++i) pts.emplace_back(393775.8 + 0.21 * i, 5403850.0 + 0.13 * (i % 29), 310.0 + 0.01 * i);
-  std::string text =
-      "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 300\nHEIGHT 1\n"
-      "VIEWPOINT 393800 5403851 312 1 0 0 0\nPOINTS 300\nDATA binary\n";
-  Bytes b(text.begin(), text.end());
-  for (const auto& p : pts)
-    for (int a = 0; a < 3; ++a) {
-      const std::size_t at = b.size();
-      b.resize(at + 8);
-      std::memcpy(b.data() + at, &p[a], 8);
-    }
-  const std::string path = (test::temp_dir("georef_viewpoint") / "vp.pcd").string();
-  write_bytes(path, b);
-  auto read = io::read_cloud(path);
-  ASSERT_TRUE(read.ok()) << read.status().to_string();
-  const Cloud& c = read.value().cloud;
-  ASSERT_TRUE(c.georef);
-  const Eigen::Vector3d sensor = c.georef->origin + c.T_cloud_sensor.translation();
-  EXPECT_NEAR((sensor - Eigen::Vector3d(393800, 5403851, 312)).norm(), 0.0, 1e-6);
-  EXPECT_LT(c.T_cloud_sensor.translation().norm(), 100.0);
-}
-
 }  // namespace
 }  // namespace lex3d::codec

@@ -516,14 +516,11 @@ TEST(LasCorrupt, ExtentBeyondFloat32ResolutionIsRefused) {
 
 // ------------------------------------------------------------------ doubles in other formats
 
-TEST(Georeference, PcdWithDoubleUtmCoordinates) {
-  const std::string dir = temp_dir("pcd_utm").string();
-  std::vector<Eigen::Vector3d> pts;
-  for (int i = 0; i < 500; ++i)
-    pts.emplace_back(393775.823 + 0.137 * i, 5403850.001 + 0.071 * (i % 37), 3107.8627 + 0.00013 * i);
-  std::string text =
-      "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 500\nHEIGHT 1\n"
-      "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 500\nDATA binary\n";
+/// A binary PCD of double x y z with the VIEWPOINT `viewpoint` (tx ty tz qw qx qy qz).
+Bytes double_pcd(const std::vector<Eigen::Vector3d>& pts, const std::string& viewpoint) {
+  const std::string n = std::to_string(pts.size());
+  const std::string text = "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH " + n +
+                           "\nHEIGHT 1\nVIEWPOINT " + viewpoint + "\nPOINTS " + n + "\nDATA binary\n";
   Bytes b(text.begin(), text.end());
   for (const auto& p : pts)
     for (int a = 0; a < 3; ++a) {
@@ -531,8 +528,16 @@ TEST(Georeference, PcdWithDoubleUtmCoordinates) {
       b.resize(at + 8);
       std::memcpy(b.data() + at, &p[a], 8);
     }
+  return b;
+}
+
+TEST(Georeference, PcdWithDoubleUtmCoordinates) {
+  const std::string dir = temp_dir("pcd_utm").string();
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 500; ++i)
+    pts.emplace_back(393775.823 + 0.137 * i, 5403850.001 + 0.071 * (i % 37), 3107.8627 + 0.00013 * i);
   const std::string path = dir + "/utm.pcd";
-  write_bytes(path, b);
+  write_bytes(path, double_pcd(pts, "0 0 0 1 0 0 0"));
   const ReadResult r = read_ok(path);
   ASSERT_EQ(r.cloud.size(), 500U);
   ASSERT_TRUE(r.cloud.georef);
@@ -561,6 +566,20 @@ TEST(Georeference, PcdWithDoubleUtmCoordinates) {
     for (std::size_t i = 0; i < pts.size(); ++i) w2 = std::max(w2, (b2.cloud.georef->to_crs(b2.cloud.points[i]) - pts[i]).norm());
     EXPECT_LT(w2, 1e-5) << ext;
   }
+}
+
+TEST(Georeference, ViewpointGivenMovesWithThePoints) {
+  // A PCD whose VIEWPOINT stands among its UTM points: the pose moves by the same origin (with
+  // the identity, no pose, the sensor stays at the local origin: test_georef's UTM PLY).
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < 300; ++i) pts.emplace_back(393775.8 + 0.21 * i, 5403850.0 + 0.13 * (i % 29), 310.0 + 0.01 * i);
+  const std::string path = (temp_dir("pcd_viewpoint") / "vp.pcd").string();
+  write_bytes(path, double_pcd(pts, "393800 5403851 312 1 0 0 0"));
+  const ReadResult r = read_ok(path);
+  ASSERT_TRUE(r.cloud.georef);
+  const Eigen::Vector3d sensor = r.cloud.georef->origin + r.cloud.T_cloud_sensor.translation();
+  EXPECT_NEAR((sensor - Eigen::Vector3d(393800, 5403851, 312)).norm(), 0.0, 1e-6);
+  EXPECT_LT(r.cloud.T_cloud_sensor.translation().norm(), 100.0);
 }
 
 TEST(Georeference, SmallCoordinatesStayAsTheyAre) {
