@@ -60,6 +60,8 @@ class RangeEncoder {
       shift_low();
     }
   }
+  /// Bytes written so far: the finished stream holds at least these.
+  [[nodiscard]] std::size_t bytes_out() const { return out_.size(); }
   /// Flushes and returns the coded bytes; the encoder must not be used afterwards.
   std::vector<std::uint8_t> finish() {
     for (int i = 0; i < 5; ++i) shift_low();
