@@ -56,6 +56,7 @@ class Bytes {
   // inserted, which costs several times more for a few bytes)
   explicit Bytes(std::size_t reserve) : b_(std::max<std::size_t>(reserve, 64)) {}
   void put(const void* data, std::size_t k) {
+    if (k == 0) return;  // (data may then be null, which memcpy must not see)
     if (b_.size() - n_ < k) b_.resize(std::max(2 * b_.size(), n_ + k));
     std::memcpy(b_.data() + n_, data, k);
     n_ += k;
