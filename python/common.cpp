@@ -26,19 +26,20 @@ bool is_float(const py::array& a) {
   return a.dtype().kind() == 'f' && (a.dtype().itemsize() == 4 || a.dtype().itemsize() == 8);
 }
 
+/// The rows of an (N, 3) array as T, each finite (else ValueError naming the row).
 template <typename T>
-void copy_points(const py::array& a, Cloud& cloud, const std::string& what) {
+std::vector<Eigen::Matrix<T, 3, 1>> finite_rows(const py::array& a, const std::string& what) {
   const auto v = py::array_t<T, py::array::forcecast>(a).template unchecked<2>();
-  const auto n = static_cast<std::size_t>(v.shape(0));
-  cloud.points.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  std::vector<Eigen::Matrix<T, 3, 1>> rows(static_cast<std::size_t>(v.shape(0)));
+  for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto k = static_cast<py::ssize_t>(i);
     const T x = v(k, 0), y = v(k, 1), z = v(k, 2);
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z))
       throw py::value_error(what + ": row " + std::to_string(i) + " is not finite (" + std::to_string(x) + ", " +
                             std::to_string(y) + ", " + std::to_string(z) + ")");
-    cloud.points[i] = Eigen::Vector3f(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+    rows[i] = {x, y, z};
   }
+  return rows;
 }
 
 Cloud decode_model_file(const std::vector<std::uint8_t>& bytes, const std::vector<std::uint8_t>* alphabet,
@@ -75,20 +76,11 @@ Cloud to_cloud(const py::handle& points_obj, const py::object& intensity_obj, co
   if (!is_float(points)) throw py::value_error(what + " must be float32 or float64, got " + dtype_of(points));
   Cloud cloud;
   if (points.dtype().itemsize() == 4) {
-    copy_points<float>(points, cloud, what);
+    cloud.points = finite_rows<float>(points, what);
   } else {
     // float64: kept to its precision where float32 would round it (coordinates far from the
     // frame's origin, a UTM cloud): relative to an origin the model keeps (Cloud::georef)
-    const auto v = py::array_t<double, py::array::forcecast>(points).unchecked<2>();
-    std::vector<Eigen::Vector3d> wide(static_cast<std::size_t>(v.shape(0)));
-    for (std::size_t i = 0; i < wide.size(); ++i) {
-      const auto k = static_cast<py::ssize_t>(i);
-      wide[i] = Eigen::Vector3d(v(k, 0), v(k, 1), v(k, 2));
-      if (!wide[i].allFinite())
-        throw py::value_error(what + ": row " + std::to_string(i) + " is not finite (" + std::to_string(wide[i].x()) +
-                              ", " + std::to_string(wide[i].y()) + ", " + std::to_string(wide[i].z()) + ")");
-    }
-    const Status st = io::set_double_points(cloud, wide, what, "metre (the array's unit)");
+    const Status st = io::set_double_points(cloud, finite_rows<double>(points, what), what, "metre (the array's unit)");
     if (!st.ok()) throw py::value_error(st.message());
   }
   if (!intensity_obj.is_none()) {

@@ -290,6 +290,9 @@ Status check_fields(const std::string& path, const Cloud& cloud);
 /// the power of ten below their extent); nullopt where float32 holds them as they are.
 std::optional<Eigen::Vector3d> wide_origin(const std::vector<Eigen::Vector3d>& points);
 
+/// kBadData naming `path` when a point lies beyond kMaxCoordinateM of its frame's origin.
+Status check_reach(const std::vector<Eigen::Vector3d>& points, const std::string& path);
+
 /// Sets `cloud.points` to `points` less `origin` in float32 and `cloud.georef` to that origin
 /// (with `unit_name` and the worst rounding), moving a sensor pose given with the points
 /// (not the identity) with them.

@@ -106,6 +106,15 @@ std::optional<Eigen::Vector3d> wide_origin(const std::vector<Eigen::Vector3d>& p
   return origin;
 }
 
+Status check_reach(const std::vector<Eigen::Vector3d>& points, const std::string& path) {
+  double max_abs = 0.0;
+  for (const Eigen::Vector3d& p : points) max_abs = std::max(max_abs, p.cwiseAbs().maxCoeff());
+  if (!(max_abs <= kMaxCoordinateM))
+    return bad_data(msg(path, "the points reach " + std::to_string(max_abs) +
+                                  " m, beyond any coordinate frame on Earth (the limit is 1e9 m)"));
+  return {};
+}
+
 void set_relative_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& points, const Eigen::Vector3d& origin,
                          const std::string& unit_name) {
   const std::size_t n = points.size();
@@ -131,8 +140,6 @@ void set_relative_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& point
 Status Builder::finish(const std::string& path) {
   if (!wide_) return {};
   const std::size_t n = wide_points_.size();
-  double max_abs = 0.0;
-  for (const Eigen::Vector3d& p : wide_points_) max_abs = std::max(max_abs, p.cwiseAbs().maxCoeff());
   const std::optional<Eigen::Vector3d> origin = wide_origin(wide_points_);
   if (!origin) {
     // float32 as before; a value beyond float's range is not finite there: dropped and counted
@@ -152,9 +159,7 @@ Status Builder::finish(const std::string& path) {
     });
     return {};
   }
-  if (!(max_abs <= kMaxCoordinateM))
-    return bad_data(msg(path, "the points reach " + std::to_string(max_abs) +
-                                  " m, beyond any coordinate frame on Earth (the limit is 1e9 m)"));
+  if (Status st = check_reach(wide_points_, path); !st.ok()) return st;
   set_relative_points(r_.cloud, wide_points_, *origin, "metre (assumed: the file names no unit)");
   wide_points_.clear();
   wide_points_.shrink_to_fit();
@@ -165,11 +170,7 @@ Status Builder::finish(const std::string& path) {
 
 Status set_double_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& points, const std::string& what,
                          const std::string& unit_name) {
-  double max_abs = 0.0;
-  for (const Eigen::Vector3d& p : points) max_abs = std::max(max_abs, p.cwiseAbs().maxCoeff());
-  if (!(max_abs <= detail::kMaxCoordinateM))
-    return Status(ErrorCode::kBadData, what + ": the points reach " + std::to_string(max_abs) +
-                                           " m, beyond any coordinate frame on Earth (the limit is 1e9 m)");
+  if (Status st = detail::check_reach(points, what); !st.ok()) return st;
   if (const auto origin = detail::wide_origin(points)) {
     detail::set_relative_points(cloud, points, *origin, unit_name);
     return {};

@@ -1233,6 +1233,12 @@ std::vector<std::uint32_t> counting_order(std::size_t n, std::size_t keys, const
   return order;
 }
 
+/// Whether a counting sort over `keys` keys pays for `n` positions (its table of starts
+/// costs no more than a few positions each), as against a comparison sort.
+bool counting_pays(std::uint64_t keys, std::size_t n) {
+  return keys > 0 && keys <= 4 * static_cast<std::uint64_t>(n) + 65536;
+}
+
 /// Roughly what a laser assignment and its table would cost the coder: per point,
 /// log2(1 + x / 1 cm) of its distance off its beam and of the change of its beam length
 /// from its laser's previous point (in column order, up to kMaxColumnGap columns back; a
@@ -1256,7 +1262,7 @@ double assignment_cost(const std::vector<Eigen::Vector3d>& p, const std::vector<
   // else a comparison sort to the same order.
   std::vector<std::uint32_t> order;
   const std::uint64_t lasers = table.lasers(), grid = table.columns;
-  bool counting = lasers * grid > 0 && lasers * grid <= 4 * static_cast<std::uint64_t>(n) + 65536;
+  bool counting = counting_pays(lasers * grid, n);
   for (std::size_t i = 0; i < n && counting; ++i) counting = ring[i] < lasers && column[i] < grid;
   if (counting) {
     order = counting_order(n, static_cast<std::size_t>(lasers * grid),
@@ -1678,7 +1684,7 @@ std::vector<std::uint32_t> pixel_order(const std::vector<std::uint32_t>& coded, 
   const std::size_t n = coded.size();
   const std::uint64_t lasers = a.table.lasers(), columns = a.table.columns;
   const std::uint64_t pixels = lasers * columns;
-  bool counting = pixels > 0 && pixels <= 4 * static_cast<std::uint64_t>(n) + 65536;
+  bool counting = counting_pays(pixels, n);
   for (std::size_t k = 0; k < n && counting; ++k) {
     const std::uint32_t i = coded[k];
     counting = (k == 0 || coded[k - 1] < i) && a.ring[i] < lasers && a.column[i] < columns;

@@ -667,7 +667,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       spherical[which[k]] = to_spherical(T_sensor_cloud * input.points[which[k]].cast<double>());
     }, 4096);
   };
-  bool spherical_all = false;
 
   // The keep mask, then the points: in row order and in input order, the smaller wins.
   RangeEncoder head;
@@ -679,6 +678,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       ctx = ((ctx << 1) | keep[i]) & 3;
     }
   }
+  // (what the keep mask takes of every stream, left out of the codings' bits a point)
+  const std::size_t head_bytes = RangeEncoder(head).finish().size();
   Cloud sensor_frame;
   sensor_frame.points.reserve(std::min<std::size_t>(coded.size(), 4096));
   for (std::size_t k = 0; k < coded.size() && sensor_frame.points.size() < 4096; k += std::max<std::size_t>(1, coded.size() / 4096))
@@ -695,9 +696,9 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // (every coded point in row order: made only when a spherical coding is coded in full)
   std::vector<std::uint32_t> rows;
   const auto need_rows = [&] {
-    if (!spherical_all) to_spherical_at(coded);
-    spherical_all = true;
-    if (rows.empty()) rows = row_order(spherical, coded, row_height);
+    if (!rows.empty()) return;
+    to_spherical_at(coded);
+    rows = row_order(spherical, coded, row_height);
   };
   struct Way {
     bool by_rows;
@@ -749,7 +750,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // them by more than 4 E (an airborne file's: Autzen 0.60 m, hexbin 0.17 m) is not tried:
   // its coding would correct across the beam at nearly every point.
   const double grid_bits = [&] {
-    const std::size_t head_bytes = RangeEncoder(head).finish().size();
     double bits = std::numeric_limits<double>::infinity();
     for (const std::vector<std::uint8_t>* st : {acquisition ? &acquisition->stream : nullptr, lattice ? &lattice->stream : nullptr})
       if (st != nullptr && !coded.empty())
@@ -818,7 +818,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // (the voxel trial, the longest job, first: the other thread meanwhile takes the
       // spherical ones)
       const std::size_t first_way = try_voxel && !defer_voxel ? 1 : 0;
-      const std::size_t head_bytes = RangeEncoder(head).finish().size();
       // The sensor-geometry coding, already coded in full, rules out a voxel coding whose
       // trial costs kLaserSkipRatio times its bits or more.
       const double laser_bits =
