@@ -598,12 +598,26 @@ std::pair<double, double> circular_mean(double sum_cos, double sum_sin, std::siz
   return {std::atan2(sum_sin, sum_cos), std::hypot(sum_cos, sum_sin) / static_cast<double>(n)};
 }
 
+/// A scan's points in the sensor frame with each one's horizontal range and azimuth,
+/// computed once for all the estimates below (each reads them several times).
+struct ScanPoints {
+  std::vector<Eigen::Vector3d> p;
+  std::vector<double> rho, azimuth;
+
+  explicit ScanPoints(std::vector<Eigen::Vector3d> points) : p(std::move(points)), rho(p.size()), azimuth(p.size()) {
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      rho[i] = std::hypot(p[i].x(), p[i].y());
+      azimuth[i] = std::atan2(p[i].y(), p[i].x());
+    }
+  }
+};
+
 /// Estimates a table for points whose lasers and columns are known: per laser, the height
 /// of the beam origin and the elevation by a line fit of z against the horizontal range
 /// (twice, the second time without the points more than 3 median deviations off), and the
 /// azimuth of its columns by a circular mean; the direction of the grid is the one whose
 /// means are the tighter.
-std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring,
+std::optional<LaserTable> estimate_table(const ScanPoints& scan, const std::vector<std::uint16_t>& ring,
                                          const std::vector<std::uint32_t>& column, std::uint32_t lasers,
                                          std::uint32_t columns, const std::vector<double>& tangential = {}) {
   if (lasers < 1 || lasers > kMaxLasers || columns < 1 || columns > kMaxLaserColumns) return std::nullopt;
@@ -612,12 +626,13 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
   const auto sideways = [&](std::uint16_t l) { return l < tangential.size() ? tangential[l] : 0.0; };
   // Per point (once: the passes below read them several times): its horizontal range, the
   // beam's length to it and the beam's azimuth.
+  const std::vector<Eigen::Vector3d>& p = scan.p;
+  const std::vector<double>& rho_of = scan.rho;
   const std::size_t n_points = p.size();
-  std::vector<double> rho_of(n_points), beam_rho_of(n_points), beam_azimuth_of(n_points);
+  std::vector<double> beam_rho_of(n_points), beam_azimuth_of(n_points);
   for (std::size_t i = 0; i < n_points; ++i) {
-    const double d = sideways(ring[i]), r = std::hypot(p[i].x(), p[i].y());
-    const double a = std::atan2(p[i].y(), p[i].x());
-    rho_of[i] = r;
+    const double d = sideways(ring[i]), r = rho_of[i];
+    const double a = scan.azimuth[i];
     beam_rho_of[i] = d == 0.0 ? r : std::sqrt(std::max(0.0, r * r - d * d));
     beam_azimuth_of[i] = d == 0.0 || !(r > 0.0) ? a : a - std::asin(std::clamp(d / r, -1.0, 1.0));
   }
@@ -720,15 +735,33 @@ std::optional<LaserTable> estimate_table(const std::vector<Eigen::Vector3d>& p, 
   return t;
 }
 
-/// sums[k] += exp(i (a + k b)) for every k (by rotation, in plain arithmetic).
-void rotate_sum(double a, double b, std::vector<std::complex<double>>& sums) {
-  double er = std::cos(a), ei = std::sin(a);
-  const double rr = std::cos(b), ri = std::sin(b);
-  for (auto& s : sums) {
-    s = {s.real() + er, s.imag() + ei};
-    const double t = er * rr - ei * ri;
-    ei = er * ri + ei * rr;
-    er = t;
+/// sums[k] += exp(i (a[j] + k b[j])) for every k and every j in order (by rotation, in plain
+/// arithmetic). Two terms at a time: their rotations are independent, and each sum still
+/// takes term j before term j + 1, so the sums are those of one term at a time.
+void rotate_sums(const std::vector<double>& a, const std::vector<double>& b, std::vector<std::complex<double>>& sums) {
+  std::size_t j = 0;
+  for (; j + 1 < a.size(); j += 2) {
+    double er = std::cos(a[j]), ei = std::sin(a[j]), fr = std::cos(a[j + 1]), fi = std::sin(a[j + 1]);
+    const double rr = std::cos(b[j]), ri = std::sin(b[j]), qr = std::cos(b[j + 1]), qi = std::sin(b[j + 1]);
+    for (auto& s : sums) {
+      s = {s.real() + er + fr, s.imag() + ei + fi};
+      const double t = er * rr - ei * ri;
+      ei = er * ri + ei * rr;
+      er = t;
+      const double u = fr * qr - fi * qi;
+      fi = fr * qi + fi * qr;
+      fr = u;
+    }
+  }
+  if (j < a.size()) {
+    double er = std::cos(a[j]), ei = std::sin(a[j]);
+    const double rr = std::cos(b[j]), ri = std::sin(b[j]);
+    for (auto& s : sums) {
+      s = {s.real() + er, s.imag() + ei};
+      const double t = er * rr - ei * ri;
+      ei = er * ri + ei * rr;
+      er = t;
+    }
   }
 }
 
@@ -743,16 +776,14 @@ void rotate_sum(double a, double b, std::vector<std::complex<double>>& sums) {
 /// more than chance would over the candidates tried; the grid's phase per laser is their
 /// circular mean and each point's column its nearest grid step. False when the lasers hold
 /// too few points.
-bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<std::uint16_t>& ring, std::uint32_t lasers,
+bool estimate_columns(const ScanPoints& scan, const std::vector<std::uint16_t>& ring, std::uint32_t lasers,
                       std::vector<std::uint32_t>& column, std::uint32_t& columns, std::vector<double>& tangential,
                       bool refine = true) {
+  const std::vector<Eigen::Vector3d>& p = scan.p;
+  const std::vector<double>& rho = scan.rho;
+  const std::vector<double>& az = scan.azimuth;
   std::vector<std::vector<std::uint32_t>> of(lasers);
   for (std::size_t i = 0; i < p.size(); ++i) of[ring[i]].push_back(static_cast<std::uint32_t>(i));
-  std::vector<double> rho(p.size()), az(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    rho[i] = std::hypot(p[i].x(), p[i].y());
-    az[i] = std::atan2(p[i].y(), p[i].x());
-  }
   std::vector<double> gaps;
   for (const auto& idx : of) {
     std::vector<double> s;
@@ -784,10 +815,13 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
       std::sort(far.begin(), far.end());
       const double stride = std::max(1.0, static_cast<double>(far.size()) / std::max(16.0, 4096.0 / lasers));
       std::fill(sums.begin(), sums.end(), Complex(0.0, 0.0));
+      std::vector<double> starts, steps;
       for (double k = 0; k < static_cast<double>(far.size()); k += stride) {
         const double a = az[far[static_cast<std::size_t>(k)]];
-        rotate_sum(static_cast<double>(w_lo) * a, a, sums);
+        starts.push_back(static_cast<double>(w_lo) * a);
+        steps.push_back(a);
       }
+      rotate_sums(starts, steps, sums);
       for (std::size_t k = 0; k < sums.size(); ++k) score[k] += std::abs(sums[k]);
     }
     const auto best = static_cast<std::size_t>(std::max_element(score.begin(), score.end()) - score.begin());
@@ -802,8 +836,12 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
   const auto coherence = [&](const std::vector<double>& phi, const std::vector<double>& x, double d0, double dd,
                              std::size_t count, std::vector<Complex>& sums) {
     sums.assign(count, Complex(0.0, 0.0));
-    for (std::size_t k = 0; k < phi.size(); ++k)
-      rotate_sum(phi[k] - static_cast<double>(w) * d0 * x[k], -static_cast<double>(w) * dd * x[k], sums);
+    std::vector<double> starts(phi.size()), steps(phi.size());
+    for (std::size_t k = 0; k < phi.size(); ++k) {
+      starts[k] = phi[k] - static_cast<double>(w) * d0 * x[k];
+      steps[k] = -static_cast<double>(w) * dd * x[k];
+    }
+    rotate_sums(starts, steps, sums);
   };
   for (std::uint32_t l = 0; l < lasers; ++l) {
     std::vector<double> phi, x;
@@ -868,11 +906,11 @@ bool estimate_columns(const std::vector<Eigen::Vector3d>& p, const std::vector<s
 /// Lasers of points that know none: the elevations (seen from the height that makes them
 /// sharpest) of the points beyond the nearest quarter form one peak a laser; each point
 /// goes to the nearest peak, and then to the laser whose fitted beam passes nearest it.
-bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint16_t>& ring, std::uint32_t& lasers) {
+bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers) {
+  const std::vector<Eigen::Vector3d>& p = scan.p;
+  const std::vector<double>& rho = scan.rho;
   const std::size_t n = p.size();
   if (n < 256) return false;
-  std::vector<double> rho(n);
-  for (std::size_t i = 0; i < n; ++i) rho[i] = std::hypot(p[i].x(), p[i].y());
   const double near = 1.0;
   std::vector<std::uint32_t> far;
   for (std::size_t i = 0; i < n; ++i)
@@ -1024,13 +1062,12 @@ bool estimate_rings(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
 /// keeps lasers whose beams start at different heights (a HDL-64E's two blocks) whole where
 /// elevations seen from one height split or merge them. `z_rms`: the points' RMS distance
 /// (in z) from their cones.
-bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint16_t>& ring, std::uint32_t& lasers,
-                    double& z_rms) {
+bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers, double& z_rms) {
+  const std::vector<Eigen::Vector3d>& p = scan.p;
+  const std::vector<double>& rho = scan.rho;
   const std::size_t n = p.size();
   if (n < 256) return false;
   constexpr double kNear = 1.0;
-  std::vector<double> rho(n);
-  for (std::size_t i = 0; i < n; ++i) rho[i] = std::hypot(p[i].x(), p[i].y());
   std::vector<std::uint32_t> far;
   for (std::size_t i = 0; i < n; ++i)
     if (rho[i] >= kNear) far.push_back(static_cast<std::uint32_t>(i));
@@ -1130,12 +1167,13 @@ bool estimate_cones(const std::vector<Eigen::Vector3d>& p, std::vector<std::uint
       const std::size_t w = first ? 12 : 4;
       std::size_t best = first ? std::min(pos, m - 1) : prev;
       double best_d = std::abs(p[i].z() - H[best] - T[best] * r);
+      const double z = p[i].z();
       for (std::size_t l = pos > w ? pos - w : 0; l < std::min(m, pos + w); ++l) {
-        const double d = std::abs(p[i].z() - H[l] - T[l] * r);
-        if (d < best_d) {
-          best_d = d;
-          best = l;
-        }
+        // (selects, not a branch: which cone is nearer is a coin toss to the predictor)
+        const double d = std::abs(z - H[l] - T[l] * r);
+        const bool nearer = d < best_d;
+        best_d = nearer ? d : best_d;
+        best = nearer ? l : best;
       }
       ring[i] = static_cast<std::uint16_t>(best);
       dist[i] = best_d;
@@ -1353,8 +1391,9 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
   } else {
     if (a.ring.empty() && !estimate) return std::nullopt;
     const Pose T_sensor_cloud = T_cloud_sensor.inverse();
-    std::vector<Eigen::Vector3d> p(n);
-    for (std::size_t i = 0; i < n; ++i) p[i] = T_sensor_cloud * input.points[i].cast<double>();
+    std::vector<Eigen::Vector3d> sensor_points(n);
+    for (std::size_t i = 0; i < n; ++i) sensor_points[i] = T_sensor_cloud * input.points[i].cast<double>();
+    const ScanPoints scan(std::move(sensor_points));
     std::optional<OrderLayout> layout;
     if (a.ring.empty()) layout = detect_order_layout(input.points);
     if (layout) {
@@ -1365,10 +1404,8 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       const std::size_t apart = layout->firing_major ? layout->lasers : 1;
       for (std::size_t i = 0; i + apart < n; i += std::max<std::size_t>(1, n / 20000)) {
         if (!layout->firing_major && layout->column(i) + 1 >= layout->columns) continue;
-        const Eigen::Vector3d& u = p[i];
-        const Eigen::Vector3d& v = p[i + apart];
-        if (std::hypot(u.x(), u.y()) < 0.3 || std::hypot(v.x(), v.y()) < 0.3) continue;
-        const double d = std::abs(wrap_angle(std::atan2(v.y(), v.x()) - std::atan2(u.y(), u.x())));
+        if (scan.rho[i] < 0.3 || scan.rho[i + apart] < 0.3) continue;
+        const double d = std::abs(wrap_angle(scan.azimuth[i + apart] - scan.azimuth[i]));
         if (d > 1e-7) steps.push_back(d);
       }
       if (steps.size() < 16) return std::nullopt;
@@ -1403,14 +1440,14 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         Candidate& c = cand[k];
         bool found = false;
         double z_rms = 0.0;
-        if (k == 0) found = estimate_cones(p, c.ring, c.lasers, z_rms);
-        else found = estimate_rings(p, c.ring, c.lasers);
+        if (k == 0) found = estimate_cones(scan, c.ring, c.lasers, z_rms);
+        else found = estimate_rings(scan, c.ring, c.lasers);
         std::vector<double> tangential;
-        if (!found || !estimate_columns(p, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) return;
-        auto t = estimate_table(p, c.ring, c.column, c.lasers, c.columns, tangential);
+        if (!found || !estimate_columns(scan, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) return;
+        auto t = estimate_table(scan, c.ring, c.column, c.lasers, c.columns, tangential);
         if (!t || !storable(*t)) return;
         c.table = std::move(*t);
-        c.cost = assignment_cost(p, c.ring, c.column, c.table);
+        c.cost = assignment_cost(scan.p, c.ring, c.column, c.table);
       }, 1);
       std::size_t pick = 0;
       for (std::size_t k = 1; k < cand.size(); ++k)
@@ -1450,10 +1487,10 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     }
     if (!a.from_elevations) {
       std::vector<double> tangential;
-      if (a.column.empty() && !estimate_columns(p, a.ring, lasers, a.column, columns, tangential)) return std::nullopt;
+      if (a.column.empty() && !estimate_columns(scan, a.ring, lasers, a.column, columns, tangential)) return std::nullopt;
       if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
       if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
-      auto t = estimate_table(p, a.ring, a.column, lasers, columns, tangential);
+      auto t = estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
       if (!t) return std::nullopt;
       a.table = std::move(*t);
     }

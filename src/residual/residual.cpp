@@ -516,18 +516,40 @@ std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, co
   };
   std::vector<Key> keys;
   keys.reserve(coded.size());
+  std::int64_t row_lo = std::numeric_limits<std::int64_t>::max(), row_hi = std::numeric_limits<std::int64_t>::min();
   for (std::uint32_t i : coded) {
     const Spherical& s = spherical[i];
     keys.push_back({static_cast<std::int64_t>(std::floor(s.elevation / row_height)), s.azimuth, i});
+    row_lo = std::min(row_lo, keys.back().row);
+    row_hi = std::max(row_hi, keys.back().row);
   }
-  std::sort(keys.begin(), keys.end(), [](const Key& a, const Key& b) {
-    if (a.row != b.row) return a.row < b.row;
+  const auto by_azimuth = [](const Key& a, const Key& b) {
     if (a.azimuth != b.azimuth) return a.azimuth < b.azimuth;
     return a.index < b.index;
-  });
+  };
+  // (the keys are all distinct, so any sort gives this one order: where the rows are few
+  // enough, the keys are bucketed by row first and each row sorted on its own)
+  std::vector<Key> sorted;
+  if (!keys.empty() && static_cast<std::uint64_t>(row_hi - row_lo) < 4 * static_cast<std::uint64_t>(keys.size()) + 1024) {
+    const auto rows = static_cast<std::size_t>(row_hi - row_lo) + 1;
+    std::vector<std::size_t> start(rows + 1, 0);
+    for (const Key& k : keys) ++start[static_cast<std::size_t>(k.row - row_lo) + 1];
+    for (std::size_t r = 1; r <= rows; ++r) start[r] += start[r - 1];
+    sorted.resize(keys.size());
+    std::vector<std::size_t> at(start.begin(), start.end() - 1);
+    for (const Key& k : keys) sorted[at[static_cast<std::size_t>(k.row - row_lo)]++] = k;
+    for (std::size_t r = 0; r < rows; ++r)
+      std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(start[r]), sorted.begin() + static_cast<std::ptrdiff_t>(start[r + 1]),
+                by_azimuth);
+  } else {
+    sorted = std::move(keys);
+    std::sort(sorted.begin(), sorted.end(), [&](const Key& a, const Key& b) {
+      return a.row != b.row ? a.row < b.row : by_azimuth(a, b);
+    });
+  }
   std::vector<std::uint32_t> order;
-  order.reserve(keys.size());
-  for (const Key& k : keys) order.push_back(k.index);
+  order.reserve(sorted.size());
+  for (const Key& k : sorted) order.push_back(k.index);
   return order;
 }
 
