@@ -717,6 +717,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const double sweep_cell = res ? 0.5 * std::max(res->azimuth_rad, res->elevation_rad) : 0.0;
   // (every coded point in row order: made only when a spherical coding is coded in full)
   std::vector<std::uint32_t> rows;
+  // (a spherical coding stopped once it could no longer be the smallest)
+  bool spherical_out = false;
   const auto need_rows = [&] {
     if (!rows.empty()) return;
     to_spherical_at(coded);
@@ -779,6 +781,10 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                   static_cast<double>(coded.size()));
     return bits;
   }();
+  const bool tall = acquisition && acquisition->step_z != acquisition->step;
+  const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + (tall ? 8 : 0) +
+                                                          acquisition->stream.size()
+                                                    : std::numeric_limits<std::size_t>::max();
   if (lasers_of && std::isfinite(grid_bits) && !exact_table && lasers_of->fit_rms > 4.0 * max_error) lasers_of.reset();
   if (lasers_of) {
     const std::vector<double> shares =
@@ -791,6 +797,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                 options.thin, shares, threads, &chosen);
     if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
+  const std::size_t laser_bytes =
+      laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
   const bool others = (!laser && !acquisition && !lattice) || options.spherical || options.voxel;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (others && !voxel) {
@@ -885,10 +893,20 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const bool full_spherical = !skip_others && !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits) &&
                                   spherical_window_bits < kVoxelSkipRatio * grid_bits;
       if (full_spherical) need_rows();
+      // The codings coded in full already (sensor geometry, acquisition order, lattice) each
+      // beat a spherical coding that comes out larger: that coding stops once its bytes pass
+      // the smallest of them (as it cannot be kept then, the same file).
+      std::size_t in_hand = std::min(laser_bytes, acquisition_bytes);
+      if (lattice) in_hand = std::min<std::size_t>(in_hand, extra_bytes(kCodingLattice) + lattice->stream.size());
+      const std::size_t sphere_extra = extra_bytes(ways[best].sweep ? kCodingSweep : 0);
+      const std::size_t sphere_give_up = in_hand == std::numeric_limits<std::size_t>::max() ? in_hand
+                                         : in_hand > sphere_extra ? in_hand - sphere_extra : 0;
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
-        if (job == 0 && full_spherical)
-          streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
-        else
+        if (job == 0 && full_spherical) {
+          streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best],
+                               &way_sources[best], sphere_give_up, &spherical_out);
+          if (spherical_out) way_sources[best].clear();
+        } else
           voxel = voxel_layer(head, input.points, coded, check_error);
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
@@ -908,8 +926,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   }
   // A spherical winner skipped for a voxel coding that the sensor-geometry coding beats may
   // beat both: it is coded in full after all.
-  if (others && options.spherical && laser && voxel && streams[best].empty() &&
-      extra_bytes(kCodingLaser) + laser->stream.size() < extra_bytes(kCodingVoxel) + voxel->stream.size()) {
+  if (others && options.spherical && laser && voxel && streams[best].empty() && !spherical_out &&
+      laser_bytes < extra_bytes(kCodingVoxel) + voxel->stream.size()) {
     need_rows();
     streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
   }
@@ -969,12 +987,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const std::size_t others_bytes = !others || !coded_others ? std::numeric_limits<std::size_t>::max()
                                    : use_voxel ? extra_bytes(kCodingVoxel) + voxel->stream.size()
                                                : extra_bytes(sweep ? kCodingSweep : 0) + streams[best].size();
-  const std::size_t laser_bytes =
-      laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
-  const bool tall = acquisition && acquisition->step_z != acquisition->step;
-  const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + (tall ? 8 : 0) +
-                                                          acquisition->stream.size()
-                                                    : std::numeric_limits<std::size_t>::max();
   // A payload of the codings on a grid from an origin (§2.11, §2.12): the coding and marker,
   // the fields every coding has, the origin, `fields` (the coding's own), the stream; its
   // coded points each stand for their own input point, `sources`.
