@@ -480,7 +480,10 @@ double voxel_cell(double bound) { return 2.0 * bound / std::sqrt(3.0) * (1.0 - 1
 /// not within `bound` of its cell's centre as a decoder computes it. nullopt when there is
 /// nothing to code or the octree would need more than kMaxVoxelDepth levels.
 std::optional<VoxelLayer> voxel_layer(RangeEncoder enc, const std::vector<Eigen::Vector3f>& input,
-                                      const std::vector<std::uint32_t>& coded, double bound) {
+                                      const std::vector<std::uint32_t>& coded, double bound,
+                                      std::size_t give_up_bytes = std::numeric_limits<std::size_t>::max(),
+                                      bool* gave_up = nullptr) {
+  if (gave_up) *gave_up = false;
   if (coded.empty()) return std::nullopt;
   VoxelLayer v;
   v.origin = corner_of(input, coded);
@@ -496,7 +499,10 @@ std::optional<VoxelLayer> voxel_layer(RangeEncoder enc, const std::vector<Eigen:
   std::sort(leaves.begin(), leaves.end());
   leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
   v.voxels = leaves.size();
-  detail::encode_occupancy(enc, leaves, v.depth, detail::OccupancyContexts::kMixed);
+  if (!detail::encode_occupancy(enc, leaves, v.depth, detail::OccupancyContexts::kMixed, give_up_bytes)) {
+    if (gave_up) *gave_up = true;
+    return std::nullopt;
+  }
   v.stream = enc.finish();
   return v;
 }
@@ -717,8 +723,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const double sweep_cell = res ? 0.5 * std::max(res->azimuth_rad, res->elevation_rad) : 0.0;
   // (every coded point in row order: made only when a spherical coding is coded in full)
   std::vector<std::uint32_t> rows;
-  // (a spherical coding stopped once it could no longer be the smallest)
-  bool spherical_out = false;
+  // (a spherical or voxel coding stopped once it could no longer be the smallest)
+  bool spherical_out = false, voxel_out = false;
   const auto need_rows = [&] {
     if (!rows.empty()) return;
     to_spherical_at(coded);
@@ -898,19 +904,25 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // the smallest of them (as it cannot be kept then, the same file).
       std::size_t in_hand = std::min(laser_bytes, acquisition_bytes);
       if (lattice) in_hand = std::min<std::size_t>(in_hand, extra_bytes(kCodingLattice) + lattice->stream.size());
-      const std::size_t sphere_extra = extra_bytes(ways[best].sweep ? kCodingSweep : 0);
-      const std::size_t sphere_give_up = in_hand == std::numeric_limits<std::size_t>::max() ? in_hand
-                                         : in_hand > sphere_extra ? in_hand - sphere_extra : 0;
+      // So does a voxel coding past the sensor-geometry coding's bytes (that bound alone where
+      // there is one: a voxel coding it beats sends the spherical coding to be coded after all,
+      // below).
+      const auto give_up_at = [](std::size_t bound, std::size_t extra) {
+        return bound == std::numeric_limits<std::size_t>::max() ? bound : bound > extra ? bound - extra : 0;
+      };
+      const std::size_t sphere_give_up = give_up_at(in_hand, extra_bytes(ways[best].sweep ? kCodingSweep : 0));
+      const std::size_t voxel_give_up = give_up_at(laser ? laser_bytes : in_hand, extra_bytes(kCodingVoxel));
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical) {
           streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best],
                                &way_sources[best], sphere_give_up, &spherical_out);
           if (spherical_out) way_sources[best].clear();
-        } else
-          voxel = voxel_layer(head, input.points, coded, check_error);
+        } else {
+          voxel = voxel_layer(head, input.points, coded, check_error, voxel_give_up, &voxel_out);
+        }
       }, 1);
       // (should the voxel coding fail after all, which its trial makes unlikely)
-      if (!voxel && !full_spherical && !skip_others && !std::isfinite(grid_bits)) {
+      if (!voxel && !voxel_out && !full_spherical && !skip_others && !std::isfinite(grid_bits)) {
         need_rows();
         streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
       }
@@ -926,8 +938,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   }
   // A spherical winner skipped for a voxel coding that the sensor-geometry coding beats may
   // beat both: it is coded in full after all.
-  if (others && options.spherical && laser && voxel && streams[best].empty() && !spherical_out &&
-      laser_bytes < extra_bytes(kCodingVoxel) + voxel->stream.size()) {
+  if (others && options.spherical && laser && (voxel || voxel_out) && streams[best].empty() && !spherical_out &&
+      (voxel_out || laser_bytes < extra_bytes(kCodingVoxel) + voxel->stream.size())) {
     need_rows();
     streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
   }

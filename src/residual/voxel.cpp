@@ -266,8 +266,8 @@ void unmorton(std::uint64_t code, std::uint32_t& x, std::uint32_t& y, std::uint3
   z = compact(code >> 2);
 }
 
-void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth,
-                      OccupancyContexts contexts) {
+bool encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth,
+                      OccupancyContexts contexts, std::size_t give_up_bytes) {
   const auto levels = levels_of(leaves, depth);
   const bool mixed = contexts == OccupancyContexts::kMixed;
   std::unique_ptr<OccupancyModels> models = mixed ? nullptr : std::make_unique<OccupancyModels>();
@@ -286,6 +286,7 @@ void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leave
       for (; j < children.size() && (children[j] >> 3) == nodes[k]; ++j) bytes[k] |= static_cast<std::uint8_t>(1U << (children[j] & 7U));
     std::size_t b = 0;
     for (std::size_t k = 0; k < nodes.size(); ++k) {
+      if ((k & 255U) == 0 && enc.bytes_out() > give_up_bytes) return false;
       const std::uint64_t n = nodes[k];
       const unsigned byte = bytes[k];
       while (occupied.key(b) != (n >> 6)) ++b;
@@ -315,6 +316,7 @@ void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leave
       if (mixed) mix->end_node(byte);
     }
   }
+  return true;
 }
 
 bool decode_occupancy(RangeDecoder& dec, int depth, std::uint64_t max_leaves, std::vector<std::uint64_t>& leaves,

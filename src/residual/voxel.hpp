@@ -6,6 +6,7 @@
 // best with, where the spherical codings' predictions from one viewpoint fail.
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "residual/range_coder.hpp"
@@ -37,9 +38,12 @@ enum class OccupancyContexts : std::uint8_t {
 /// 8^depth, sorted, without repeats): for every level from the root, for every occupied
 /// node in Morton order, its children's occupancy byte, bit by bit (bit i: child i, whose
 /// Morton code is node * 8 + i), each bit's probability in the context of which of the
-/// node's neighbours are occupied and of the bits before it (`contexts`).
-void encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth,
-                      OccupancyContexts contexts);
+/// node's neighbours are occupied and of the bits before it (`contexts`). With
+/// `give_up_bytes`, stops (and returns false) once the bytes written exceed them: a coding
+/// that only has to beat a size known already.
+bool encode_occupancy(RangeEncoder& enc, const std::vector<std::uint64_t>& leaves, int depth,
+                      OccupancyContexts contexts,
+                      std::size_t give_up_bytes = std::numeric_limits<std::size_t>::max());
 
 /// Decodes what encode_occupancy coded: the leaves in Morton order. False when the stream
 /// describes more than `max_leaves` leaves (a level with more nodes than that: malformed).

@@ -513,6 +513,29 @@ TEST(ResidualVoxel, OccupancyRoundTripsAndBoundsItsWork) {
   }
 }
 
+TEST(ResidualVoxel, OccupancyGivesUpOnlyPastItsBound) {
+  // A bound at or above the finished stream's bytes changes nothing (the same bytes); one
+  // below them stops the coding, which then reports it, before writing much past the bound.
+  using residual::detail::OccupancyContexts;
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<std::uint32_t> coord(0, (1U << 10) - 1);
+  std::vector<std::uint64_t> leaves;
+  for (int i = 0; i < 20000; ++i) leaves.push_back(residual::detail::morton(coord(rng), coord(rng), coord(rng) / 8));
+  std::sort(leaves.begin(), leaves.end());
+  leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
+  RangeEncoder whole;
+  ASSERT_TRUE(residual::detail::encode_occupancy(whole, leaves, 10, OccupancyContexts::kMixed));
+  const Bytes full = whole.finish();
+  ASSERT_GT(full.size(), 4096U);
+  RangeEncoder at_size;
+  ASSERT_TRUE(residual::detail::encode_occupancy(at_size, leaves, 10, OccupancyContexts::kMixed, full.size()));
+  EXPECT_EQ(at_size.finish(), full);
+  RangeEncoder half;
+  EXPECT_FALSE(residual::detail::encode_occupancy(half, leaves, 10, OccupancyContexts::kMixed, full.size() / 2));
+  EXPECT_GT(half.bytes_out(), full.size() / 2);
+  EXPECT_LT(half.bytes_out(), full.size());
+}
+
 TEST(ResidualVoxel, MixedContextsCodeSurfacesSmaller) {
   // The same occupied cells (a floor and two walls of a room map, and a sparse random
   // sample of it like an airborne cloud's) coded with the contexts of format 1.8 and of
