@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
@@ -20,6 +19,8 @@
 
 namespace lex3d::codec {
 namespace {
+
+using test::write_bytes;
 
 using Bytes = std::vector<std::uint8_t>;
 
@@ -357,12 +358,6 @@ TEST(GeorefModel, LasScanComesBackInItsTrueCoordinatesWithinTheBound) {
   // and the file says feet and the same CRS records
   EXPECT_DOUBLE_EQ(back.value().cloud.georef->unit_m, 0.3048);
   EXPECT_EQ(back.value().cloud.georef->crs_records.size(), input.georef->crs_records.size());
-}
-
-void write_bytes(const std::string& path, const Bytes& b) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
-  ASSERT_TRUE(f.good()) << path;
 }
 
 /// A binary PLY of double x y z (no viewpoint) at `path`.

@@ -17,15 +17,12 @@
 namespace lex3d::io {
 namespace {
 
+using test::write_bytes;
+
 namespace fs = std::filesystem;
 using test::temp_dir;
 
 std::string fixture(const std::string& name) { return std::string(LEX3D_TEST_DATA_DIR) + "/io/" + name; }
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
 
 std::string slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <vector>
 
@@ -15,6 +14,8 @@
 
 namespace lex3d::io {
 namespace {
+
+using test::write_bytes;
 
 using test::shared_data;
 using test::temp_dir;
@@ -31,11 +32,6 @@ Bytes file_bytes(const std::string& path) {
   auto b = read_file(path);
   EXPECT_TRUE(b.ok());
   return b.ok() ? b.value() : Bytes{};
-}
-
-void write_bytes(const std::string& path, const Bytes& b) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
 }
 
 template <typename T>

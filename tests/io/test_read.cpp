@@ -17,6 +17,8 @@
 namespace lex3d::io {
 namespace {
 
+using test::write_bytes;
+
 using test::has_shared_data;
 using test::shared_data;
 using test::temp_dir;
@@ -28,11 +30,6 @@ ReadResult read_ok(const std::string& path, const ReadOptions& options = {}) {
   EXPECT_TRUE(r.ok()) << path << ": " << r.status().to_string();
   if (!r.ok()) return {};
   return std::move(r).value();
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
 std::string floats_le(const std::vector<float>& v) {

@@ -20,6 +20,8 @@
 namespace lex3d::io {
 namespace {
 
+using test::write_bytes;
+
 namespace fs = std::filesystem;
 using test::shared_data;
 using test::temp_dir;
@@ -28,11 +30,6 @@ std::string slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary | std::ios::trunc);
-  f.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
-
 // ------------------------------------------------------------ a classic pcap, edited in memory
 
 struct Record {

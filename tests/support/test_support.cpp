@@ -1,6 +1,7 @@
 #include "support/test_support.hpp"
 
 #include <cstdlib>
+#include <fstream>
 #include <vector>
 #include <unistd.h>
 
@@ -53,6 +54,21 @@ Cloud load_or_fail(const std::string& path) {
     return {};
   }
   return std::move(r).value().cloud;
+}
+
+namespace {
+void write_raw(const std::string& path, const char* data, std::size_t size) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  f.write(data, static_cast<std::streamsize>(size));
+  f.close();
+  if (!f) ADD_FAILURE() << "could not write " << path;
+}
+}  // namespace
+
+void write_bytes(const std::string& path, const std::string& bytes) { write_raw(path, bytes.data(), bytes.size()); }
+
+void write_bytes(const std::string& path, const std::vector<std::uint8_t>& bytes) {
+  write_raw(path, reinterpret_cast<const char*>(bytes.data()), bytes.size());
 }
 
 }  // namespace lex3d::test

@@ -1,8 +1,10 @@
 #pragma once
 // Helpers shared by the test binaries: data paths, skip-when-absent, temp dirs.
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -21,6 +23,9 @@ bool has_shared_data(const std::string& relative);
 std::filesystem::path temp_dir(const std::string& name);
 /// Reads a cloud or fails the current test.
 Cloud load_or_fail(const std::string& path);
+/// Writes `bytes` to `path` (replacing it), or fails the current test.
+void write_bytes(const std::string& path, const std::string& bytes);
+void write_bytes(const std::string& path, const std::vector<std::uint8_t>& bytes);
 
 }  // namespace lex3d::test
 
