@@ -24,6 +24,7 @@
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/layout.hpp"
 #include "residual/angles.hpp"
+#include "residual/counting.hpp"
 #include "residual/mixing.hpp"
 #include "residual/point_ball_grid.hpp"
 
@@ -1258,23 +1259,6 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
   // (ring numbers from the top, as sensors number their beams)
   for (auto& r : ring) r = static_cast<std::uint16_t>(lasers - 1 - r);
   return true;
-}
-
-/// The positions 0 .. n-1 ordered by key(k) in [0, keys), ties in position order: a counting
-/// sort (the order a stable sort by key gives).
-template <typename Key>
-std::vector<std::uint32_t> counting_order(std::size_t n, std::size_t keys, const Key& key) {
-  std::vector<std::uint32_t> start(keys + 1, 0), order(n);
-  for (std::size_t k = 0; k < n; ++k) ++start[key(k) + 1];
-  for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
-  for (std::size_t k = 0; k < n; ++k) order[start[key(k)]++] = static_cast<std::uint32_t>(k);
-  return order;
-}
-
-/// Whether a counting sort over `keys` keys pays for `n` positions (its table of starts
-/// costs no more than a few positions each), as against a comparison sort.
-bool counting_pays(std::uint64_t keys, std::size_t n) {
-  return keys > 0 && keys <= 4 * static_cast<std::uint64_t>(n) + 65536;
 }
 
 /// Roughly what a laser assignment and its table would cost the coder: per point,

@@ -31,6 +31,7 @@
 #include "codec/bytes.hpp"
 #include "residual/acquisition.hpp"
 #include "residual/angles.hpp"
+#include "residual/counting.hpp"
 #include "residual/laser.hpp"
 #include "residual/lattice.hpp"
 #include "residual/layer_lasers.hpp"
@@ -536,17 +537,16 @@ std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, co
   // (the keys are all distinct, so any sort gives this one order: where the rows are few
   // enough, the keys are bucketed by row first and each row sorted on its own)
   std::vector<Key> sorted;
-  if (!keys.empty() && static_cast<std::uint64_t>(row_hi - row_lo) < 4 * static_cast<std::uint64_t>(keys.size()) + 1024) {
-    const auto rows = static_cast<std::size_t>(row_hi - row_lo) + 1;
-    std::vector<std::size_t> start(rows + 1, 0);
-    for (const Key& k : keys) ++start[static_cast<std::size_t>(k.row - row_lo) + 1];
-    for (std::size_t r = 1; r <= rows; ++r) start[r] += start[r - 1];
-    sorted.resize(keys.size());
-    std::vector<std::size_t> at(start.begin(), start.end() - 1);
-    for (const Key& k : keys) sorted[at[static_cast<std::size_t>(k.row - row_lo)]++] = k;
-    for (std::size_t r = 0; r < rows; ++r)
-      std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(start[r]), sorted.begin() + static_cast<std::ptrdiff_t>(start[r + 1]),
-                by_azimuth);
+  if (!keys.empty() && detail::counting_pays(static_cast<std::uint64_t>(row_hi - row_lo) + 1, keys.size())) {
+    const std::vector<std::uint32_t> by_row =
+        detail::counting_order(keys.size(), static_cast<std::size_t>(row_hi - row_lo) + 1,
+                               [&](std::size_t k) { return static_cast<std::size_t>(keys[k].row - row_lo); });
+    sorted.reserve(keys.size());
+    for (const std::uint32_t k : by_row) sorted.push_back(keys[k]);
+    for (std::size_t a = 0, b = 0; a < sorted.size(); a = b) {
+      while (b < sorted.size() && sorted[b].row == sorted[a].row) ++b;
+      std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(a), sorted.begin() + static_cast<std::ptrdiff_t>(b), by_azimuth);
+    }
   } else {
     sorted = std::move(keys);
     std::sort(sorted.begin(), sorted.end(), [&](const Key& a, const Key& b) {
@@ -791,6 +791,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const std::size_t acquisition_bytes = acquisition ? extra_bytes(kCodingAcquisition) + (tall ? 8 : 0) +
                                                           acquisition->stream.size()
                                                     : std::numeric_limits<std::size_t>::max();
+  const std::size_t lattice_bytes =
+      lattice ? extra_bytes(kCodingLattice) + lattice->stream.size() : std::numeric_limits<std::size_t>::max();
   if (lasers_of && std::isfinite(grid_bits) && !exact_table && lasers_of->fit_rms > 4.0 * max_error) lasers_of.reset();
   if (lasers_of) {
     const std::vector<double> shares =
@@ -902,8 +904,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // The codings coded in full already (sensor geometry, acquisition order, lattice) each
       // beat a spherical coding that comes out larger: that coding stops once its bytes pass
       // the smallest of them (as it cannot be kept then, the same file).
-      std::size_t in_hand = std::min(laser_bytes, acquisition_bytes);
-      if (lattice) in_hand = std::min<std::size_t>(in_hand, extra_bytes(kCodingLattice) + lattice->stream.size());
+      const std::size_t in_hand = std::min({laser_bytes, acquisition_bytes, lattice_bytes});
       // So does a voxel coding past the sensor-geometry coding's bytes (that bound alone where
       // there is one: a voxel coding it beats sends the spherical coding to be coded after all,
       // below).
@@ -1024,7 +1025,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     fill_sources(out, &sources);
     return out;
   };
-  if (lattice && extra_bytes(kCodingLattice) + lattice->stream.size() < std::min({others_bytes, laser_bytes, acquisition_bytes}))
+  if (lattice && lattice_bytes < std::min({others_bytes, laser_bytes, acquisition_bytes}))
     return grid_payload(kCodingLattice, lattice->step, lattice->origin, lattice->sources, lattice->stream,
                         [&](std::vector<std::uint8_t>& out) {
                           put_f64(out, lattice->pitch);
