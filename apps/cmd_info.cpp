@@ -289,8 +289,9 @@ bool info_lex3d_file(const InfoOptions& o) {
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
       if (layer && layer->coding == 3)
         std::printf("laser table    %u lasers, %u columns a turn, stored in the layer (its source is reported by "
-                    "compress --json, not stored); step across the beams %.4g m; ranges predicted by the %s\n",
-                    layer->lasers, layer->columns, layer->tangential_step, range_predictor_name(layer->predictor));
+                    "compress --json, not stored); step across the beams %.4g m; ranges predicted by the %s%s\n",
+                    layer->lasers, layer->columns, layer->tangential_step, range_predictor_name(layer->predictor),
+                    layer->motion ? "; beams moving over the turn (a motion-compensated scan)" : "");
       if (layer && layer->coding == 2)
         std::printf("octree         %u levels of %.4g m cells from (%.4g, %.4g, %.4g) m, %s contexts\n", layer->depth,
                     layer->step, layer->origin[0], layer->origin[1], layer->origin[2],

@@ -78,6 +78,10 @@ constexpr std::uint16_t kLaserShortMinor = 11;
 /// against its own predictor, model.md §2.8.1) and the first minor version that has it.
 constexpr std::uint32_t kLaserTablePredictorsBit = 1U << 8;
 constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
+/// Bit 9 of a sensor-geometry layer's predictor field (the beams' origins move over the
+/// turn, model.md §2.8.5) and the first minor version that has it.
+constexpr std::uint32_t kLaserMotionBit = 1U << 9;
+constexpr std::uint16_t kLaserMotionMinor = 14;
 /// The first minor version with an acquisition-order layer whose x and y are fitted with a
 /// line or whose cells are taller than wide (its prediction field not 0, model.md §2.11),
 /// or a lattice layer whose cells' points are stacked (its order field not 0, §2.12).
@@ -784,6 +788,7 @@ bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_cod
 std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
   if (layer_coding(payload) != 3 || payload.size() < kLaserPredictorOffset + 4) return 0;
   const std::uint32_t field = ld_u32(payload.data() + kLaserPredictorOffset);
+  if ((field & kLaserMotionBit) != 0) return kLaserMotionMinor;
   if ((field & kLaserTablePredictorsBit) != 0) return kLaserTablePredictorsMinor;
   const std::uint32_t predictor = field & 0xFFU;
   return predictor >= 4 ? kLaserMixedMinor : predictor >= 2 ? kLaserEdgeMinor : 0;
@@ -1268,7 +1273,9 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need) {
       const std::uint32_t field = ld_u32(out.residual->data() + kLaserPredictorOffset);
       return ctx.error(std::string("a sensor-geometry layer ") +
-                           ((field & kLaserTablePredictorsBit) != 0
+                           ((field & kLaserMotionBit) != 0
+                                ? "whose beams move over the turn (predictor field bit 9)"
+                                : (field & kLaserTablePredictorsBit) != 0
                                 ? "whose laser table picks its predictors (predictor field bit 8)"
                                 : "with range predictor " + std::to_string(field)) +
                            " needs format version 1." + std::to_string(need) + ", the header says 1." +

@@ -16,6 +16,9 @@
 #include <cmath>
 #include <memory>
 #include <complex>
+#include <initializer_list>
+#include <iomanip>
+#include <sstream>
 #include <cstring>
 #include <limits>
 #include <numeric>
@@ -58,6 +61,11 @@ struct Beams {
   double azimuth0 = 0.0, column_angle = 0.0;  // column_angle: direction · 2π / columns
   double shift_unit = 0.0;
   Pose T_cloud_head = Pose::Identity();
+  // The table's motion over a turn (metres, head frame), the column it starts at and the
+  // column count: a beam's origin moves by motion · tau(column).
+  Eigen::Vector3d motion = Eigen::Vector3d::Zero();
+  std::uint32_t motion_cut = 0, grid_columns = 1;
+  bool moves = false;
 
   Beams(const LaserTable& t, const Pose& T_cloud_sensor) {
     const std::size_t n = t.elevation.size();
@@ -88,6 +96,11 @@ struct Beams {
     column_angle = static_cast<double>(t.direction) * (kTwoPi / static_cast<double>(t.columns));
     shift_unit = t.shift_unit;
     T_cloud_head = T_cloud_sensor * t.T_sensor_head;
+    grid_columns = std::max<std::uint32_t>(1, t.columns);
+    moves = t.has_motion();
+    motion = Eigen::Vector3d(static_cast<double>(t.motion[0]), static_cast<double>(t.motion[1]),
+                             static_cast<double>(t.motion[2])) * kLaserLengthUnit;
+    motion_cut = t.motion_cut % grid_columns;
   }
 
   struct Beam {
@@ -102,19 +115,35 @@ struct Beams {
   /// a beam needs besides its laser, 32 bytes where the beam takes 96.
   struct Trig {
     double ca, sa, cb, sb;
+    double mx, my, mz;  // the column's origin moved by the table's motion
   };
   /// The cosine and sine of a column's azimuth (shifted by `shift` units), shared by its
-  /// lasers: one sine and cosine a column, not two a point.
+  /// lasers: one sine and cosine a column, not two a point; and where the sensor was at
+  /// that column (the table's motion times tau(c), formats/model.md §2.8.5).
   struct ColumnTrig {
     double c, s;
+    double mx = 0.0, my = 0.0, mz = 0.0;
   };
   [[nodiscard]] ColumnTrig column_trig(std::uint32_t c, std::int64_t shift) const {
     const double a = azimuth0 + column_angle * static_cast<double>(c) + static_cast<double>(shift) * shift_unit;
-    return {std::cos(a), std::sin(a)};
+    ColumnTrig k{std::cos(a), std::sin(a)};
+    if (moves) {
+      const double tau = motion_tau(c);
+      k.mx = motion.x() * tau;
+      k.my = motion.y() * tau;
+      k.mz = motion.z() * tau;
+    }
+    return k;
+  }
+  /// tau(c) = ((c - cut) mod columns + 1/2) / columns - 1/2: the column's time in the turn,
+  /// in turns from its middle.
+  [[nodiscard]] double motion_tau(std::uint32_t c) const {
+    const std::uint32_t k = (c % grid_columns + grid_columns - motion_cut) % grid_columns;
+    return (static_cast<double>(k) + 0.5) / static_cast<double>(grid_columns) - 0.5;
   }
   [[nodiscard]] Trig trig(std::uint32_t l, const ColumnTrig& k) const {
     return {k.c * cos_o[l] - k.s * sin_o[l], k.s * cos_o[l] + k.c * sin_o[l], k.c * cos_d[l] - k.s * sin_d[l],
-            k.s * cos_d[l] + k.c * sin_d[l]};
+            k.s * cos_d[l] + k.c * sin_d[l], k.mx, k.my, k.mz};
   }
   [[nodiscard]] Trig trig(std::uint32_t l, std::uint32_t c, std::int64_t shift) const {
     return trig(l, column_trig(c, shift));
@@ -129,7 +158,7 @@ struct Beams {
   [[nodiscard]] Beam beam(std::uint32_t l, const Trig& t) const {
     const double ca = t.ca, sa = t.sa, cb = t.cb, sb = t.sb;
     Beam b;
-    b.o = Eigen::Vector3d(radial[l] * ca, radial[l] * sa, z[l]);
+    b.o = Eigen::Vector3d(radial[l] * ca + t.mx, radial[l] * sa + t.my, z[l] + t.mz);
     b.u = Eigen::Vector3d(cb * cos_el[l], sb * cos_el[l], sin_el[l]);
     b.e1 = Eigen::Vector3d(-sb, cb, 0.0);
     b.e2 = Eigen::Vector3d(-cb * sin_el[l], -sb * sin_el[l], cos_el[l]);
@@ -544,6 +573,10 @@ void put_table(RangeEncoder& enc, const LaserTable& t) {
     }
     put_table_field(enc, m, *f, kind);
   }
+  if (t.has_motion()) {
+    m.put(enc, 0, static_cast<std::int64_t>(t.motion_cut));
+    for (const std::int64_t v : t.motion) m.put(enc, 0, v);
+  }
 }
 
 /// The bytes the table costs coded alone as put_table codes it (not in the layer's stream).
@@ -572,7 +605,8 @@ bool storable(const LaserTable& t) {
   };
   return within(t.elevation, kMaxAngleUnits) && within(t.beam_azimuth, kMaxAngleUnits) &&
          within(t.column_azimuth, kMaxAngleUnits) && within(t.z_offset, kMaxLengthUnits) &&
-         within(t.radial_offset, kMaxLengthUnits);
+         within(t.radial_offset, kMaxLengthUnits) &&
+         std::all_of(t.motion.begin(), t.motion.end(), [](std::int64_t v) { return std::abs(v) <= kMaxLengthUnits; });
 }
 
 LaserTable quantise_geometry(const SensorGeometry& g) {
@@ -1051,6 +1085,169 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
 }
 
 
+/// The sensor's travel over a turn, for a scan whose points were motion-compensated: each
+/// point moved to where it lies from the sensor's pose at one instant, so that seen from
+/// the head its beams no longer keep their elevations (KITTI's scans: ~0.8 m a turn at
+/// 8 m/s). `at(azimuth)` is where the sensor was when it looked that way, from the turn's
+/// middle: travel · (((azimuth - cut) mod 2π) / 2π - 1/2).
+struct TurnMotion {
+  double cut = 0.0;                        // azimuth where the turn starts, radians
+  Eigen::Vector2d travel = Eigen::Vector2d::Zero();  // metres a turn, horizontal
+  [[nodiscard]] double tau(double azimuth) const {
+    double a = azimuth - cut;
+    a -= kTwoPi * std::floor(a / kTwoPi);
+    return a / kTwoPi - 0.5;
+  }
+};
+
+/// The motion that makes the points' elevations (seen from the height that makes them
+/// sharpest) fall into the sharpest peaks: the sum of squared counts of bins of their
+/// tangents 0.01° wide at the horizon, on at
+/// most 4096 points beyond 1 m, searched over 8 start azimuths and travels up to 2 m a
+/// turn in x and y (every 0.5 m on half the points), then refined by steps of 0.25, 0.1
+/// and 0.05 m (and of an eighth of a turn times them). nullopt where no motion sharpens the
+/// elevations by kMotionGain or more: a scan as the sensor took it, or one too still to
+/// tell.
+std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& points) {
+  constexpr double kMotionGain = 1.1;
+  constexpr std::size_t kSample = 4096;
+  constexpr double kBin = 0.01 * kPi / 180.0;
+  std::vector<std::uint32_t> far;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (std::hypot(points[i].x(), points[i].y()) >= 1.0) far.push_back(static_cast<std::uint32_t>(i));
+  if (far.size() < 256) return std::nullopt;
+  struct Sample {
+    double x, y, z, azimuth;
+  };
+  std::vector<Sample> sample;
+  const std::size_t count = std::min(kSample, far.size());
+  sample.reserve(count);
+  for (std::size_t k = 0; k < count; ++k) {
+    const Eigen::Vector3d& q = points[far[k * far.size() / count]];
+    sample.push_back({q.x(), q.y(), q.z(), std::atan2(q.y(), q.x())});
+  }
+  // (tangents within ±kTangentBins bins: elevations within ±60°, beyond any spinning lidar's beams)
+  const double kTangentBins = std::ceil(std::sqrt(3.0) / kBin);
+  std::vector<double> hist(static_cast<std::size_t>(2.0 * kTangentBins) + 2, 0.0);
+  std::vector<std::uint32_t> touched(sample.size());
+  // (every other sample point where `half`)
+  const auto sharpness = [&](double h, const TurnMotion& m, bool coarse) {
+    std::size_t used = 0;
+    for (std::size_t k = 0; k < sample.size(); k += coarse ? 2 : 1) {
+      const Sample& q = sample[k];
+      const double t = m.tau(q.azimuth);
+      const double dx = q.x - m.travel.x() * t, dy = q.y - m.travel.y() * t;
+      // (bins of the elevation's tangent, as fine as kBin near the horizon: no arc tangent;
+      // each point shared by its two nearest bins, so that the sum does not jump as points
+      // cross bin edges)
+      const double x = std::clamp((q.z - h) / std::sqrt(dx * dx + dy * dy) / kBin + kTangentBins, 0.0,
+                                  static_cast<double>(hist.size() - 2));
+      const auto b = static_cast<std::uint32_t>(x);
+      const double f = x - static_cast<double>(b);
+      hist[b] += 1.0 - f;
+      hist[b + 1] += f;
+      touched[used++] = b;
+    }
+    double sum = 0.0;
+    for (std::size_t k = 0; k < used; ++k) {
+      const std::uint32_t b = touched[k];
+      sum += hist[b] * hist[b] + hist[b + 1] * hist[b + 1];
+      hist[b] = 0.0;
+      hist[b + 1] = 0.0;
+    }
+    return sum;
+  };
+  const TurnMotion still;
+  double h = 0.0, best = -1.0;
+  for (int k = -6; k <= 6; ++k) {
+    const double v = sharpness(0.05 * k, still, false);
+    if (v > best) {
+      best = v;
+      h = 0.05 * k;
+    }
+  }
+  // Coarse: 8 start azimuths, travels on a 0.5 m grid.
+  TurnMotion m;
+  best = -1.0;
+  for (int c = 0; c < 8; ++c)
+    for (int ix = -4; ix <= 4; ++ix)
+      for (int iy = -4; iy <= 4; ++iy) {
+        const TurnMotion t{-kPi + c * kPi / 4.0, Eigen::Vector2d(0.5 * ix, 0.5 * iy)};
+        const double v = sharpness(h, t, true);
+        if (v > best) {
+          best = v;
+          m = t;
+        }
+      }
+  // (no travel on the grid sharpens the elevations by kMotionGain: not refined)
+  if (m.travel.isZero() || !(best >= kMotionGain * sharpness(h, still, true))) return std::nullopt;
+  // Refined: the travel and the height by steps of 0.25, 0.1 and 0.05 m (the height by a
+  // fifth of them) at the coarse start azimuth, then the start azimuth within π/8 of it in
+  // steps of π/64, each tried with that travel refined again by 0.05 m. (Moving the start
+  // step by step strays: the start and the travel across it trade off.)
+  const auto refine = [&](TurnMotion& t, double& height, double value, std::initializer_list<double> steps) {
+    for (const double step : steps) {
+      for (bool moved = true; moved;) {
+        moved = false;
+        for (const Eigen::Vector2d& d : {Eigen::Vector2d(step, 0), Eigen::Vector2d(-step, 0), Eigen::Vector2d(0, step),
+                                         Eigen::Vector2d(0, -step)}) {
+          const TurnMotion u{t.cut, t.travel + d};
+          const double v = sharpness(height, u, false);
+          if (v > value) {
+            value = v;
+            t = u;
+            moved = true;
+          }
+        }
+        for (const double dh : {step / 5.0, -step / 5.0}) {
+          const double v = sharpness(height + dh, t, false);
+          if (v > value) {
+            value = v;
+            height += dh;
+            moved = true;
+          }
+        }
+      }
+    }
+    return value;
+  };
+  best = refine(m, h, sharpness(h, m, false), {0.25, 0.1, 0.05});
+  const TurnMotion coarse_motion = m;
+  const double coarse_h = h;
+  for (int k = -8; k <= 8; ++k) {
+    if (k == 0) continue;
+    TurnMotion t{coarse_motion.cut + k * kPi / 64.0, coarse_motion.travel};
+    double th = coarse_h;
+    const double v = refine(t, th, sharpness(th, t, false), {0.05});
+    if (v > best) {
+      best = v;
+      m = t;
+      h = th;
+    }
+  }
+  // Against no motion at its own sharpest height, both within 10 cm of the first (1 cm steps).
+  double moving = best, none = -1.0;
+  for (int k = -10; k <= 10; ++k) {
+    moving = std::max(moving, sharpness(h + 0.01 * k, m, false));
+    none = std::max(none, sharpness(h + 0.01 * k, still, false));
+  }
+  if (m.travel.isZero() || !(moving >= kMotionGain * none)) return std::nullopt;
+  return m;
+}
+
+/// Sets `t`'s motion (formats/model.md §2.8.5) to `m`, estimated in the sensor frame (the
+/// head's, for an estimated table): the column nearest its start azimuth, and its travel
+/// turned to the columns' direction.
+void set_motion(LaserTable& t, const TurnMotion& m) {
+  const auto w = static_cast<std::int64_t>(std::max<std::uint32_t>(1, t.columns));
+  const double step = static_cast<double>(t.direction) * kTwoPi / static_cast<double>(w);
+  std::int64_t c = std::llround((m.cut - t.azimuth0) / step) % w;
+  if (c < 0) c += w;
+  t.motion_cut = static_cast<std::uint32_t>(c);
+  const double sign = t.direction > 0 ? 1.0 : -1.0;
+  t.motion = {std::llround(sign * m.travel.x() / kLaserLengthUnit), std::llround(sign * m.travel.y() / kLaserLengthUnit), 0};
+}
+
 /// Lasers of points that know none, as cones: laser l's beams start at height h_l on the
 /// spin axis and rise at tan t_l, so its points lie on z = h_l + t_l·ρ. Seeds: every point
 /// votes, for each origin height h in [-0.5, 0.5] m, for the slope (z - h) / ρ it would
@@ -1377,9 +1574,27 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     const Pose T_sensor_cloud = T_cloud_sensor.inverse();
     std::vector<Eigen::Vector3d> sensor_points(n);
     for (std::size_t i = 0; i < n; ++i) sensor_points[i] = T_sensor_cloud * input.points[i].cast<double>();
-    const ScanPoints scan(std::move(sensor_points));
     std::optional<OrderLayout> layout;
     if (a.ring.empty()) layout = detect_order_layout(input.points);
+    // A motion-compensated scan (estimate_motion): the lasers and columns are estimated
+    // from the points as the sensor saw them, and the table carries the motion.
+    std::optional<TurnMotion> motion;
+    if (a.ring.empty() && !layout) motion = estimate_motion(sensor_points);
+    if (motion)
+      for (Eigen::Vector3d& q : sensor_points) {
+        const double t = motion->tau(std::atan2(q.y(), q.x()));
+        q.x() -= motion->travel.x() * t;
+        q.y() -= motion->travel.y() * t;
+      }
+    std::string motion_note;
+    if (motion) {
+      std::ostringstream note;
+      note << std::fixed << std::setprecision(2) << "; motion-compensated points: the sensor moved ("
+           << motion->travel.x() << ", " << motion->travel.y() << ") m over the turn from azimuth " << std::setprecision(1)
+           << motion->cut * 180.0 / kPi << " deg";
+      motion_note = note.str();
+    }
+    const ScanPoints scan(std::move(sensor_points));
     if (layout) {
       // Stored firing by firing or row by row: the order gives lasers and columns; the
       // grid's step is the median azimuth step of a laser from one column to the next.
@@ -1432,6 +1647,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         if (!t || !storable(*t)) return;
         c.table = std::move(*t);
         c.cost = assignment_cost(scan.p, c.ring, c.column, c.table);
+        if (motion) set_motion(c.table, *motion);
       }, 1);
       std::size_t pick = 0;
       for (std::size_t k = 1; k < cand.size(); ++k)
@@ -1454,6 +1670,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         b.table = std::move(cand[other].table);
         b.source = other == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
                               : "estimated from the points (lasers by elevation, columns by azimuth)";
+        b.source += motion_note;
         b.from_elevations = true;
         if (finish_assignment(input, T_cloud_sensor, b))
           a.alternative = std::make_shared<const LaserAssignment>(std::move(b));
@@ -1464,6 +1681,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       a.source = pick == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
                            : "estimated from the points (lasers by elevation, columns by azimuth)";
       a.from_elevations = true;
+      a.source += motion_note;
     } else if (a.column.empty()) {
       a.source = "estimated from the input's lasers (columns by azimuth)";
     } else {
@@ -1681,7 +1899,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     codec::bytes::put_u32(out.fields, table.lasers());
     codec::bytes::put_u32(out.fields, table.columns);
     codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
-    codec::bytes::put_u32(out.fields, table.predictor | (table.table_predictors ? kTablePredictorsBit : 0U));
+    codec::bytes::put_u32(out.fields, table.predictor | (table.table_predictors ? kTablePredictorsBit : 0U) |
+                                          (table.has_motion() ? kMotionBit : 0U));
     codec::bytes::put_f64(out.fields, table.azimuth0);
     if (head_pose) {
       for (int r = 0; r < 3; ++r)
@@ -1924,7 +2143,8 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   const std::uint32_t predictor_field = codec::bytes::ld_u32(f + 28);
   table.predictor = predictor_field & 0xFFU;
   table.table_predictors = (predictor_field & kTablePredictorsBit) != 0;
-  if ((predictor_field & ~(0xFFU | kTablePredictorsBit)) != 0)
+  table.motion_coded = (predictor_field & kMotionBit) != 0;
+  if ((predictor_field & ~(0xFFU | kTablePredictorsBit | kMotionBit)) != 0)
     return LaserDecodeError{"predictor field " + std::to_string(predictor_field) + " has reserved bits set", 28};
   table.azimuth0 = codec::bytes::ld_f64(f + 32);
   if (lasers < 1 || lasers > kMaxLasers)
@@ -1975,6 +2195,16 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
         prev_d = d;
       }
       ++f_index;
+    }
+    if (table.motion_coded) {
+      const std::int64_t cut = m.get(dec, 0);
+      if (cut < 0 || cut >= static_cast<std::int64_t>(table.columns))
+        return LaserDecodeError{"motion's first column " + std::to_string(cut) + " is outside the grid", 0};
+      table.motion_cut = static_cast<std::uint32_t>(cut);
+      for (std::int64_t& v : table.motion) {
+        v = m.get(dec, 0);
+        if (std::abs(v) > kMaxLengthUnits) return LaserDecodeError{"motion over a turn beyond 64 m", 0};
+      }
     }
   }
   const Beams beams(table, T_cloud_sensor);

@@ -4,6 +4,7 @@
 // laser table stored in the layer, so that only the range — and, where the table does not
 // reproduce a point within the bound, a small tangential correction — costs bits.
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -22,6 +23,8 @@ constexpr std::uint32_t kMaxLasers = 1024;
 /// Bit 8 of a layer's stored predictor field: the table's fields each coded against the
 /// predictor it picks (formats/model.md §2.8.1, format 1.11); bits 0-7 the range predictor.
 constexpr std::uint32_t kTablePredictorsBit = 1U << 8;
+/// Bit 9 of the stored predictor field: the table's motion follows its fields in the stream (format 1.14).
+constexpr std::uint32_t kMotionBit = 1U << 9;
 constexpr std::uint32_t kMaxLaserColumns = 1U << 20;
 
 /// A laser table as a layer stores it: quantised per-laser fields and the azimuth grid.
@@ -41,8 +44,18 @@ struct LaserTable {
   bool table_predictors = false;
   double azimuth0 = 0.0;
   Pose T_sensor_head = Pose::Identity();
+  /// The sensor's travel over one turn (head frame, kLaserLengthUnit) and the column the
+  /// turn starts at, for a scan whose points were motion-compensated (each moved to where
+  /// it lies from the sensor's pose at one instant): a beam of column c starts
+  /// motion·tau(c) from the head's origin, tau(c) = ((c - motion_cut) mod columns + 1/2) /
+  /// columns - 1/2 (formats/model.md §2.8.5, format 1.14). All zero: no motion.
+  std::array<std::int64_t, 3> motion{0, 0, 0};
+  std::uint32_t motion_cut = 0;
+  /// Decoding: the stored fields say the motion follows the table in the stream (bit 9).
+  bool motion_coded = false;
 
   [[nodiscard]] std::uint32_t lasers() const { return static_cast<std::uint32_t>(elevation.size()); }
+  [[nodiscard]] bool has_motion() const { return motion[0] != 0 || motion[1] != 0 || motion[2] != 0; }
 };
 
 /// Where each input point sits in a laser table: its laser and column.

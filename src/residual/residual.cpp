@@ -630,6 +630,7 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     const std::uint32_t predictor_field = codec::bytes::ld_u32(payload + at + kHeadBytes + 28);
     h.predictor = predictor_field & 0xFFU;
     h.table_predictors = (predictor_field & detail::kTablePredictorsBit) != 0;
+    h.motion = (predictor_field & detail::kMotionBit) != 0;
     h.stream_offset += h.head_pose ? detail::kLaserFieldBytes : detail::kLaserShortFieldBytes;
   }
   return h;
