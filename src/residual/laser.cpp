@@ -1585,10 +1585,11 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     for (std::size_t i = 0; i < n; ++i) sensor_points[i] = T_sensor_cloud * input.points[i].cast<double>();
     std::optional<OrderLayout> layout;
     if (a.ring.empty()) layout = detect_order_layout(input.points);
-    // A motion-compensated scan (estimate_motion): the lasers and columns are estimated
-    // from the points as the sensor saw them, and the table carries the motion.
+    // A motion-compensated scan (estimate_motion; with its lasers given or not, but not one
+    // in firing or row order, which is as the sensor saw it): the lasers, columns and table
+    // are estimated from the points as the sensor saw them, and the table carries the motion.
     std::optional<TurnMotion> motion;
-    if (a.ring.empty() && !layout) motion = estimate_motion(sensor_points);
+    if (!layout) motion = estimate_motion(sensor_points);
     if (motion)
       for (Eigen::Vector3d& q : sensor_points) {
         const double t = motion->tau(std::atan2(q.y(), q.x()));
@@ -1704,6 +1705,10 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       auto t = estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
       if (!t) return std::nullopt;
       a.table = std::move(*t);
+      if (motion) {
+        set_motion(a.table, *motion);
+        a.source += motion_note;
+      }
     }
   }
   if (!finish_assignment(input, T_cloud_sensor, a)) return std::nullopt;

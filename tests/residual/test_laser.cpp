@@ -31,6 +31,18 @@ using namespace residual_test;  // NOLINT: the shared helpers of the layer's tes
 
 double hausdorff(const Cloud& a, const Cloud& b) { return eval::compare_clouds(a, b).hausdorff; }
 
+/// How far a beam from `o` along unit `u` goes before it hits the test room: a floor 1.7 m
+/// below the sensor and walls at x = 8, -9 and y = 12, -6.5 m (1e9 where it hits none).
+double room_hit(const Eigen::Vector3d& o, const Eigen::Vector3d& u) {
+  double t = 1e9;
+  if (u.z() < 0) t = std::min(t, (-1.7 - o.z()) / u.z());
+  for (double wall : {8.0, -9.0})
+    if (std::abs(u.x()) > 1e-9 && (wall - o.x()) / u.x() > 0) t = std::min(t, (wall - o.x()) / u.x());
+  for (double wall : {12.0, -6.5})
+    if (std::abs(u.y()) > 1e-9 && (wall - o.y()) / u.y() > 0) t = std::min(t, (wall - o.y()) / u.y());
+  return t;
+}
+
 /// A spinning lidar of `lasers` beams and `columns` steps a turn whose beams start off the
 /// spin axis, with per-laser azimuths and a head turned and raised in the sensor frame (as
 /// Ouster's are), scanning a floor and four walls; `dropout` of the pixels return nothing.
@@ -72,12 +84,7 @@ Cloud organised_scan(std::uint32_t lasers, std::uint32_t columns, double dropout
       const Eigen::Vector3d u(std::cos(beta) * std::cos(g.elevation[l]), std::sin(beta) * std::cos(g.elevation[l]),
                               std::sin(g.elevation[l]));
       const Eigen::Vector3d os = g.T_sensor_head * o, us = g.T_sensor_head.linear() * u;
-      double t = 1e9;
-      if (us.z() < 0) t = std::min(t, (-1.7 - os.z()) / us.z());
-      for (double wall : {8.0, -9.0})
-        if (std::abs(us.x()) > 1e-9 && (wall - os.x()) / us.x() > 0) t = std::min(t, (wall - os.x()) / us.x());
-      for (double wall : {12.0, -6.5})
-        if (std::abs(us.y()) > 1e-9 && (wall - os.y()) / us.y() > 0) t = std::min(t, (wall - os.y()) / us.y());
+      double t = room_hit(os, us);
       if (t > 80.0 || u01(rng) < dropout) continue;
       t += noise(rng);
       c.points.push_back(g.T_sensor_head.cast<float>() * (o + t * u).cast<float>());
@@ -598,9 +605,10 @@ TEST(ResidualLaser, BeamsFromTwoHeightsAndSidewaysKeepTheirLasers) {
 
 /// A 16-laser scan taken while the sensor travels `travel` over the turn (from azimuth
 /// `start`, turning with the azimuth), then motion-compensated: every point in the frame of
-/// the sensor at the middle of the turn, as KITTI's are; no rings, columns or order.
+/// the sensor at the middle of the turn, as KITTI's are; no columns or order, and no rings
+/// unless `with_rings`.
 Cloud moving_scan(const Eigen::Vector2d& travel, double start, std::uint32_t seed, std::uint32_t kLasers = 16,
-                  std::uint32_t kColumns = 1024) {
+                  std::uint32_t kColumns = 1024, bool with_rings = false) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> keep(0.0, 1.0);
   std::normal_distribution<double> noise(0.0, 0.003);
@@ -614,15 +622,11 @@ Cloud moving_scan(const Eigen::Vector2d& travel, double start, std::uint32_t see
       const double elevation = (2.0 - 24.0 * l / kLasers) * M_PI / 180.0;
       const Eigen::Vector3d u(std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth),
                               std::sin(elevation));
-      double t = 1e9;
-      if (u.z() < 0) t = std::min(t, (-1.7 - origin.z()) / u.z());
-      for (double wall : {8.0, -9.0})
-        if (std::abs(u.x()) > 1e-9 && (wall - origin.x()) / u.x() > 0) t = std::min(t, (wall - origin.x()) / u.x());
-      for (double wall : {12.0, -6.5})
-        if (std::abs(u.y()) > 1e-9 && (wall - origin.y()) / u.y() > 0) t = std::min(t, (wall - origin.y()) / u.y());
-      c.points.push_back((origin + (t + noise(rng)) * u).cast<float>());
+      c.points.push_back((origin + (room_hit(origin, u) + noise(rng)) * u).cast<float>());
+      c.ring.push_back(static_cast<std::uint16_t>(l));
     }
   }
+  if (!with_rings) c.ring.clear();
   return c;
 }
 
@@ -655,6 +659,15 @@ TEST(ResidualLaser, AMotionCompensatedScanKeepsItsLasersWithMovingBeams) {
   ASSERT_TRUE(st_still.laser);
   EXPECT_EQ(st_still.laser_table_source.find("motion"), std::string::npos) << st_still.laser_table_source;
   EXPECT_EQ(st_still.lasers, 16U);
+  // with its rings given (a deskewed cloud that kept its ring field): the same motion
+  const Cloud ringed = moving_scan(Eigen::Vector2d(0.8, -0.3), 2.0, 7, 16, 1024, true);
+  ASSERT_TRUE(ringed.has_rings());
+  residual::LayerStats st_ringed;
+  const Bytes ringed_layer = residual::encode_layer(ringed, Cloud{}, Pose::Identity(), 0.01, &st_ringed, only(true));
+  ASSERT_TRUE(st_ringed.laser);
+  EXPECT_NE(st_ringed.laser_table_source.find("input's lasers"), std::string::npos) << st_ringed.laser_table_source;
+  EXPECT_NE(st_ringed.laser_table_source.find("motion-compensated"), std::string::npos) << st_ringed.laser_table_source;
+  expect_layer_bound(ringed_layer, ringed, Pose::Identity(), 0.01);
 }
 
 // Format 1.14: a motion-compensated scan, its beams moving over the turn.
