@@ -130,10 +130,10 @@ bool parse_number(const char* b, const char* e, T& out) {
 
 /// Parses a named integer field's value spanning exactly [b, e): a number that is an integer
 /// within 32-bit signed range; false otherwise.
-inline bool parse_field_value(const char* b, const char* e, std::int32_t& out) {
+inline bool parse_field_value(const char* b, const char* e, std::int64_t& out) {
   double v = 0.0;
-  if (!parse_number(b, e, v) || v != std::floor(v) || v < -2147483648.0 || v > 2147483647.0) return false;
-  out = static_cast<std::int32_t>(v);
+  if (!parse_number(b, e, v) || v != std::floor(v) || v < -2147483648.0 || v > 4294967295.0) return false;
+  out = static_cast<std::int64_t>(v);
   return true;
 }
 
@@ -262,12 +262,13 @@ using Rgb = std::array<std::uint8_t, 3>;
 
 /// A reader's field that no other Cloud member holds, `values` a point (0: a PLY list):
 /// kept as a named integer field (Cloud::fields; its name appended to `kept`) when it is
-/// one integer of up to 32 bits signed or 16 bits unsigned, its name one is_field_name
-/// takes and not already kept; else named in `not_kept`, with why. True when kept.
+/// one integer of up to 32 bits (an unsigned 32-bit one only while its values fit in 31
+/// bits: Builder::finish drops it otherwise, naming it), its name one is_field_name takes
+/// and not already kept; else named in `not_kept`, with why. True when kept.
 inline bool offer_field(const std::string& name, Scalar type, std::uint64_t values, std::vector<std::string>& kept,
                         std::vector<std::string>& not_kept) {
   const bool integer = type == Scalar::kI8 || type == Scalar::kU8 || type == Scalar::kI16 || type == Scalar::kU16 ||
-                       type == Scalar::kI32;
+                       type == Scalar::kI32 || type == Scalar::kU32;
   if (values == 1 && integer && is_field_name(name) && std::find(kept.begin(), kept.end(), name) == kept.end()) {
     kept.push_back(name);
     return true;
@@ -339,8 +340,10 @@ class Builder {
   void set_fields(const std::vector<std::string>& names) {
     for (const std::string& name : names) r_.cloud.fields.push_back({name, {}});
     next_fields_.assign(names.size(), 0);
+    beyond_int32_.assign(names.size(), false);
   }
-  void next_field(std::size_t k, std::int32_t v) { next_fields_[k] = v; }
+  /// (a value beyond int32, as an unsigned 32-bit field may hold, drops field k at finish)
+  void next_field(std::size_t k, std::int64_t v) { next_fields_[k] = v; }
 
   /// Records each point's laser (`rings`) and column (`columns`) from add_at; with
   /// `organised`, NaN/Inf and exact (0, 0, 0) points are the sensor's no-returns (counted in
@@ -393,9 +396,17 @@ class Builder {
 
  private:
   void push_fields() {
-    for (std::size_t k = 0; k < next_fields_.size(); ++k) r_.cloud.fields[k].values.push_back(next_fields_[k]);
+    for (std::size_t k = 0; k < next_fields_.size(); ++k) {
+      const std::int64_t v = next_fields_[k];
+      const bool fits = v >= std::numeric_limits<std::int32_t>::min() && v <= std::numeric_limits<std::int32_t>::max();
+      if (!fits) beyond_int32_[k] = true;
+      r_.cloud.fields[k].values.push_back(fits ? static_cast<std::int32_t>(v) : 0);
+    }
   }
-  std::vector<std::int32_t> next_fields_;
+  /// Drops the named fields a value of which lies beyond int32, naming them in dropped_fields.
+  void drop_fields_beyond_int32();
+  std::vector<std::int64_t> next_fields_;
+  std::vector<bool> beyond_int32_;
   bool time_ = false;
   double next_time_ = 0.0;
   ReadResult& r_;

@@ -137,7 +137,17 @@ void set_relative_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& point
   cloud.georef = std::move(g);
 }
 
+void Builder::drop_fields_beyond_int32() {
+  for (std::size_t k = beyond_int32_.size(); k-- > 0;) {
+    if (!beyond_int32_[k]) continue;
+    r_.dropped_fields.push_back(printable(r_.cloud.fields[k].name, 64) + " (values above 2^31 - 1)");
+    r_.cloud.fields.erase(r_.cloud.fields.begin() + static_cast<std::ptrdiff_t>(k));
+  }
+  beyond_int32_.clear();
+}
+
 Status Builder::finish(const std::string& path) {
+  drop_fields_beyond_int32();
   if (!wide_) return {};
   const std::size_t n = wide_points_.size();
   const std::optional<Eigen::Vector3d> origin = wide_origin(wide_points_);

@@ -252,9 +252,9 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   const PcdField* fc = find({"rgb", "rgba"});
   const PcdField* ft = find({"time", "t", "timestamp"});
   if (fc != nullptr && fc->size != 4) fc = nullptr;  // only packed 32-bit colours
-  // Every other field: a single integer of up to 32 bits (signed) or 16 bits (unsigned) with
-  // a plain name is kept as a named field (Cloud::fields); the rest are named as not kept
-  // (PCL's "_" padding fields hold nothing).
+  // Every other field: a single integer of up to 32 bits (an unsigned 32-bit one while its
+  // values fit in 31 bits) with a plain name is kept as a named field (Cloud::fields); the
+  // rest are named as not kept (PCL's "_" padding fields hold nothing).
   std::vector<const PcdField*> extras;
   std::vector<std::string> extra_names;
   for (const PcdField& f : fields) {
@@ -339,7 +339,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (ft != nullptr && col == ft->token) return parse_number(b, e, time_value);
         for (std::size_t x = 0; x < extras.size(); ++x)
           if (col == extras[x]->token) {
-            std::int32_t value = 0;
+            std::int64_t value = 0;
             if (!parse_field_value(b, e, value)) return false;
             out.next_field(x, value);
             return true;
@@ -461,7 +461,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     if (!rs.ok()) return rs;
     if (ft != nullptr) out.next_time(load_scalar(block + at.base + i * at.stride, ft->scalar, swap));
     for (std::size_t e = 0; e < extras.size(); ++e)
-      out.next_field(e, static_cast<std::int32_t>(load_scalar(block + extra_at[e].base + i * extra_at[e].stride, extras[e]->scalar, swap)));
+      out.next_field(e, static_cast<std::int64_t>(load_scalar(block + extra_at[e].base + i * extra_at[e].stride, extras[e]->scalar, swap)));
     if (wide)
       out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
                    load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),

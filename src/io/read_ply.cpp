@@ -247,9 +247,9 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
                                   (ix < 0 ? "x" : iy < 0 ? "y" : "z") + "' property"));
   }
   const bool color = ir >= 0 && ig >= 0 && ib >= 0;
-  // Every other vertex property: a single integer of up to 32 bits (signed) or 16 bits
-  // (unsigned) with a plain name is kept as a named field (Cloud::fields); the rest are
-  // named as not kept.
+  // Every other vertex property: a single integer of up to 32 bits (an unsigned 32-bit one
+  // while its values fit in 31 bits) with a plain name is kept as a named field
+  // (Cloud::fields); the rest are named as not kept.
   std::vector<int> extras;  // property indexes
   std::vector<std::string> extra_names;
   for (std::size_t k = 0; k < vertex.props.size(); ++k) {
@@ -389,7 +389,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (rings && kk == il) ok = parse_number(b, e, lv);
         else if (times && kk == it) ok = parse_number(b, e, tv);
         else if (const int x = extra_of(kk); x >= 0) {
-          std::int32_t value = 0;
+          std::int64_t value = 0;
           ok = parse_field_value(b, e, value);
           if (ok) out.next_field(static_cast<std::size_t>(x), value);
         } else ok = is_number(b, e);
@@ -496,7 +496,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       }
       for (std::size_t e = 0; e < extras.size(); ++e) {
         const auto u = static_cast<std::size_t>(extras[e]);
-        out.next_field(e, static_cast<std::int32_t>(load_scalar(p + offsets[u], vertex.props[u].type, swap)));
+        out.next_field(e, static_cast<std::int64_t>(load_scalar(p + offsets[u], vertex.props[u].type, swap)));
       }
       if (wide)
         out.add_wide(load_scalar(p + offsets[static_cast<std::size_t>(ix)], sx, swap),
@@ -532,7 +532,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       else if (const int x = extra_of(kk); x >= 0) {
         double value = 0.0;
         ok = bc.scalar(p.type, value);
-        if (ok) out.next_field(static_cast<std::size_t>(x), static_cast<std::int32_t>(value));
+        if (ok) out.next_field(static_cast<std::size_t>(x), static_cast<std::int64_t>(value));
       } else ok = bc.skip(scalar_size(p.type));
       if (!ok) {
         return bad_data(msg(path, "truncated binary data: vertex " + std::to_string(item) + " of " +

@@ -244,6 +244,35 @@ TEST(ReadFixture, PcdWithExtraFields) {
   EXPECT_EQ(r.cloud.intensity[2], 7.0F);
 }
 
+TEST(ReadFixture, UnsignedThirtyTwoBitFieldsAreKeptWhileTheyFitIn31Bits) {
+  // An Ouster driver's `range` (u32 millimetres) is kept; a u32 `label` with a value of
+  // 2^31 or more cannot be an int32 field: it is dropped and named, whatever the encoding.
+  const auto dir = temp_dir("u32_fields");
+  const auto expect_fields = [](const ReadResult& r, const std::string& what) {
+    ASSERT_EQ(r.cloud.size(), 2U) << what;
+    const IntegerField* range = r.cloud.field("range");
+    ASSERT_NE(range, nullptr) << what;
+    EXPECT_EQ(range->values, (std::vector<std::int32_t>{12345, 2147483647})) << what;
+    EXPECT_EQ(r.cloud.field("label"), nullptr) << what;
+    ASSERT_EQ(r.dropped_fields.size(), 1U) << what;
+    EXPECT_EQ(r.dropped_fields[0], "label (values above 2^31 - 1)") << what;
+  };
+  const std::string head = "VERSION 0.7\nFIELDS x y z range label\nSIZE 4 4 4 4 4\nTYPE F F F U U\n"
+                           "WIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ";
+  write_bytes((dir / "a.pcd").string(), head + "ascii\n1 2 3 12345 7\n4 5 6 2147483647 3000000000\n");
+  expect_fields(read_ok((dir / "a.pcd").string()), "ascii PCD");
+  std::string binary = head + "binary\n";
+  const auto put = [&](auto v) { binary.append(reinterpret_cast<const char*>(&v), sizeof v); };
+  put(1.0F), put(2.0F), put(3.0F), put(std::uint32_t{12345}), put(std::uint32_t{7});
+  put(4.0F), put(5.0F), put(6.0F), put(std::uint32_t{2147483647}), put(std::uint32_t{3000000000U});
+  write_bytes((dir / "b.pcd").string(), binary);
+  expect_fields(read_ok((dir / "b.pcd").string()), "binary PCD");
+  write_bytes((dir / "c.ply").string(),
+              "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+              "property uint range\nproperty uint label\nend_header\n1 2 3 12345 7\n4 5 6 2147483647 3000000000\n");
+  expect_fields(read_ok((dir / "c.ply").string()), "ascii PLY");
+}
+
 TEST(ReadFixture, PcdViewpointIsTheSensorPose) {
   // PCL's VIEWPOINT (tx ty tz qw qx qy qz): the sensor pose in the points' frame.
   const auto dir = temp_dir("pcd_viewpoint");
