@@ -1087,9 +1087,9 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
 
 /// The sensor's travel over a turn, for a scan whose points were motion-compensated: each
 /// point moved to where it lies from the sensor's pose at one instant, so that seen from
-/// the head its beams no longer keep their elevations (KITTI's scans: ~0.8 m a turn at
-/// 8 m/s). `at(azimuth)` is where the sensor was when it looked that way, from the turn's
-/// middle: travel · (((azimuth - cut) mod 2π) / 2π - 1/2).
+/// the head its beams no longer keep their elevations (KITTI's scans: ~0.85 m a turn at
+/// 8.5 m/s). When the sensor looked along `azimuth` it stood travel · tau(azimuth) from
+/// where it was at the turn's middle, tau(azimuth) = ((azimuth - cut) mod 2π) / 2π - 1/2.
 struct TurnMotion {
   double cut = 0.0;                        // azimuth where the turn starts, radians
   Eigen::Vector2d travel = Eigen::Vector2d::Zero();  // metres a turn, horizontal
@@ -1102,10 +1102,10 @@ struct TurnMotion {
 
 /// The motion that makes the points' elevations (seen from the height that makes them
 /// sharpest) fall into the sharpest peaks: the sum of squared counts of bins of their
-/// tangents 0.01° wide at the horizon, on at
-/// most 4096 points beyond 1 m, searched over 8 start azimuths and travels up to 2 m a
-/// turn in x and y (every 0.5 m on a quarter of the points), then refined by steps of 0.25, 0.1
-/// and 0.05 m, and the start within π/8. nullopt where no travel within the search
+/// tangents 0.01° wide at the horizon, on at most 4096 points beyond 1 m, searched over 8
+/// start azimuths and travels up to 2 m a turn in x and y (every 0.5 m, on a quarter of
+/// the points), then refined by steps of 0.25, 0.1 and 0.05 m, and the start within π/8.
+/// nullopt where no travel within the search
 /// sharpens the elevations by kMotionGain or more: a scan as the sensor took it, one too
 /// still to tell, or one whose sharpest travel lies at the edge of the search.
 std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& points) {
@@ -1135,17 +1135,19 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
   const double kTangentBins = std::ceil(std::sqrt(3.0) / kBin);
   std::vector<double> hist(static_cast<std::size_t>(2.0 * kTangentBins) + 2, 0.0);
   std::vector<std::uint32_t> touched(sample.size());
-  // (every other sample point where `half`)
+  // (every fourth sample point where `coarse`)
   const auto sharpness = [&](double h, const TurnMotion& m, bool coarse) {
     std::size_t used = 0;
     for (std::size_t k = 0; k < sample.size(); k += coarse ? 4 : 1) {
       const Sample& q = sample[k];
       const double t = m.tau(q.azimuth);
       const double dx = q.x - m.travel.x() * t, dy = q.y - m.travel.y() * t;
+      const double rho2 = dx * dx + dy * dy;
+      if (!(rho2 >= 1e-4)) continue;  // (moved onto the spin axis: no elevation)
       // (bins of the elevation's tangent, as fine as kBin near the horizon: no arc tangent;
       // each point shared by its two nearest bins, so that the sum does not jump as points
       // cross bin edges)
-      const double x = std::clamp((q.z - h) / std::sqrt(dx * dx + dy * dy) / kBin + kTangentBins, 0.0,
+      const double x = std::clamp((q.z - h) / std::sqrt(rho2) / kBin + kTangentBins, 0.0,
                                   static_cast<double>(hist.size() - 2));
       const auto b = static_cast<std::uint32_t>(x);
       const double f = x - static_cast<double>(b);
