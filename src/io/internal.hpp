@@ -129,7 +129,8 @@ bool parse_number(const char* b, const char* e, T& out) {
 }
 
 /// Parses a named integer field's value spanning exactly [b, e): a number that is an integer
-/// within 32-bit signed range; false otherwise.
+/// within [-2^31, 2^32 - 1] (an unsigned 32-bit field's value beyond int32 drops its field
+/// when the reading ends, Builder::finish); false otherwise.
 inline bool parse_field_value(const char* b, const char* e, std::int64_t& out) {
   double v = 0.0;
   if (!parse_number(b, e, v) || v != std::floor(v) || v < -2147483648.0 || v > 4294967295.0) return false;

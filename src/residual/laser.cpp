@@ -1598,14 +1598,16 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         q.x() -= motion->travel.x() * t;
         q.y() -= motion->travel.y() * t;
       }
-    std::string motion_note;
-    if (motion) {
+    // (an estimated table takes the motion, and its source says so, before its fit is measured)
+    const auto carry_motion = [&motion](LaserAssignment& x) {
+      if (!motion) return;
+      set_motion(x.table, *motion);
       std::ostringstream note;
       note << std::fixed << std::setprecision(2) << "; motion-compensated points: the sensor moved ("
            << motion->travel.x() << ", " << motion->travel.y() << ") m over the turn from azimuth " << std::setprecision(1)
            << motion->cut * 180.0 / kPi << " deg";
-      motion_note = note.str();
-    }
+      x.source += note.str();
+    };
     const ScanPoints scan(std::move(sensor_points));
     if (layout) {
       // Stored firing by firing or row by row: the order gives lasers and columns; the
@@ -1659,7 +1661,6 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         if (!t || !storable(*t)) return;
         c.table = std::move(*t);
         c.cost = assignment_cost(scan.p, c.ring, c.column, c.table);
-        if (motion) set_motion(c.table, *motion);
       }, 1);
       std::size_t pick = 0;
       for (std::size_t k = 1; k < cand.size(); ++k)
@@ -1682,7 +1683,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         b.table = std::move(cand[other].table);
         b.source = other == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
                               : "estimated from the points (lasers by elevation, columns by azimuth)";
-        b.source += motion_note;
+        carry_motion(b);
         b.from_elevations = true;
         if (finish_assignment(input, T_cloud_sensor, b))
           a.alternative = std::make_shared<const LaserAssignment>(std::move(b));
@@ -1693,7 +1694,6 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       a.source = pick == 0 ? "estimated from the points (lasers as cones, columns by azimuth)"
                            : "estimated from the points (lasers by elevation, columns by azimuth)";
       a.from_elevations = true;
-      a.source += motion_note;
     } else if (a.column.empty()) {
       a.source = "estimated from the input's lasers (columns by azimuth)";
     } else {
@@ -1707,11 +1707,8 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       auto t = estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
       if (!t) return std::nullopt;
       a.table = std::move(*t);
-      if (motion) {
-        set_motion(a.table, *motion);
-        a.source += motion_note;
-      }
     }
+    carry_motion(a);
   }
   if (!finish_assignment(input, T_cloud_sensor, a)) return std::nullopt;
   return a;

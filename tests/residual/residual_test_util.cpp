@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <utility>
 #include <fstream>
 
 #include <gtest/gtest.h>
@@ -17,6 +18,13 @@
 
 namespace lex3d::residual_test {
 
+Bytes with_minor(Bytes file, std::uint8_t minor) {
+  file[10] = minor;
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data(), 16));
+  for (int i = 0; i < 4; ++i) file[16 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
+  return file;
+}
+
 Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor) {
   for (std::size_t at = 20; at + 12 <= file.size();) {
     std::uint64_t len = 0;
@@ -28,10 +36,7 @@ Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t mi
     }
     at += 12 + len + 4;
   }
-  file[10] = minor;
-  const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data(), 16));
-  for (int i = 0; i < 4; ++i) file[16 + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-  return file;
+  return with_minor(std::move(file), minor);
 }
 
 void expect_rejected(const Bytes& file, const std::string& needle) {

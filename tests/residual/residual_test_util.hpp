@@ -13,6 +13,8 @@ namespace lex3d::residual_test {
 
 using Bytes = std::vector<std::uint8_t>;
 
+/// `file` with the header's minor version set to `minor` and its header CRC recomputed.
+Bytes with_minor(Bytes file, std::uint8_t minor);
 /// Rewrites chunk `from` of a model file as `to` (its CRC recomputed) and sets the minor version.
 Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor);
 /// Decoding model file `file` fails, and the message names `needle`.

@@ -24,6 +24,7 @@
 #include "lex3d/io/io.hpp"
 #include "lex3d/residual/attributes.hpp"
 #include "lex3d/residual/residual.hpp"
+#include "residual/residual_test_util.hpp"
 #include "support/model_support.hpp"
 #include "test_config.hpp"
 
@@ -31,6 +32,7 @@ namespace lex3d {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
+using residual_test::with_minor;
 
 /// A spinning-lidar-like scan: `lasers` rings of `columns` points around a room, with
 /// intensities in 0.01 steps, times in microseconds within the turn, ring and colour.
@@ -324,20 +326,6 @@ TEST(Attributes, CorruptOrTruncatedPayloadsAreRejectedWithoutCrashing) {
   auto r = residual::decode_cloud(wrong);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("points"), std::string::npos);
-}
-
-/// `file` with the header's minor version set to `minor` and its header CRC recomputed
-/// (bytes 0..15, zlib's polynomial, as the container does).
-Bytes with_minor(Bytes file, std::uint8_t minor) {
-  file[10] = minor;
-  std::uint32_t crc = 0xFFFFFFFFU;
-  for (int i = 0; i < 16; ++i) {
-    crc ^= file[static_cast<std::size_t>(i)];
-    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320U & (0U - (crc & 1U)));
-  }
-  crc ^= 0xFFFFFFFFU;
-  for (int b = 0; b < 4; ++b) file[16 + static_cast<std::size_t>(b)] = static_cast<std::uint8_t>(crc >> (8 * b));
-  return file;
 }
 
 TEST(Attributes, ChunkNeedsFormatOneSix) {
