@@ -73,7 +73,7 @@ io::ReadResult load_cloud(const std::string& path, const io::ReadOptions& opt) {
   if (!res.dropped_fields.empty()) {
     std::string list;
     for (const auto& f : res.dropped_fields) list += (list.empty() ? "" : ", ") + f;
-    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z, intensity, ring, time and colour): %s\n", path.c_str(), list.c_str());
+    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z, intensity, ring, time, colour and single integer and float fields): %s\n", path.c_str(), list.c_str());
   }
   for (const auto& n : res.notes) std::fprintf(stderr, "note: %s: %s\n", path.c_str(), n.c_str());
   return std::move(r).value();
@@ -297,7 +297,7 @@ void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options
   if (!bag.dropped_fields.empty()) {
     std::string list;
     for (const auto& f : bag.dropped_fields) list += (list.empty() ? "" : ", ") + f;
-    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z, intensity, ring, time and colour): %s\n",
+    std::fprintf(stderr, "note: %s: fields not kept (lex3d keeps x y z, intensity, ring, time, colour and single integer and float fields): %s\n",
                  path.c_str(), list.c_str());
   }
   for (const auto& n : bag.notes) std::fprintf(stderr, "note: %s: %s\n", path.c_str(), n.c_str());

@@ -522,9 +522,13 @@ void run_info(const InfoOptions& o) {
     if (!c.fields.empty()) {
       j.begin_array("fields");
       for (const IntegerField& f : c.fields) {
+        // (a float field's keys order as its values: its least and greatest values)
         const auto mm = std::minmax_element(f.values.begin(), f.values.end());
-        j.begin_object().value("name", f.name);
-        if (!f.values.empty()) j.value("min", static_cast<std::int64_t>(*mm.first)).value("max", static_cast<std::int64_t>(*mm.second));
+        j.begin_object().value("name", f.name).value("type", std::string(field_type_name(f.type)));
+        if (!f.values.empty() && is_float_type(f.type))
+          j.value("min", static_cast<double>(key_float(*mm.first))).value("max", static_cast<double>(key_float(*mm.second)));
+        else if (!f.values.empty())
+          j.value("min", static_cast<std::int64_t>(*mm.first)).value("max", static_cast<std::int64_t>(*mm.second));
         j.end_object();
       }
       j.end_array();
@@ -569,7 +573,11 @@ void run_info(const InfoOptions& o) {
   for (const IntegerField& f : c.fields) {
     if (f.values.empty()) continue;
     const auto mm = std::minmax_element(f.values.begin(), f.values.end());
-    std::printf("field          %s %d .. %d\n", f.name.c_str(), *mm.first, *mm.second);
+    if (is_float_type(f.type))
+      std::printf("field          %s (%s) %.9g .. %.9g\n", f.name.c_str(), field_type_name(f.type),
+                  static_cast<double>(key_float(*mm.first)), static_cast<double>(key_float(*mm.second)));
+    else
+      std::printf("field          %s (%s) %d .. %d\n", f.name.c_str(), field_type_name(f.type), *mm.first, *mm.second);
   }
   for (const auto& f : r.dropped_fields) std::printf("not kept       %s\n", f.c_str());
 }

@@ -133,7 +133,7 @@ Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabe
   if (!r.value().dropped_fields.empty()) {
     std::string list;
     for (const auto& f : r.value().dropped_fields) list += (list.empty() ? "" : ", ") + f;
-    warn(path + ": fields not kept (lex3d keeps x y z, intensity, ring, time and colour): " + list);
+    warn(path + ": fields not kept (lex3d keeps x y z, intensity, ring, time, colour and single integer and float fields): " + list);
   }
   for (const auto& n : r.value().notes) warn(path + ": " + n);
   return std::move(r.value().cloud);

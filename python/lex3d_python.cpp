@@ -108,6 +108,15 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   return py::make_tuple(to_bytes(c.bytes), info);
 }
 
+/// A named field's values as a numpy array of T, its source type (float fields from their keys).
+template <typename T>
+py::array_t<T> typed_field(const lex3d::IntegerField& x) {
+  py::array_t<T> a(static_cast<py::ssize_t>(x.values.size()));
+  auto w = a.template mutable_unchecked<1>();
+  for (std::size_t i = 0; i < x.values.size(); ++i) w(static_cast<py::ssize_t>(i)) = static_cast<T>(x.value(i));
+  return a;
+}
+
 py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alphabet, bool attributes) {
   const std::vector<std::uint8_t> bytes = to_vector(data);
   std::vector<std::uint8_t> alphabet_file;
@@ -150,8 +159,20 @@ py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alp
       for (py::ssize_t k = 0; k < 3; ++k) c(i, k) = cloud.rgb[static_cast<std::size_t>(i)][static_cast<std::size_t>(k)];
     fields["rgb"] = rgb;
   }
-  for (const lex3d::IntegerField& x : cloud.fields)
-    if (x.values.size() == cloud.size()) fields[py::str(x.name)] = py::array_t<std::int32_t>(n, x.values.data());
+  // (each in its source type: uint16 as numpy.uint16, float32 as numpy.float32...)
+  for (const lex3d::IntegerField& x : cloud.fields) {
+    if (x.values.size() != cloud.size()) continue;
+    switch (x.type) {
+      case lex3d::FieldType::kInt8: fields[py::str(x.name)] = typed_field<std::int8_t>(x); break;
+      case lex3d::FieldType::kUint8: fields[py::str(x.name)] = typed_field<std::uint8_t>(x); break;
+      case lex3d::FieldType::kInt16: fields[py::str(x.name)] = typed_field<std::int16_t>(x); break;
+      case lex3d::FieldType::kUint16: fields[py::str(x.name)] = typed_field<std::uint16_t>(x); break;
+      case lex3d::FieldType::kUint32: fields[py::str(x.name)] = typed_field<std::uint32_t>(x); break;
+      case lex3d::FieldType::kFloat32: fields[py::str(x.name)] = typed_field<float>(x); break;
+      case lex3d::FieldType::kFloat64: fields[py::str(x.name)] = typed_field<double>(x); break;
+      default: fields[py::str(x.name)] = py::array_t<std::int32_t>(n, x.values.data()); break;
+    }
+  }
   return py::make_tuple(out, fields);
 }
 

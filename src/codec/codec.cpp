@@ -66,6 +66,9 @@ constexpr std::uint16_t kAttrMinor = 6;
 /// An ATTR chunk holding a named integer field (kind 5) or colour coded as differences
 /// (rgb `transform` 1) and the first minor version that has them (model.md §2.10).
 constexpr std::uint16_t kAttrExtendedMinor = 10;
+/// An ATTR chunk whose named field records its source type (kind 5 with a `transform`, a
+/// FieldType; floating-point fields) and the first minor version that has it (model.md §2.10).
+constexpr std::uint16_t kAttrTypedMinor = 15;
 /// A model without instances (no INST chunk, the short MHDR) or without words at all (no
 /// alphabet: flag bits 0 and 1 clear) and the first minor version that has it (model.md
 /// §2.1, §2.4).
@@ -794,20 +797,28 @@ std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
   return predictor >= 4 ? kLaserMixedMinor : predictor >= 2 ? kLaserEdgeMinor : 0;
 }
 
-/// Whether an ATTR payload holds a named integer field (kind 5) or colour coded as
-/// differences (kind 4 with a transform): its descriptors walked as far as they go (the
-/// attribute decoder checks them).
-bool attributes_extended(const std::uint8_t* p, std::uint64_t size) {
+/// The minor version an ATTR payload needs: kAttrExtendedMinor for a named field (kind 5)
+/// or colour coded as differences (kind 4 with a transform), kAttrTypedMinor for a named
+/// field with its type (kind 5 with a transform), else kAttrMinor; its descriptors walked
+/// as far as they go (the attribute decoder checks them).
+std::uint16_t attributes_minor(const std::uint8_t* p, std::uint64_t size) {
   constexpr std::uint64_t kDescriptor = 56;
-  if (size < 9) return false;
+  std::uint16_t minor = kAttrMinor;
+  if (size < 9) return minor;
   std::uint64_t at = 9;
   for (int i = 0; i < p[8] && size - at >= kDescriptor; ++i) {
-    if (p[at] == 5 || (p[at] == 4 && ld_u32(p + at + 4) != 0)) return true;
-    const std::uint64_t stream = ld_u64(p + at + 48);
-    if (stream > size - at - kDescriptor) return false;
+    const std::uint32_t transform = ld_u32(p + at + 4);
+    if (p[at] == 5) minor = std::max(minor, transform != 0 ? kAttrTypedMinor : kAttrExtendedMinor);
+    if (p[at] == 4 && transform != 0) minor = std::max(minor, kAttrExtendedMinor);
+    std::uint64_t stream = ld_u64(p + at + 48);
+    if (p[at] == 5) {  // (its name follows the descriptor: a length byte, then the name)
+      if (size - at - kDescriptor < 1) break;
+      stream += 1U + p[at + kDescriptor];
+    }
+    if (stream > size - at - kDescriptor) break;
     at += kDescriptor + stream;
   }
-  return false;
+  return minor;
 }
 
 /// Where a layer holds a field that format 1.13 added, not 0 (an acquisition-order layer's
@@ -1110,8 +1121,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual && laser_short_layer(*data.residual)) minor = std::max(minor, kLaserShortMinor);
   if (data.residual && voxel_mixed_layer(*data.residual)) minor = std::max(minor, kVoxelMixedMinor);
   if (data.residual && layer_1_13_field(*data.residual) != 0) minor = std::max(minor, kLayerFieldsMinor);
-  if (data.attributes && attributes_extended(data.attributes->data(), data.attributes->size()))
-    minor = std::max(minor, kAttrExtendedMinor);
+  if (data.attributes) minor = std::max(minor, attributes_minor(data.attributes->data(), data.attributes->size()));
   // A model without instances has no INST chunk and the short MHDR; one without words at
   // all (an empty embedded alphabet) no alphabet either: 292 bytes fewer (format 1.11).
   const bool instances = !data.model.instances.empty();
@@ -1220,9 +1230,11 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     if (c.is(kGeorType)) return read_geor(c, ctx, h.minor, out.georef.emplace());
     if (c.is(kAttrType)) {
       if (c.length == 0) return ctx.error("chunk 'ATTR' is empty", c.offset + 4);
-      if (h.minor < kAttrExtendedMinor && attributes_extended(c.payload, c.length))
-        return ctx.error("chunk 'ATTR' holds a named field or colour differences, which need format version 1." +
-                             std::to_string(kAttrExtendedMinor) + ", the header says 1." + std::to_string(h.minor),
+      if (const std::uint16_t needed = attributes_minor(c.payload, c.length); h.minor < needed)
+        return ctx.error(std::string("chunk 'ATTR' holds ") +
+                             (needed == kAttrTypedMinor ? "a named field with its type" : "a named field or colour differences") +
+                             ", which need format version 1." + std::to_string(needed) + ", the header says 1." +
+                             std::to_string(h.minor),
                          c.payload_offset);
       out.attributes.emplace(c.payload, c.payload + c.length);
       return {};

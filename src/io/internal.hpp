@@ -266,19 +266,43 @@ using Rgb = std::array<std::uint8_t, 3>;
 /// one integer of up to 32 bits (an unsigned 32-bit one only while its values fit in 31
 /// bits: Builder::finish drops it otherwise, naming it), its name one is_field_name takes
 /// and not already kept; else named in `not_kept`, with why. True when kept.
-inline bool offer_field(const std::string& name, Scalar type, std::uint64_t values, std::vector<std::string>& kept,
+/// A named field a reader keeps: its name and its type in the file.
+struct FieldSpec {
+  std::string name;
+  FieldType type;
+};
+
+/// The type a named field of scalar `s` keeps, or nullopt for one it cannot (64-bit integers).
+inline std::optional<FieldType> field_type_of(Scalar s) {
+  switch (s) {
+    case Scalar::kI8: return FieldType::kInt8;
+    case Scalar::kU8: return FieldType::kUint8;
+    case Scalar::kI16: return FieldType::kInt16;
+    case Scalar::kU16: return FieldType::kUint16;
+    case Scalar::kI32: return FieldType::kInt32;
+    case Scalar::kU32: return FieldType::kUint32;
+    case Scalar::kF32: return FieldType::kFloat32;
+    case Scalar::kF64: return FieldType::kFloat64;
+    default: return std::nullopt;
+  }
+}
+
+/// Whether a field no other member of Cloud takes is kept as a named field (Cloud::fields):
+/// one value a point, a name is_field_name takes, not kept already, and an integer of up to
+/// 32 bits or a float (a double only where every value is a float32's: Builder::finish).
+/// Else its name and why go to `not_kept`.
+inline bool offer_field(const std::string& name, Scalar type, std::uint64_t values, std::vector<FieldSpec>& kept,
                         std::vector<std::string>& not_kept) {
-  const bool integer = type == Scalar::kI8 || type == Scalar::kU8 || type == Scalar::kI16 || type == Scalar::kU16 ||
-                       type == Scalar::kI32 || type == Scalar::kU32;
-  if (values == 1 && integer && is_field_name(name) && std::find(kept.begin(), kept.end(), name) == kept.end()) {
-    kept.push_back(name);
+  const std::optional<FieldType> t = field_type_of(type);
+  const bool named = std::find_if(kept.begin(), kept.end(), [&](const FieldSpec& f) { return f.name == name; }) != kept.end();
+  if (values == 1 && t && is_field_name(name) && !named) {
+    kept.push_back({name, *t});
     return true;
   }
   std::string why;
   if (values == 0) why = " (a list)";
   else if (values > 1) why = " (" + std::to_string(values) + " values a point)";
-  else if (type == Scalar::kF32 || type == Scalar::kF64) why = " (floating point)";
-  else if (!integer) why = " (unsigned 32/64-bit)";
+  else if (!t) why = " (64-bit integers)";
   not_kept.push_back(printable(name, 64) + why);
   return false;
 }
@@ -336,15 +360,42 @@ class Builder {
   /// Records each point's time (Cloud::time): the value given to next_time before its add.
   void set_time(bool on) { time_ = on; }
   void next_time(double t) { next_time_ = t; }
-  /// Records named integer fields (Cloud::fields) `names`: field k of each point is the
-  /// value given to next_field(k, ...) before its add.
-  void set_fields(const std::vector<std::string>& names) {
-    for (const std::string& name : names) r_.cloud.fields.push_back({name, {}});
-    next_fields_.assign(names.size(), 0);
-    beyond_int32_.assign(names.size(), false);
+  /// Records named fields (Cloud::fields) `specs`: field k of each point is the value given
+  /// to next_field(k, ...) before its add.
+  void set_fields(const std::vector<FieldSpec>& specs) {
+    for (const FieldSpec& f : specs) r_.cloud.fields.push_back({f.name, {}, f.type});
+    next_fields_.assign(specs.size(), 0);
+    unfit_.assign(specs.size(), false);
   }
-  /// (a value beyond int32, as an unsigned 32-bit field may hold, drops field k at finish)
-  void next_field(std::size_t k, std::int64_t v) { next_fields_[k] = v; }
+  /// Field k's value at the next point: an integer field's (a value beyond int32, as an
+  /// unsigned 32-bit field may hold, drops the field at finish), a float field's as its
+  /// float_key (a double that float32 does not hold drops a float64 field at finish).
+  void next_field(std::size_t k, double v) {
+    const FieldType t = r_.cloud.fields[k].type;
+    if (!is_float_type(t)) {
+      const bool fits = v >= -2147483648.0 && v <= 2147483647.0;
+      if (!fits) unfit_[k] = true;
+      next_fields_[k] = fits ? static_cast<std::int32_t>(v) : 0;
+      return;
+    }
+    const auto f = static_cast<float>(v);
+    if (t == FieldType::kFloat64 && static_cast<double>(f) != v && !std::isnan(v)) unfit_[k] = true;
+    next_fields_[k] = float_key(f);
+  }
+  /// Reads field k's value at the next point from the text [b, e): an integer field's an
+  /// integer, a float field's any number; false where it is not one.
+  bool parse_field(std::size_t k, const char* b, const char* e) {
+    double v = 0.0;
+    if (is_float_type(r_.cloud.fields[k].type)) {
+      if (!parse_number(b, e, v)) return false;
+    } else {
+      std::int64_t i = 0;
+      if (!parse_field_value(b, e, i)) return false;
+      v = static_cast<double>(i);
+    }
+    next_field(k, v);
+    return true;
+  }
 
   /// Records each point's laser (`rings`) and column (`columns`) from add_at; with
   /// `organised`, NaN/Inf and exact (0, 0, 0) points are the sensor's no-returns (counted in
@@ -397,17 +448,13 @@ class Builder {
 
  private:
   void push_fields() {
-    for (std::size_t k = 0; k < next_fields_.size(); ++k) {
-      const std::int64_t v = next_fields_[k];
-      const bool fits = v >= std::numeric_limits<std::int32_t>::min() && v <= std::numeric_limits<std::int32_t>::max();
-      if (!fits) beyond_int32_[k] = true;
-      r_.cloud.fields[k].values.push_back(fits ? static_cast<std::int32_t>(v) : 0);
-    }
+    for (std::size_t k = 0; k < next_fields_.size(); ++k) r_.cloud.fields[k].values.push_back(next_fields_[k]);
   }
-  /// Drops the named fields a value of which lies beyond int32, naming them in dropped_fields.
-  void drop_fields_beyond_int32();
-  std::vector<std::int64_t> next_fields_;
-  std::vector<bool> beyond_int32_;
+  /// Drops the named fields a value of which the field cannot keep (next_field), naming them
+  /// in dropped_fields.
+  void drop_unfit_fields();
+  std::vector<std::int32_t> next_fields_;
+  std::vector<bool> unfit_;
   bool time_ = false;
   double next_time_ = 0.0;
   ReadResult& r_;

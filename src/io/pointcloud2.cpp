@@ -167,7 +167,7 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
   // values fit in 31 bits) with a plain name is kept as a named field (Cloud::fields, e.g.
   // an Ouster driver's reflectivity, ambient and range); the rest are named as not kept.
   std::vector<const Field*> extras;
-  std::vector<std::string> extra_names;
+  std::vector<FieldSpec> extra_names;
   for (const Field& f : fields) {
     const bool used = &f == fx || &f == fy || &f == fz || &f == fi || &f == fr || &f == ft || &f == fc;
     if (used) {
@@ -228,7 +228,7 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
       }
       if (ft != nullptr) out.next_time(load_scalar(pt + ft->f->offset, ft->scalar, swap) * time_scale);
       for (std::size_t e = 0; e < extras.size(); ++e)
-        out.next_field(e, static_cast<std::int64_t>(load_scalar(pt + extras[e]->f->offset, extras[e]->scalar, swap)));
+        out.next_field(e, load_scalar(pt + extras[e]->f->offset, extras[e]->scalar, swap));
       if (wide)
         out.add_wide(load_scalar(pt + fx->f->offset, fx->scalar, swap), load_scalar(pt + fy->f->offset, fy->scalar, swap),
                      load_scalar(pt + fz->f->offset, fz->scalar, swap), in, c, ring, col);

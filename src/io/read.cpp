@@ -137,17 +137,19 @@ void set_relative_points(Cloud& cloud, const std::vector<Eigen::Vector3d>& point
   cloud.georef = std::move(g);
 }
 
-void Builder::drop_fields_beyond_int32() {
-  for (std::size_t k = beyond_int32_.size(); k-- > 0;) {
-    if (!beyond_int32_[k]) continue;
-    r_.dropped_fields.push_back(printable(r_.cloud.fields[k].name, 64) + " (values above 2^31 - 1)");
+void Builder::drop_unfit_fields() {
+  for (std::size_t k = unfit_.size(); k-- > 0;) {
+    if (!unfit_[k]) continue;
+    const bool wide = r_.cloud.fields[k].type == FieldType::kFloat64;
+    r_.dropped_fields.push_back(printable(r_.cloud.fields[k].name, 64) +
+                                (wide ? " (double-precision values that float32 does not hold)" : " (values above 2^31 - 1)"));
     r_.cloud.fields.erase(r_.cloud.fields.begin() + static_cast<std::ptrdiff_t>(k));
   }
-  beyond_int32_.clear();
+  unfit_.clear();
 }
 
 Status Builder::finish(const std::string& path) {
-  drop_fields_beyond_int32();
+  drop_unfit_fields();
   if (!wide_) return {};
   const std::size_t n = wide_points_.size();
   const std::optional<Eigen::Vector3d> origin = wide_origin(wide_points_);

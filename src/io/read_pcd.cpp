@@ -256,7 +256,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   // values fit in 31 bits) with a plain name is kept as a named field (Cloud::fields); the
   // rest are named as not kept (PCL's "_" padding fields hold nothing).
   std::vector<const PcdField*> extras;
-  std::vector<std::string> extra_names;
+  std::vector<FieldSpec> extra_names;
   for (const PcdField& f : fields) {
     const PcdField* p = &f;
     if (p == fx || p == fy || p == fz || p == fi || p == fr || p == fc || p == ft || f.name == "_") continue;
@@ -339,10 +339,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (ft != nullptr && col == ft->token) return parse_number(b, e, time_value);
         for (std::size_t x = 0; x < extras.size(); ++x)
           if (col == extras[x]->token) {
-            std::int64_t value = 0;
-            if (!parse_field_value(b, e, value)) return false;
-            out.next_field(x, value);
-            return true;
+            return out.parse_field(x, b, e);
           }
         return slot != nullptr ? parse_number(b, e, *slot) : is_number(b, e);
       });
@@ -461,7 +458,7 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
     if (!rs.ok()) return rs;
     if (ft != nullptr) out.next_time(load_scalar(block + at.base + i * at.stride, ft->scalar, swap));
     for (std::size_t e = 0; e < extras.size(); ++e)
-      out.next_field(e, static_cast<std::int64_t>(load_scalar(block + extra_at[e].base + i * extra_at[e].stride, extras[e]->scalar, swap)));
+      out.next_field(e, load_scalar(block + extra_at[e].base + i * extra_at[e].stride, extras[e]->scalar, swap));
     if (wide)
       out.add_wide(load_scalar(block + ax.base + i * ax.stride, fx->scalar, swap),
                    load_scalar(block + ay.base + i * ay.stride, fy->scalar, swap),

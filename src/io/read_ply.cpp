@@ -251,7 +251,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   // while its values fit in 31 bits) with a plain name is kept as a named field
   // (Cloud::fields); the rest are named as not kept.
   std::vector<int> extras;  // property indexes
-  std::vector<std::string> extra_names;
+  std::vector<FieldSpec> extra_names;
   for (std::size_t k = 0; k < vertex.props.size(); ++k) {
     const PlyProperty& p = vertex.props[k];
     const int kk = static_cast<int>(k);
@@ -389,9 +389,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
         else if (rings && kk == il) ok = parse_number(b, e, lv);
         else if (times && kk == it) ok = parse_number(b, e, tv);
         else if (const int x = extra_of(kk); x >= 0) {
-          std::int64_t value = 0;
-          ok = parse_field_value(b, e, value);
-          if (ok) out.next_field(static_cast<std::size_t>(x), value);
+          ok = out.parse_field(static_cast<std::size_t>(x), b, e);
         } else ok = is_number(b, e);
         if (!ok) return not_number();
       }
@@ -496,7 +494,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       }
       for (std::size_t e = 0; e < extras.size(); ++e) {
         const auto u = static_cast<std::size_t>(extras[e]);
-        out.next_field(e, static_cast<std::int64_t>(load_scalar(p + offsets[u], vertex.props[u].type, swap)));
+        out.next_field(e, load_scalar(p + offsets[u], vertex.props[u].type, swap));
       }
       if (wide)
         out.add_wide(load_scalar(p + offsets[static_cast<std::size_t>(ix)], sx, swap),
@@ -532,7 +530,7 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
       else if (const int x = extra_of(kk); x >= 0) {
         double value = 0.0;
         ok = bc.scalar(p.type, value);
-        if (ok) out.next_field(static_cast<std::size_t>(x), static_cast<std::int64_t>(value));
+        if (ok) out.next_field(static_cast<std::size_t>(x), value);
       } else ok = bc.skip(scalar_size(p.type));
       if (!ok) {
         return bad_data(msg(path, "truncated binary data: vertex " + std::to_string(item) + " of " +

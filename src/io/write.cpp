@@ -50,6 +50,32 @@ Status invalid(const std::string& path, const std::string& what) {
   return {ErrorCode::kInvalidArgument, msg(path, what)};
 }
 
+/// How a named field of type t is declared: its PCD SIZE and TYPE and its PLY type.
+struct FieldDecl {
+  unsigned size;
+  const char* pcd_type;
+  const char* ply_type;
+};
+FieldDecl declaration(FieldType t) {
+  switch (t) {
+    case FieldType::kInt8: return {1, "I", "char"};
+    case FieldType::kUint8: return {1, "U", "uchar"};
+    case FieldType::kInt16: return {2, "I", "short"};
+    case FieldType::kUint16: return {2, "U", "ushort"};
+    case FieldType::kUint32: return {4, "U", "uint"};
+    case FieldType::kFloat32: return {4, "F", "float"};
+    case FieldType::kFloat64: return {8, "F", "double"};
+    default: return {4, "I", "int"};  // int32, and a field whose type is not recorded
+  }
+}
+
+/// The bytes a point's named fields take in a binary PCD or PLY file.
+std::size_t named_bytes(const Cloud& cloud) {
+  std::size_t k = 0;
+  for (const IntegerField& x : cloud.fields) k += declaration(x.type).size;
+  return k;
+}
+
 class Bytes {
  public:
   // (a buffer kept larger than what is written, n_ bytes: a value is copied in, not
@@ -136,13 +162,34 @@ class Bytes {
       text(cloud.time[i]);
     }
   }
-  /// " v1 v2 ..." of point i's named fields as text (no end of line).
+  /// " v1 v2 ..." of point i's named fields as text (no end of line): a float field's
+  /// value as the shortest decimal that reads back to it (a float64 field's as a double's).
   void named(const Cloud& cloud, std::size_t i) {
     for (const IntegerField& x : cloud.fields) {
       u8(' ');
       const std::int32_t v = x.values[i];
-      if (v < 0) u8('-');
-      text(static_cast<std::uint64_t>(v < 0 ? -static_cast<std::int64_t>(v) : v));
+      if (x.type == FieldType::kFloat32) {
+        text(key_float(v));
+      } else if (x.type == FieldType::kFloat64) {
+        text(static_cast<double>(key_float(v)));
+      } else {
+        if (v < 0) u8('-');
+        text(static_cast<std::uint64_t>(v < 0 ? -static_cast<std::int64_t>(v) : v));
+      }
+    }
+  }
+  /// Point i's value of named field x in the field's own type, little-endian.
+  void field(const IntegerField& x, std::size_t i) {
+    const std::int32_t v = x.values[i];
+    switch (x.type) {
+      case FieldType::kInt8: return le(static_cast<std::int8_t>(v));
+      case FieldType::kUint8: return le(static_cast<std::uint8_t>(v));
+      case FieldType::kInt16: return le(static_cast<std::int16_t>(v));
+      case FieldType::kUint16: return le(static_cast<std::uint16_t>(v));
+      case FieldType::kUint32: return le(static_cast<std::uint32_t>(v));
+      case FieldType::kFloat32: return f32(key_float(v));
+      case FieldType::kFloat64: return f64(static_cast<double>(key_float(v)));
+      default: return le(v);
     }
   }
   std::vector<std::uint8_t>& vec() {
@@ -166,7 +213,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
   const std::size_t n = cloud.size();
   const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
   const std::size_t point_size = (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0) + (with_r ? 2 : 0) +
-                                 (with_t ? 8 : 0) + 4 * cloud.fields.size();
+                                 (with_t ? 8 : 0) + named_bytes(cloud);
   Bytes b(256 + n * point_size + (o.pcd_encoding == PcdEncoding::kAscii ? n * 40 : 0));
   std::string fields = "x y z", sizes = g != nullptr ? "8 8 8" : "4 4 4", types = "F F F", counts = "1 1 1";
   if (with_i) {
@@ -195,10 +242,11 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
     types += " F";
     counts += " 1";
   }
-  for (const IntegerField& x : cloud.fields) {  // named fields (a LAS classification...) as int32
+  for (const IntegerField& x : cloud.fields) {  // named fields (a LAS classification...) in their types
+    const FieldDecl d = declaration(x.type);
     fields += " " + x.name;
-    sizes += " 4";
-    types += " I";
+    sizes += " " + std::to_string(d.size);
+    types += std::string(" ") + d.pcd_type;
     counts += " 1";
   }
   // true coordinates: the viewpoint moves with the points (in the CRS's units when they are metres)
@@ -231,7 +279,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
         if (with_c) b.le(pack_rgb(o.colors[i]));
         if (with_r) b.le(cloud.ring[i]);
         if (with_t) b.f64(cloud.time[i]);
-        for (const IntegerField& x : cloud.fields) b.le(x.values[i]);
+        for (const IntegerField& x : cloud.fields) b.field(x, i);
       }
       break;
     case PcdEncoding::kBinaryCompressed: {
@@ -261,7 +309,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
         for (std::size_t i = 0; i < n; ++i) raw.f64(cloud.time[i]);
       }
       for (const IntegerField& x : cloud.fields)
-        for (std::size_t i = 0; i < n; ++i) raw.le(x.values[i]);
+        for (std::size_t i = 0; i < n; ++i) raw.field(x, i);
       std::vector<std::uint8_t> comp;
       unsigned comp_size = 0;
       if (raw_size > 0) {
@@ -294,7 +342,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
   const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
   if (with_r) h += "property ushort ring\n";
   if (with_t) h += "property double time\n";
-  for (const IntegerField& x : cloud.fields) h += "property int " + x.name + "\n";
+  for (const IntegerField& x : cloud.fields) h += std::string("property ") + declaration(x.type).ply_type + " " + x.name + "\n";
   h += "end_header\n";
   b.str(h);
   for (std::size_t i = 0; i < n; ++i) {
@@ -308,7 +356,7 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
       }
       if (with_r) b.le(cloud.ring[i]);
       if (with_t) b.f64(cloud.time[i]);
-      for (const IntegerField& x : cloud.fields) b.le(x.values[i]);
+      for (const IntegerField& x : cloud.fields) b.field(x, i);
     } else {
       b.text_point(cloud, i, with_i, g);
       if (with_c) {
@@ -439,7 +487,7 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
         grid.ring.resize(at.size());  // a no-return pixel keeps its row as its laser
         for (std::size_t k = 0; k < at.size(); ++k) grid.ring[k] = static_cast<std::uint16_t>(k / cloud.columns);
         if (cloud.has_time()) grid.time.assign(at.size(), 0.0);
-        for (const IntegerField& x : cloud.fields) grid.fields.push_back({x.name, std::vector<std::int32_t>(at.size(), 0)});
+        for (const IntegerField& x : cloud.fields) grid.fields.push_back({x.name, std::vector<std::int32_t>(at.size(), 0), x.type});
         for (std::size_t k = 0; k < at.size(); ++k) {
           if (at[k] < 0) continue;
           const auto i = static_cast<std::size_t>(at[k]);
@@ -530,6 +578,14 @@ Status check_fields(const std::string& path, const Cloud& cloud) {
                                std::to_string(cloud.points.size()) + " points");
     if (!is_field_name(x.name))
       return invalid(path, "field name '" + printable(x.name, 64) + "' is not 1-64 letters, digits or underscores");
+    if (static_cast<unsigned>(x.type) > static_cast<unsigned>(FieldType::kFloat64))
+      return invalid(path, "field " + printable(x.name, 64) + " has an unknown type");
+    if (is_float_type(x.type)) continue;
+    const auto [lo, hi] = field_type_range(x.type);
+    for (const std::int32_t v : x.values)
+      if (v < lo || v > hi)
+        return invalid(path, "field " + printable(x.name, 64) + " holds " + std::to_string(v) + ", not a " +
+                                 field_type_name(x.type) + " value");
   }
   return {};
 }

@@ -83,6 +83,13 @@ std::string other_scan_angle(const std::string& name) {
   return name == "scan_angle" ? "scan_angle_rank" : name == "scan_angle_rank" ? "scan_angle" : "";
 }
 
+/// The cloud's integer field named `name` (a LAS record's field), or nullptr: a floating-point
+/// field of that name is not one.
+const IntegerField* integer_field(const Cloud& cloud, const std::string& name) {
+  const IntegerField* f = cloud.field(name);
+  return f != nullptr && !is_float_type(f->type) ? f : nullptr;
+}
+
 }  // namespace
 
 std::vector<std::string> las_fields_not_written(const Cloud& cloud, const WriteOptions& o) {
@@ -91,7 +98,8 @@ std::vector<std::string> las_fields_not_written(const Cloud& cloud, const WriteO
   std::vector<std::string> out;
   for (const IntegerField& x : cloud.fields) {
     bool placed = false;
-    for (const las::PointField& f : fields) placed = placed || x.name == f.name || x.name == other_scan_angle(f.name);
+    for (const las::PointField& f : fields)
+      placed = placed || (!is_float_type(x.type) && (x.name == f.name || x.name == other_scan_angle(f.name)));
     if (!placed) out.push_back(x.name);
   }
   return out;
@@ -121,9 +129,9 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   std::vector<Put> puts;
   for (const las::PointField& f : las::point_fields(format)) {
     Put put{f, {}};
-    if (const IntegerField* have = cloud.field(f.name)) {
+    if (const IntegerField* have = integer_field(cloud, f.name)) {
       put.values = have->values;
-    } else if (const IntegerField* other = cloud.field(other_scan_angle(f.name))) {
+    } else if (const IntegerField* other = integer_field(cloud, other_scan_angle(f.name))) {
       const double to = std::string(f.name) == "scan_angle" ? 1.0 / 0.006 : 0.006;
       for (const std::int32_t v : other->values)
         put.values.push_back(static_cast<std::int32_t>(std::clamp(std::round(v * to), f.size == 1 ? -128.0 : -32768.0,
@@ -144,7 +152,7 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   // Points by return number (the header's counts): 1 of 1 where the cloud has no return number.
   const int returns = format >= 6 ? 15 : 5;
   std::vector<std::uint64_t> by_return(static_cast<std::size_t>(returns), 0);
-  const IntegerField* return_number = cloud.field("return_number");  // every format has it (checked above)
+  const IntegerField* return_number = integer_field(cloud, "return_number");  // every format has it (checked above)
   if (return_number == nullptr) by_return[0] = n;
   else
     for (const std::int32_t r : return_number->values)

@@ -36,6 +36,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "codec/bytes.hpp"
 #include "residual/layer_lasers.hpp"
@@ -93,19 +94,6 @@ const char* kind_name(std::uint8_t k) {
     case kNamed: return "named field";
     default: return "unknown";
   }
-}
-
-// The float32 bit pattern as an integer that orders like the value (−0 below +0).
-std::int64_t float_key(float v) {
-  std::uint32_t b = 0;
-  std::memcpy(&b, &v, 4);
-  return (b & 0x80000000U) ? -static_cast<std::int64_t>(b & 0x7FFFFFFFU) - 1 : static_cast<std::int64_t>(b);
-}
-float key_float(std::int64_t k) {
-  const std::uint32_t b = k >= 0 ? static_cast<std::uint32_t>(k) : (0x80000000U | static_cast<std::uint32_t>(-(k + 1)));
-  float v = 0.0F;
-  std::memcpy(&v, &b, 4);
-  return v;
 }
 
 /// How a field's values map to integers: value = T(base + (kmin + u)·step), T the field's type.
@@ -373,6 +361,7 @@ struct FieldOut {
   std::uint64_t span;
   std::int64_t kmin = 0;
   std::vector<std::vector<std::int64_t>> u;
+  std::uint32_t type = 0;  // kNamed: the source type (FieldType), stored in `transform`
 };
 
 void check_size(std::size_t have, std::size_t points, const char* name) {
@@ -430,12 +419,18 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     lasers = static_cast<std::size_t>(f.span) + 1;
     fields.push_back(std::move(f));
   }
+  // A float or double field: its step, else (bits) its float32 bit patterns.
   const auto scalar = [&](std::uint8_t kind, const std::vector<double>& all, bool is_f32, double bound, bool bits,
-                          double fallback) {
+                          double fallback, const std::string& name = {}) {
     std::vector<double> vals(n);
     for (std::size_t j = 0; j < n; ++j) vals[j] = all[sources[j]];
-    const Quant q = quantise_field(vals, is_f32, bound, bits, fallback, kind_name(kind));
-    FieldOut f{{}, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
+    // (a named float field keeps every bit: NaN, infinities and -0 only as bit patterns)
+    const bool only_bits = kind == kNamed && std::any_of(vals.begin(), vals.end(), [](double v) {
+                             return !std::isfinite(v) || (v == 0.0 && std::signbit(v));
+                           });
+    const Quant q = only_bits ? Quant{kFloatBits, 0.0, 0.0, 0.0, 0}
+                              : quantise_field(vals, is_f32, bound, bits, fallback, kind == kNamed ? name.c_str() : kind_name(kind));
+    FieldOut f{name, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
     f.u.assign(1, std::vector<std::int64_t>(n));
     std::int64_t kmin = std::numeric_limits<std::int64_t>::max(), kmax = std::numeric_limits<std::int64_t>::min();
     for (std::size_t j = 0; j < n; ++j) {
@@ -473,7 +468,19 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         if (input.fields[e].name == x.name) throw std::invalid_argument("attribute field " + x.name + " is given twice");
       check_size(x.values.size(), n_in, x.name.c_str());
       if (x.values.size() != n_in) continue;
+      if (static_cast<std::uint32_t>(x.type) > static_cast<std::uint32_t>(FieldType::kFloat64))
+        throw std::invalid_argument("attribute field " + x.name + " has an unknown type");
+      if (is_float_type(x.type)) {
+        // (lossless: an exact step, else the bit patterns)
+        std::vector<double> all(n_in);
+        for (std::size_t i = 0; i < n_in; ++i) all[i] = static_cast<double>(key_float(x.values[i]));
+        scalar(kNamed, all, true, 0.0, true, 0.0, x.name);
+        fields.back().type = static_cast<std::uint32_t>(x.type);
+        continue;
+      }
       FieldOut f{x.name, kNamed, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+      f.type = static_cast<std::uint32_t>(x.type);
+      const auto [type_lo, type_hi] = field_type_range(x.type);
       f.u.assign(1, std::vector<std::int64_t>(n));
       std::int64_t lo = 0, hi = 0;
       for (std::size_t j = 0; j < n; ++j) {
@@ -482,6 +489,9 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         lo = j == 0 ? v : std::min(lo, v);
         hi = j == 0 ? v : std::max(hi, v);
       }
+      if (lo < type_lo || hi > type_hi)
+        throw std::invalid_argument("attribute field " + x.name + " holds " + std::to_string(lo < type_lo ? lo : hi) +
+                                    ", not a " + field_type_name(x.type) + " value");
       if (static_cast<std::uint64_t>(hi - lo) > kMaxSpan)
         throw std::invalid_argument("attribute field " + x.name + " spans " + std::to_string(lo) + " to " + std::to_string(hi) +
                                     ", more than 2^31 apart");
@@ -541,7 +551,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     out.push_back(f.repr);
     out.push_back(best_method);
     out.push_back(f.channels);
-    codec::bytes::put_u32(out, best_transform);
+    codec::bytes::put_u32(out, f.kind == kNamed ? f.type : best_transform);
     codec::bytes::put_f64(out, f.step);
     codec::bytes::put_f64(out, f.base);
     codec::bytes::put_f64(out, f.max_error);
@@ -610,15 +620,24 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
       for (const Descriptor& e : out)
         if (e.kind == kNamed && e.name == f.name) return bad_data("attribute field " + f.name + " is repeated", at);
       f.stream_offset += 1 + len;
-      if (f.repr != kQuantised || f.step != 1.0 || f.base != 0.0 || f.max_error != 0.0)
-        return bad_data("attribute field " + f.name + " is not lossless integers (step 1, base 0)", at + 1);
-      if (f.kmin < -2147483648LL || f.kmin + static_cast<std::int64_t>(std::min<std::uint64_t>(f.span, kMaxSpan)) > 2147483647LL)
-        return bad_data("attribute field " + f.name + " values are not 32-bit integers", at + 32);
+      // its type (format 1.15; 0: a 32-bit signed integer)
+      if (f.transform > static_cast<std::uint32_t>(FieldType::kFloat64))
+        return bad_data("attribute field " + f.name + " type " + std::to_string(f.transform) + " is unknown", at + 4);
+      const auto type = static_cast<FieldType>(f.transform);
+      if (is_float_type(type)) {
+        if (f.max_error != 0.0) return bad_data("attribute field " + f.name + " is not lossless", at + 24);
+      } else {
+        if (f.repr != kQuantised || f.step != 1.0 || f.base != 0.0 || f.max_error != 0.0)
+          return bad_data("attribute field " + f.name + " is not lossless integers (step 1, base 0)", at + 1);
+        const auto [lo, hi] = field_type_range(type);
+        if (f.kmin < lo || f.kmin + static_cast<std::int64_t>(std::min<std::uint64_t>(f.span, kMaxSpan)) > hi)
+          return bad_data("attribute field " + f.name + " values are not " + field_type_name(type) + " integers", at + 32);
+      }
     }
     const std::string& name = f.name;
-    if (f.transform != 0 && !(f.kind == kRgb && f.transform == kColourDifferences))
+    if (f.transform != 0 && f.kind != kNamed && !(f.kind == kRgb && f.transform == kColourDifferences))
       return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
-    if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity))
+    if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity && f.kind != kNamed))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
     if (f.method > kMethodMixedTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
     if (f.channels != (f.kind == kRgb ? 3 : 1))
@@ -667,9 +686,11 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
     a.bytes = kDescriptorBytes + f.stream_bytes;
     std::ostringstream s;
     s << std::setprecision(6);
+    const bool named_float = f.kind == kNamed && is_float_type(static_cast<FieldType>(f.transform));
+    if (f.kind == kNamed && f.transform != 0) s << field_type_name(static_cast<FieldType>(f.transform)) << ": ";
     if (f.repr == kFloatBits) s << "float32 bit patterns, lossless";
     else if (f.kind == kRgb && f.transform == kColourDifferences) s << "integers, lossless (green, red and blue less green)";
-    else if (f.kind == kRing || f.kind == kRgb || f.kind == kNamed) s << "integers, lossless";
+    else if (f.kind == kRing || f.kind == kRgb || (f.kind == kNamed && !named_float)) s << "integers, lossless";
     else {
       s << "step " << f.step;
       if (f.base != 0.0) s << " from " << std::setprecision(17) << f.base << std::setprecision(6);
@@ -753,7 +774,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
       case kIntensity:
         decoded.intensity.resize(n);
         for (std::size_t j = 0; j < n; ++j)
-          decoded.intensity[j] = f.repr == kFloatBits ? key_float(f.kmin + u[0][j])
+          decoded.intensity[j] = f.repr == kFloatBits ? key_float(static_cast<std::int32_t>(f.kmin + u[0][j]))
                                                       : static_cast<float>(f.base + static_cast<double>(f.kmin + u[0][j]) * f.step);
         for (std::size_t j = 0; j < n; ++j)
           if (!std::isfinite(decoded.intensity[j]))
@@ -783,8 +804,12 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         }
         break;
       case kNamed: {
-        IntegerField x{f.name, std::vector<std::int32_t>(n)};
-        for (std::size_t j = 0; j < n; ++j) x.values[j] = static_cast<std::int32_t>(f.kmin + u[0][j]);
+        IntegerField x{f.name, std::vector<std::int32_t>(n), static_cast<FieldType>(f.transform)};
+        // (floating point: the float's key, from its bit pattern or its step)
+        const bool stepped = is_float_type(x.type) && f.repr == kQuantised;
+        for (std::size_t j = 0; j < n; ++j)
+          x.values[j] = stepped ? float_key(static_cast<float>(f.base + static_cast<double>(f.kmin + u[0][j]) * f.step))
+                                : static_cast<std::int32_t>(f.kmin + u[0][j]);
         decoded.fields.push_back(std::move(x));
         break;
       }

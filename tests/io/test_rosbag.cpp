@@ -180,10 +180,15 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
     c.time.push_back(1700000000.0 + 1e-4 * i);
     c.rgb.push_back({static_cast<std::uint8_t>(i), 7, 200});
   }
-  c.fields = {{"classification", {}}, {"scan_angle", {}}};  // named integer fields, as INT32
+  // named fields: one whose type is not recorded (an INT32), a uint8, a float32 and a float64
+  c.fields = {{"classification", {}}, {"scan_angle", {}}, {"label", {}, FieldType::kUint8},
+              {"normal_x", {}, FieldType::kFloat32}, {"offset", {}, FieldType::kFloat64}};
   for (int i = 0; i < 50; ++i) {
     c.fields[0].values.push_back(i % 9);
     c.fields[1].values.push_back(-3000 + 97 * i);
+    c.fields[2].values.push_back(255 - i);
+    c.fields[3].values.push_back(float_key(static_cast<float>(i) / 7.0F));
+    c.fields[4].values.push_back(float_key(-0.5F * static_cast<float>(i)));
   }
   c.rows = 5;
   c.columns = 12;  // 60 pixels, 50 points: 10 no-returns written as NaN
@@ -217,10 +222,11 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
     EXPECT_EQ(a.cloud.intensity[i], c.intensity[k]);
     EXPECT_EQ(a.cloud.time[i], c.time[k]);
     EXPECT_EQ(a.cloud.rgb[i], c.rgb[k]);
-    ASSERT_EQ(a.cloud.fields.size(), 2U);
+    ASSERT_EQ(a.cloud.fields.size(), 5U);
     EXPECT_EQ(a.cloud.fields[0].name, "classification");
-    EXPECT_EQ(a.cloud.fields[0].values[i], c.fields[0].values[k]);
-    EXPECT_EQ(a.cloud.fields[1].values[i], c.fields[1].values[k]);
+    EXPECT_EQ(a.cloud.fields[0].type, FieldType::kInt32);
+    for (std::size_t f = 0; f < 5; ++f) EXPECT_EQ(a.cloud.fields[f].values[i], c.fields[f].values[k]) << f;
+    for (std::size_t f = 2; f < 5; ++f) EXPECT_EQ(a.cloud.fields[f].type, c.fields[f].type) << f;
   }
   const io::BagScan& b = r.value().scans[1];
   EXPECT_EQ(b.stamp_sec, 1700000124U);  // no stamp: 1 s after the scan before

@@ -230,29 +230,84 @@ TEST(WriteRoundTrip, RingAndTimeAreKeptWhereTheFormatHoldsThem) {
   for (std::size_t i = 0; i < small.size(); ++i) EXPECT_EQ(rank->values[i], angle.values[i] / 500 * 3) << i;
 }
 
-// A PCD or PLY field lex3d cannot keep as a named integer field (floating point, several
-// values a point) is named as not kept; PCL's "_" padding is not.
+// A PCD or PLY field lex3d cannot keep as a named field (several values a point, a list,
+// 64-bit integers, doubles that float32 does not hold) is named as not kept; PCL's "_"
+// padding is not. Float fields are kept with their type.
 TEST(ReadFields, FieldsNotKeptAreNamed) {
   const auto dir = temp_dir("read_fields");
   const std::string pcd = (dir / "f.pcd").string();
-  std::ofstream(pcd) << "VERSION 0.7\nFIELDS x y z label normal_x _ hist\nSIZE 4 4 4 2 4 1 4\nTYPE F F F U F U F\n"
-                        "COUNT 1 1 1 1 1 1 2\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
-                        "1 2 3 7 0.5 0 1 2\n4 5 6 9 0.25 0 3 4\n";
+  std::ofstream(pcd) << "VERSION 0.7\nFIELDS x y z label normal_x _ hist wide\nSIZE 4 4 4 2 4 1 4 8\nTYPE F F F U F U F F\n"
+                        "COUNT 1 1 1 1 1 1 2 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
+                        "1 2 3 7 0.5 0 1 2 0.1\n4 5 6 9 0.25 0 3 4 2\n";
   auto r = read_cloud(pcd);
   ASSERT_TRUE(r.ok()) << r.status().to_string();
-  ASSERT_EQ(r.value().cloud.fields.size(), 1U);
+  ASSERT_EQ(r.value().cloud.fields.size(), 2U);
   EXPECT_EQ(r.value().cloud.fields[0].name, "label");
+  EXPECT_EQ(r.value().cloud.fields[0].type, FieldType::kUint16);
   EXPECT_EQ(r.value().cloud.fields[0].values, (std::vector<std::int32_t>{7, 9}));
-  EXPECT_EQ(r.value().dropped_fields, (std::vector<std::string>{"normal_x (floating point)", "hist (2 values a point)"}));
+  EXPECT_EQ(r.value().cloud.fields[1].name, "normal_x");
+  EXPECT_EQ(r.value().cloud.fields[1].type, FieldType::kFloat32);
+  EXPECT_EQ(r.value().cloud.fields[1].value(0), 0.5);
+  EXPECT_EQ(r.value().cloud.fields[1].value(1), 0.25);
+  EXPECT_EQ(r.value().dropped_fields, (std::vector<std::string>{"hist (2 values a point)",
+                                                                "wide (double-precision values that float32 does not hold)"}));
   const std::string ply = (dir / "f.ply").string();
   std::ofstream(ply) << "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
-                        "property float z\nproperty short segment\nproperty float nx\nend_header\n"
-                        "1 2 3 -4 0.5\n4 5 6 12 0.25\n";
+                        "property float z\nproperty short segment\nproperty float nx\nproperty list uchar int idx\nend_header\n"
+                        "1 2 3 -4 0.5 1 7\n4 5 6 12 0.25 1 8\n";
   auto p = read_cloud(ply);
   ASSERT_TRUE(p.ok()) << p.status().to_string();
-  ASSERT_EQ(p.value().cloud.fields.size(), 1U);
+  ASSERT_EQ(p.value().cloud.fields.size(), 2U);
+  EXPECT_EQ(p.value().cloud.fields[0].type, FieldType::kInt16);
   EXPECT_EQ(p.value().cloud.fields[0].values, (std::vector<std::int32_t>{-4, 12}));
-  EXPECT_EQ(p.value().dropped_fields, std::vector<std::string>{"nx (floating point)"});
+  EXPECT_EQ(p.value().cloud.fields[1].type, FieldType::kFloat32);
+  EXPECT_EQ(p.value().cloud.fields[1].value(1), 0.25);
+  EXPECT_EQ(p.value().dropped_fields, std::vector<std::string>{"idx (a list)"});
+}
+
+// Named fields keep their type and every bit through PCD (ascii, binary, compressed) and
+// PLY (binary, ascii): integers of 8-32 bits, float32 with NaN and -0, float64 that float32
+// holds; an integer outside its type is refused.
+TEST(WriteRoundTrip, NamedFieldsKeepTheirTypes) {
+  Cloud c;
+  IntegerField i8{"flag", {}, FieldType::kInt8}, u8{"label", {}, FieldType::kUint8}, i16{"segment", {}, FieldType::kInt16},
+      u16{"reflectivity", {}, FieldType::kUint16}, u32{"range", {}, FieldType::kUint32}, i32{"id", {}, FieldType::kInt32},
+      f32{"normal_x", {}, FieldType::kFloat32}, f64{"offset", {}, FieldType::kFloat64};
+  for (int i = 0; i < 40; ++i) {
+    c.points.emplace_back(0.1F * static_cast<float>(i), 2.0F, -1.0F);
+    i8.values.push_back(i % 2 == 0 ? -128 : 127);
+    u8.values.push_back(i * 6);
+    i16.values.push_back(i % 2 == 0 ? -32768 : 32767);
+    u16.values.push_back(65535 - i);
+    u32.values.push_back(2147483647 - i);
+    i32.values.push_back(-2147483647 - 1 + i);
+    f32.values.push_back(float_key(static_cast<float>(i) / 3.0F));
+    f64.values.push_back(float_key(1e-7F * static_cast<float>(i * i)));
+  }
+  f32.values[1] = float_key(std::numeric_limits<float>::quiet_NaN());
+  f32.values[2] = float_key(-0.0F);
+  f32.values[3] = float_key(-std::numeric_limits<float>::infinity());
+  c.fields = {i8, u8, i16, u16, u32, i32, f32, f64};
+  for (const Case& k : all_cases()) {
+    if (std::string(k.file) != "c.pcd" && std::string(k.file) != "c.ply") continue;
+    std::optional<ReadResult> out;
+    write_and_read(c, k, "typed_", out);
+    ASSERT_TRUE(out.has_value()) << k.name;
+    EXPECT_TRUE(out->dropped_fields.empty()) << k.name;
+    ASSERT_EQ(out->cloud.fields.size(), c.fields.size()) << k.name;
+    for (std::size_t f = 0; f < c.fields.size(); ++f) {
+      EXPECT_EQ(out->cloud.fields[f].name, c.fields[f].name) << k.name;
+      EXPECT_EQ(out->cloud.fields[f].type, c.fields[f].type) << k.name << " " << c.fields[f].name;
+      EXPECT_EQ(out->cloud.fields[f].values, c.fields[f].values) << k.name << " " << c.fields[f].name;
+    }
+  }
+  Cloud bad = c;
+  bad.fields[1].values[0] = 256;
+  const auto dir = temp_dir("typed_bad");
+  const Status st = write_cloud((dir / "bad.pcd").string(), bad);
+  EXPECT_EQ(st.code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("label"), std::string::npos) << st.to_string();
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad.pcd"));
 }
 
 // An organised cloud written as an organised PCD keeps each point's laser and time; the

@@ -231,6 +231,40 @@ def test_las_point_fields_are_kept_by_name():
     assert len(fields["classification"]) == back.shape[0]
 
 
+def test_pcd_fields_come_back_in_their_types():
+    """A driver's PCD: uint16 reflectivity, uint32 range, float32 normals with a NaN. Each
+    comes back as the numpy type the file had, every value as it was (no thinning)."""
+    rng = np.random.default_rng(11)
+    n = 4000
+    az = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    r = 8 + 2 * np.sin(3 * az) + rng.normal(0, 0.01, n)
+    dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("reflectivity", "<u2"), ("range", "<u4"),
+                   ("normal_x", "<f4")])
+    a = np.zeros(n, dt)
+    a["x"], a["y"], a["z"] = r * np.cos(az), r * np.sin(az), rng.uniform(-1, 1, n)
+    a["reflectivity"] = rng.integers(0, 65536, n)
+    a["range"] = np.round(r * 1000).astype(np.uint32)
+    a["normal_x"] = np.cos(az)
+    a["normal_x"][7] = np.nan
+    header = (f"VERSION 0.7\nFIELDS x y z reflectivity range normal_x\nSIZE 4 4 4 2 4 4\nTYPE F F F U U F\n"
+              f"COUNT 1 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nPOINTS {n}\nDATA binary\n")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / "driver.pcd"
+        path.write_bytes(header.encode() + a.tobytes())
+        data = lex3d.compress(str(path), max_error=0.01, keep_all_points=True)
+        back, fields = lex3d.decompress(data, attributes=True)
+    assert fields["reflectivity"].dtype == np.uint16
+    assert fields["range"].dtype == np.uint32
+    assert fields["normal_x"].dtype == np.float32
+    assert back.shape[0] == n
+    # every point's values, matched by the points' unique reflectivity and range
+    order_in = np.lexsort((a["range"], a["reflectivity"]))
+    order_out = np.lexsort((fields["range"], fields["reflectivity"]))
+    assert (fields["reflectivity"][order_out] == a["reflectivity"][order_in]).all()
+    assert (fields["range"][order_out] == a["range"][order_in]).all()
+    assert fields["normal_x"][order_out].tobytes() == a["normal_x"][order_in].tobytes()
+
+
 def test_an_airborne_strip_keeps_its_order_through_the_acquisition_coding():
     # Pulses 10 us apart (write_las's GPS times) sweeping lines of 200 across the track, 1 m
     # on between lines, over rolling ground: the acquisition-order layer keeps the bound and

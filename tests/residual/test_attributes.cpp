@@ -493,6 +493,114 @@ TEST(Attributes, NamedFieldsGoldenFileDecodes) {
   }
 }
 
+/// `c` with fields as a driver's PCD gives them, each with its type: an Ouster driver's
+/// uint16 reflectivity and uint32 range, a uint8 label, an int8 flag, float32 normals (one
+/// NaN, one -0), a float32 curvature on a 0.001 step and a float64 field that float32 holds.
+Cloud with_typed_fields(Cloud c) {
+  const std::size_t n = c.size();
+  IntegerField refl{"reflectivity", {}, FieldType::kUint16}, range{"range", {}, FieldType::kUint32},
+      label{"label", {}, FieldType::kUint8}, flag{"flag", {}, FieldType::kInt8}, normal{"normal_x", {}, FieldType::kFloat32},
+      curv{"curvature", {}, FieldType::kFloat32}, wide{"offset", {}, FieldType::kFloat64};
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f& p = c.points[i];
+    refl.values.push_back(static_cast<std::int32_t>((i * 7919) % 65536));
+    range.values.push_back(static_cast<std::int32_t>(std::lround(p.norm() * 1000.0F)) + 2000000000);
+    label.values.push_back(static_cast<std::int32_t>(c.ring[i] % 7) * 30 + 50);
+    flag.values.push_back(static_cast<std::int32_t>(i % 5) - 2);
+    normal.values.push_back(float_key(p.x() / p.norm()));
+    curv.values.push_back(float_key(static_cast<float>(static_cast<double>(i % 997) * 0.001)));
+    wide.values.push_back(float_key(static_cast<float>(i % 13) * 0.25F));
+  }
+  normal.values[3] = float_key(std::numeric_limits<float>::quiet_NaN());
+  normal.values[4] = float_key(-0.0F);
+  c.fields = {refl, range, label, flag, normal, curv, wide};
+  return c;
+}
+
+TEST(Attributes, TypedFieldsKeepTheirTypeAndEveryBitInFormatOneFifteen) {
+  const Cloud in = with_typed_fields(synthetic_scan(8, 120, 41));
+  const Coded c = code(in, 0.01);
+  ASSERT_EQ(c.fields.size(), 11U);  // ring, intensity, time, rgb, then the seven named fields
+  EXPECT_EQ(codec::inspect(c.file).value().minor, 15);
+  EXPECT_NE(c.fields[8].representation.find("float32 bit patterns"), std::string::npos) << c.fields[8].representation;
+  EXPECT_NE(c.fields[9].representation.find("float32: step 0.001"), std::string::npos) << c.fields[9].representation;
+  EXPECT_NE(c.fields[10].representation.find("float64: step 0.25"), std::string::npos) << c.fields[10].representation;
+  EXPECT_NE(c.fields[4].representation.find("uint16"), std::string::npos) << c.fields[4].representation;
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  const Cloud& d = out.value();
+  ASSERT_EQ(d.fields.size(), in.fields.size());
+  for (std::size_t f = 0; f < in.fields.size(); ++f) {
+    EXPECT_EQ(d.fields[f].name, in.fields[f].name);
+    EXPECT_EQ(d.fields[f].type, in.fields[f].type) << in.fields[f].name;
+    ASSERT_EQ(d.fields[f].values.size(), d.size());
+    // (the keys are the float bits: equal keys, equal bits, NaN and -0 included)
+    for (std::size_t j = 0; j < d.size(); ++j)
+      ASSERT_EQ(d.fields[f].values[j], in.fields[f].values[c.sources[j]]) << in.fields[f].name << " " << j;
+  }
+  const auto nan_at = std::find(c.sources.begin(), c.sources.end(), 3U) - c.sources.begin();
+  EXPECT_TRUE(std::isnan(d.fields[4].value(static_cast<std::size_t>(nan_at))));
+  // a 1.14 reader's view: the type needs format 1.15
+  auto old = codec::decode_model(with_minor(c.file, 14));
+  ASSERT_FALSE(old.ok());
+  EXPECT_NE(old.status().message().find("1.15"), std::string::npos) << old.status().to_string();
+  // fields whose type is not recorded keep format 1.10
+  EXPECT_EQ(codec::inspect(code(with_named_fields(synthetic_scan(4, 30, 42)), 0.01).file).value().minor, 10);
+}
+
+TEST(Attributes, TypedFieldsOutsideTheirTypeAreRefusedAndCorruptTypesRejected) {
+  const Cloud base = with_typed_fields(synthetic_scan(4, 30, 43));
+  Cloud c = base;
+  c.fields[2].values[5] = 256;  // a uint8 label of 256
+  expect_refused(c, "label");
+  c = base;
+  c.fields[3].values[1] = -129;  // an int8 flag
+  expect_refused(c, "flag");
+  c = base;
+  c.fields[0].type = static_cast<FieldType>(9);
+  expect_refused(c, "unknown type");
+  // a descriptor whose type is unknown, or too narrow for its values, is bad data
+  const Coded coded = code(base, 0.02);
+  auto m = codec::decode_model(coded.file);
+  ASSERT_TRUE(m.ok());
+  expect_damaged_payloads_fail(m.value());
+  const std::string name = "label";
+  for (const std::uint8_t type : {std::uint8_t{9}, std::uint8_t{1}}) {  // unknown; int8 for 50..230
+    codec::ModelData bad = m.value();
+    Bytes& p = *bad.attributes;
+    const auto at = std::search(p.begin(), p.end(), name.begin(), name.end());
+    ASSERT_NE(at, p.end());
+    // the name follows its 56-byte descriptor and a length byte; the type is the descriptor's byte 4
+    const auto descriptor = at - 1 - 56;
+    ASSERT_EQ(descriptor[0], 5);
+    ASSERT_EQ(descriptor[4], static_cast<std::uint8_t>(FieldType::kUint8));
+    descriptor[4] = type;
+    auto r = residual::decode_cloud(bad);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+    EXPECT_NE(r.status().message().find("label"), std::string::npos) << r.status().to_string();
+  }
+}
+
+TEST(Attributes, TypedFieldsGoldenFileDecodes) {
+  const Cloud in = with_typed_fields(synthetic_scan(4, 48, 44));
+  const Bytes bytes = golden("attributes_typed_1_15.lex3dm", in);
+  ASSERT_FALSE(bytes.empty());
+  EXPECT_EQ(codec::inspect(bytes).value().minor, 15);
+  auto out = decode(bytes);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  ASSERT_EQ(out.value().size(), in.size());
+  ASSERT_EQ(out.value().fields.size(), in.fields.size());
+  // no thinning: a permutation of the input, each field's values (float keys) with it
+  for (std::size_t f = 0; f < in.fields.size(); ++f) {
+    EXPECT_EQ(out.value().fields[f].type, in.fields[f].type);
+    auto x = out.value().fields[f].values, y = in.fields[f].values;
+    std::sort(x.begin(), x.end());
+    std::sort(y.begin(), y.end());
+    EXPECT_EQ(x, y) << in.fields[f].name;
+  }
+}
+
 /// `c` with colours whose channels move together (a grey ramp, red a little above green and
 /// blue a little below, as a colourised map's are): coded as green and differences.
 Cloud with_correlated_colours(Cloud c) {

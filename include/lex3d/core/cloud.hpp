@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -98,11 +99,51 @@ struct Georeference {
 
 /// A point cloud: positions and, when the source has them, per-point attributes
 /// (intensity, laser, column, time, colour), each either empty or one a point.
-/// A per-point integer field that no other member of Cloud holds (a LAS file's
-/// classification, return number, scan angle...): its name and one value a point.
+/// The type a named field had in its source file, so that it is written back as it came
+/// (formats/model.md §2.10): kUnspecified is a 32-bit signed integer.
+enum class FieldType : std::uint8_t {
+  kUnspecified = 0,
+  kInt8 = 1,
+  kUint8 = 2,
+  kInt16 = 3,
+  kUint16 = 4,
+  kInt32 = 5,
+  kUint32 = 6,
+  kFloat32 = 7,
+  kFloat64 = 8,  ///< double-precision values that float32 holds exactly
+};
+
+/// Whether fields of type `t` hold floating-point values (IntegerField::values then hold
+/// each float's order key, float_key).
+[[nodiscard]] constexpr bool is_float_type(FieldType t) noexcept {
+  return t == FieldType::kFloat32 || t == FieldType::kFloat64;
+}
+/// The name of a field type as the model file's `info` and the docs give it ("uint16").
+[[nodiscard]] const char* field_type_name(FieldType t) noexcept;
+/// The values an integer field of type `t` holds, lowest and highest (kUint32: those
+/// within 31 bits, as IntegerField keeps them; kUnspecified and the float types: int32's).
+[[nodiscard]] std::pair<std::int64_t, std::int64_t> field_type_range(FieldType t) noexcept;
+
+/// A float's order key: its bit pattern as a signed 32-bit integer that orders as the
+/// floats do (bits for a positive sign, -(bits without the sign) - 1 for a negative
+/// one); every bit pattern, NaN included, maps to one key and back (key_float).
+[[nodiscard]] std::int32_t float_key(float v) noexcept;
+/// The float whose order key is `key` (the inverse of float_key).
+[[nodiscard]] float key_float(std::int32_t key) noexcept;
+
+/// A per-point field that no other member of Cloud holds (a LAS file's classification,
+/// return number, scan angle; a PCD or PLY file's other integer and floating-point
+/// fields): its name, its source type and one value a point. Integer types hold the values
+/// themselves; floating-point types hold each value's float_key (value(i) gives it back).
 struct IntegerField {
   std::string name;
   std::vector<std::int32_t> values;
+  FieldType type = FieldType::kUnspecified;
+
+  /// Point i's value: the integer, or for a floating-point field the float.
+  [[nodiscard]] double value(std::size_t i) const noexcept {
+    return is_float_type(type) ? static_cast<double>(key_float(values[i])) : static_cast<double>(values[i]);
+  }
 };
 
 /// Whether `name` may name an IntegerField: 1-64 letters, digits or underscores, as a PCD or
