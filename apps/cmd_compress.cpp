@@ -43,6 +43,7 @@ struct CompressOptions {
   codec::Quantization quantization{0.0, 0.0, 0.0005};
   bool json = false;
   double intensity_error = 0.0;  ///< 0: intensities kept losslessly
+  std::vector<std::string> drop_fields;  ///< fields not kept, by name
   bool drop_attributes = false;
   std::string sensor;  ///< --sensor: a sensor profile (formats/sensor_profile.md)
   ScanSetOptions scan_set;
@@ -155,6 +156,7 @@ void run_compress(const CompressOptions& o) {
   coding.keep_attributes = !o.drop_attributes;
   coding.layer_only_references_alphabet = o.one_file;  // a sequence's models all reference its alphabet
   coding.attributes.intensity_error = o.intensity_error;
+  coding.attributes.drop = o.drop_fields;
   if (!o.sensor.empty()) coding.sensor_profile = read_sensor_profile(o.sensor);
   const ScanCoder coder(std::move(set.alphabet), coding, !o.save_alphabet.empty() || o.one_file,
                         reuse ? std::move(reuse->bytes) : std::vector<std::uint8_t>{});
@@ -341,8 +343,13 @@ void run_compress(const CompressOptions& o) {
       for (const auto& f : coded.dropped)
         std::printf("  dropped %s (%s)\n", f.c_str(),
                     o.drop_attributes ? "--drop-attributes"
+                    : std::find(o.drop_fields.begin(), o.drop_fields.end(), f) != o.drop_fields.end() ? "--drop-field"
                     : coded.max_error ? "not coded"
                                       : "words alone: give --max-error to keep attributes");
+      // (a name given to --drop-field that the scan does not have: likely a typo)
+      for (const std::string& f : o.drop_fields)
+        if (std::find(coded.dropped.begin(), coded.dropped.end(), f) == coded.dropped.end())
+          std::printf("  --drop-field %s: the scan has no field of that name\n", f.c_str());
     }
     std::fflush(stdout);
     bar.update(static_cast<long>(i + 1), static_cast<long>(n_scans), loader.name(i));
@@ -472,6 +479,10 @@ void register_compress(CLI::App& app) {
       ->capture_default_str();
   sub->add_flag("--drop-attributes", o->drop_attributes,
                 "Keep positions only: no intensity, ring, time or colour (they are listed as dropped)");
+  sub->add_option("--drop-field", o->drop_fields,
+                  "A field not to keep, by the name compress lists it under (ring, intensity, time, rgb, or a named "
+                  "field such as an Ouster capture's signal or near_ir); may be given several times")
+      ->type_name("NAME");
   sub->add_option("--sensor", o->sensor,
                   "Sensor profile of the scans' lidar (its laser table: JSON as bench/sensors/*.json, or a Velodyne "
                   "db.xml; formats/sensor_profile.md): the sensor-geometry coding takes each point's laser and column "

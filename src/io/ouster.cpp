@@ -209,6 +209,8 @@ struct Frame {
   std::uint32_t id = 0;
   std::vector<std::uint32_t> range_mm;  // H × W, row-major by beam
   std::vector<std::uint16_t> refl;
+  std::vector<std::uint16_t> signal;    // (not in the low-data profile)
+  std::vector<std::uint16_t> near_ir;
   std::vector<std::uint8_t> second;     // dual profile: second return present
   std::vector<std::uint8_t> have;       // per measurement column
   std::size_t columns_seen = 0;
@@ -335,6 +337,14 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     cloud.intensity.reserve(pixels);
     cloud.ring.reserve(pixels);
     cloud.column.reserve(pixels);
+    // the packets' signal and near-infrared channels, in their types (the low-data profile
+    // has no signal and an 8-bit near-infrared)
+    const bool with_signal = m.profile != Profile::kLowData;
+    if (with_signal) cloud.fields.push_back({"signal", {}, FieldType::kUint16});
+    cloud.fields.push_back({"near_ir", {}, m.profile == Profile::kLowData ? FieldType::kUint8 : FieldType::kUint16});
+    for (IntegerField& x : cloud.fields) x.values.reserve(pixels);
+    IntegerField* signal = with_signal ? &cloud.fields.front() : nullptr;
+    IntegerField& near_ir = cloud.fields.back();
     // each measurement column's encoder angle, and its cosine and sine (shared by the beams)
     std::vector<double> theta(m.W), cos_theta(m.W), sin_theta(m.W);
     for (std::uint32_t mc = 0; mc < m.W; ++mc) {
@@ -361,6 +371,8 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
                                 r * sphi + z_m);
         cloud.points.push_back((T_sensor_lidar * p).cast<float>());
         cloud.intensity.push_back(static_cast<float>(f.refl[k]));
+        if (signal != nullptr) signal->values.push_back(f.signal[k]);
+        near_ir.values.push_back(f.near_ir[k]);
         cloud.ring.push_back(static_cast<std::uint16_t>(l));
         cloud.column.push_back(c);
       }
@@ -403,6 +415,8 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
       cur->id = frame_id;
       cur->range_mm.assign(HW, 0);
       cur->refl.assign(HW, 0);
+      cur->signal.assign(HW, 0);
+      cur->near_ir.assign(HW, 0);
       cur->second.assign(HW, 0);
       cur->have.assign(m.W, 0);
     }
@@ -424,22 +438,31 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
         const std::uint8_t* px = col + col_head + static_cast<std::size_t>(l) * m.pixel_bytes();
         const std::size_t idx = static_cast<std::size_t>(l) * m.W + mid;
         switch (m.profile) {
+          // (the pixel layouts of the Ouster sensor user manual: range, reflectivity,
+          // signal and near-infrared; the dual profile's signal of the first return)
           case Profile::kLegacy:
             f.range_mm[idx] = le<std::uint32_t>(px) & 0xFFFFFU;
             f.refl[idx] = le<std::uint16_t>(px + 4);
+            f.signal[idx] = le<std::uint16_t>(px + 6);
+            f.near_ir[idx] = le<std::uint16_t>(px + 8);
             break;
           case Profile::kSingle:
             f.range_mm[idx] = le<std::uint32_t>(px) & 0x7FFFFU;
             f.refl[idx] = px[4];
+            f.signal[idx] = le<std::uint16_t>(px + 6);
+            f.near_ir[idx] = le<std::uint16_t>(px + 8);
             break;
           case Profile::kDual:
             f.range_mm[idx] = le<std::uint32_t>(px) & 0x7FFFFU;
             f.refl[idx] = px[3];
             f.second[idx] = (le<std::uint32_t>(px + 4) & 0x7FFFFU) != 0 ? 1 : 0;
+            f.signal[idx] = le<std::uint16_t>(px + 8);
+            f.near_ir[idx] = le<std::uint16_t>(px + 12);
             break;
           case Profile::kLowData:
             f.range_mm[idx] = (static_cast<std::uint32_t>(le<std::uint16_t>(px)) & 0x7FFFU) * 8U;
             f.refl[idx] = px[2];
+            f.near_ir[idx] = px[3];
             break;
         }
       }

@@ -407,7 +407,10 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   std::vector<FieldOut> fields;
   std::vector<std::uint16_t> laser;  // per decoded point, when the ring field is kept
   std::size_t lasers = 1;
-  if (options.ring && input.has_rings()) {
+  const auto kept = [&options](const char* name) {
+    return std::find(options.drop.begin(), options.drop.end(), name) == options.drop.end();
+  };
+  if (options.ring && kept("ring") && input.has_rings()) {
     FieldOut f{{}, kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
     f.u.assign(1, std::vector<std::int64_t>(n));
     laser.resize(n);
@@ -447,12 +450,12 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     f.span = static_cast<std::uint64_t>(kmax - kmin);
     fields.push_back(std::move(f));
   };
-  if (options.intensity && input.has_intensity()) {
+  if (options.intensity && kept("intensity") && input.has_intensity()) {
     const std::vector<double> all(input.intensity.begin(), input.intensity.end());
     scalar(kIntensity, all, true, options.intensity_error, true, 0.0);
   }
-  if (options.time && input.has_time()) scalar(kTime, input.time, false, 0.0, false, options.time_error);
-  if (options.rgb && input.has_rgb()) {
+  if (options.time && kept("time") && input.has_time()) scalar(kTime, input.time, false, 0.0, false, options.time_error);
+  if (options.rgb && kept("rgb") && input.has_rgb()) {
     FieldOut f{{}, kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}};
     f.u.assign(3, std::vector<std::int64_t>(n));
     for (std::size_t j = 0; j < n; ++j)
@@ -467,7 +470,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
       for (std::size_t e = 0; e < k; ++e)
         if (input.fields[e].name == x.name) throw std::invalid_argument("attribute field " + x.name + " is given twice");
       check_size(x.values.size(), n_in, x.name.c_str());
-      if (x.values.size() != n_in) continue;
+      if (x.values.size() != n_in || !kept(x.name.c_str())) continue;
       if (static_cast<std::uint32_t>(x.type) > static_cast<std::uint32_t>(FieldType::kFloat64))
         throw std::invalid_argument("attribute field " + x.name + " has an unknown type");
       if (is_float_type(x.type)) {

@@ -498,6 +498,14 @@ file(READ "${WORK}/k_attr.pcd" pcd_head LIMIT 200)
 expect_match(attr.pcd "${pcd_head}" "FIELDS x y z intensity")
 run(0 attr.drop compress "${KITTI}" -o "${WORK}/k_noattr.lex3dm" --max-error 0.05 --words off --drop-attributes)
 expect_match(attr.drop "${LAST_OUT}" "dropped intensity")
+# one field dropped by name; a name the scan does not have is said so
+run(0 attr.drop_field compress "${KITTI}" -o "${WORK}/k_nofield.lex3dm" --max-error 0.05 --words off
+    --drop-field intensity --drop-field intensty)
+expect_match(attr.drop_field "${LAST_OUT}" "dropped intensity \\(--drop-field\\)")
+expect_match(attr.drop_field_typo "${LAST_OUT}" "--drop-field intensty: the scan has no field of that name")
+run(0 attr.drop_field_back decompress "${WORK}/k_nofield.lex3dm" -o "${WORK}/k_nofield.pcd")
+file(READ "${WORK}/k_nofield.pcd" nofield_head LIMIT 200)
+expect_match(attr.drop_field_pcd "${nofield_head}" "FIELDS x y z\n")
 # a corrupt attribute chunk (a byte of its CRC flipped): bad data, exit 2, no output
 execute_process(COMMAND /usr/bin/python3 -c "import sys; d=bytearray(open(sys.argv[1],'rb').read()); d[-20]^=0x55; open(sys.argv[2],'wb').write(d)"
                 "${WORK}/k_attr.lex3dm" "${WORK}/k_attr_bad.lex3dm")

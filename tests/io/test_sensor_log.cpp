@@ -218,6 +218,38 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
       std::printf("[ geometry ] %s turn %zu: %zu points, %zu no-returns, max residual %.3g m\n", k.pcap, s, c.size(),
                   log.no_returns[s], res.max_m);
       EXPECT_LT(res.max_m, 1e-4);
+      // the packets' signal (not in the low-data profile) and near-infrared channels, kept as
+      // named fields in their types: the signal follows the reflectivity, and the
+      // near-infrared (an ambient-light image) changes little along a laser's row
+      const bool low_data = std::string(k.profile) == "RNG15_RFL8_NIR8";
+      ASSERT_EQ(c.fields.size(), low_data ? 1U : 2U);
+      const IntegerField& nir = c.fields.back();
+      EXPECT_EQ(nir.name, "near_ir");
+      EXPECT_EQ(nir.type, low_data ? FieldType::kUint8 : FieldType::kUint16);
+      ASSERT_EQ(nir.values.size(), c.size());
+      double along = 0.0, across = 0.0;
+      for (std::size_t i = 1; i < c.size(); ++i) {
+        along += std::abs(nir.values[i] - nir.values[i - 1]);
+        across += std::abs(nir.values[i] - nir.values[(i * 7919) % c.size()]);
+      }
+      EXPECT_LT(along, 0.7 * across);
+      if (!low_data) {
+        const IntegerField& signal = c.fields.front();
+        EXPECT_EQ(signal.name, "signal");
+        EXPECT_EQ(signal.type, FieldType::kUint16);
+        double sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0;
+        const auto n = static_cast<double>(c.size());
+        for (std::size_t i = 0; i < c.size(); ++i) {
+          const double x = signal.values[i], y = c.intensity[i];
+          sx += x;
+          sy += y;
+          sxx += x * x;
+          syy += y * y;
+          sxy += x * y;
+        }
+        const double corr = (n * sxy - sx * sy) / std::sqrt((n * sxx - sx * sx) * (n * syy - sy * sy));
+        EXPECT_GT(corr, 0.1);
+      }
       points += c.size();
       if (s > 0) EXPECT_EQ(log.frame_ids[s], log.frame_ids[s - 1] + 1);
     }

@@ -31,6 +31,8 @@ struct AttributeOptions {
   bool ring = true;       ///< keep Cloud::ring
   bool rgb = true;        ///< keep Cloud::rgb
   bool fields = true;     ///< keep Cloud::fields (named integer fields, lossless)
+  /// Fields not kept, by name: "ring", "intensity", "time", "rgb" or a named field's.
+  std::vector<std::string> drop;
   /// Largest intensity error, in the intensity's units; 0: lossless. [0, 1e9].
   double intensity_error = 0.0;
   /// Largest time error, seconds, when the times have no exact step; (0, 1].
