@@ -11,6 +11,8 @@
 
 namespace lex3d::python {
 
+std::string dtype_of(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
+
 std::string shape_of(const py::array& a) {
   std::string s = "(";
   for (py::ssize_t d = 0; d < a.ndim(); ++d) s += (d ? ", " : "") + std::to_string(a.shape(d));
@@ -19,7 +21,6 @@ std::string shape_of(const py::array& a) {
 
 namespace {
 
-std::string dtype_of(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
 
 /// float32 or float64 (either byte order).
 bool is_float(const py::array& a) {
@@ -29,7 +30,8 @@ bool is_float(const py::array& a) {
 /// The rows of an (N, 3) array as T, each finite (else ValueError naming the row).
 template <typename T>
 std::vector<Eigen::Matrix<T, 3, 1>> finite_rows(const py::array& a, const std::string& what) {
-  const auto v = py::array_t<T, py::array::forcecast>(a).template unchecked<2>();
+  const py::array_t<T, py::array::forcecast> values(a);  // (a converted copy kept alive while read)
+  const auto v = values.template unchecked<2>();
   std::vector<Eigen::Matrix<T, 3, 1>> rows(static_cast<std::size_t>(v.shape(0)));
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const auto k = static_cast<py::ssize_t>(i);
@@ -90,7 +92,9 @@ Cloud to_cloud(const py::handle& points_obj, const py::object& intensity_obj, co
     if (in.ndim() != 1 || static_cast<std::size_t>(in.shape(0)) != cloud.size())
       throw py::value_error(iwhat + " must have shape (" + std::to_string(cloud.size()) + ",), got " + shape_of(in));
     if (!is_float(in)) throw py::value_error(iwhat + " must be float32 or float64, got " + dtype_of(in));
-    const auto v = py::array_t<float, py::array::forcecast>(in).unchecked<1>();
+    // (the converted array kept alive while it is read: a float64 intensity is a copy)
+    const py::array_t<float, py::array::forcecast> values(in);
+    const auto v = values.unchecked<1>();
     cloud.intensity.resize(cloud.size());
     for (std::size_t i = 0; i < cloud.size(); ++i) {
       const float x = v(static_cast<py::ssize_t>(i));
@@ -159,7 +163,8 @@ Pose to_pose(const py::handle& obj, const std::string& what) {
   const auto a = py::reinterpret_borrow<py::array>(obj);
   if (a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4 || !is_float(a))
     throw py::value_error(what + " must be a 4x4 float array, got " + shape_of(a) + " " + dtype_of(a));
-  const auto v = py::array_t<double, py::array::forcecast>(a).unchecked<2>();
+  const py::array_t<double, py::array::forcecast> values(a);  // (kept alive while read)
+  const auto v = values.unchecked<2>();
   Eigen::Matrix4d m;
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) {

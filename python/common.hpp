@@ -17,6 +17,8 @@ namespace lex3d::python {
 namespace py = pybind11;
 
 std::string shape_of(const py::array& a);
+/// An array's dtype as numpy names it ("float32").
+std::string dtype_of(const py::array& a);
 
 /// An (N, 3) float array (and optional (N,) intensity) as a Cloud; ValueError naming
 /// `what` and what is wrong otherwise.

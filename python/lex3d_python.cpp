@@ -9,6 +9,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
+#include <cmath>
 #include <optional>
 #include <string>
 #include <vector>
@@ -45,16 +47,68 @@ lex3d::LayerCoding layer_coding(const std::string& s) {
                         "'");
 }
 
+/// Adds `fields` (a dict: name -> (N,) numpy array) to `cloud` as named fields in their
+/// dtypes' types: int8 to uint32 (a uint32 within 31 bits), float32, float64 that float32
+/// holds. ValueError for a bad name, shape, dtype or value.
+void add_fields(lex3d::Cloud& cloud, const py::object& fields) {
+  if (!py::isinstance<py::dict>(fields)) throw py::value_error("fields must be a dict of name -> numpy array");
+  for (const auto& item : py::reinterpret_borrow<py::dict>(fields)) {
+    if (!py::isinstance<py::str>(item.first)) throw py::value_error("fields: a name is not a str");
+    const auto name = item.first.cast<std::string>();
+    const std::string what = "fields['" + name + "']";
+    if (!lex3d::is_field_name(name)) throw py::value_error(what + ": the name is not 1-64 letters, digits or underscores");
+    for (const char* taken : {"intensity", "ring", "time", "rgb"})
+      if (name == taken) throw py::value_error(what + ": " + name + " is not a named field (intensity= gives the intensity)");
+    if (cloud.field(name) != nullptr) throw py::value_error(what + " is given twice");
+    if (!py::isinstance<py::array>(item.second)) throw py::value_error(what + " must be a numpy array of shape (N,)");
+    const auto a = py::reinterpret_borrow<py::array>(item.second);
+    if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != cloud.size())
+      throw py::value_error(what + " must have shape (" + std::to_string(cloud.size()) + ",), got " +
+                            lex3d::python::shape_of(a));
+    const char kind = a.dtype().kind();
+    const auto size = a.dtype().itemsize();
+    lex3d::IntegerField x{name, std::vector<std::int32_t>(cloud.size()), lex3d::FieldType::kUnspecified};
+    if (kind == 'f' && (size == 4 || size == 8)) {
+      x.type = size == 4 ? lex3d::FieldType::kFloat32 : lex3d::FieldType::kFloat64;
+      const py::array_t<double, py::array::forcecast> values(a);  // (kept alive while read)
+      const auto v = values.unchecked<1>();
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        const double d = v(static_cast<py::ssize_t>(i));
+        const auto f = static_cast<float>(d);
+        if (size == 8 && static_cast<double>(f) != d && !std::isnan(d))
+          throw py::value_error(what + ": value " + std::to_string(i) + " is a double that float32 does not hold");
+        x.values[i] = lex3d::float_key(f);
+      }
+    } else if ((kind == 'i' || kind == 'u') && size <= 4) {
+      x.type = kind == 'i' ? (size == 1 ? lex3d::FieldType::kInt8 : size == 2 ? lex3d::FieldType::kInt16 : lex3d::FieldType::kInt32)
+                           : (size == 1 ? lex3d::FieldType::kUint8 : size == 2 ? lex3d::FieldType::kUint16 : lex3d::FieldType::kUint32);
+      const py::array_t<std::int64_t, py::array::forcecast> values(a);
+      const auto v = values.unchecked<1>();
+      for (std::size_t i = 0; i < cloud.size(); ++i) {
+        const std::int64_t k = v(static_cast<py::ssize_t>(i));
+        if (k > 2147483647LL) throw py::value_error(what + ": value " + std::to_string(i) + " is above 2^31 - 1");
+        x.values[i] = static_cast<std::int32_t>(k);
+      }
+    } else {
+      throw py::value_error(what + " must be an integer array of up to 32 bits or float32/float64, got " +
+                            lex3d::python::dtype_of(a));
+    }
+    cloud.fields.push_back(std::move(x));
+  }
+}
+
 py::object compress(const py::object& points, const py::object& intensity, std::optional<double> max_error,
                     std::optional<double> target_bpp, const std::optional<std::string>& words,
                     const std::string& coding, bool keep_all_points, const std::optional<py::bytes>& alphabet,
                     double word_radius, int iterations, std::uint64_t seed, int threads, bool report,
-                    const py::object& sensor) {
+                    const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields) {
   // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept).
   const bool from_file = lex3d::python::is_path(points);
   if (from_file && !intensity.is_none()) throw py::value_error("intensity goes with an array of points, not a path");
-  const lex3d::Cloud cloud = from_file ? lex3d::python::scan_from(points, nullptr, "points")
-                                       : lex3d::python::to_cloud(points, intensity, "points");
+  if (from_file && !fields.is_none()) throw py::value_error("fields go with an array of points, not a path");
+  lex3d::Cloud cloud = from_file ? lex3d::python::scan_from(points, nullptr, "points")
+                                 : lex3d::python::to_cloud(points, intensity, "points");
+  if (!fields.is_none()) add_fields(cloud, fields);
   lex3d::CompressOptions o;
   o.max_error = max_error;
   o.target_bpp = target_bpp.value_or(0.0);
@@ -67,6 +121,7 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   o.max_iterations = iterations;
   o.seed = seed;
   o.threads = threads;
+  o.attributes.drop = drop_fields;
   if (!sensor.is_none()) {  // a sensor profile file (formats/sensor_profile.md)
     if (!lex3d::python::is_path(sensor)) throw py::value_error("sensor must be the path of a sensor profile file");
     const std::string path = lex3d::python::path_of(sensor);
@@ -87,7 +142,7 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   const lex3d::CompressResult& c = r->value();
   // Never drop an attribute silently.
   for (const auto& a : c.dropped_attributes)
-    if (PyErr_WarnEx(PyExc_UserWarning, (a + " is not kept in this model file (attributes need a residual layer: "
+    if (std::find(drop_fields.begin(), drop_fields.end(), a) == drop_fields.end() && PyErr_WarnEx(PyExc_UserWarning, (a + " is not kept in this model file (attributes need a residual layer: "
                                          "give max_error or target_bpp): " + std::to_string(c.input_points) +
                                          " values dropped").c_str(), 1) != 0)
       throw py::error_already_set();
@@ -213,14 +268,21 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("layer_coding") = "auto", py::arg("keep_all_points") = false, py::arg("alphabet") = py::none(),
         py::arg("word_radius") = 0.0, py::arg("iterations") = lex3d::LearnParams{}.max_iterations,
         py::arg("seed") = lex3d::LearnParams{}.seed, py::arg("threads") = 2, py::arg("report") = false,
-        py::arg("sensor") = py::none(),
+        py::arg("sensor") = py::none(), py::arg("fields") = py::none(),
+        py::arg("drop_fields") = std::vector<std::string>{},
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
     coordinates that float32 would round (far from their frame's origin, as UTM ones) are kept
     relative to an origin the file stores; decompress gives them back as they were. Or a path
     (str or os.PathLike) of a point cloud file, read as `lex3d compress PATH` reads it.
-intensity: optional (N,) float array; model files do not store it (a UserWarning says so).
+intensity: optional (N,) float array, kept with a residual layer (losslessly); without one
+    a UserWarning says it was dropped.
+fields: optional dict of name -> (N,) array, further per-point fields kept with a residual
+    layer (losslessly), each given back by decompress(attributes=True) in its dtype: integers
+    of up to 32 bits (uint32 values below 2^31), float32, float64 that float32 holds.
+drop_fields: names of fields not to keep ('intensity', 'ring', 'time', 'rgb' or a named
+    field's, as report lists them), like `compress --drop-field`.
 max_error: residual-layer bound in metres, [1e-4, 10]: every point has a decoded point within it
     and vice versa. None: words only (an alphabet is learned on the scan), unless target_bpp.
 target_bpp: bits per point the file should fit; the smallest bound that fits is taken.

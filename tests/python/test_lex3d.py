@@ -265,6 +265,39 @@ def test_pcd_fields_come_back_in_their_types():
     assert fields["normal_x"][order_out].tobytes() == a["normal_x"][order_in].tobytes()
 
 
+def test_fields_given_as_arrays_round_trip_in_their_dtypes(kitti):
+    """fields= keeps further per-point arrays (as a user's pipeline has them) with the layer,
+    each back in its dtype; drop_fields leaves one out; bad fields raise ValueError."""
+    points, intensity = kitti
+    n = points.shape[0]
+    label = (np.arange(n) % 7).astype(np.uint8)
+    normal = (points[:, 0] / np.linalg.norm(points, axis=1)).astype(np.float32)
+    stamp = (np.arange(n) % 1000 - 500).astype(np.int16)
+    index = np.arange(n, dtype=np.uint32)
+    data, info = lex3d.compress(points, intensity, max_error=0.014, keep_all_points=True, report=True,
+                                fields={"label": label, "normal_x": normal, "stamp": stamp, "index": index})
+    assert {"intensity", "label", "normal_x", "stamp", "index"} <= set(info["attributes"])
+    back, fields = lex3d.decompress(data, attributes=True)
+    assert back.shape[0] == n
+    assert fields["label"].dtype == np.uint8 and fields["normal_x"].dtype == np.float32
+    assert fields["stamp"].dtype == np.int16 and fields["index"].dtype == np.uint32
+    # every point's values, found by its index: a permutation, each value with its point
+    at = fields["index"]
+    assert np.array_equal(np.sort(at), index)
+    assert np.array_equal(fields["label"], label[at]) and np.array_equal(fields["stamp"], stamp[at])
+    assert fields["normal_x"].tobytes() == normal[at].tobytes()
+    assert np.abs(back - points[at]).max() <= 0.014 * 1.01
+    dropped, info = lex3d.compress(points, intensity, max_error=0.014, report=True,
+                                   fields={"label": label}, drop_fields=["label"])
+    assert "label" in info["dropped_attributes"] and "label" not in info["attributes"]
+    for bad, message in [({"label": label[:-1]}, "shape"), ({"a b": label}, "letters"),
+                         ({"wide": points[:, 0].astype(np.float64) + 1e-9}, "float32 does not hold"),
+                         ({"big": np.full(n, 2**31, np.uint32)}, "2\\^31"), ({"c": label.astype(np.complex64)}, "integer"),
+                         ({"intensity": label}, "not a named field")]:
+        with pytest.raises(ValueError, match=message):
+            lex3d.compress(points, max_error=0.014, fields=bad)
+
+
 def test_an_airborne_strip_keeps_its_order_through_the_acquisition_coding():
     # Pulses 10 us apart (write_las's GPS times) sweeping lines of 200 across the track, 1 m
     # on between lines, over rolling ground: the acquisition-order layer keeps the bound and
