@@ -261,11 +261,6 @@ constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties 
 
 using Rgb = std::array<std::uint8_t, 3>;
 
-/// A reader's field that no other Cloud member holds, `values` a point (0: a PLY list):
-/// kept as a named integer field (Cloud::fields; its name appended to `kept`) when it is
-/// one integer of up to 32 bits (an unsigned 32-bit one only while its values fit in 31
-/// bits: Builder::finish drops it otherwise, naming it), its name one is_field_name takes
-/// and not already kept; else named in `not_kept`, with why. True when kept.
 /// A named field a reader keeps: its name and its type in the file.
 struct FieldSpec {
   std::string name;
@@ -287,10 +282,12 @@ inline std::optional<FieldType> field_type_of(Scalar s) {
   }
 }
 
-/// Whether a field no other member of Cloud takes is kept as a named field (Cloud::fields):
+/// Whether a reader's field that no other Cloud member holds, `values` a point (0: a PLY
+/// list), is kept as a named field (Cloud::fields; its name and type appended to `kept`):
 /// one value a point, a name is_field_name takes, not kept already, and an integer of up to
-/// 32 bits or a float (a double only where every value is a float32's: Builder::finish).
-/// Else its name and why go to `not_kept`.
+/// 32 bits (an unsigned 32-bit one only while its values fit in 31 bits) or a float (a
+/// double only where float32 holds every value); Builder::finish drops those that do not
+/// hold, naming them. Else its name and why go to `not_kept`. True when kept.
 inline bool offer_field(const std::string& name, Scalar type, std::uint64_t values, std::vector<FieldSpec>& kept,
                         std::vector<std::string>& not_kept) {
   const std::optional<FieldType> t = field_type_of(type);

@@ -556,7 +556,7 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   const std::uint32_t oring = ring ? field("ring", kU16, 2) : 0;
   step = (step + 7U) & ~7U;  // the double time aligned
   const std::uint32_t ot = time ? field("time", kF64, 8) : 0;
-  // named integer fields (Cloud::fields) as INT32
+  // named fields (Cloud::fields), each in its type
   m.names.reserve(c.fields.size());
   std::vector<std::uint32_t> onamed;
   // (PointCloud2's datatypes number the types as FieldType does; a field whose type is not

@@ -18,8 +18,9 @@
 //    intensities follow its calibration and its neighbours; the models learn their
 //    distribution given those neighbours, not only a difference;
 //  - method 5 (mixed tree): method 4 over the history of methods 0-2.
-// Named integer fields (kind 5, a LAS file's classification, return number...) are coded
-// as the others, losslessly, their name after their descriptor.
+// Named fields (kind 5: a LAS file's classification, return number...; a PCD's other integer
+// and float fields) are coded as the others, losslessly, their name after their descriptor
+// and their source type in its transform bytes (format 1.15); float ones as intensity is.
 // For methods 0-2 and 5 "previous" is the last value of the same laser when the chunk also
 // holds the ring field (coded first), else the last value in the decoded order. The
 // encoder codes each field every way that applies and keeps the smallest.

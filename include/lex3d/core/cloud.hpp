@@ -189,8 +189,9 @@ struct Cloud {
   /// Where the local frame sits in a georeferenced (projected) frame, when the source's
   /// coordinates are large (a LAS file, a UTM cloud): true coordinates are origin + point.
   std::optional<Georeference> georef;
-  /// Further per-point integer fields by name, each with points.size() values (a LAS
-  /// file's: classification, return_number, number_of_returns, scan_angle_rank, ...; see
+  /// Further per-point fields by name, each with points.size() values and its source type
+  /// (a LAS file's classification, return_number, scan_angle_rank...; a PCD's or PLY's other
+  /// integer and float fields; a raw Ouster capture's signal and near_ir; see
   /// formats/model.md §2.10 for how they are kept).
   std::vector<IntegerField> fields;
 
