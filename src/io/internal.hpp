@@ -261,6 +261,37 @@ constexpr std::size_t kMaxFields = 1U << 16;       // fields (PCD) / properties 
 
 using Rgb = std::array<std::uint8_t, 3>;
 
+/// The bytes a named field of type `t` takes in a PCD, PLY or PointCloud2 record (a field
+/// whose type is not recorded: an int32's).
+inline unsigned field_bytes(FieldType t) {
+  switch (t) {
+    case FieldType::kInt8: case FieldType::kUint8: return 1;
+    case FieldType::kInt16: case FieldType::kUint16: return 2;
+    case FieldType::kFloat64: return 8;
+    default: return 4;
+  }
+}
+
+/// Stores point i's value of named field `x` at `dst` in the field's type (a float field's
+/// float, a float64 one's widened), in the host's byte order; returns field_bytes(x.type).
+inline unsigned store_field(std::uint8_t* dst, const IntegerField& x, std::size_t i) {
+  const std::int32_t v = x.values[i];
+  const auto put = [dst](auto value) {
+    std::memcpy(dst, &value, sizeof value);
+    return static_cast<unsigned>(sizeof value);
+  };
+  switch (x.type) {
+    case FieldType::kInt8: return put(static_cast<std::int8_t>(v));
+    case FieldType::kUint8: return put(static_cast<std::uint8_t>(v));
+    case FieldType::kInt16: return put(static_cast<std::int16_t>(v));
+    case FieldType::kUint16: return put(static_cast<std::uint16_t>(v));
+    case FieldType::kUint32: return put(static_cast<std::uint32_t>(v));
+    case FieldType::kFloat32: return put(key_float(v));
+    case FieldType::kFloat64: return put(static_cast<double>(key_float(v)));
+    default: return put(v);
+  }
+}
+
 /// A named field a reader keeps: its name and its type in the file.
 struct FieldSpec {
   std::string name;

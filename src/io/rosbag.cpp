@@ -561,15 +561,10 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   std::vector<std::uint32_t> onamed;
   // (PointCloud2's datatypes number the types as FieldType does; a field whose type is not
   // recorded is an INT32)
-  std::vector<std::uint32_t> named_size;
   for (const IntegerField& f : c.fields) {
     m.names.push_back(f.name);
     const std::uint8_t type = f.type == FieldType::kUnspecified ? kI32 : static_cast<std::uint8_t>(f.type);
-    const std::uint32_t size = f.type == FieldType::kFloat64 ? 8U
-                               : f.type == FieldType::kInt16 || f.type == FieldType::kUint16 ? 2U
-                               : f.type == FieldType::kInt8 || f.type == FieldType::kUint8 ? 1U : 4U;
-    named_size.push_back(size);
-    onamed.push_back(field(m.names.back().c_str(), type, size));
+    onamed.push_back(field(m.names.back().c_str(), type, detail::field_bytes(f.type)));
   }
   m.point_step = step;
   // organised: every point has a distinct pixel (row, column) of the shape
@@ -612,24 +607,7 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
     }
     if (ring) std::memcpy(p + oring, &c.ring[i], 2);
     if (time) std::memcpy(p + ot, &c.time[i], 8);
-    for (std::size_t k = 0; k < c.fields.size(); ++k) {
-      const IntegerField& f = c.fields[k];
-      const std::int32_t v = f.values[i];
-      if (f.type == FieldType::kFloat32 || f.type == FieldType::kFloat64) {
-        const float x = key_float(v);
-        const double wide = x;
-        if (f.type == FieldType::kFloat64) std::memcpy(p + onamed[k], &wide, 8);
-        else std::memcpy(p + onamed[k], &x, 4);
-      } else if (named_size[k] == 1) {
-        const auto b = static_cast<std::uint8_t>(v);
-        std::memcpy(p + onamed[k], &b, 1);
-      } else if (named_size[k] == 2) {
-        const auto h = static_cast<std::uint16_t>(v);
-        std::memcpy(p + onamed[k], &h, 2);
-      } else {
-        std::memcpy(p + onamed[k], &v, 4);
-      }
-    }
+    for (std::size_t k = 0; k < c.fields.size(); ++k) detail::store_field(p + onamed[k], c.fields[k], i);
   }
   return m;
 }

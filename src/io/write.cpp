@@ -50,29 +50,29 @@ Status invalid(const std::string& path, const std::string& what) {
   return {ErrorCode::kInvalidArgument, msg(path, what)};
 }
 
-/// How a named field of type t is declared: its PCD SIZE and TYPE and its PLY type.
+/// How a named field of type t is declared: its PCD TYPE and its PLY type (its size:
+/// detail::field_bytes).
 struct FieldDecl {
-  unsigned size;
   const char* pcd_type;
   const char* ply_type;
 };
 FieldDecl declaration(FieldType t) {
   switch (t) {
-    case FieldType::kInt8: return {1, "I", "char"};
-    case FieldType::kUint8: return {1, "U", "uchar"};
-    case FieldType::kInt16: return {2, "I", "short"};
-    case FieldType::kUint16: return {2, "U", "ushort"};
-    case FieldType::kUint32: return {4, "U", "uint"};
-    case FieldType::kFloat32: return {4, "F", "float"};
-    case FieldType::kFloat64: return {8, "F", "double"};
-    default: return {4, "I", "int"};  // int32, and a field whose type is not recorded
+    case FieldType::kInt8: return {"I", "char"};
+    case FieldType::kUint8: return {"U", "uchar"};
+    case FieldType::kInt16: return {"I", "short"};
+    case FieldType::kUint16: return {"U", "ushort"};
+    case FieldType::kUint32: return {"U", "uint"};
+    case FieldType::kFloat32: return {"F", "float"};
+    case FieldType::kFloat64: return {"F", "double"};
+    default: return {"I", "int"};  // int32, and a field whose type is not recorded
   }
 }
 
 /// The bytes a point's named fields take in a binary PCD or PLY file.
 std::size_t named_bytes(const Cloud& cloud) {
   std::size_t k = 0;
-  for (const IntegerField& x : cloud.fields) k += declaration(x.type).size;
+  for (const IntegerField& x : cloud.fields) k += detail::field_bytes(x.type);
   return k;
 }
 
@@ -180,17 +180,10 @@ class Bytes {
   }
   /// Point i's value of named field x in the field's own type, little-endian.
   void field(const IntegerField& x, std::size_t i) {
-    const std::int32_t v = x.values[i];
-    switch (x.type) {
-      case FieldType::kInt8: return le(static_cast<std::int8_t>(v));
-      case FieldType::kUint8: return le(static_cast<std::uint8_t>(v));
-      case FieldType::kInt16: return le(static_cast<std::int16_t>(v));
-      case FieldType::kUint16: return le(static_cast<std::uint16_t>(v));
-      case FieldType::kUint32: return le(static_cast<std::uint32_t>(v));
-      case FieldType::kFloat32: return f32(key_float(v));
-      case FieldType::kFloat64: return f64(static_cast<double>(key_float(v)));
-      default: return le(v);
-    }
+    std::uint8_t tmp[8];
+    const unsigned k = detail::store_field(tmp, x, i);
+    if (kHostBigEndian) std::reverse(tmp, tmp + k);
+    put(tmp, k);
   }
   std::vector<std::uint8_t>& vec() {
     b_.resize(n_);
@@ -245,7 +238,7 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
   for (const IntegerField& x : cloud.fields) {  // named fields (a LAS classification...) in their types
     const FieldDecl d = declaration(x.type);
     fields += " " + x.name;
-    sizes += " " + std::to_string(d.size);
+    sizes += " " + std::to_string(detail::field_bytes(x.type));
     types += std::string(" ") + d.pcd_type;
     counts += " 1";
   }
