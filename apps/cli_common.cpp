@@ -41,8 +41,12 @@ io::ReadOptions read_options(io::Format format, const std::string& metadata, con
   opt.format = format;
   opt.metadata_path = metadata;
   opt.sensor_model = sensor_model;
-  if (!sensor_model.empty() && sensor_model != "vlp16" && sensor_model != "hdl32e")
-    throw CliError(1, "unknown --sensor-model '" + sensor_model + "' (expected vlp16 or hdl32e)");
+  const std::vector<std::string> models = io::velodyne_models();
+  if (!sensor_model.empty() && std::find(models.begin(), models.end(), sensor_model) == models.end()) {
+    std::string list;
+    for (const std::string& m : models) list += (list.empty() ? "" : ", ") + m;
+    throw CliError(1, "unknown --sensor-model '" + sensor_model + "' (expected one of " + list + ")");
+  }
   return opt;
 }
 

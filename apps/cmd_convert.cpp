@@ -79,7 +79,7 @@ void register_convert(CLI::App& app) {
   sub->add_option("output", o->output, "Output (.pcd, .ply, .bin, .xyz/.txt; numbered _000, _001... for several turns), or .bag: one ROS bag, a PointCloud2 message a scan")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
   sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
-  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16 or hdl32e");
+  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e or vlp32c (default: detected from the packets)");
   sub->add_option("--topic", o->topic, "The topic of a ROS bag to read (default: its only point cloud topic)");
   sub->add_option("--sensor", o->sensor,
                   "Sensor profile (formats/sensor_profile.md): write each point's laser by its table as the ring field");

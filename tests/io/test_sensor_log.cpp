@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <set>
 #include <string>
 #include <vector>
@@ -381,8 +382,6 @@ TEST(SensorLog, Vlp16CapturesGiveOneTurnAndTheWrongModelByteIsCaught) {
   EXPECT_EQ(forced.value().info.lasers, 32U);
 }
 
-// ------------------------------------------------------------ bad input
-
 ::testing::AssertionResult bad(const StatusOr<SensorLog>& r, const std::string& path, const std::string& what) {
   if (r.ok()) return ::testing::AssertionFailure() << "expected an error";
   const Status& s = r.status();
@@ -394,6 +393,206 @@ TEST(SensorLog, Vlp16CapturesGiveOneTurnAndTheWrongModelByteIsCaught) {
     return ::testing::AssertionFailure() << "does not say '" << what << "': " << s.message();
   return ::testing::AssertionSuccess() << s.message();
 }
+
+// Velodyne packets edited in memory: the UDP payload of an Ethernet/IPv4 record.
+constexpr std::size_t kUdpPayload = 42, kVelodynePacket = 1206;
+bool velodyne_record(const Record& r) { return r.data.size() == kUdpPayload + kVelodynePacket; }
+std::uint8_t* velodyne_payload(Record& r) { return reinterpret_cast<std::uint8_t*>(r.data.data()) + kUdpPayload; }
+std::uint32_t payload_time(Record& r) {
+  std::uint32_t t = 0;
+  std::memcpy(&t, velodyne_payload(r) + 1200, 4);
+  return t;
+}
+void set_payload_time(Record& r, std::uint32_t t) { std::memcpy(velodyne_payload(r) + 1200, &t, 4); }
+
+/// Decodes `capture` (written under `name`) and returns its log; fails the test otherwise.
+SensorLog decode_edited(const Capture& capture, const std::string& name, const ReadOptions& o = {}) {
+  const std::string p = (temp_dir("sensor_log_edited") / name).string();
+  write_bytes(p, serialise(capture));
+  auto r = read_sensor_log(p, o);
+  EXPECT_TRUE(r.ok()) << r.status().to_string();
+  return r.ok() ? r.value() : SensorLog{};
+}
+
+TEST(SensorLog, PuckHiResPacketsUseItsElevations) {
+  // The VLP-16 sample with the Puck Hi-Res factory byte (same packets and timing, the
+  // lasers 4/3° apart within ±10°): every point keeps its range and column, at the Hi-Res
+  // elevation of its laser.
+  const std::string bytes = slurp(test::sample("vlp16_velodyne_example.pcap"));
+  const SensorLog vlp = decode_edited(parse_capture(bytes), "vlp16.pcap");
+  Capture c = parse_capture(bytes);
+  for (Record& r : c.records)
+    if (velodyne_record(r)) velodyne_payload(r)[1205] = 0x24;
+  const SensorLog hires = decode_edited(c, "hires.pcap");
+  ASSERT_EQ(vlp.scans.size(), 1U);
+  ASSERT_EQ(hires.scans.size(), 1U);
+  EXPECT_EQ(hires.info.sensor, "Puck Hi-Res");
+  EXPECT_NE(hires.info.model_note.find("(agrees)"), std::string::npos) << hires.info.model_note;
+  const Cloud& a = vlp.scans[0];
+  const Cloud& b = hires.scans[0];
+  expect_velodyne_turn(b, 16);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_NEAR(b.geometry->elevation.front() * 180 / M_PI, -10.0, 1e-9);
+  EXPECT_NEAR(b.geometry->elevation.back() * 180 / M_PI, 10.0, 1e-9);
+  for (std::size_t i = 0; i < a.size(); i += 97) {
+    ASSERT_EQ(a.ring[i], b.ring[i]);  // both tables interleave low and high lasers alike
+    ASSERT_EQ(a.column[i], b.column[i]);
+    EXPECT_NEAR(a.points[i].norm(), b.points[i].norm(), 1e-4);
+    EXPECT_NEAR(std::asin(b.points[i].z() / b.points[i].norm()), b.geometry->elevation[b.ring[i]], 1e-5);
+  }
+}
+
+TEST(SensorLog, Vlp32cPacketsUseItsTableAzimuthOffsetsAndRangeUnit) {
+  // The HDL-32E capture's packets (12 blocks of one 32-laser firing each, as a VLP-32C's)
+  // with the VLP-32C factory byte and packet period: read with the VLP-32C's elevations,
+  // azimuth offsets (±1.4°, ±4.2°), paired firing times and 4 mm range unit.
+  LEX3D_REQUIRE_SHARED("velodyne/hdl32e_hdl32_example.pcap");
+  const std::string bytes = slurp(shared_data("velodyne/hdl32e_hdl32_example.pcap"));
+  const SensorLog hdl = decode_edited(parse_capture(bytes), "hdl32e.pcap");
+  Capture c = parse_capture(bytes);
+  std::size_t k = 0;
+  std::uint32_t t0 = 0;
+  for (Record& r : c.records) {
+    if (!velodyne_record(r)) continue;
+    if (k == 0) t0 = payload_time(r);
+    velodyne_payload(r)[1205] = 0x28;
+    set_payload_time(r, t0 + static_cast<std::uint32_t>(std::lround(static_cast<double>(k++) * 12 * 55.296)));
+  }
+  const SensorLog v = decode_edited(c, "vlp32c.pcap");
+  EXPECT_EQ(v.info.sensor, "VLP-32C");
+  EXPECT_EQ(v.info.lasers, 32U);
+  EXPECT_NE(v.info.model_note.find("(agrees)"), std::string::npos) << v.info.model_note;
+  ASSERT_EQ(v.scans.size(), hdl.scans.size());
+  ASSERT_FALSE(v.scans.empty());
+  const Cloud& a = hdl.scans[0];
+  const Cloud& b = v.scans[0];
+  expect_velodyne_turn(b, 32);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_NEAR(b.geometry->elevation.front() * 180 / M_PI, -25.0, 1e-9);
+  EXPECT_NEAR(b.geometry->elevation.back() * 180 / M_PI, 15.0, 1e-9);
+  // the lowest beam (laser 0) points 1.4° clockwise of its firing: beam_azimuth -1.4°
+  EXPECT_NEAR(b.geometry->beam_azimuth.front() * 180 / M_PI, -1.4, 1e-9);
+  double max_offset = 0.0;
+  for (double x : b.geometry->beam_azimuth) max_offset = std::max(max_offset, std::abs(x) * 180 / M_PI);
+  EXPECT_NEAR(max_offset, 4.2, 1e-9);
+  // Each point from its own firing: the HDL-32E reading's point of the same laser id and
+  // column at azimuth α_h (laser l fires l·1.152 µs into 46.08 µs there, floor(l/2)·2.304 µs
+  // into 55.296 µs here), twice the range (4 mm units), at the VLP-32C laser's elevation and
+  // offset. Rings are lasers by elevation: each table, sorted, gives a ring's laser id.
+  const double hdl_el[32] = {-30.67, -9.33, -29.33, -8.00, -28.00, -6.67, -26.67, -5.33, -25.33, -4.00, -24.00,
+                             -2.67,  -22.67, -1.33, -21.33, 0.00, -20.00, 1.33, -18.67, 2.67, -17.33, 4.00,
+                             -16.00, 5.33,  -14.67, 6.67, -13.33, 8.00, -12.00, 9.33, -10.67, 10.67};
+  const double vlp_el[32] = {-25,    -1,     -1.667, -15.639, -11.31, 0,      -0.667, -8.843, -7.254, 0.333, -0.333,
+                             -6.148, -5.333, 1.333,  0.667,   -4,     -4.667, 1.667,  1,      -3.667, -3.333, 3.333,
+                             2.333,  -2.667, -3,     7,       4.667,  -2.333, -2,     15,     10.333, -1.333};
+  const auto ids_by_ring = [](const double* el) {
+    std::vector<int> id(32);
+    for (int l = 0; l < 32; ++l) id[l] = l;
+    std::sort(id.begin(), id.end(), [&](int x, int y) { return el[x] < el[y]; });
+    return id;
+  };
+  const std::vector<int> hdl_id = ids_by_ring(hdl_el), vlp_id = ids_by_ring(vlp_el);
+  std::map<std::pair<int, std::uint32_t>, std::size_t> in_a;
+  for (std::size_t i = 0; i < a.size(); ++i) in_a[{hdl_id[a.ring[i]], a.column[i]}] = i;
+  const double step = 360.0 / a.columns;
+  std::size_t checked = 0;
+  for (std::size_t j = 0; j < b.size(); j += 101) {
+    const int id = vlp_id[b.ring[j]];
+    EXPECT_NEAR(b.geometry->elevation[b.ring[j]] * 180 / M_PI, vlp_el[id], 1e-9);
+    const auto it = in_a.find({id, b.column[j]});
+    ASSERT_NE(it, in_a.end());
+    const std::size_t i = it->second;
+    EXPECT_NEAR(b.points[j].norm(), 2.0 * a.points[i].norm(), 2e-4 * a.points[i].norm() + 1e-4);
+    EXPECT_NEAR(std::asin(b.points[j].z() / b.points[j].norm()), vlp_el[id] * M_PI / 180, 1e-5);
+    // azimuth: clockwise from +y (Velodyne's), the firing's start + the time share + the offset
+    const double alpha_a = std::atan2(a.points[i].x(), a.points[i].y()) * 180 / M_PI;
+    const double alpha_b = std::atan2(b.points[j].x(), b.points[j].y()) * 180 / M_PI;
+    const double share_a = id * 1.152 / 46.08, share_b = (id / 2) * 2.304 / 55.296;
+    const double offset = -b.geometry->beam_azimuth[b.ring[j]] * 180 / M_PI;
+    EXPECT_TRUE(std::abs(std::abs(offset) - 1.4) < 1e-9 || std::abs(std::abs(offset) - 4.2) < 1e-9) << offset;
+    const double expected = alpha_a + step * (share_b - share_a) + offset;
+    EXPECT_NEAR(std::remainder(alpha_b - expected, 360.0), 0.0, 0.05 * step) << "point " << j << " laser " << id;
+    ++checked;
+  }
+  EXPECT_GT(checked, 100U);
+}
+
+TEST(SensorLog, DualReturnPacketsKeepTheLastReturnAndCountTheOthers) {
+  // The VLP-16 sample turned into dual-return packets: each packet's 12 blocks go into two
+  // packets of 6 block pairs (the block, then a copy with every third return moved 20 cm
+  // as a distinct strongest return), mode byte 0x39, packets twice as often.
+  const std::string bytes = slurp(test::sample("vlp16_velodyne_example.pcap"));
+  const SensorLog single = decode_edited(parse_capture(bytes), "single.pcap");
+  Capture c = parse_capture(bytes);
+  std::vector<Record> out;
+  std::size_t moved = 0;
+  for (Record& r : c.records) {
+    if (!velodyne_record(r)) {
+      out.push_back(r);
+      continue;
+    }
+    const std::uint32_t t = payload_time(r);
+    for (int half = 0; half < 2; ++half) {
+      Record d = r;
+      std::uint8_t* p = velodyne_payload(d);
+      const std::uint8_t* src = velodyne_payload(r);
+      for (int k = 0; k < 6; ++k) {
+        const std::uint8_t* blk = src + (half * 6 + k) * 100;
+        std::memcpy(p + (2 * k) * 100, blk, 100);
+        std::memcpy(p + (2 * k + 1) * 100, blk, 100);
+        for (int ch = 0; ch < 32; ch += 3) {
+          std::uint8_t* x = p + (2 * k + 1) * 100 + 4 + ch * 3;
+          const int dist = x[0] | (x[1] << 8);
+          if (dist == 0 || dist > 60000) continue;
+          x[0] = static_cast<std::uint8_t>((dist + 100) & 255);
+          x[1] = static_cast<std::uint8_t>((dist + 100) >> 8);
+          ++moved;
+        }
+      }
+      p[1204] = 0x39;
+      set_payload_time(d, t + static_cast<std::uint32_t>(half * 664));
+      out.push_back(std::move(d));
+    }
+  }
+  c.records = std::move(out);
+  const SensorLog dual = decode_edited(c, "dual.pcap");
+  EXPECT_EQ(dual.info.sensor, "VLP-16");
+  EXPECT_EQ(dual.info.profile, "dual (last return kept)");
+  EXPECT_NE(dual.info.model_note.find("(agrees)"), std::string::npos) << dual.info.model_note;
+  ASSERT_EQ(dual.scans.size(), single.scans.size());
+  ASSERT_EQ(dual.scans.size(), 1U);
+  const Cloud& a = single.scans[0];
+  const Cloud& b = dual.scans[0];
+  EXPECT_EQ(a.columns, b.columns);
+  ASSERT_EQ(a.size(), b.size());
+  // the same ranges, lasers and columns; azimuths within 0.3 of a firing step (a packet's
+  // last block pair places its second firing and its lasers' firing times by the gap from
+  // the pair before, whose block azimuths, in 0.01° units, jitter by a unit or two)
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a.ring[i], b.ring[i]);
+    ASSERT_EQ(a.column[i], b.column[i]);
+    ASSERT_NEAR(a.points[i].norm(), b.points[i].norm(), 1e-5) << i;
+    ASSERT_EQ(a.points[i].z(), b.points[i].z()) << i;
+    const double da = std::remainder(std::atan2(a.points[i].y(), a.points[i].x()) - std::atan2(b.points[i].y(), b.points[i].x()), 2 * M_PI);
+    ASSERT_LT(std::abs(da), 0.3 * 2 * M_PI / a.columns) << i;
+  }
+  // the moved returns of the kept turn (a share of all moved ones: 1.12 turns captured)
+  EXPECT_GT(dual.info.second_returns, a.size() / 20);
+  EXPECT_LT(dual.info.second_returns, moved);
+  EXPECT_EQ(single.info.second_returns, 0U);
+  // a pair whose blocks disagree in azimuth is not a dual-return packet
+  for (Record& r : c.records)
+    if (velodyne_record(r)) {
+      velodyne_payload(r)[100 + 2] ^= 1;
+      break;
+    }
+  const std::string p = (temp_dir("sensor_log_edited") / "dual_bad.pcap").string();
+  write_bytes(p, serialise(c));
+  EXPECT_TRUE(bad(read_sensor_log(p), p, "differ in azimuth"));
+}
+
+// ------------------------------------------------------------ bad input
+
 
 TEST(SensorLogErrors, NoLidarPackets) {
   LEX3D_REQUIRE_SHARED("velodyne/hdl32e_hdl32_example.pcap");

@@ -33,7 +33,7 @@ enum class Format : std::uint8_t {
   kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`;
              ///< read into lex3d's right-handed metric frame: x = z_in/100, y = -x_in/100, z = y_in/100
   kPcap,     ///< a raw spinning-lidar log: libpcap capture of Ouster (with its metadata JSON) or
-             ///< Velodyne (VLP-16, HDL-32E) UDP packets; read_cloud gives its first complete turn,
+             ///< Velodyne (VLP-16, Puck Hi-Res, HDL-32E, VLP-32C) UDP packets; read_cloud gives its first complete turn,
              ///< read_sensor_log (sensor_log.hpp) every turn
   kLas,      ///< ASPRS LAS 1.0-1.4 (`.las`, magic "LASF"), point data record formats 0-10: x y z (scale and
              ///< offset, the CRS's units read into metres about a georeference origin), intensity, RGB as

@@ -13,7 +13,9 @@
 ///   the "sensor" frame (lidar_to_sensor_transform), so the geometry reproduces it exactly.
 ///   Intensity is the reflectivity channel. Zero-range pixels are no-returns (counted, not
 ///   points); the dual profile's second returns are counted and not kept.
-/// - Velodyne VLP-16 and HDL-32E with the published per-model elevation tables. Rings are the
+/// - Velodyne VLP-16, Puck Hi-Res, HDL-32E and VLP-32C, single or dual return (the last
+///   return kept, the other counted), with the published per-model tables (elevation, and
+///   the VLP-32C's azimuth offsets) and firing timing. Rings are the
 ///   lasers ordered by elevation, lowest first (ring 0 = lowest beam); a column is one firing
 ///   of all lasers, counted from the start of its turn. A turn is 360° of azimuth starting at
 ///   the log's first firing (so a log of 1.1 turns gives one). The points use each firing's
@@ -64,6 +66,10 @@ struct SensorLog {
   std::vector<std::uint64_t> frame_ids;        ///< Ouster frame_id, or the turn's index (Velodyne)
   std::vector<std::size_t> no_returns;         ///< per scan
 };
+
+/// The Velodyne models a capture is read as (`ReadOptions::sensor_model` keys): "vlp16",
+/// "puck-hires", "hdl32e", "vlp32c".
+[[nodiscard]] std::vector<std::string> velodyne_models();
 
 /// True when `path` is named `.pcap`/`.pcapng` or starts with a libpcap or pcapng magic number.
 [[nodiscard]] bool is_sensor_log(const std::string& path);
