@@ -175,6 +175,26 @@ def velodyne():
         t_us += 1327
         packets.append(bytes(p))
     put("pcap", "vlp16.pcap", pcap_file(packets, 1327.104, 2368))
+    # VLP-32C, dual return: each firing twice in a pair of blocks with one azimuth (the last
+    # return, then the strongest, 10 cm farther on every fifth laser), packets twice as often.
+    packets = []
+    az = 35500
+    t_us = 0
+    for k in range(40):
+        p = bytearray()
+        for b in range(6):
+            last, strongest = bytearray(), bytearray()
+            for f in range(32):
+                d = int((8.0 + 0.5 * math.cos(0.01 * (az + 7 * f))) / 0.004) if (f + k) % 9 else 0
+                last += struct.pack("<HB", d, 20 + f)
+                strongest += struct.pack("<HB", d + 25 if d and f % 5 == 0 else d, 60 + f)
+            p += struct.pack("<HH", 0xEEFF, az % 36000) + last
+            p += struct.pack("<HH", 0xEEFF, az % 36000) + strongest
+            az += 200
+        p += struct.pack("<IBB", t_us, 0x39, 0x28)
+        t_us += 332
+        packets.append(bytes(p))
+    put("pcap", "vlp32c_dual.pcap", pcap_file(packets, 331.776, 2368))
 
 
 def ouster():
