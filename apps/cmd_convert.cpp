@@ -78,8 +78,8 @@ void register_convert(CLI::App& app) {
   sub->add_option("input", o->input, "Point cloud or raw lidar log (.pcap)")->required();
   sub->add_option("output", o->output, "Output (.pcd, .ply, .bin, .xyz/.txt; numbered _000, _001... for several turns), or .bag: one ROS bag, a PointCloud2 message a scan")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
-  sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
-  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e or vlp32c (default: detected from the packets)");
+  sub->add_option("--metadata", o->metadata, "Metadata of a pcap: an Ouster metadata JSON, or a Velodyne calibration (db.xml, VeloView XML or the ROS driver's YAML; needed for an HDL-64E) (default: the .json, .xml, .yaml or .yml beside it, same stem)");
+  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e, vlp32c or hdl64e (default: detected from the packets)");
   sub->add_option("--topic", o->topic, "The topic of a ROS bag to read (default: its only point cloud topic)");
   sub->add_option("--sensor", o->sensor,
                   "Sensor profile (formats/sensor_profile.md): write each point's laser by its table as the ring field");

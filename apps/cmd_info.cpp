@@ -590,8 +590,8 @@ void register_info(CLI::App& app) {
   sub->footer("Examples:\n  lex3d info scan.las\n  lex3d info model.lex3dm --json");
   sub->add_option("file", o->path, "Point cloud (.bin, .pcd, .ply, .xyz/.txt, .3d), or a lex3d model, alphabet or sequence file")->required();
   sub->add_option("--format", o->format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
-  sub->add_option("--metadata", o->metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
-  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e or vlp32c (default: detected from the packets)");
+  sub->add_option("--metadata", o->metadata, "Metadata of a pcap: an Ouster metadata JSON, or a Velodyne calibration (db.xml, VeloView XML or the ROS driver's YAML; needed for an HDL-64E) (default: the .json, .xml, .yaml or .yml beside it, same stem)");
+  sub->add_option("--sensor-model", o->sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e, vlp32c or hdl64e (default: detected from the packets)");
   sub->add_option("--sensor", o->sensor,
                   "A point cloud: how it fits this sensor profile (formats/sensor_profile.md); exit 2 if it does not");
   sub->add_option("--alphabet", o->alphabet, "The alphabet file a model references (for its counts)");

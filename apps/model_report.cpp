@@ -38,8 +38,8 @@ ModelParams ModelOptions::params() const {
 
 void ScanSetOptions::add_to(CLI::App& app) {
   app.add_option("--format", format, "Input format: auto, kitti, binxyz, pcd, ply, xyz, uos, pcap");
-  app.add_option("--metadata", metadata, "Metadata JSON of an Ouster pcap (default: the .json beside it, same stem)");
-  app.add_option("--sensor-model", sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e or vlp32c (default: detected from the packets)");
+  app.add_option("--metadata", metadata, "Metadata of a pcap: an Ouster metadata JSON, or a Velodyne calibration (db.xml, VeloView XML or the ROS driver's YAML; needed for an HDL-64E) (default: the .json, .xml, .yaml or .yml beside it, same stem)");
+  app.add_option("--sensor-model", sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e, vlp32c or hdl64e (default: detected from the packets)");
   app.add_option("--topic", topic, "The topic of a ROS bag to read (default: its only PointCloud2 or Ouster packet topic)");
   app.add_option("--poses", poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
   app.add_option("--input-frame", input_frame,

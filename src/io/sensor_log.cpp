@@ -22,16 +22,18 @@ bool is_file(const std::string& p) {
   return ::stat(p.c_str(), &st) == 0 && S_ISREG(st.st_mode);
 }
 
-/// The metadata beside a capture: `<stem>.json`, else the JSON named by the stem cut at
-/// its last '_' (repeatedly): `OS-1-128_1024x10_run3.pcap` finds `OS-1-128_1024x10.json`.
-/// The packets are checked against it (size, columns, serial number) when decoded.
-std::string metadata_beside(const std::string& path) {
+/// The metadata beside a capture: `<stem>.json` (or another of `extensions`, in their
+/// order), else the file named by the stem cut at its last '_' (repeatedly):
+/// `OS-1-128_1024x10_run3.pcap` finds `OS-1-128_1024x10.json`. The packets are checked
+/// against it (size, columns, serial number, laser count) when decoded.
+std::string metadata_beside(const std::string& path, std::initializer_list<const char*> extensions = {".json"}) {
   const std::size_t slash = path.find_last_of('/');
   const std::size_t dot = path.find_last_of('.');
   std::string stem = (dot == std::string::npos || (slash != std::string::npos && dot < slash)) ? path : path.substr(0, dot);
   const std::size_t dir_end = slash == std::string::npos ? 0 : slash + 1;
   for (;;) {
-    if (is_file(stem + ".json")) return stem + ".json";
+    for (const char* ext : extensions)
+      if (is_file(stem + ext)) return stem + ext;
     const std::size_t cut = stem.find_last_of('_');
     if (cut == std::string::npos || cut < dir_end + 1) return {};
     stem.resize(cut);
@@ -47,7 +49,12 @@ StatusOr<SensorLog> read_sensor_log_impl(const std::string& path, const ReadOpti
   std::size_t velodyne = 0;
   for (const auto& d : datagrams) velodyne += detail::is_velodyne_packet(d.payload) ? 1 : 0;
   std::string metadata = options.metadata_path;
-  if (!metadata.empty() || velodyne == 0) {
+  const bool ouster_json = detail::extension_lower(metadata) == ".json";
+  if (velodyne > 0 && !ouster_json) {
+    // a Velodyne calibration given, or beside the capture (db.xml or the ROS driver's YAML)
+    if (metadata.empty()) metadata = metadata_beside(path, {".xml", ".yaml", ".yml"});
+    s = detail::decode_velodyne(path, options.sensor_model, metadata, datagrams, log);
+  } else {
     if (metadata.empty()) metadata = metadata_beside(path);
     if (metadata.empty()) {
       const std::string what = datagrams.empty()
@@ -59,8 +66,6 @@ StatusOr<SensorLog> read_sensor_log_impl(const std::string& path, const ReadOpti
       return bad_data(detail::msg(path, what));
     }
     s = detail::decode_ouster(path, metadata, datagrams, log);
-  } else {
-    s = detail::decode_velodyne(path, options.sensor_model, datagrams, log);
   }
   if (!s.ok()) return s;
   if (log.scans.empty())

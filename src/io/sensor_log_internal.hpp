@@ -52,9 +52,11 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
 /// True when the payload looks like a Velodyne data packet (1206 bytes, first block flag).
 bool is_velodyne_packet(const std::vector<std::uint8_t>& payload);
 
-/// Velodyne VLP-16 / HDL-32E: decodes the data packets of `datagrams`; `model` overrides
-/// the detected model ("vlp16", "hdl32e"; empty: detect).
-Status decode_velodyne(const std::string& path, const std::string& model,
+/// Velodyne: decodes the data packets of `datagrams`; `model` overrides the detected model
+/// (a key of velodyne_models(); empty: detect); `calibration` (db.xml, VeloView XML or the
+/// ROS driver's YAML; empty: none) gives the lasers' angles and offsets, and is required
+/// for an HDL-64E.
+Status decode_velodyne(const std::string& path, const std::string& model, const std::string& calibration,
                        const std::vector<Datagram>& datagrams, SensorLog& log);
 
 }  // namespace lex3d::io::detail

@@ -18,8 +18,15 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <fstream>
+#include <map>
 #include <numeric>
+#include <optional>
+#include <string_view>
 
+#include <Eigen/Core>
+
+#include "core/xml_elements.hpp"
 #include "io/internal.hpp"
 #include "io/sensor_log_internal.hpp"
 
@@ -68,6 +75,10 @@ const Model kVlp32c{"VLP-32C", "vlp32c", 0x28, 32, 1, 55.296, 2.304, 2, 12 * 55.
                     {1.4, -4.2, 1.4, -1.4, 1.4, -1.4, 4.2, -1.4, 1.4, -4.2, 1.4, -1.4, 4.2, -1.4, 4.2, -1.4,
                      1.4, -4.2, 1.4, -4.2, 4.2, -1.4, 1.4, -1.4, 1.4, -1.4, 1.4, -4.2, 4.2, -1.4, 1.4, -1.4}};
 const Model* const kModels[] = {&kVlp16, &kPuckHiRes, &kHdl32, &kVlp32c};
+// The HDL-64E (S2, S3 single return): upper (lasers 0-31) and lower (32-63) blocks of one
+// azimuth, no factory byte, its angles from the unit's calibration only; points at their
+// block's azimuth (as the calibration's rotation corrections assume).
+const Model kHdl64{"HDL-64E", "hdl64e", 0x00, 64, 1, 0.0, 0.0, 1, 0.0, 0.002, {}, {}};
 
 const Model* by_product(std::uint8_t b) {
   for (const Model* m : kModels)
@@ -100,10 +111,242 @@ std::uint32_t le32(const std::uint8_t* p) {
 struct Firing {
   double azimuth_deg = 0.0;  // start of the firing, unwrapped across turns
   double step_deg = 0.0;     // azimuth advance over one firing period
-  std::array<std::uint16_t, 32> dist{};
-  std::array<std::uint8_t, 32> refl{};
-  std::array<bool, 32> second{};  // dual return: the pair's other block holds another return
+  std::array<std::uint16_t, 64> dist{};
+  std::array<std::uint8_t, 64> refl{};
+  std::array<bool, 64> second{};  // dual return: the pair's other block holds another return
 };
+
+/// One laser as its points are placed: at the firing's azimuth advanced by `share` of the
+/// firing step and by `azimuth_deg` (clockwise), elevation `elevation_deg`, the distance
+/// plus `dist_m`, from a beam origin `vert_offset_m` along the beam's upward normal and
+/// `horiz_offset_m` to its side (Velodyne's calibration model); with `two_point`, the
+/// HDL-64E S2 manual's near-range corrections (dist_x_m, dist_y_m) of x and y.
+struct Laser {
+  double elevation_deg = 0.0, azimuth_deg = 0.0, share = 0.0;
+  double dist_m = 0.0, vert_offset_m = 0.0, horiz_offset_m = 0.0;
+  bool two_point = false;
+  double dist_x_m = 0.0, dist_y_m = 0.0;
+};
+
+/// A calibration file's lasers (by laser id) and distance unit (0: not given).
+struct Calibration {
+  std::vector<Laser> lasers;
+  double range_unit_m = 0.0;
+};
+
+Status calibration_error(const std::string& origin, const std::string& what) { return bad_data(msg(origin, what)); }
+
+/// Checks a laser's values; an error names the laser and the field.
+std::optional<std::string> check_laser(const Laser& l, std::size_t id) {
+  const auto outside = [&](const char* name, double v, double limit) -> std::optional<std::string> {
+    if (std::isfinite(v) && std::abs(v) <= limit) return std::nullopt;
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return "laser " + std::to_string(id) + ": " + name + " " + buf + " is not a number within +-" +
+           std::to_string(static_cast<int>(limit));
+  };
+  for (auto e : {outside("elevation (degrees)", l.elevation_deg, 90), outside("rotation (degrees)", l.azimuth_deg, 180),
+                 outside("distance correction (m)", l.dist_m, 10), outside("x distance correction (m)", l.dist_x_m, 10),
+                 outside("y distance correction (m)", l.dist_y_m, 10), outside("vertical offset (m)", l.vert_offset_m, 10),
+                 outside("horizontal offset (m)", l.horiz_offset_m, 10)})
+    if (e) return e;
+  return std::nullopt;
+}
+
+/// Lasers by id, which must be 0..n-1, each once.
+StatusOr<Calibration> by_ids(const std::string& origin, std::vector<std::pair<long, Laser>> found, double unit) {
+  if (found.empty()) return calibration_error(origin, "no laser found in the calibration");
+  if (found.size() > 64) return calibration_error(origin, std::to_string(found.size()) + " lasers, more than 64");
+  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  Calibration c;
+  c.range_unit_m = unit;
+  for (std::size_t k = 0; k < found.size(); ++k) {
+    if (found[k].first != static_cast<long>(k))
+      return calibration_error(origin, "laser ids are not 0.." + std::to_string(found.size() - 1) + " each once (" +
+                                           std::to_string(k) + ")");
+    if (auto e = check_laser(found[k].second, k)) return calibration_error(origin, *e);
+    c.lasers.push_back(found[k].second);
+  }
+  if (!(unit == 0.0 || (std::isfinite(unit) && unit > 0.0 && unit <= 0.1)))
+    return calibration_error(origin, "distance resolution is not within (0, 0.1] m");
+  return c;
+}
+
+/// Velodyne's db.xml or VeloView's calibration XML: distLSB_ (cm) and one <px> a laser with
+/// id_, vertCorrection_ and rotCorrection_ (degrees; the rotation is subtracted from the
+/// firing's azimuth), distCorrection_, distCorrectionX_, distCorrectionY_,
+/// vertOffsetCorrection_ and horizOffsetCorrection_ (cm).
+StatusOr<Calibration> parse_calibration_xml(std::string_view text, const std::string& origin) {
+  double unit = 0.0;
+  if (const auto lsb = ::lex3d::detail::xml_element(text, "distLSB_")) {
+    const auto v = ::lex3d::detail::text_number(lsb->first);
+    if (!v) return calibration_error(origin, "distLSB_ is not a number");
+    unit = *v / 100.0;
+  }
+  std::vector<std::pair<long, Laser>> found;
+  std::size_t at = 0;
+  while (const auto px = ::lex3d::detail::xml_element(text, "px", at)) {
+    at = px->second;
+    const std::string where = "laser entry " + std::to_string(found.size()) + ": ";
+    const auto number = [&](const char* name, std::optional<double>& out) -> std::optional<std::string> {
+      const auto e = ::lex3d::detail::xml_element(px->first, name);
+      if (!e) return std::nullopt;
+      out = ::lex3d::detail::text_number(e->first);
+      if (!out) return where + name + " is not a number";
+      return std::nullopt;
+    };
+    std::optional<double> id, vert, rot, dist, dist_x, dist_y, vert_off, horiz_off;
+    for (auto e : {number("id_", id), number("vertCorrection_", vert), number("rotCorrection_", rot),
+                   number("distCorrection_", dist), number("distCorrectionX_", dist_x),
+                   number("distCorrectionY_", dist_y), number("vertOffsetCorrection_", vert_off),
+                   number("horizOffsetCorrection_", horiz_off)})
+      if (e) return calibration_error(origin, *e);
+    if (!id || *id != std::floor(*id) || *id < 0 || *id > 1023)
+      return calibration_error(origin, where + "id_ is missing or not a laser number");
+    if (!vert) return calibration_error(origin, where + "vertCorrection_ is missing");
+    Laser l;
+    l.elevation_deg = *vert;
+    l.azimuth_deg = rot ? -*rot : 0.0;
+    l.dist_m = dist ? *dist / 100.0 : 0.0;
+    l.vert_offset_m = vert_off ? *vert_off / 100.0 : 0.0;
+    l.horiz_offset_m = horiz_off ? *horiz_off / 100.0 : 0.0;
+    l.two_point = dist_x.has_value() && dist_y.has_value();
+    l.dist_x_m = dist_x ? *dist_x / 100.0 : l.dist_m;
+    l.dist_y_m = dist_y ? *dist_y / 100.0 : l.dist_m;
+    found.emplace_back(static_cast<long>(*id), l);
+  }
+  return by_ids(origin, std::move(found), unit);
+}
+
+/// The YAML of the ROS velodyne driver: distance_resolution (m) and a list `lasers` of
+/// laser_id, vert_correction and rot_correction (radians; the rotation is subtracted from
+/// the firing's azimuth), dist_correction, dist_correction_x, dist_correction_y,
+/// vert_offset_correction, horiz_offset_correction (m), two_pt_correction_available; each
+/// item in block style (`- key: value`, then `  key: value` lines) or flow style
+/// (`- {key: value, ...}`).
+StatusOr<Calibration> parse_calibration_yaml(std::string_view text, const std::string& origin) {
+  double unit = 0.0;
+  std::vector<std::map<std::string, std::string>> items;
+  std::size_t line_no = 0;
+  const auto trim = [](std::string_view t) {
+    while (!t.empty() && std::isspace(static_cast<unsigned char>(t.front()))) t.remove_prefix(1);
+    while (!t.empty() && std::isspace(static_cast<unsigned char>(t.back()))) t.remove_suffix(1);
+    return t;
+  };
+  const auto add_pairs = [&](std::string_view t, std::map<std::string, std::string>& into) -> bool {
+    // "k: v" or "k: v, k: v" (inside braces)
+    while (!t.empty()) {
+      const std::size_t comma = t.find(',');
+      const std::string_view pair = trim(t.substr(0, comma));
+      t = comma == std::string_view::npos ? std::string_view() : t.substr(comma + 1);
+      if (pair.empty()) continue;
+      const std::size_t colon = pair.find(':');
+      if (colon == std::string_view::npos) return false;
+      into[std::string(trim(pair.substr(0, colon)))] = std::string(trim(pair.substr(colon + 1)));
+    }
+    return true;
+  };
+  bool in_lasers = false;
+  while (!text.empty()) {
+    const std::size_t nl = text.find('\n');
+    std::string_view line = text.substr(0, nl);
+    text = nl == std::string_view::npos ? std::string_view() : text.substr(nl + 1);
+    ++line_no;
+    if (const std::size_t hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
+    const bool indented = !line.empty() && std::isspace(static_cast<unsigned char>(line.front()));
+    line = trim(line);
+    if (line.empty()) continue;
+    const std::string where = "line " + std::to_string(line_no) + ": ";
+    if (line.front() == '-') {
+      if (!in_lasers) return calibration_error(origin, where + "a list item outside `lasers:`");
+      std::string_view rest = trim(line.substr(1));
+      items.emplace_back();
+      if (!rest.empty() && rest.front() == '{') {
+        if (rest.back() != '}') return calibration_error(origin, where + "a flow mapping without its closing brace");
+        rest = rest.substr(1, rest.size() - 2);
+      }
+      if (!add_pairs(rest, items.back())) return calibration_error(origin, where + "not `key: value`");
+      continue;
+    }
+    if (indented && in_lasers && !items.empty()) {
+      if (!add_pairs(line, items.back())) return calibration_error(origin, where + "not `key: value`");
+      continue;
+    }
+    std::map<std::string, std::string> top;
+    if (!add_pairs(line, top) || top.size() != 1) return calibration_error(origin, where + "not `key: value`");
+    const auto& [key, value] = *top.begin();
+    in_lasers = key == "lasers";
+    if (key == "distance_resolution") {
+      const auto v = ::lex3d::detail::text_number(value);
+      if (!v) return calibration_error(origin, where + "distance_resolution is not a number");
+      unit = *v;
+    }
+  }
+  std::vector<std::pair<long, Laser>> found;
+  for (std::size_t k = 0; k < items.size(); ++k) {
+    const auto& m = items[k];
+    const std::string where = "laser entry " + std::to_string(k) + ": ";
+    const auto number = [&](const char* name, double& out, bool required) -> std::optional<std::string> {
+      const auto it = m.find(name);
+      if (it == m.end()) return required ? std::optional<std::string>(where + name + " is missing") : std::nullopt;
+      const auto v = ::lex3d::detail::text_number(it->second);
+      if (!v) return where + name + " is not a number";
+      out = *v;
+      return std::nullopt;
+    };
+    double id = -1, vert = 0, rot = 0;
+    Laser l;
+    for (auto e : {number("laser_id", id, true), number("vert_correction", vert, true),
+                   number("rot_correction", rot, false), number("dist_correction", l.dist_m, false),
+                   number("vert_offset_correction", l.vert_offset_m, false),
+                   number("horiz_offset_correction", l.horiz_offset_m, false)})
+      if (e) return calibration_error(origin, *e);
+    l.dist_x_m = l.dist_y_m = l.dist_m;
+    for (auto e : {number("dist_correction_x", l.dist_x_m, false), number("dist_correction_y", l.dist_y_m, false)})
+      if (e) return calibration_error(origin, *e);
+    if (id != std::floor(id) || id < 0 || id > 1023) return calibration_error(origin, where + "laser_id is not a laser number");
+    const auto two = m.find("two_pt_correction_available");
+    l.two_point = two != m.end() && (to_lower(two->second) == "true" || two->second == "1");
+    l.elevation_deg = vert * 180.0 / M_PI;
+    l.azimuth_deg = -rot * 180.0 / M_PI;
+    found.emplace_back(static_cast<long>(id), l);
+  }
+  return by_ids(origin, std::move(found), unit);
+}
+
+StatusOr<Calibration> read_calibration(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status(ErrorCode::kIoError, msg(path, "cannot open the calibration file"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (text.size() > (16U << 20)) return calibration_error(path, "larger than 16 MB: not a calibration file");
+  std::size_t first = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
+  while (first < text.size() && std::isspace(static_cast<unsigned char>(text[first]))) ++first;
+  if (first == text.size()) return calibration_error(path, "the calibration file is empty");
+  if (text[first] == '<') return parse_calibration_xml(text, path);
+  return parse_calibration_yaml(text, path);
+}
+
+/// A point of laser `l` at distance `d` (metres, the laser's correction added) and azimuth
+/// `alpha` (radians, clockwise from +y).
+Eigen::Vector3f place(const Laser& l, double cw, double sw, double d, double alpha) {
+  const double sa = std::sin(alpha), ca = std::cos(alpha);
+  double xy = d * cw - l.vert_offset_m * sw;
+  double x = xy * sa - l.horiz_offset_m * ca;
+  double y = xy * ca + l.horiz_offset_m * sa;
+  double z = d * sw + l.vert_offset_m * cw;
+  if (l.two_point) {
+    // The HDL-64E S2 manual's two-point calibration: the distance correction of x moves
+    // linearly from dist_x_m at |x| = 2.4 m to dist_m at 25.04 m, that of y (and z) from
+    // dist_y_m at |y| = 1.93 m.
+    const double cx = (l.dist_m - l.dist_x_m) * (std::abs(x) - 2.4) / (25.04 - 2.4) + l.dist_x_m - l.dist_m;
+    const double cy = (l.dist_m - l.dist_y_m) * (std::abs(y) - 1.93) / (25.04 - 1.93) + l.dist_y_m - l.dist_m;
+    x = ((d + cx) * cw - l.vert_offset_m * sw) * sa - l.horiz_offset_m * ca;
+    xy = (d + cy) * cw - l.vert_offset_m * sw;
+    y = xy * ca + l.horiz_offset_m * sa;
+    z = (d + cy) * sw + l.vert_offset_m * cw;
+  }
+  return {static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
+}
 
 double median(std::vector<double> v) {
   if (v.empty()) return std::nan("");
@@ -118,14 +361,14 @@ bool is_velodyne_packet(const std::vector<std::uint8_t>& payload) {
   return payload.size() == kPacketBytes && payload[0] == 0xFF && (payload[1] == 0xEE || payload[1] == 0xDD);
 }
 
-Status decode_velodyne(const std::string& path, const std::string& model_key, const std::vector<Datagram>& datagrams,
-                       SensorLog& log) {
+Status decode_velodyne(const std::string& path, const std::string& model_key, const std::string& calibration_path,
+                       const std::vector<Datagram>& datagrams, SensorLog& log) {
   SensorLogInfo& info = log.info;
   info.vendor = "velodyne";
   std::vector<const Datagram*> packets;
   for (const auto& d : datagrams) {
     if (d.truncated && (d.dst_port == 2368 || d.claimed == kPacketBytes ||
-                        (d.payload.size() >= 2 && d.payload[0] == 0xFF && d.payload[1] == 0xEE)))
+                        (d.payload.size() >= 2 && d.payload[0] == 0xFF && (d.payload[1] == 0xEE || d.payload[1] == 0xDD))))
       return bad_data(msg(path, "capture record " + std::to_string(d.record) + ": Velodyne data packet truncated: " +
                                     std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
                                     " bytes captured"));
@@ -135,12 +378,26 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   if (packets.empty()) return bad_data(msg(path, "no Velodyne data packets"));
   info.lidar_packets = packets.size();
 
+  // A calibration file (db.xml, VeloView's XML or the ROS driver's YAML) gives the lasers'
+  // angles and offsets; an HDL-64E (upper 0xEEFF and lower 0xDDFF blocks) needs one.
+  std::optional<Calibration> calibration;
+  if (!calibration_path.empty()) {
+    auto c = read_calibration(calibration_path);
+    if (!c.ok()) return c.status();
+    calibration = std::move(c).value();
+    info.metadata_path = calibration_path;
+  }
+  bool lower_blocks = false;
+  for (std::size_t k = 0; k < kBlocks; ++k) lower_blocks = lower_blocks || packets.front()->payload[k * 100 + 1] == 0xDD;
+  const bool hdl64 = lower_blocks || to_lower(model_key) == kHdl64.key;
+
   // The model: the factory byte, checked against the packet period (the firing timing is
-  // fixed per model, the azimuth step is not: it follows the motor speed).
+  // fixed per model, the azimuth step is not: it follows the motor speed). An HDL-64E has
+  // no factory byte (its last two bytes are status): its blocks tell it.
   const std::uint8_t product = packets.front()->payload[1205];
   const std::uint8_t mode = packets.front()->payload[1204];
   for (const Datagram* d : packets) {
-    if (d->payload[1205] != product || d->payload[1204] != mode)
+    if (!hdl64 && (d->payload[1205] != product || d->payload[1204] != mode))
       return bad_data(msg(path, "capture record " + std::to_string(d->record) +
                                     ": the factory bytes change within the capture (two sensors on one port?)"));
   }
@@ -152,7 +409,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   }
   const double period_us = median(dt);
   // Dual-return packets hold half the firings of single-return ones: twice as many.
-  const bool dual = mode == 0x39;
+  const bool dual = !hdl64 && mode == 0x39;
   const double packet_share = dual ? 0.5 : 1.0;
   const auto timing_fits = [&](const Model* m) {
     return std::isfinite(period_us) && std::abs(period_us - m->packet_us * packet_share) < 0.1 * m->packet_us * packet_share;
@@ -166,7 +423,18 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   std::snprintf(period_text, sizeof period_text, "%.0f", period_us);
   std::string keys;
   for (const Model* m : kModels) keys += std::string(keys.empty() ? "" : ", ") + m->key;
-  if (!model_key.empty()) {
+  keys += std::string(", ") + kHdl64.key;
+  if (hdl64) {
+    if (!model_key.empty() && to_lower(model_key) != kHdl64.key)
+      return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key, 32) +
+                                               "' does not fit the capture: its upper and lower blocks are an HDL-64E's"};
+    if (!calibration)
+      return bad_data(msg(path, "an HDL-64E capture needs the sensor's calibration (db.xml or the ROS driver's YAML, "
+                                "beside the capture with its stem or given with --metadata)"));
+    model = &kHdl64;
+    info.model_note = lower_blocks ? "upper and lower blocks (HDL-64E); calibration " + calibration_path
+                                   : "given: HDL-64E; calibration " + calibration_path;
+  } else if (!model_key.empty()) {
     const std::string k = to_lower(model_key);
     for (const Model* m : kModels)
       if (k == m->key) model = m;
@@ -190,37 +458,67 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     std::string names;
     for (const Model* m : kModels) names += std::string(names.empty() ? "" : ", ") + m->name;
     return bad_data(msg(path, "Velodyne " + product_name(product) + " (factory byte " + hex(product) +
-                                  ") is not supported (" + names + "; give --sensor-model to read it as one)"));
+                                  ") is not supported (" + names + "; HDL-64E with its calibration; give --sensor-model to read it as one)"));
   }
-  if (mode != 0x37 && mode != 0x38 && mode != 0x39)
+  if (!hdl64 && mode != 0x37 && mode != 0x38 && mode != 0x39)
     return bad_data(msg(path, "Velodyne return mode byte " + hex(mode) + " is not one of 0x37 (strongest), 0x38 (last), 0x39 (dual)"));
   info.sensor = model->name;
-  info.profile = mode == 0x37 ? "strongest" : mode == 0x38 ? "last" : "dual (last return kept)";
+  info.profile = hdl64 ? "single return" : mode == 0x37 ? "strongest" : mode == 0x38 ? "last" : "dual (last return kept)";
   info.lasers = model->lasers;
 
+  // The lasers: the model's published table, or the calibration's (its laser count must be
+  // the model's); the range unit the calibration's where it gives one.
+  std::vector<Laser> lasers(model->lasers);
+  double range_unit = model->range_unit_m;
+  // (laser l fires slot_us · its slot after the sequence starts: that share of the firing step)
+  for (unsigned l = 0; l < model->lasers; ++l) {
+    lasers[l].share = model->firing_us > 0.0 ? (l / model->lasers_per_slot) * model->slot_us / model->firing_us : 0.0;
+    if (l < 32) {
+      lasers[l].elevation_deg = model->elevation_deg[l];
+      lasers[l].azimuth_deg = model->azimuth_deg[l];
+    }
+  }
+  if (calibration) {
+    if (calibration->lasers.size() != model->lasers)
+      return bad_data(msg(calibration_path, "the calibration has " + std::to_string(calibration->lasers.size()) +
+                                                " lasers, the " + model->name + " capture " + std::to_string(model->lasers)));
+    for (unsigned l = 0; l < model->lasers; ++l) {
+      const double share = lasers[l].share;
+      lasers[l] = calibration->lasers[l];
+      lasers[l].share = share;
+    }
+    if (calibration->range_unit_m > 0.0) range_unit = calibration->range_unit_m;
+  }
+
   // Firings in capture order, the azimuth unwrapped. A dual-return packet's block pairs
-  // share an azimuth: the first block of each pair is the firing kept.
-  const std::size_t block_stride = dual ? 2 : 1, kept_blocks = kBlocks / block_stride;
+  // share an azimuth: the first block of each pair is the firing kept. An HDL-64E's upper
+  // and lower blocks of one azimuth make one firing of its 64 lasers.
+  const std::size_t block_stride = dual || hdl64 ? 2 : 1;
   std::vector<Firing> firings;
-  firings.reserve(packets.size() * kept_blocks * model->firings_per_block);
+  firings.reserve(packets.size() * (kBlocks / block_stride) * model->firings_per_block);
   double unwrap = 0.0, prev = -1.0, last_gap = std::nan("");
   for (const Datagram* d : packets) {
     const std::uint8_t* b = d->payload.data();
     std::array<double, kBlocks> az{};
     for (std::size_t k = 0; k < kBlocks; ++k) {
       const std::uint8_t* blk = b + k * 100;
-      if (blk[0] != 0xFF || blk[1] != 0xEE)
+      const std::uint8_t want = hdl64 && k % 2 == 1 ? 0xDD : 0xEE;
+      if (blk[0] != 0xFF || blk[1] != want)
         return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": block " + std::to_string(k) +
                                       " has flag " + hex(blk[0]) + hex(blk[1]).substr(2) +
-                                      (blk[1] == 0xDD ? " (an HDL-64E upper/lower block: not supported)" : " (not a data block)")));
+                                      (hdl64 ? " (an HDL-64E's blocks alternate upper 0xFFEE and lower 0xFFDD)"
+                                             : blk[1] == 0xDD ? " (an HDL-64E lower block in another model's packet)"
+                                                              : " (not a data block)")));
       const std::uint16_t a = le16(blk + 2);
       if (a >= 36000)
         return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": block " + std::to_string(k) +
                                       " azimuth " + std::to_string(a) + " is not below 36000 (0.01 degree units)"));
       az[k] = a / 100.0;
-      if (dual && k % 2 == 1 && le16(blk + 2) != le16(blk - 100 + 2))
-        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": dual-return blocks " +
-                                      std::to_string(k - 1) + " and " + std::to_string(k) + " differ in azimuth"));
+      if (block_stride == 2 && k % 2 == 1 && le16(blk + 2) != le16(blk - 100 + 2))
+        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": " +
+                                      (hdl64 ? "upper and lower blocks " : "dual-return blocks ") + std::to_string(k - 1) +
+                                      " and " + std::to_string(k) + " differ in azimuth" +
+                                      (hdl64 ? " (a dual-return HDL-64E S3 capture is not supported)" : "")));
     }
     for (std::size_t k = 0; k < kBlocks; k += block_stride) {
       const std::size_t next = k + block_stride;
@@ -239,7 +537,8 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
         f.azimuth_deg = a_unwrapped + block_step * s;
         f.step_deg = block_step;
         for (unsigned l = 0; l < model->lasers; ++l) {
-          const std::uint8_t* ch = blk + (s * model->lasers + l) * 3;
+          // (an HDL-64E's lasers 32-63 in the lower block, 100 bytes on)
+          const std::uint8_t* ch = hdl64 ? blk + (l / 32) * 100 + (l % 32) * 3 : blk + (s * model->lasers + l) * 3;
           f.dist[l] = le16(ch);
           f.refl[l] = ch[2];
           if (dual) {
@@ -256,7 +555,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   std::vector<unsigned> laser_of_ring(model->lasers);
   std::iota(laser_of_ring.begin(), laser_of_ring.end(), 0U);
   std::stable_sort(laser_of_ring.begin(), laser_of_ring.end(),
-                   [&](unsigned a, unsigned b) { return model->elevation_deg[a] < model->elevation_deg[b]; });
+                   [&](unsigned a, unsigned b) { return lasers[a].elevation_deg < lasers[b].elevation_deg; });
 
   // Turns: 360° of azimuth from the first firing on. A turn with a hole (an azimuth jump of
   // more than 5 firing steps: lost packets) is dropped and counted.
@@ -296,37 +595,47 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
       mean_offset += firings[i].azimuth_deg - (start + 360.0 * static_cast<double>(i - begin) / columns);
     start += mean_offset / static_cast<double>(columns);
     g.azimuth0 = std::remainder(M_PI / 2 - start * M_PI / 180.0, 2.0 * M_PI);
-    g.source = "model table";
+    g.source = calibration ? "calibration " + calibration_path : "model table";
     g.sensor = model->name;
-    // (laser l fires slot_us · its slot after the sequence starts: a share `frac` of the
-    // column's azimuth step; its beam points azimuth_deg further, clockwise)
-    const auto frac = [&](unsigned l) { return (l / model->lasers_per_slot) * model->slot_us / model->firing_us; };
     for (unsigned r = 0; r < model->lasers; ++r) {
-      const unsigned l = laser_of_ring[r];
-      g.elevation.push_back(model->elevation_deg[l] * M_PI / 180.0);
-      g.beam_azimuth.push_back(-model->azimuth_deg[l] * M_PI / 180.0);
-      g.column_azimuth.push_back(-(2.0 * M_PI / columns) * frac(l));
-      g.z_offset.push_back(0.0);
-      g.radial_offset.push_back(0.0);
+      const Laser& l = lasers[laser_of_ring[r]];
+      const double w = l.elevation_deg * M_PI / 180.0;
+      g.elevation.push_back(w);
+      // The beam points azimuth_deg clockwise of its firing's column, fired `share` of a
+      // step after it; its origin lies vert_offset along the beam's upward normal (height
+      // vert_offset·cos w, vert_offset·sin w behind it) and horiz_offset to its side:
+      // radially at angle psi from the beam's azimuth (counter-clockwise).
+      const double beam = -(2.0 * M_PI / columns) * l.share - l.azimuth_deg * M_PI / 180.0;
+      const double along = -l.vert_offset_m * std::sin(w), side = l.horiz_offset_m;
+      const double radial = std::hypot(along, side);
+      const double psi = radial > 0.0 ? std::atan2(side, along) : 0.0;
+      if (radial > 0.0) {
+        g.column_azimuth.push_back(beam + psi);
+        g.beam_azimuth.push_back(-psi);
+      } else {
+        g.column_azimuth.push_back(-(2.0 * M_PI / columns) * l.share);
+        g.beam_azimuth.push_back(-l.azimuth_deg * M_PI / 180.0);
+      }
+      g.z_offset.push_back(l.vert_offset_m * std::cos(w));
+      g.radial_offset.push_back(radial);
     }
     std::size_t no_returns = 0;
     for (unsigned r = 0; r < model->lasers; ++r) {
-      const unsigned l = laser_of_ring[r];
+      const unsigned id = laser_of_ring[r];
+      const Laser& l = lasers[id];
       const double w = g.elevation[r];
       const double cw = std::cos(w), sw = std::sin(w);
-      const double share = frac(l);
       for (std::size_t i = begin; i < end; ++i) {
         const Firing& f = firings[i];
-        info.second_returns += f.second[l] ? 1 : 0;
-        if (f.dist[l] == 0) {
+        info.second_returns += f.second[id] ? 1 : 0;
+        if (f.dist[id] == 0) {
           ++no_returns;
           continue;
         }
-        const double d = f.dist[l] * model->range_unit_m;
-        const double a = (f.azimuth_deg + f.step_deg * share + model->azimuth_deg[l]) * M_PI / 180.0;
-        cloud.points.emplace_back(static_cast<float>(d * cw * std::sin(a)), static_cast<float>(d * cw * std::cos(a)),
-                                  static_cast<float>(d * sw));
-        cloud.intensity.push_back(static_cast<float>(f.refl[l]));
+        const double d = f.dist[id] * range_unit + l.dist_m;
+        const double a = (f.azimuth_deg + f.step_deg * l.share + l.azimuth_deg) * M_PI / 180.0;
+        cloud.points.push_back(place(l, cw, sw, d, a));
+        cloud.intensity.push_back(static_cast<float>(f.refl[id]));
         cloud.ring.push_back(static_cast<std::uint16_t>(r));
         cloud.column.push_back(static_cast<std::uint32_t>(i - begin));
       }
@@ -355,6 +664,7 @@ namespace lex3d::io {
 std::vector<std::string> velodyne_models() {
   std::vector<std::string> keys;
   for (const auto* m : detail::kModels) keys.emplace_back(m->key);
+  keys.emplace_back(detail::kHdl64.key);
   return keys;
 }
 

@@ -16,6 +16,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/xml_elements.hpp"
+
 namespace lex3d::residual {
 namespace {
 
@@ -138,61 +140,26 @@ StatusOr<SensorProfile> parse_json(std::string_view text, const std::string& ori
 // Velodyne db.xml / VeloView calibration XML (boost serialization)
 // ---------------------------------------------------------------------------------------
 
-/// The text between `<name>` (or `<name attributes>`) and `</name>` in [begin, end), and
-/// where the element ends; nullopt when absent.
-std::optional<std::pair<std::string_view, std::size_t>> element(std::string_view s, std::string_view name,
-                                                                std::size_t begin = 0) {
-  std::size_t at = begin;
-  while (true) {
-    at = s.find('<', at);
-    if (at == std::string_view::npos) return std::nullopt;
-    const std::size_t n = at + 1;
-    if (s.compare(n, name.size(), name) == 0 && n + name.size() < s.size() &&
-        (s[n + name.size()] == '>' || s[n + name.size()] == ' ' || s[n + name.size()] == '\t' ||
-         s[n + name.size()] == '\n' || s[n + name.size()] == '\r')) {
-      const std::size_t open_end = s.find('>', n);
-      if (open_end == std::string_view::npos) return std::nullopt;
-      const std::string close = "</" + std::string(name) + ">";
-      const std::size_t close_at = s.find(close, open_end + 1);
-      if (close_at == std::string_view::npos) return std::nullopt;
-      return std::make_pair(s.substr(open_end + 1, close_at - open_end - 1), close_at + close.size());
-    }
-    at = n;
-  }
-}
-
-/// A number as the whole text of an element (surrounding blanks allowed).
-std::optional<double> parse_number(std::string_view t) {
-  while (!t.empty() && std::isspace(static_cast<unsigned char>(t.front()))) t.remove_prefix(1);
-  while (!t.empty() && std::isspace(static_cast<unsigned char>(t.back()))) t.remove_suffix(1);
-  if (t.empty() || t.size() > 64) return std::nullopt;
-  const std::string s(t);
-  char* end = nullptr;
-  const double v = std::strtod(s.c_str(), &end);
-  if (end != s.c_str() + s.size()) return std::nullopt;
-  return v;
-}
-
 StatusOr<SensorProfile> parse_xml(std::string_view text, const std::string& origin) {
   SensorProfile p;
   p.origin = origin;
   p.sensor = "Velodyne (calibration XML)";
-  const auto lsb = element(text, "distLSB_");
+  const auto lsb = ::lex3d::detail::xml_element(text, "distLSB_");
   if (!lsb) return bad(origin, "distLSB_ is missing (the distance resolution, centimetres)");
-  const auto step_cm = parse_number(lsb->first);
+  const auto step_cm = ::lex3d::detail::text_number(lsb->first);
   if (!step_cm) return bad(origin, "distLSB_ is not a number");
   if (auto e = out_of_range("distLSB_", *step_cm, 0.0, 100.0, true)) return bad(origin, *e);
   p.range_step = *step_cm / 100.0;
   std::map<long, ProfileLaser> by_id;
   std::size_t at = 0;
-  while (auto px = element(text, "px", at)) {
+  while (auto px = ::lex3d::detail::xml_element(text, "px", at)) {
     at = px->second;
     const std::string where = "laser " + std::to_string(by_id.size()) + ": ";
     const auto field = [&](const char* name, bool required, double lo, double hi,
                            std::optional<double>& out) -> std::optional<std::string> {
-      const auto e = element(px->first, name);
+      const auto e = ::lex3d::detail::xml_element(px->first, name);
       if (!e) return required ? std::optional<std::string>(where + name + " is missing") : std::nullopt;
-      out = parse_number(e->first);
+      out = ::lex3d::detail::text_number(e->first);
       if (!out) return where + name + " is not a number";
       return out_of_range(where + name, *out, lo, hi);
     };

@@ -10,6 +10,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -589,6 +590,188 @@ TEST(SensorLog, DualReturnPacketsKeepTheLastReturnAndCountTheOthers) {
   const std::string p = (temp_dir("sensor_log_edited") / "dual_bad.pcap").string();
   write_bytes(p, serialise(c));
   EXPECT_TRUE(bad(read_sensor_log(p), p, "differ in azimuth"));
+}
+
+// ------------------------------------------------------------ HDL-64E with its calibration
+
+/// An HDL-64E-like calibration: 64 lasers from -24.8° to +2° (upper block above), rotation
+/// corrections within ±8°, distance corrections near 1.3 m, beam origins 15-22 cm up their
+/// normals and 2.6 cm to alternate sides (the ranges of real S2 calibrations).
+struct Calib64 {
+  double vert_deg[64], rot_deg[64], dist[64], vert_off[64], horiz_off[64];
+  Calib64() {
+    for (int l = 0; l < 64; ++l) {
+      const bool upper = l < 32;
+      const int k = upper ? l : l - 32;
+      vert_deg[l] = upper ? 2.0 - 0.34 * (k * 7 % 32) : -8.8 - 0.5 * (k * 5 % 32);
+      rot_deg[l] = 8.0 * std::sin(1.7 * l + 0.3);
+      dist[l] = 1.2 + 0.005 * ((l * 13) % 40);
+      vert_off[l] = upper ? 0.215 - 0.0004 * k : 0.160 - 0.0005 * k;
+      horiz_off[l] = l % 2 == 0 ? 0.026 : -0.026;
+    }
+  }
+  [[nodiscard]] std::string yaml() const {
+    std::string y = "distance_resolution: 0.002\nlasers:\n";
+    char buf[512];
+    for (int l = 0; l < 64; ++l) {
+      std::snprintf(buf, sizeof buf,
+                    "- dist_correction: %.17g\n  dist_correction_x: %.17g\n  dist_correction_y: %.17g\n"
+                    "  laser_id: %d\n  rot_correction: %.17g\n  two_pt_correction_available: false\n"
+                    "  vert_correction: %.17g\n  vert_offset_correction: %.17g\n  horiz_offset_correction: %.17g\n",
+                    dist[l], dist[l], dist[l], l, rot_deg[l] * M_PI / 180, vert_deg[l] * M_PI / 180, vert_off[l],
+                    horiz_off[l]);
+      y += buf;
+    }
+    return y + "num_lasers: 64\n";
+  }
+  [[nodiscard]] std::string xml() const {  // db.xml: degrees and centimetres
+    std::string x = "<?xml version=\"1.0\"?>\n<boost_serialization>\n<DB>\n<distLSB_>0.2</distLSB_>\n<points_>\n";
+    char buf[512];
+    for (int l = 0; l < 64; ++l) {
+      std::snprintf(buf, sizeof buf,
+                    "<item><px><id_>%d</id_><rotCorrection_>%.17g</rotCorrection_><vertCorrection_>%.17g</vertCorrection_>"
+                    "<distCorrection_>%.17g</distCorrection_><vertOffsetCorrection_>%.17g</vertOffsetCorrection_>"
+                    "<horizOffsetCorrection_>%.17g</horizOffsetCorrection_></px></item>\n",
+                    l, rot_deg[l], vert_deg[l], dist[l] * 100, vert_off[l] * 100, horiz_off[l] * 100);
+      x += buf;
+    }
+    return x + "</points_>\n</DB>\n</boost_serialization>\n";
+  }
+};
+
+/// Distance along laser l's beam fired at Velodyne azimuth `alpha_deg` (clockwise from +y)
+/// to a scene of a floor 1.73 m below the sensor and a round wall 18 m from its axis;
+/// 0 where it hits neither within 120 m.
+double scene_distance(const Calib64& c, int l, double alpha_deg) {
+  const double w = c.vert_deg[l] * M_PI / 180, th = (alpha_deg - c.rot_deg[l]) * M_PI / 180;
+  const double v = c.vert_off[l], h = c.horiz_off[l];
+  const Eigen::Vector3d o(-v * std::sin(w) * std::sin(th) - h * std::cos(th), -v * std::sin(w) * std::cos(th) + h * std::sin(th),
+                          v * std::cos(w));
+  const Eigen::Vector3d u(std::cos(w) * std::sin(th), std::cos(w) * std::cos(th), std::sin(w));
+  double t = 1e9;
+  if (u.z() < 0) t = (-1.73 - o.z()) / u.z();
+  const double a = u.x() * u.x() + u.y() * u.y(), b = 2 * (o.x() * u.x() + o.y() * u.y()),
+               cc = o.x() * o.x() + o.y() * o.y() - 18.0 * 18.0;
+  const double disc = b * b - 4 * a * cc;
+  if (a > 0 && disc >= 0) t = std::min(t, (-b + std::sqrt(disc)) / (2 * a));
+  return t > 0 && t < 120 ? t : 0.0;
+}
+
+/// An HDL-64E capture of that scene: 1.2 turns of firings 0.18° apart, each packet six
+/// upper/lower block pairs, the distances in 2 mm units less the laser's correction.
+Capture hdl64_capture(const Calib64& c, const Record& frame_template) {
+  Capture cap = parse_capture(slurp(test::sample("vlp16_velodyne_example.pcap")));
+  cap.records.clear();
+  int az = 17000;  // 0.01° units
+  for (int packet = 0; packet < 400; ++packet) {
+    Record r = frame_template;
+    std::uint8_t* p = velodyne_payload(r);
+    for (int pair = 0; pair < 6; ++pair) {
+      for (int bank = 0; bank < 2; ++bank) {
+        std::uint8_t* blk = p + (2 * pair + bank) * 100;
+        blk[0] = 0xFF;
+        blk[1] = bank == 0 ? 0xEE : 0xDD;
+        blk[2] = static_cast<std::uint8_t>((az % 36000) & 255);
+        blk[3] = static_cast<std::uint8_t>((az % 36000) >> 8);
+        for (int k = 0; k < 32; ++k) {
+          const int l = bank * 32 + k;
+          const double d = scene_distance(c, l, az / 100.0);
+          const long raw = d > 0 ? std::lround((d - c.dist[l]) / 0.002) : 0;
+          blk[4 + 3 * k] = static_cast<std::uint8_t>(raw & 255);
+          blk[5 + 3 * k] = static_cast<std::uint8_t>(raw >> 8);
+          blk[6 + 3 * k] = static_cast<std::uint8_t>(l * 3);
+        }
+      }
+      az += 18;
+    }
+    set_payload_time(r, static_cast<std::uint32_t>(packet * 288));
+    p[1204] = 0xA5;  // status bytes, not a return mode
+    p[1205] = static_cast<std::uint8_t>(packet);
+    cap.records.push_back(std::move(r));
+  }
+  return cap;
+}
+
+Record velodyne_frame_template() {
+  Capture c = parse_capture(slurp(test::sample("vlp16_velodyne_example.pcap")));
+  for (const Record& r : c.records)
+    if (velodyne_record(r)) return r;
+  ADD_FAILURE() << "no Velodyne packet in the sample";
+  return {};
+}
+
+TEST(SensorLog, Hdl64eCaptureWithItsCalibrationPlacesEveryPointOnTheScene) {
+  const Calib64 calib;
+  const fs::path dir = temp_dir("sensor_log_hdl64");
+  const Capture cap = hdl64_capture(calib, velodyne_frame_template());
+  const std::string pcap = (dir / "hdl64e_run.pcap").string();
+  write_bytes(pcap, serialise(cap));
+  // the ROS driver's YAML beside the capture (found by the stem cut at '_'), then db.xml given
+  write_bytes((dir / "hdl64e.yaml").string(), calib.yaml());
+  auto from_yaml = read_sensor_log(pcap);
+  ASSERT_TRUE(from_yaml.ok()) << from_yaml.status().to_string();
+  ReadOptions o;
+  o.metadata_path = (dir / "db.xml").string();
+  write_bytes(o.metadata_path, calib.xml());
+  auto from_xml = read_sensor_log(pcap, o);
+  ASSERT_TRUE(from_xml.ok()) << from_xml.status().to_string();
+  const SensorLog& log = from_yaml.value();
+  EXPECT_EQ(log.info.sensor, "HDL-64E");
+  EXPECT_EQ(log.info.lasers, 64U);
+  EXPECT_EQ(log.info.metadata_path, (dir / "hdl64e.yaml").string());
+  ASSERT_EQ(log.scans.size(), 1U);
+  const Cloud& c = log.scans[0];
+  EXPECT_EQ(c.columns, 2000U);
+  expect_organised(c);
+  EXPECT_EQ(c.geometry->source, "calibration " + (dir / "hdl64e.yaml").string());
+  // both calibration files give the same points (to float rounding of their units)
+  const Cloud& x = from_xml.value().scans[0];
+  ASSERT_EQ(x.size(), c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) ASSERT_LT((x.points[i] - c.points[i]).norm(), 1e-5F) << i;
+  // every point on the floor or the wall, within the 2 mm range unit
+  std::size_t floor = 0, wall = 0;
+  for (const Eigen::Vector3f& q : c.points) {
+    const double to_floor = std::abs(q.z() + 1.73), to_wall = std::abs(std::hypot(q.x(), q.y()) - 18.0);
+    ASSERT_LT(std::min(to_floor, to_wall), 1.5e-3) << q.transpose();
+    (to_floor < to_wall ? floor : wall) += 1;
+  }
+  EXPECT_GT(floor, c.size() / 4);
+  EXPECT_GT(wall, c.size() / 10);
+  // the geometry (beam origins off the axis and up the beams' normals) reproduces each point
+  const Residual res = geometry_residual(c);
+  std::printf("[ geometry ] HDL-64E turn: %zu points, %u columns, max residual %.3g m\n", c.size(), c.columns, res.max_m);
+  EXPECT_LT(res.max_m, 1e-4);
+  for (std::size_t r = 1; r < 64; ++r) EXPECT_LT(c.geometry->elevation[r - 1], c.geometry->elevation[r]);
+}
+
+TEST(SensorLogErrors, Hdl64eWithoutOrWithAWrongCalibration) {
+  const Calib64 calib;
+  const fs::path dir = temp_dir("sensor_log_hdl64_bad");
+  Capture cap = hdl64_capture(calib, velodyne_frame_template());
+  const std::string pcap = (dir / "capture.pcap").string();
+  write_bytes(pcap, serialise(cap));
+  EXPECT_TRUE(bad(read_sensor_log(pcap), pcap, "needs the sensor's calibration"));
+  ReadOptions o;
+  o.metadata_path = (dir / "c.yaml").string();
+  // 32 lasers
+  std::string y = calib.yaml();
+  write_bytes(o.metadata_path, y.substr(0, y.find("- dist_correction", y.find("laser_id: 31"))));
+  EXPECT_TRUE(bad(read_sensor_log(pcap, o), o.metadata_path, "32 lasers"));
+  // a NaN angle, a missing angle, a repeated id
+  for (const auto& [from, to, what] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"laser_id: 5\n  rot_correction: ", "laser_id: 5\n  rot_correction: nan #", "laser 5: rotation"},
+           {"laser_id: 7\n", "laser_id: 6\n", "laser ids are not 0..63"},
+           {"  vert_correction", "  vert_corr", "vert_correction is missing"}}) {
+    std::string t = y;
+    t.replace(t.find(from), from.size(), to);
+    write_bytes(o.metadata_path, t);
+    EXPECT_TRUE(bad(read_sensor_log(pcap, o), o.metadata_path, what)) << what;
+  }
+  // the capture's upper and lower blocks at two azimuths (a dual-return S3 layout)
+  write_bytes(o.metadata_path, y);
+  velodyne_payload(cap.records[3])[100 + 2] ^= 1;
+  write_bytes(pcap, serialise(cap));
+  EXPECT_TRUE(bad(read_sensor_log(pcap, o), pcap, "differ in azimuth"));
 }
 
 // ------------------------------------------------------------ bad input

@@ -33,7 +33,7 @@ enum class Format : std::uint8_t {
   kUos3d,    ///< Osnabrueck/3DTK `.3d`: ASCII `x y z` in centimetres, left-handed (y up, z forward), optional `.pose`;
              ///< read into lex3d's right-handed metric frame: x = z_in/100, y = -x_in/100, z = y_in/100
   kPcap,     ///< a raw spinning-lidar log: libpcap capture of Ouster (with its metadata JSON) or
-             ///< Velodyne (VLP-16, Puck Hi-Res, HDL-32E, VLP-32C) UDP packets; read_cloud gives its first complete turn,
+             ///< Velodyne (VLP-16, Puck Hi-Res, HDL-32E, VLP-32C; HDL-64E with its calibration) UDP packets; read_cloud gives its first complete turn,
              ///< read_sensor_log (sensor_log.hpp) every turn
   kLas,      ///< ASPRS LAS 1.0-1.4 (`.las`, magic "LASF"), point data record formats 0-10: x y z (scale and
              ///< offset, the CRS's units read into metres about a georeference origin), intensity, RGB as
@@ -58,10 +58,14 @@ struct ReadOptions {
   /// For kUos3d: points at or beyond this range (centimetres) are the scanner's
   /// no-return value; they are dropped, counted, and kept as no-return directions.
   float uos_no_return_cm = 3270.0F;
-  /// For kPcap (Ouster): the sensor metadata JSON; empty: `<stem>.json` beside the capture.
+  /// For kPcap: the Ouster sensor metadata JSON, or a Velodyne calibration (db.xml, VeloView
+  /// XML, the ROS driver's YAML; required for an HDL-64E); empty: `<stem>.json` (Ouster) or
+  /// `<stem>.xml`/`.yaml`/`.yml` (Velodyne) beside the capture, the stem cut at its last
+  /// '_' until one is found.
   std::string metadata_path;
-  /// For kPcap (Velodyne): "vlp16" or "hdl32e" to override the model the packets announce
-  /// (and the packet timing check); empty: detected.
+  /// For kPcap (Velodyne): a key of velodyne_models() ("vlp16", "puck-hires", "hdl32e",
+  /// "vlp32c", "hdl64e") to override the model the packets announce (and the packet timing
+  /// check); empty: detected.
   std::string sensor_model;
   /// For a ROS bag (io/rosbag.hpp): the topic to read; empty: its only point cloud topic.
   std::string bag_topic;

@@ -15,7 +15,9 @@
 ///   points); the dual profile's second returns are counted and not kept.
 /// - Velodyne VLP-16, Puck Hi-Res, HDL-32E and VLP-32C, single or dual return (the last
 ///   return kept, the other counted), with the published per-model tables (elevation, and
-///   the VLP-32C's azimuth offsets) and firing timing. Rings are the
+///   the VLP-32C's azimuth offsets) and firing timing, or the unit's calibration where one
+///   is given (db.xml, VeloView XML, the ROS driver's YAML: `metadata_path`, else beside the
+///   capture); the HDL-64E (single return) with its calibration only. Rings are the
 ///   lasers ordered by elevation, lowest first (ring 0 = lowest beam); a column is one firing
 ///   of all lasers, counted from the start of its turn. A turn is 360° of azimuth starting at
 ///   the log's first firing (so a log of 1.1 turns gives one). The points use each firing's
@@ -42,7 +44,7 @@ struct SensorLogInfo {
   std::string vendor;        ///< "ouster" or "velodyne"
   std::string sensor;        ///< e.g. "OS-1-128", "VLP-16"
   std::string profile;       ///< Ouster udp_profile_lidar; Velodyne return mode ("strongest", "last")
-  std::string metadata_path; ///< the Ouster metadata JSON read (empty for Velodyne)
+  std::string metadata_path; ///< the Ouster metadata JSON or the Velodyne calibration read (empty: none)
   std::string model_note;    ///< how the Velodyne model was decided (factory byte, timing, override)
   std::uint32_t lasers = 0;   ///< beams (rows of a turn)
   std::uint32_t columns = 0;  ///< columns a turn (Ouster: columns_per_frame; Velodyne: median firings a turn)
@@ -68,7 +70,7 @@ struct SensorLog {
 };
 
 /// The Velodyne models a capture is read as (`ReadOptions::sensor_model` keys): "vlp16",
-/// "puck-hires", "hdl32e", "vlp32c".
+/// "puck-hires", "hdl32e", "vlp32c", "hdl64e".
 [[nodiscard]] std::vector<std::string> velodyne_models();
 
 /// True when `path` is named `.pcap`/`.pcapng` or starts with a libpcap or pcapng magic number.
