@@ -767,6 +767,15 @@ TEST(SensorLogErrors, Hdl64eWithoutOrWithAWrongCalibration) {
     write_bytes(o.metadata_path, t);
     EXPECT_TRUE(bad(read_sensor_log(pcap, o), o.metadata_path, what)) << what;
   }
+  // every cut of either calibration file: read, or one line naming it (never a crash)
+  for (const std::string& text : {y, calib.xml()})
+    for (std::size_t cut = 0; cut < text.size(); cut += 331) {
+      write_bytes(o.metadata_path, text.substr(0, cut));
+      auto r = read_sensor_log(pcap, o);
+      if (r.ok()) continue;
+      EXPECT_EQ(r.status().message().find('\n'), std::string::npos) << r.status().message();
+      EXPECT_NE(r.status().message().find(o.metadata_path), std::string::npos) << r.status().message();
+    }
   // the capture's upper and lower blocks at two azimuths (a dual-return S3 layout)
   write_bytes(o.metadata_path, y);
   velodyne_payload(cap.records[3])[100 + 2] ^= 1;
