@@ -69,6 +69,10 @@ constexpr std::uint16_t kAttrExtendedMinor = 10;
 /// An ATTR chunk whose named field records its source type (kind 5 with a `transform`, a
 /// FieldType; floating-point fields) and the first minor version that has it (model.md §2.10).
 constexpr std::uint16_t kAttrTypedMinor = 15;
+/// An ATTR chunk whose ring, intensity or time records the name and type its source stored
+/// it in (kinds 1-3 with a `transform`, the name after the descriptor) and the first minor
+/// version that has it (model.md §2.10).
+constexpr std::uint16_t kAttrSourceMinor = 16;
 /// A model without instances (no INST chunk, the short MHDR) or without words at all (no
 /// alphabet: flag bits 0 and 1 clear) and the first minor version that has it (model.md
 /// §2.1, §2.4).
@@ -799,7 +803,8 @@ std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
 
 /// The minor version an ATTR payload needs: kAttrExtendedMinor for a named field (kind 5)
 /// or colour coded as differences (kind 4 with a transform), kAttrTypedMinor for a named
-/// field with its type (kind 5 with a transform), else kAttrMinor; its descriptors walked
+/// field with its type (kind 5 with a transform), kAttrSourceMinor for a ring, intensity or
+/// time with its source's name and type (kinds 1-3 with a transform), else kAttrMinor; its descriptors walked
 /// as far as they go (the attribute decoder checks them).
 std::uint16_t attributes_minor(const std::uint8_t* p, std::uint64_t size) {
   constexpr std::uint64_t kDescriptor = 56;
@@ -808,10 +813,12 @@ std::uint16_t attributes_minor(const std::uint8_t* p, std::uint64_t size) {
   std::uint64_t at = 9;
   for (int i = 0; i < p[8] && size - at >= kDescriptor; ++i) {
     const std::uint32_t transform = ld_u32(p + at + 4);
+    const bool sourced = p[at] >= 1 && p[at] <= 3 && transform != 0;
     if (p[at] == 5) minor = std::max(minor, transform != 0 ? kAttrTypedMinor : kAttrExtendedMinor);
     if (p[at] == 4 && transform != 0) minor = std::max(minor, kAttrExtendedMinor);
+    if (sourced) minor = std::max(minor, kAttrSourceMinor);
     std::uint64_t stream = ld_u64(p + at + 48);
-    if (p[at] == 5) {  // (its name follows the descriptor: a length byte, then the name)
+    if (p[at] == 5 || sourced) {  // (its name follows the descriptor: a length byte, then the name)
       if (size - at - kDescriptor < 1) break;
       stream += 1U + p[at + kDescriptor];
     }
@@ -1232,7 +1239,9 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
       if (c.length == 0) return ctx.error("chunk 'ATTR' is empty", c.offset + 4);
       if (const std::uint16_t needed = attributes_minor(c.payload, c.length); h.minor < needed)
         return ctx.error(std::string("chunk 'ATTR' holds ") +
-                             (needed == kAttrTypedMinor ? "a named field with its type" : "a named field or colour differences") +
+                             (needed == kAttrSourceMinor  ? "a ring, intensity or time with its source's name and type"
+                              : needed == kAttrTypedMinor ? "a named field with its type"
+                                                          : "a named field or colour differences") +
                              ", which need format version 1." + std::to_string(needed) + ", the header says 1." +
                              std::to_string(h.minor),
                          c.payload_offset);

@@ -292,6 +292,14 @@ inline unsigned store_field(std::uint8_t* dst, const IntegerField& x, std::size_
   }
 }
 
+/// The source of a reader's ring, intensity or time field named `name` of scalar `s`
+/// (Cloud::ring_source, ...; a 64-bit integer's type is not recorded).
+inline SourceField source_field(const std::string& name, Scalar s);
+
+/// Seconds a unit of a time field of scalar `s`: an integer one counts nanoseconds (the
+/// ouster_ros convention), a float one seconds.
+inline double time_unit(Scalar s) { return s == Scalar::kF32 || s == Scalar::kF64 ? 1.0 : 1e-9; }
+
 /// A named field a reader keeps: its name and its type in the file.
 struct FieldSpec {
   std::string name;
@@ -311,6 +319,11 @@ inline std::optional<FieldType> field_type_of(Scalar s) {
     case Scalar::kF64: return FieldType::kFloat64;
     default: return std::nullopt;
   }
+}
+
+inline SourceField source_field(const std::string& name, Scalar s) {
+  const std::optional<FieldType> t = field_type_of(s);
+  return t && *t != FieldType::kUnspecified ? SourceField{name, *t} : SourceField{};
 }
 
 /// Whether a reader's field that no other Cloud member holds, `values` a point (0: a PLY
@@ -334,6 +347,18 @@ inline bool offer_field(const std::string& name, Scalar type, std::uint64_t valu
   not_kept.push_back(printable(name, 64) + why);
   return false;
 }
+
+/// The ring, intensity and time of `cloud` as their source stored them (Cloud::ring_source,
+/// ...): each one whose source is given and whose every value that type holds, as a named
+/// field of the source's name and type (an integer time in nanoseconds), which the PCD, PLY
+/// and PointCloud2 writers put in place of their default column; the others empty, written
+/// as `ring` uint16, `intensity` float32 and `time` float64 (that one under its source's name
+/// where the source gave a float64).
+struct SourceColumns {
+  std::optional<IntegerField> ring, intensity, time;
+  std::string time_name = "time";
+};
+SourceColumns source_columns(const Cloud& cloud);
 
 /// kInvalidArgument naming `path` when a named field of `cloud` does not hold a value a
 /// point or has a name is_field_name refuses (write.cpp).
@@ -385,9 +410,13 @@ class Builder {
     push_fields();
   }
 
-  /// Records each point's time (Cloud::time): the value given to next_time before its add.
-  void set_time(bool on) { time_ = on; }
-  void next_time(double t) { next_time_ = t; }
+  /// Records each point's time (Cloud::time, seconds): the value given to next_time before
+  /// its add, times `unit` (seconds a unit of the source's field: 1e-9 for nanoseconds).
+  void set_time(bool on, double unit = 1.0) {
+    time_ = on;
+    time_unit_ = unit;
+  }
+  void next_time(double t) { next_time_ = t * time_unit_; }
   /// Records named fields (Cloud::fields) `specs`: field k of each point is the value given
   /// to next_field(k, ...) before its add.
   void set_fields(const std::vector<FieldSpec>& specs) {
@@ -485,6 +514,7 @@ class Builder {
   std::vector<bool> unfit_;
   bool time_ = false;
   double next_time_ = 0.0;
+  double time_unit_ = 1.0;
   ReadResult& r_;
   bool intensity_;
   bool color_;

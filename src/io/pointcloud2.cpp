@@ -195,6 +195,10 @@ Status pointcloud2_to_cloud(const std::string& where, const PointCloud2Msg& m, R
   Builder out(r, fi != nullptr, fc != nullptr, wide);
   out.set_time(ft != nullptr);
   out.set_fields(extra_names);
+  // (how the ring, intensity and time were stored, for the writers to give them back so)
+  if (fr != nullptr) r.cloud.ring_source = source_field(fr->f->name, fr->scalar);
+  if (fi != nullptr) r.cloud.intensity_source = source_field(fi->f->name, fi->scalar);
+  if (ft != nullptr) r.cloud.time_source = source_field(ft->f->name, ft->scalar);
   const bool organised = m.height > 1 && m.height <= 0xFFFF;
   if (organised) {
     r.cloud.rows = m.height;

@@ -269,7 +269,13 @@ Status read_pcd(const std::string& path, const std::uint8_t* data, std::size_t s
   // double coordinates may be georeferenced (Builder::finish)
   const bool wide = fx->scalar == Scalar::kF64 || fy->scalar == Scalar::kF64 || fz->scalar == Scalar::kF64;
   Builder out(r, fi != nullptr, fc != nullptr, wide);
-  out.set_time(ft != nullptr);
+  out.set_time(ft != nullptr, ft != nullptr ? time_unit(ft->scalar) : 1.0);
+  if (ft != nullptr && time_unit(ft->scalar) != 1.0)
+    r.notes.push_back("the integer time field " + quoted(ft->name) + " is read as nanoseconds (the ouster_ros convention)");
+  // (how the ring, intensity and time were stored, for the writers to give them back so)
+  if (fr != nullptr) r.cloud.ring_source = source_field(fr->name, fr->scalar);
+  if (fi != nullptr) r.cloud.intensity_source = source_field(fi->name, fi->scalar);
+  if (ft != nullptr) r.cloud.time_source = source_field(ft->name, ft->scalar);
   out.set_fields(extra_names);
   // An organised cloud (HEIGHT > 1): rows are lasers, columns azimuth steps, NaN or (0, 0, 0)
   // pixels no-returns; a ring field gives each point's laser.

@@ -276,7 +276,14 @@ Status read_ply(const std::string& path, const std::uint8_t* data, std::size_t s
   out.set_layout(rings, false, false);
   // A time property gives each point's time (Cloud::time), seconds.
   const bool times = it >= 0;
-  out.set_time(times);
+  const auto prop = [&](int k) -> const PlyProperty& { return vertex.props[static_cast<std::size_t>(k)]; };
+  out.set_time(times, times ? time_unit(prop(it).type) : 1.0);
+  if (times && time_unit(prop(it).type) != 1.0)
+    r.notes.push_back("the integer time property " + quoted(prop(it).name) + " is read as nanoseconds (the ouster_ros convention)");
+  // (how the ring, intensity and time were stored, for the writers to give them back so)
+  if (il >= 0) r.cloud.ring_source = source_field(prop(il).name, prop(il).type);
+  if (ii >= 0) r.cloud.intensity_source = source_field(prop(ii).name, prop(ii).type);
+  if (times) r.cloud.time_source = source_field(prop(it).name, prop(it).type);
   out.set_fields(extra_names);
   auto ring_of = [&](std::uint64_t item, double value, std::uint16_t& ring) -> Status {
     if (!(value >= 0.0 && value <= 65535.0) || value != std::floor(value))

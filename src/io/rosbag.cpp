@@ -551,21 +551,25 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   };
   const std::uint32_t ox = field("x", kF32, 4), oy = field("y", kF32, 4), oz = field("z", kF32, 4);
   const bool in = c.has_intensity(), ring = c.has_rings(), time = c.has_time(), rgb = c.has_rgb();
-  const std::uint32_t oi = in ? field("intensity", kF32, 4) : 0;
-  const std::uint32_t orgb = rgb ? field("rgb", kF32, 4) : 0;
-  const std::uint32_t oring = ring ? field("ring", kU16, 2) : 0;
-  step = (step + 7U) & ~7U;  // the double time aligned
-  const std::uint32_t ot = time ? field("time", kF64, 8) : 0;
-  // named fields (Cloud::fields), each in its type
-  m.names.reserve(c.fields.size());
-  std::vector<std::uint32_t> onamed;
+  // the ring, intensity and time in their sources' names and types where given
+  const detail::SourceColumns sc = detail::source_columns(c);
+  m.names.reserve(c.fields.size() + 4);
   // (PointCloud2's datatypes number the types as FieldType does; a field whose type is not
   // recorded is an INT32)
-  for (const IntegerField& f : c.fields) {
+  const auto typed = [&](const IntegerField& f) {
     m.names.push_back(f.name);
     const std::uint8_t type = f.type == FieldType::kUnspecified ? kI32 : static_cast<std::uint8_t>(f.type);
-    onamed.push_back(field(m.names.back().c_str(), type, detail::field_bytes(f.type)));
-  }
+    return field(m.names.back().c_str(), type, detail::field_bytes(f.type));
+  };
+  const std::uint32_t oi = !in ? 0 : sc.intensity ? typed(*sc.intensity) : field("intensity", kF32, 4);
+  const std::uint32_t orgb = rgb ? field("rgb", kF32, 4) : 0;
+  const std::uint32_t oring = !ring ? 0 : sc.ring ? typed(*sc.ring) : field("ring", kU16, 2);
+  if (!sc.time) step = (step + 7U) & ~7U;  // the double time aligned (as before typed times)
+  m.names.push_back(sc.time_name);
+  const std::uint32_t ot = !time ? 0 : sc.time ? typed(*sc.time) : field(m.names.back().c_str(), kF64, 8);
+  // named fields (Cloud::fields), each in its type
+  std::vector<std::uint32_t> onamed;
+  for (const IntegerField& f : c.fields) onamed.push_back(typed(f));
   m.point_step = step;
   // organised: every point has a distinct pixel (row, column) of the shape
   std::vector<std::size_t> pixel;  // point -> pixel
@@ -600,13 +604,16 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
     std::memcpy(p + ox, &c.points[i].x(), 4);
     std::memcpy(p + oy, &c.points[i].y(), 4);
     std::memcpy(p + oz, &c.points[i].z(), 4);
-    if (in) std::memcpy(p + oi, &c.intensity[i], 4);
+    if (in && sc.intensity) detail::store_field(p + oi, *sc.intensity, i);
+    else if (in) std::memcpy(p + oi, &c.intensity[i], 4);
     if (rgb) {
       const std::uint32_t v = (std::uint32_t{c.rgb[i][0]} << 16) | (std::uint32_t{c.rgb[i][1]} << 8) | c.rgb[i][2];
       std::memcpy(p + orgb, &v, 4);
     }
-    if (ring) std::memcpy(p + oring, &c.ring[i], 2);
-    if (time) std::memcpy(p + ot, &c.time[i], 8);
+    if (ring && sc.ring) detail::store_field(p + oring, *sc.ring, i);
+    else if (ring) std::memcpy(p + oring, &c.ring[i], 2);
+    if (time && sc.time) detail::store_field(p + ot, *sc.time, i);
+    else if (time) std::memcpy(p + ot, &c.time[i], 8);
     for (std::size_t k = 0; k < c.fields.size(); ++k) detail::store_field(p + onamed[k], c.fields[k], i);
   }
   return m;

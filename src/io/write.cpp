@@ -69,6 +69,49 @@ FieldDecl declaration(FieldType t) {
   }
 }
 
+}  // namespace
+
+namespace detail {
+
+SourceColumns source_columns(const Cloud& cloud) {
+  SourceColumns out;
+  const std::size_t n = cloud.size();
+  // values `v(i)` as a field of `src`'s name and type where all of them hold in it
+  const auto typed = [n](const SourceField& src, auto&& v) -> std::optional<IntegerField> {
+    if (!src.given() || !is_field_name(src.name)) return std::nullopt;
+    IntegerField f{src.name, std::vector<std::int32_t>(n), src.type};
+    const auto [lo, hi] = field_type_range(src.type);
+    for (std::size_t i = 0; i < n; ++i) {
+      const double x = v(i);
+      if (is_float_type(src.type)) {
+        const auto as_float = static_cast<float>(x);
+        // (a float64 one only where float32 holds each value: a named field holds float keys)
+        if (src.type == FieldType::kFloat64 && static_cast<double>(as_float) != x && !std::isnan(x)) return std::nullopt;
+        f.values[i] = float_key(as_float);
+      } else {
+        if (!(x >= static_cast<double>(lo) && x <= static_cast<double>(hi)) || x != std::floor(x)) return std::nullopt;
+        f.values[i] = static_cast<std::int32_t>(x);
+      }
+    }
+    return f;
+  };
+  if (cloud.has_rings()) out.ring = typed(cloud.ring_source, [&](std::size_t i) { return static_cast<double>(cloud.ring[i]); });
+  if (cloud.has_intensity())
+    out.intensity = typed(cloud.intensity_source, [&](std::size_t i) { return static_cast<double>(cloud.intensity[i]); });
+  if (cloud.has_time()) {
+    const bool ns = cloud.time_source.given() && !is_float_type(cloud.time_source.type);
+    out.time = typed(cloud.time_source, [&](std::size_t i) { return ns ? std::nearbyint(cloud.time[i] * 1e9) : cloud.time[i]; });
+    if (!out.time && cloud.time_source.given() && cloud.time_source.type == FieldType::kFloat64 &&
+        is_field_name(cloud.time_source.name))
+      out.time_name = cloud.time_source.name;
+  }
+  return out;
+}
+
+}  // namespace detail
+
+namespace {
+
 /// The bytes a point's named fields take in a binary PCD or PLY file.
 std::size_t named_bytes(const Cloud& cloud) {
   std::size_t k = 0;
@@ -130,7 +173,8 @@ class Bytes {
   }
   /// "x y z" of point i, then " intensity" when `with_i` (no end of line); with `g`, the
   /// true coordinates (doubles) of the georeference.
-  void text_point(const Cloud& cloud, std::size_t i, bool with_i, const Georeference* g = nullptr) {
+  void text_point(const Cloud& cloud, std::size_t i, bool with_i, const Georeference* g = nullptr,
+                  const IntegerField* typed_i = nullptr) {
     const auto& p = cloud.points[i];
     if (g != nullptr) {
       const Eigen::Vector3d t = g->to_crs(p);
@@ -148,34 +192,42 @@ class Bytes {
     }
     if (with_i) {
       u8(' ');
-      text(cloud.intensity[i]);
+      if (typed_i != nullptr) value_text(*typed_i, i);
+      else text(cloud.intensity[i]);
     }
   }
-  /// " ring time" of point i as text, each when asked (no end of line).
-  void ring_time(const Cloud& cloud, std::size_t i, bool with_r, bool with_t) {
+  /// " ring time" of point i as text, each when asked (no end of line), each in its source's
+  /// type where `sc` has it.
+  void ring_time(const Cloud& cloud, std::size_t i, bool with_r, bool with_t, const detail::SourceColumns& sc) {
     if (with_r) {
       u8(' ');
-      text(static_cast<std::uint64_t>(cloud.ring[i]));
+      if (sc.ring) value_text(*sc.ring, i);
+      else text(static_cast<std::uint64_t>(cloud.ring[i]));
     }
     if (with_t) {
       u8(' ');
-      text(cloud.time[i]);
+      if (sc.time) value_text(*sc.time, i);
+      else text(cloud.time[i]);
     }
   }
-  /// " v1 v2 ..." of point i's named fields as text (no end of line): a float field's
-  /// value as the shortest decimal that reads back to it (a float64 field's as a double's).
+  /// " v1 v2 ..." of point i's named fields as text (no end of line).
   void named(const Cloud& cloud, std::size_t i) {
     for (const IntegerField& x : cloud.fields) {
       u8(' ');
-      const std::int32_t v = x.values[i];
-      if (x.type == FieldType::kFloat32) {
-        text(key_float(v));
-      } else if (x.type == FieldType::kFloat64) {
-        text(static_cast<double>(key_float(v)));
-      } else {
-        if (v < 0) u8('-');
-        text(static_cast<std::uint64_t>(v < 0 ? -static_cast<std::int64_t>(v) : v));
-      }
+      value_text(x, i);
+    }
+  }
+  /// Point i's value of named field x as text: a float field's value as the shortest
+  /// decimal that reads back to it (a float64 field's as a double's).
+  void value_text(const IntegerField& x, std::size_t i) {
+    const std::int32_t v = x.values[i];
+    if (x.type == FieldType::kFloat32) {
+      text(key_float(v));
+    } else if (x.type == FieldType::kFloat64) {
+      text(static_cast<double>(key_float(v)));
+    } else {
+      if (v < 0) u8('-');
+      text(static_cast<std::uint64_t>(v < 0 ? -static_cast<std::int64_t>(v) : v));
     }
   }
   /// Point i's value of named field x in the field's own type, little-endian.
@@ -205,11 +257,25 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
                  bool with_c, const Georeference* g, std::vector<std::uint8_t>& out, std::size_t height = 1) {
   const std::size_t n = cloud.size();
   const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
-  const std::size_t point_size = (g != nullptr ? 24 : 12) + (with_i ? 4 : 0) + (with_c ? 4 : 0) + (with_r ? 2 : 0) +
-                                 (with_t ? 8 : 0) + named_bytes(cloud);
+  const detail::SourceColumns sc = detail::source_columns(cloud);
+  const IntegerField* typed_i = with_i && sc.intensity ? &*sc.intensity : nullptr;
+  const auto bytes_of = [](const std::optional<IntegerField>& f, std::size_t otherwise) {
+    return f ? static_cast<std::size_t>(detail::field_bytes(f->type)) : otherwise;
+  };
+  const std::size_t point_size = (g != nullptr ? 24 : 12) + (with_i ? bytes_of(sc.intensity, 4) : 0) + (with_c ? 4 : 0) +
+                                 (with_r ? bytes_of(sc.ring, 2) : 0) + (with_t ? bytes_of(sc.time, 8) : 0) +
+                                 named_bytes(cloud);
   Bytes b(256 + n * point_size + (o.pcd_encoding == PcdEncoding::kAscii ? n * 40 : 0));
   std::string fields = "x y z", sizes = g != nullptr ? "8 8 8" : "4 4 4", types = "F F F", counts = "1 1 1";
-  if (with_i) {
+  const auto declare = [&](const IntegerField& x) {
+    fields += " " + x.name;
+    sizes += " " + std::to_string(detail::field_bytes(x.type));
+    types += std::string(" ") + declaration(x.type).pcd_type;
+    counts += " 1";
+  };
+  if (typed_i != nullptr) {
+    declare(*typed_i);
+  } else if (with_i) {
     fields += " intensity";
     sizes += " 4";
     types += " F";
@@ -223,25 +289,23 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
     types += o.pcd_encoding == PcdEncoding::kAscii ? " U" : " F";
     counts += " 1";
   }
-  if (with_r) {  // the laser, as Velodyne's and Ouster's ROS drivers name it
+  if (with_r && sc.ring) {
+    declare(*sc.ring);
+  } else if (with_r) {  // the laser, as Velodyne's and Ouster's ROS drivers name it
     fields += " ring";
     sizes += " 2";
     types += " U";
     counts += " 1";
   }
-  if (with_t) {
-    fields += " time";
+  if (with_t && sc.time) {
+    declare(*sc.time);
+  } else if (with_t) {
+    fields += " " + sc.time_name;
     sizes += " 8";
     types += " F";
     counts += " 1";
   }
-  for (const IntegerField& x : cloud.fields) {  // named fields (a LAS classification...) in their types
-    const FieldDecl d = declaration(x.type);
-    fields += " " + x.name;
-    sizes += " " + std::to_string(detail::field_bytes(x.type));
-    types += std::string(" ") + d.pcd_type;
-    counts += " 1";
-  }
+  for (const IntegerField& x : cloud.fields) declare(x);  // named fields (a LAS classification...) in their types
   // true coordinates: the viewpoint moves with the points (in the CRS's units when they are metres)
   Pose viewpoint = cloud.T_cloud_sensor;
   if (g != nullptr) viewpoint.translation() = g->to_crs(cloud.T_cloud_sensor.translation().cast<float>());
@@ -255,12 +319,12 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
   switch (o.pcd_encoding) {
     case PcdEncoding::kAscii:
       for (std::size_t i = 0; i < n; ++i) {
-        b.text_point(cloud, i, with_i, g);
+        b.text_point(cloud, i, with_i, g, typed_i);
         if (with_c) {  // as PCL does: the packed colour written as an unsigned integer
           b.u8(' ');
           b.text(static_cast<std::uint64_t>(pack_rgb(o.colors[i])));
         }
-        b.ring_time(cloud, i, with_r, with_t);
+        b.ring_time(cloud, i, with_r, with_t, sc);
         b.named(cloud, i);
         b.u8('\n');
       }
@@ -268,10 +332,13 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
     case PcdEncoding::kBinary:
       for (std::size_t i = 0; i < n; ++i) {
         b.xyz(cloud, i, g);
-        if (with_i) b.f32(cloud.intensity[i]);
+        if (typed_i != nullptr) b.field(*typed_i, i);
+        else if (with_i) b.f32(cloud.intensity[i]);
         if (with_c) b.le(pack_rgb(o.colors[i]));
-        if (with_r) b.le(cloud.ring[i]);
-        if (with_t) b.f64(cloud.time[i]);
+        if (with_r && sc.ring) b.field(*sc.ring, i);
+        else if (with_r) b.le(cloud.ring[i]);
+        if (with_t && sc.time) b.field(*sc.time, i);
+        else if (with_t) b.f64(cloud.time[i]);
         for (const IntegerField& x : cloud.fields) b.field(x, i);
       }
       break;
@@ -289,16 +356,22 @@ Status build_pcd(const std::string& path, const Cloud& cloud, const WriteOptions
           else raw.f32(cloud.points[i][a]);
         }
       }
-      if (with_i) {
+      if (typed_i != nullptr) {
+        for (std::size_t i = 0; i < n; ++i) raw.field(*typed_i, i);
+      } else if (with_i) {
         for (std::size_t i = 0; i < n; ++i) raw.f32(cloud.intensity[i]);
       }
       if (with_c) {
         for (std::size_t i = 0; i < n; ++i) raw.le(pack_rgb(o.colors[i]));
       }
-      if (with_r) {
+      if (with_r && sc.ring) {
+        for (std::size_t i = 0; i < n; ++i) raw.field(*sc.ring, i);
+      } else if (with_r) {
         for (std::size_t i = 0; i < n; ++i) raw.le(cloud.ring[i]);
       }
-      if (with_t) {
+      if (with_t && sc.time) {
+        for (std::size_t i = 0; i < n; ++i) raw.field(*sc.time, i);
+      } else if (with_t) {
         for (std::size_t i = 0; i < n; ++i) raw.f64(cloud.time[i]);
       }
       for (const IntegerField& x : cloud.fields)
@@ -330,35 +403,46 @@ void build_ply(const Cloud& cloud, const WriteOptions& o, bool with_i, bool with
   h += o.ply_binary ? "binary_little_endian" : "ascii";
   h += " 1.0\ncomment written by lex3d\nelement vertex " + std::to_string(n) +
        "\nproperty " + coord + " x\nproperty " + coord + " y\nproperty " + coord + " z\n";
-  if (with_i) h += "property float intensity\n";
+  const detail::SourceColumns sc = detail::source_columns(cloud);
+  const IntegerField* typed_i = with_i && sc.intensity ? &*sc.intensity : nullptr;
+  const auto declare = [&h](const IntegerField& x) {
+    h += std::string("property ") + declaration(x.type).ply_type + " " + x.name + "\n";
+  };
+  if (typed_i != nullptr) declare(*typed_i);
+  else if (with_i) h += "property float intensity\n";
   if (with_c) h += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   const bool with_r = cloud.has_rings(), with_t = cloud.has_time();
-  if (with_r) h += "property ushort ring\n";
-  if (with_t) h += "property double time\n";
-  for (const IntegerField& x : cloud.fields) h += std::string("property ") + declaration(x.type).ply_type + " " + x.name + "\n";
+  if (with_r && sc.ring) declare(*sc.ring);
+  else if (with_r) h += "property ushort ring\n";
+  if (with_t && sc.time) declare(*sc.time);
+  else if (with_t) h += "property double " + sc.time_name + "\n";
+  for (const IntegerField& x : cloud.fields) declare(x);
   h += "end_header\n";
   b.str(h);
   for (std::size_t i = 0; i < n; ++i) {
     if (o.ply_binary) {
       b.xyz(cloud, i, g);
-      if (with_i) b.f32(cloud.intensity[i]);
+      if (typed_i != nullptr) b.field(*typed_i, i);
+      else if (with_i) b.f32(cloud.intensity[i]);
       if (with_c) {
         b.u8(o.colors[i][0]);
         b.u8(o.colors[i][1]);
         b.u8(o.colors[i][2]);
       }
-      if (with_r) b.le(cloud.ring[i]);
-      if (with_t) b.f64(cloud.time[i]);
+      if (with_r && sc.ring) b.field(*sc.ring, i);
+      else if (with_r) b.le(cloud.ring[i]);
+      if (with_t && sc.time) b.field(*sc.time, i);
+      else if (with_t) b.f64(cloud.time[i]);
       for (const IntegerField& x : cloud.fields) b.field(x, i);
     } else {
-      b.text_point(cloud, i, with_i, g);
+      b.text_point(cloud, i, with_i, g, typed_i);
       if (with_c) {
         for (int ch = 0; ch < 3; ++ch) {
           b.u8(' ');
           b.text(static_cast<std::uint64_t>(o.colors[i][static_cast<std::size_t>(ch)]));
         }
       }
-      b.ring_time(cloud, i, with_r, with_t);
+      b.ring_time(cloud, i, with_r, with_t, sc);
       b.named(cloud, i);
       b.u8('\n');
     }

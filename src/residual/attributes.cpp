@@ -68,6 +68,10 @@ std::string shown(const std::string& name) {
 /// then red and blue less green (each + 255, span 510), which takes the correlation of the
 /// three channels out of the two coded last.
 constexpr std::uint32_t kColourDifferences = 1;
+/// The ring, intensity and time fields' `transform` (format 1.16): bits 0-7 the type the
+/// source stored the field in (a FieldType), bit 8 set when the source's field name follows
+/// the descriptor (as a named field's does).
+constexpr std::uint32_t kSourceNameBit = 0x100;
 constexpr std::uint64_t kColourDifferenceSpan = 510;
 /// At most this many fields in a chunk (the count is a byte).
 constexpr std::size_t kMaxFields = 255;
@@ -411,8 +415,18 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   const auto kept = [&options](const char* name) {
     return std::find(options.drop.begin(), options.drop.end(), name) == options.drop.end();
   };
+  // (the name and type a source stored the ring, intensity or time in, where given and not
+  // the writers' own: `ring` uint16, `intensity` float32, `time` float64)
+  const auto source_of = [](FieldOut& f, const SourceField& src) {
+    if (!src.given() || !is_field_name(src.name)) return;
+    const FieldType own = f.kind == kRing ? FieldType::kUint16 : f.kind == kIntensity ? FieldType::kFloat32 : FieldType::kFloat64;
+    if (src.name == kind_name(f.kind) && src.type == own) return;
+    f.name = src.name;
+    f.type = static_cast<std::uint32_t>(src.type);
+  };
   if (options.ring && kept("ring") && input.has_rings()) {
     FieldOut f{{}, kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+    if (!is_float_type(input.ring_source.type)) source_of(f, input.ring_source);
     f.u.assign(1, std::vector<std::int64_t>(n));
     laser.resize(n);
     for (std::size_t j = 0; j < n; ++j) {
@@ -425,7 +439,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   }
   // A float or double field: its step, else (bits) its float32 bit patterns.
   const auto scalar = [&](std::uint8_t kind, const std::vector<double>& all, bool is_f32, double bound, bool bits,
-                          double fallback, const std::string& name = {}) {
+                          double fallback, const std::string& name = {}, const SourceField* source = nullptr) {
     std::vector<double> vals(n);
     for (std::size_t j = 0; j < n; ++j) vals[j] = all[sources[j]];
     // (a named float field keeps every bit: NaN, infinities and -0 only as bit patterns)
@@ -435,6 +449,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const Quant q = only_bits ? Quant{kFloatBits, 0.0, 0.0, 0.0, 0}
                               : quantise_field(vals, is_f32, bound, bits, fallback, kind == kNamed ? name.c_str() : kind_name(kind));
     FieldOut f{name, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
+    if (source != nullptr) source_of(f, *source);
     f.u.assign(1, std::vector<std::int64_t>(n));
     std::int64_t kmin = std::numeric_limits<std::int64_t>::max(), kmax = std::numeric_limits<std::int64_t>::min();
     for (std::size_t j = 0; j < n; ++j) {
@@ -453,9 +468,10 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   };
   if (options.intensity && kept("intensity") && input.has_intensity()) {
     const std::vector<double> all(input.intensity.begin(), input.intensity.end());
-    scalar(kIntensity, all, true, options.intensity_error, true, 0.0);
+    scalar(kIntensity, all, true, options.intensity_error, true, 0.0, {}, &input.intensity_source);
   }
-  if (options.time && kept("time") && input.has_time()) scalar(kTime, input.time, false, 0.0, false, options.time_error);
+  if (options.time && kept("time") && input.has_time())
+    scalar(kTime, input.time, false, 0.0, false, options.time_error, {}, &input.time_source);
   if (options.rgb && kept("rgb") && input.has_rgb()) {
     FieldOut f{{}, kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}};
     f.u.assign(3, std::vector<std::int64_t>(n));
@@ -555,21 +571,22 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     out.push_back(f.repr);
     out.push_back(best_method);
     out.push_back(f.channels);
-    codec::bytes::put_u32(out, f.kind == kNamed ? f.type : best_transform);
+    const bool sourced = f.kind != kNamed && f.kind != kRgb && f.type != 0;
+    codec::bytes::put_u32(out, f.kind == kNamed ? f.type : sourced ? f.type | kSourceNameBit : best_transform);
     codec::bytes::put_f64(out, f.step);
     codec::bytes::put_f64(out, f.base);
     codec::bytes::put_f64(out, f.max_error);
     codec::bytes::put_u64(out, static_cast<std::uint64_t>(f.kmin));
     codec::bytes::put_u64(out, best_transform != 0 ? kColourDifferenceSpan : f.span);
     codec::bytes::put_u64(out, best.size());
-    if (f.kind == kNamed) {
+    if (f.kind == kNamed || sourced) {
       out.push_back(static_cast<std::uint8_t>(f.name.size()));
       out.insert(out.end(), f.name.begin(), f.name.end());
     }
     out.insert(out.end(), best.begin(), best.end());
     if (fields_out) {
       AttributeField info;
-      info.name = f.kind == kNamed ? f.name : kind_name(f.kind);
+      info.name = f.kind == kNamed ? f.name : kind_name(f.kind);  // (the kind, whatever the source named it)
       info.step = f.step;
       info.max_error = f.max_error;
       info.method = best_method;
@@ -590,10 +607,11 @@ namespace {
 struct Descriptor {
   std::string name;  // kNamed: its name; else the kind's
   std::uint8_t kind, repr, method, channels;
-  std::uint32_t transform;  // rgb: kColourDifferences or 0; else 0
+  std::uint32_t transform;  // rgb: kColourDifferences or 0; named: its type; ring, intensity, time: source type | kSourceNameBit
   double step, base, max_error;
   std::int64_t kmin;
   std::uint64_t span, stream_bytes, offset, stream_offset;
+  SourceField source{};  // ring, intensity, time: the source's name and type (format 1.16), else not given
 };
 
 StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_t>& p) {
@@ -609,7 +627,7 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     const std::uint8_t* d = p.data() + at;
     Descriptor f{kind_name(d[0]), d[0], d[1], d[2], d[3], codec::bytes::ld_u32(d + 4), codec::bytes::ld_f64(d + 8), codec::bytes::ld_f64(d + 16),
                  codec::bytes::ld_f64(d + 24), static_cast<std::int64_t>(codec::bytes::ld_u64(d + 32)),
-                 codec::bytes::ld_u64(d + 40), codec::bytes::ld_u64(d + 48), at, at + kDescriptorBytes};
+                 codec::bytes::ld_u64(d + 40), codec::bytes::ld_u64(d + 48), at, at + kDescriptorBytes, SourceField{}};
     if (f.kind < kRing || f.kind > kNamed) return bad_data("attribute field kind " + std::to_string(f.kind) + " is unknown", at);
     if (f.kind < previous_kind || (f.kind == previous_kind && f.kind != kNamed))
       return bad_data("attribute field " + f.name + " is out of order or repeated", at);
@@ -638,8 +656,26 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
           return bad_data("attribute field " + f.name + " values are not " + field_type_name(type) + " integers", at + 32);
       }
     }
+    if ((f.kind == kRing || f.kind == kIntensity || f.kind == kTime) && f.transform != 0) {
+      // the source's type and name (format 1.16)
+      const std::uint32_t type = f.transform & 0xFFU;
+      if ((f.transform & ~(0xFFU | kSourceNameBit)) != 0 || (f.transform & kSourceNameBit) == 0 || type == 0 ||
+          type > static_cast<std::uint32_t>(FieldType::kFloat64) ||
+          (f.kind == kRing && is_float_type(static_cast<FieldType>(type))))
+        return bad_data("attribute field " + f.name + " source type " + std::to_string(f.transform) + " is invalid", at + 4);
+      if (p.size() - f.stream_offset < 1) return bad_data("attribute field " + f.name + " source name is truncated", f.stream_offset);
+      const std::size_t len = p[f.stream_offset];
+      if (p.size() - f.stream_offset - 1 < len)
+        return bad_data("attribute field " + f.name + " source name is truncated", f.stream_offset);
+      f.source.name.assign(reinterpret_cast<const char*>(p.data() + f.stream_offset + 1), len);
+      if (!is_field_name(f.source.name))
+        return bad_data("attribute field " + f.name + " source name is not 1-64 letters, digits or underscores", f.stream_offset);
+      f.source.type = static_cast<FieldType>(type);
+      f.stream_offset += 1 + len;
+    }
     const std::string& name = f.name;
-    if (f.transform != 0 && f.kind != kNamed && !(f.kind == kRgb && f.transform == kColourDifferences))
+    if (f.transform != 0 && f.kind != kNamed && !(f.kind == kRgb && f.transform == kColourDifferences) &&
+        !f.source.given())
       return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity && f.kind != kNamed))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
@@ -692,6 +728,7 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
     s << std::setprecision(6);
     const bool named_float = f.kind == kNamed && is_float_type(static_cast<FieldType>(f.transform));
     if (f.kind == kNamed && f.transform != 0) s << field_type_name(static_cast<FieldType>(f.transform)) << ": ";
+    if (f.source.given()) s << "as " << f.source.name << " " << field_type_name(f.source.type) << ": ";
     if (f.repr == kFloatBits) s << "float32 bit patterns, lossless";
     else if (f.kind == kRgb && f.transform == kColourDifferences) s << "integers, lossless (green, red and blue less green)";
     else if (f.kind == kRing || f.kind == kRgb || (f.kind == kNamed && !named_float)) s << "integers, lossless";
@@ -769,6 +806,9 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
     if (dec.overrun() > 8)
       return bad_data("attribute field " + name + " stream ends " + std::to_string(dec.overrun()) + " bytes early",
                       f.stream_offset + f.stream_bytes);
+    if (f.kind == kRing) decoded.ring_source = f.source;
+    if (f.kind == kIntensity) decoded.intensity_source = f.source;
+    if (f.kind == kTime) decoded.time_source = f.source;
     switch (f.kind) {
       case kRing:
         laser.assign(u[0].begin(), u[0].end());

@@ -196,6 +196,10 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
   plain.ring.clear();
   plain.column.clear();
   plain.rows = plain.columns = 0;
+  // (the second scan's intensity and time as a driver stored them: a uint16, and a float64
+  // `timestamp`, which comes back under that name)
+  plain.intensity_source = {"intensity", FieldType::kUint16};
+  plain.time_source = {"timestamp", FieldType::kFloat64};
   std::vector<io::BagScan> scans(2);
   scans[0].cloud = c;
   scans[0].stamp_sec = 1700000123;
@@ -235,8 +239,13 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
   for (std::size_t i = 0; i < 50; ++i) {
     EXPECT_EQ(b.cloud.points[i], plain.points[i]);
     EXPECT_EQ(b.cloud.time[i], plain.time[i]);
+    EXPECT_EQ(b.cloud.intensity[i], plain.intensity[i]);
   }
   EXPECT_FALSE(b.cloud.has_rings());
+  EXPECT_EQ(b.cloud.intensity_source.type, FieldType::kUint16);
+  EXPECT_EQ(b.cloud.time_source.name, "timestamp");
+  EXPECT_EQ(b.cloud.time_source.type, FieldType::kFloat64);
+  EXPECT_EQ(a.cloud.intensity_source.type, FieldType::kFloat32);  // the first scan's: the writer's own
 }
 
 TEST_F(Bags, MissingTopicListsTheTopics) {

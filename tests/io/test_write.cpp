@@ -310,6 +310,55 @@ TEST(WriteRoundTrip, NamedFieldsKeepTheirTypes) {
   EXPECT_FALSE(std::filesystem::exists(dir / "bad.pcd"));
 }
 
+// The ring, intensity and time come back in the names and types their source gave them (a
+// driver's uint8 laser_id, uint16 intensity and uint32 nanosecond `t`), in every PCD and PLY
+// encoding; a value the source's type cannot hold falls back to the writers' own column.
+TEST(WriteRoundTrip, RingIntensityAndTimeKeepTheirSourceNamesAndTypes) {
+  Cloud c;
+  for (int i = 0; i < 40; ++i) {
+    c.points.emplace_back(0.1F * static_cast<float>(i), 2.0F, -1.0F);
+    c.ring.push_back(static_cast<std::uint16_t>(i % 32 == 0 ? 255 : i % 32));
+    c.intensity.push_back(static_cast<float>(65535 - 1000 * i));
+    c.time.push_back(static_cast<double>(48828 * i + 17) * 1e-9);
+  }
+  c.ring_source = {"laser_id", FieldType::kUint8};
+  c.intensity_source = {"intensity", FieldType::kUint16};
+  c.time_source = {"t", FieldType::kUint32};
+  for (const Case& k : all_cases()) {
+    if (std::string(k.file) != "c.pcd" && std::string(k.file) != "c.ply") continue;
+    std::optional<ReadResult> out;
+    write_and_read(c, k, "sourced_", out);
+    ASSERT_TRUE(out.has_value()) << k.name;
+    const Cloud& d = out->cloud;
+    EXPECT_EQ(d.ring_source.name, "laser_id") << k.name;
+    EXPECT_EQ(d.ring_source.type, FieldType::kUint8) << k.name;
+    EXPECT_EQ(d.intensity_source.type, FieldType::kUint16) << k.name;
+    EXPECT_EQ(d.time_source.name, "t") << k.name;
+    EXPECT_EQ(d.time_source.type, FieldType::kUint32) << k.name;
+    EXPECT_TRUE(d.fields.empty()) << k.name;
+    EXPECT_EQ(d.ring, c.ring) << k.name;
+    EXPECT_EQ(d.intensity, c.intensity) << k.name;
+    ASSERT_EQ(d.time.size(), c.time.size()) << k.name;
+    for (std::size_t i = 0; i < c.size(); ++i) EXPECT_EQ(std::llround(d.time[i] * 1e9), 48828 * static_cast<long>(i) + 17);
+  }
+  // a ring of 300 in a uint8 source, a fractional intensity in a uint16 one: written as the
+  // writers' own ring (uint16) and intensity (float32), values kept
+  Cloud wide = c;
+  wide.ring[3] = 300;
+  wide.intensity[4] = 0.5F;
+  const auto dir = temp_dir("sourced_fallback");
+  const std::string path = (dir / "wide.pcd").string();
+  ASSERT_TRUE(write_cloud(path, wide).ok());
+  auto back = read_cloud(path);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_EQ(back.value().cloud.ring_source.name, "ring");
+  EXPECT_EQ(back.value().cloud.ring_source.type, FieldType::kUint16);
+  EXPECT_EQ(back.value().cloud.intensity_source.type, FieldType::kFloat32);
+  EXPECT_EQ(back.value().cloud.ring, wide.ring);
+  EXPECT_EQ(back.value().cloud.intensity, wide.intensity);
+  EXPECT_EQ(back.value().cloud.time_source.name, "t");
+}
+
 // An organised cloud written as an organised PCD keeps each point's laser and time; the
 // no-return pixels are not points when it is read back.
 TEST(WriteRoundTrip, OrganisedPcdKeepsRingAndTime) {

@@ -601,6 +601,87 @@ TEST(Attributes, TypedFieldsGoldenFileDecodes) {
   }
 }
 
+/// `c` as a driver's PCD gives it: its laser a uint8 `laser_id`, intensity a uint16 and time
+/// a uint32 `t` in nanoseconds.
+Cloud with_sources(Cloud c) {
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    c.intensity[i] = static_cast<float>((i * 7) % 4000);
+    c.time[i] = static_cast<double>(48828 * i + 17) * 1e-9;
+  }
+  c.ring_source = {"laser_id", FieldType::kUint8};
+  c.intensity_source = {"intensity", FieldType::kUint16};
+  c.time_source = {"t", FieldType::kUint32};
+  return c;
+}
+
+TEST(Attributes, RingIntensityAndTimeKeepTheirSourceNamesAndTypesInFormatOneSixteen) {
+  const Cloud in = with_sources(synthetic_scan(8, 120, 45));
+  const Coded c = code(in, 0.01);
+  ASSERT_GE(c.fields.size(), 3U);
+  EXPECT_EQ(codec::inspect(c.file).value().minor, 16);
+  EXPECT_NE(c.fields[0].representation.find("as laser_id uint8"), std::string::npos) << c.fields[0].representation;
+  EXPECT_NE(c.fields[1].representation.find("as intensity uint16"), std::string::npos) << c.fields[1].representation;
+  EXPECT_NE(c.fields[2].representation.find("as t uint32"), std::string::npos) << c.fields[2].representation;
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  const Cloud& d = out.value();
+  EXPECT_EQ(d.ring_source.name, "laser_id");
+  EXPECT_EQ(d.ring_source.type, FieldType::kUint8);
+  EXPECT_EQ(d.intensity_source.name, "intensity");
+  EXPECT_EQ(d.intensity_source.type, FieldType::kUint16);
+  EXPECT_EQ(d.time_source.name, "t");
+  EXPECT_EQ(d.time_source.type, FieldType::kUint32);
+  for (std::size_t j = 0; j < d.size(); ++j) {
+    ASSERT_EQ(std::llround(d.time[j] * 1e9), 48828 * static_cast<long>(c.sources[j]) + 17) << j;  // every nanosecond
+    ASSERT_EQ(d.intensity[j], in.intensity[c.sources[j]]) << j;
+  }
+  // a 1.15 reader's view: the sources need format 1.16
+  auto old = codec::decode_model(with_minor(c.file, 15));
+  ASSERT_FALSE(old.ok());
+  EXPECT_NE(old.status().message().find("1.16"), std::string::npos) << old.status().to_string();
+  // sources that are the writers' own (ring uint16, intensity float32, time float64) are not
+  // recorded: the file is the one without them
+  Cloud plain = synthetic_scan(8, 120, 45), own = plain;
+  own.ring_source = {"ring", FieldType::kUint16};
+  own.intensity_source = {"intensity", FieldType::kFloat32};
+  own.time_source = {"time", FieldType::kFloat64};
+  EXPECT_EQ(code(own, 0.01).file, code(plain, 0.01).file);
+  // damaged descriptors: bad data, never a crash
+  auto m = codec::decode_model(c.file);
+  ASSERT_TRUE(m.ok());
+  expect_damaged_payloads_fail(m.value());
+  for (const std::uint32_t transform : {0x109U, 0x004U, 0x307U}) {  // unknown type; no name bit; a reserved bit
+    codec::ModelData bad = m.value();
+    Bytes& p = *bad.attributes;
+    const std::size_t ring_descriptor = 9;  // the first field
+    ASSERT_EQ(p[ring_descriptor], 1);
+    for (int b = 0; b < 4; ++b) p[ring_descriptor + 4 + b] = static_cast<std::uint8_t>(transform >> (8 * b));
+    auto r = residual::decode_cloud(bad);
+    ASSERT_FALSE(r.ok()) << transform;
+    EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
+  }
+}
+
+TEST(Attributes, SourceNamesAndTypesGoldenFileDecodes) {
+  const Cloud in = with_sources(synthetic_scan(4, 48, 46));
+  const Bytes bytes = golden("attributes_sources_1_16.lex3dm", in);
+  ASSERT_FALSE(bytes.empty());
+  EXPECT_EQ(codec::inspect(bytes).value().minor, 16);
+  auto out = decode(bytes);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  ASSERT_EQ(out.value().size(), in.size());
+  EXPECT_EQ(out.value().ring_source.name, "laser_id");
+  EXPECT_EQ(out.value().time_source.type, FieldType::kUint32);
+  std::vector<long> got, want;
+  for (std::size_t j = 0; j < in.size(); ++j) {
+    got.push_back(std::llround(out.value().time[j] * 1e9));
+    want.push_back(std::llround(in.time[j] * 1e9));
+  }
+  std::sort(got.begin(), got.end());
+  std::sort(want.begin(), want.end());
+  EXPECT_EQ(got, want);
+}
+
 /// `c` with colours whose channels move together (a grey ramp, red a little above green and
 /// blue a little below, as a colourised map's are): coded as green and differences.
 Cloud with_correlated_colours(Cloud c) {

@@ -150,6 +150,17 @@ struct IntegerField {
 /// PLY header and a model file (formats/model.md §2.10) take it.
 [[nodiscard]] bool is_field_name(const std::string& name) noexcept;
 
+/// How a source stored the ring, intensity or time of its points: the field's name and type
+/// (a driver's uint8 `ring`, a uint16 `intensity`, an Ouster driver's uint32 `t`), so that
+/// the writers give it back as it came. Not given (an empty name, kUnspecified): the
+/// writers' own (`ring` uint16, `intensity` float32, `time` float64). An integer time
+/// field counts nanoseconds; Cloud::time holds seconds either way.
+struct SourceField {
+  std::string name;
+  FieldType type = FieldType::kUnspecified;
+  [[nodiscard]] bool given() const noexcept { return type != FieldType::kUnspecified && !name.empty(); }
+};
+
 struct Cloud {
   /// Point positions in metres.
   std::vector<Eigen::Vector3f> points;
@@ -181,6 +192,9 @@ struct Cloud {
   /// `timestamp` field, LAS GPS time, a raw log's firing time); empty otherwise, else
   /// points.size(). The epoch is the source's (LAS: GPS time; raw logs: the sensor's clock).
   std::vector<double> time;
+  /// The name and type the source gave the ring, intensity and time fields (SourceField;
+  /// kept through a model file since format 1.16).
+  SourceField ring_source, intensity_source, time_source;
   /// RGB colour of each point when the source has one (PCD `rgb`/`rgba`, PLY `red green
   /// blue`, LAS formats with colour, scaled to 8 bits); empty otherwise, else points.size().
   std::vector<std::array<std::uint8_t, 3>> rgb;
