@@ -91,7 +91,15 @@ Cloud to_cloud(const py::handle& points_obj, const py::object& intensity_obj, co
     const auto in = py::reinterpret_borrow<py::array>(intensity_obj);
     if (in.ndim() != 1 || static_cast<std::size_t>(in.shape(0)) != cloud.size())
       throw py::value_error(iwhat + " must have shape (" + std::to_string(cloud.size()) + ",), got " + shape_of(in));
-    if (!is_float(in)) throw py::value_error(iwhat + " must be float32 or float64, got " + dtype_of(in));
+    // (an 8- or 16-bit integer intensity is kept as its values and comes back in its dtype)
+    const char kind = in.dtype().kind();
+    const auto size = in.dtype().itemsize();
+    const bool small_int = (kind == 'i' || kind == 'u') && (size == 1 || size == 2);
+    if (!is_float(in) && !small_int)
+      throw py::value_error(iwhat + " must be float32, float64 or an 8- or 16-bit integer, got " + dtype_of(in));
+    if (small_int)
+      cloud.intensity_source = {"intensity", kind == 'i' ? (size == 1 ? FieldType::kInt8 : FieldType::kInt16)
+                                                         : (size == 1 ? FieldType::kUint8 : FieldType::kUint16)};
     // (the converted array kept alive while it is read: a float64 intensity is a copy)
     const py::array_t<float, py::array::forcecast> values(in);
     const auto v = values.unchecked<1>();

@@ -204,8 +204,33 @@ py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alp
   // The per-point fields the file keeps (formats/model.md §2.10), by name.
   const auto n = static_cast<py::ssize_t>(cloud.size());
   py::dict fields;
-  if (cloud.has_intensity()) fields["intensity"] = py::array_t<float>(n, cloud.intensity.data());
-  if (cloud.has_rings()) fields["ring"] = py::array_t<std::uint16_t>(n, cloud.ring.data());
+  // (intensity and ring in the integer type their source gave them, where the file records one)
+  const auto as_source = [n](const lex3d::SourceField& src, auto&& value) -> py::object {
+    lex3d::IntegerField x{src.name, std::vector<std::int32_t>(static_cast<std::size_t>(n)), src.type};
+    for (py::ssize_t i = 0; i < n; ++i) x.values[static_cast<std::size_t>(i)] = static_cast<std::int32_t>(value(i));
+    switch (src.type) {
+      case lex3d::FieldType::kInt8: return typed_field<std::int8_t>(x);
+      case lex3d::FieldType::kUint8: return typed_field<std::uint8_t>(x);
+      case lex3d::FieldType::kInt16: return typed_field<std::int16_t>(x);
+      case lex3d::FieldType::kUint16: return typed_field<std::uint16_t>(x);
+      case lex3d::FieldType::kInt32: return typed_field<std::int32_t>(x);
+      case lex3d::FieldType::kUint32: return typed_field<std::uint32_t>(x);
+      default: return py::none();
+    }
+  };
+  const auto integral = [](const lex3d::SourceField& s) { return s.given() && !lex3d::is_float_type(s.type); };
+  if (cloud.has_intensity()) {
+    py::object typed = integral(cloud.intensity_source)
+                           ? as_source(cloud.intensity_source, [&](py::ssize_t i) { return cloud.intensity[static_cast<std::size_t>(i)]; })
+                           : py::none();
+    fields["intensity"] = typed.is_none() ? py::object(py::array_t<float>(n, cloud.intensity.data())) : typed;
+  }
+  if (cloud.has_rings()) {
+    py::object typed = integral(cloud.ring_source)
+                           ? as_source(cloud.ring_source, [&](py::ssize_t i) { return cloud.ring[static_cast<std::size_t>(i)]; })
+                           : py::none();
+    fields["ring"] = typed.is_none() ? py::object(py::array_t<std::uint16_t>(n, cloud.ring.data())) : typed;
+  }
   if (cloud.has_time()) fields["time"] = py::array_t<double>(n, cloud.time.data());
   if (cloud.has_rgb()) {
     py::array_t<std::uint8_t> rgb({n, py::ssize_t{3}});
@@ -276,7 +301,7 @@ points: (N, 3) float32 or float64 array, metres, sensor frame; every value finit
     coordinates that float32 would round (far from their frame's origin, as UTM ones) are kept
     relative to an origin the file stores; decompress gives them back as they were. Or a path
     (str or os.PathLike) of a point cloud file, read as `lex3d compress PATH` reads it.
-intensity: optional (N,) float array, kept with a residual layer (losslessly); without one
+intensity: optional (N,) float or 8- or 16-bit integer array (an integer one comes back in its dtype), kept with a residual layer (losslessly); without one
     a UserWarning says it was dropped.
 fields: optional dict of name -> (N,) array, further per-point fields kept with a residual
     layer (losslessly), each given back by decompress(attributes=True) in its dtype: integers
@@ -306,7 +331,8 @@ as UTM ones), a float64 array of their true coordinates in the file's units.
 
 alphabet: the alphabet file (bytes) the model references, if it references one.
 attributes: also return the per-point fields the file keeps, as (points, fields) with fields a
-dict of (M,) arrays by name: "intensity" (float32), "ring" (uint16), "time" (float64, seconds),
+dict of (M,) arrays by name: "intensity" (float32, or the integer dtype it was given in), "ring" (uint16, or
+the integer type its source gave it), "time" (float64, seconds),
 "rgb" ((M, 3) uint8) and each named integer field (int32; a LAS file's "classification",
 "return_number", "scan_angle_rank"...).
 Raises ValueError for a malformed, truncated or corrupt file (the message names the byte offset)

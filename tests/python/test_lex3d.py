@@ -135,6 +135,21 @@ def test_bad_intensity_and_options_raise_value_error(small):
         lex3d.learn_alphabet([small, np.zeros((4, 2), np.float32)])
 
 
+def test_an_integer_intensity_comes_back_in_its_dtype(kitti):
+    """A uint16 intensity (a sensor's counts) is kept and given back as uint16 (model
+    format 1.16 records its type); a 32-bit or complex one raises ValueError."""
+    points, _ = kitti
+    n = points.shape[0]
+    counts = (np.arange(n) * 37 % 4096).astype(np.uint16)
+    data = lex3d.compress(points, counts, max_error=0.014, keep_all_points=True)
+    back, fields = lex3d.decompress(data, attributes=True)
+    assert fields["intensity"].dtype == np.uint16
+    assert np.array_equal(np.sort(fields["intensity"]), np.sort(counts))
+    for bad in (counts.astype(np.uint32), counts.astype(np.complex64)):
+        with pytest.raises(ValueError, match="intensity must be"):
+            lex3d.compress(points, bad, max_error=0.014)
+
+
 def test_corrupt_and_truncated_files_raise_value_error(small):
     data = lex3d.compress(small, max_error=0.02)
     for n in (0, 3, len(data) // 2, len(data) - 1):
