@@ -480,8 +480,9 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   }
   if (calibration) {
     if (calibration->lasers.size() != model->lasers)
-      return bad_data(msg(calibration_path, "the calibration has " + std::to_string(calibration->lasers.size()) +
-                                                " lasers, the " + model->name + " capture " + std::to_string(model->lasers)));
+      return bad_data(msg(path, "the calibration " + calibration_path + " has " +
+                                    std::to_string(calibration->lasers.size()) + " lasers, the " + model->name +
+                                    " capture " + std::to_string(model->lasers)));
     for (unsigned l = 0; l < model->lasers; ++l) {
       const double share = lasers[l].share;
       lasers[l] = calibration->lasers[l];

@@ -32,7 +32,7 @@
 namespace lex3d::fuzz {
 
 /// The inputs one reader target takes.
-enum class Reader { kPcd, kPly, kKitti, kBinXyz, kXyz, kUos, kLas, kPcap, kOuster, kPoses, kBag };
+enum class Reader { kPcd, kPly, kKitti, kBinXyz, kXyz, kUos, kLas, kPcap, kOuster, kHdl64, kPoses, kBag };
 
 struct ReaderKind {
   Reader reader;
@@ -44,7 +44,7 @@ inline constexpr ReaderKind kReaderKinds[] = {
     {Reader::kPcd, "pcd", ".pcd"},       {Reader::kPly, "ply", ".ply"},       {Reader::kKitti, "kitti", ".bin"},
     {Reader::kBinXyz, "binxyz", ".bin"}, {Reader::kXyz, "xyz", ".xyz"},       {Reader::kUos, "uos", ".3d"},
     {Reader::kLas, "las", ".las"},       {Reader::kPcap, "pcap", ".pcap"},    {Reader::kOuster, "ouster", ".pcap"},
-    {Reader::kPoses, "poses", ".txt"},    {Reader::kBag, "bag", ".bag"},
+    {Reader::kHdl64, "hdl64", ".pcap"},   {Reader::kPoses, "poses", ".txt"},    {Reader::kBag, "bag", ".bag"},
 };
 
 inline const ReaderKind* find_reader(std::string_view name) {
@@ -80,7 +80,7 @@ inline const std::string& scratch_dir() {
 inline void remove_scratch() {
   const std::string& d = scratch_dir();
   for (const char* f : {"/input.pcd", "/input.ply", "/input.bin", "/input.xyz", "/input.3d", "/input.las",
-                        "/input.pcap", "/input.json", "/input.txt", "/input.bag", "/keep.bag", "/back.pcd"})
+                        "/input.pcap", "/input.json", "/input.yaml", "/input.txt", "/input.bag", "/keep.bag", "/back.pcd"})
     std::remove((d + f).c_str());
   std::remove(d.c_str());
 }
@@ -104,6 +104,28 @@ inline const char* ouster_metadata() {
  "data_format": {"pixels_per_column": 16, "columns_per_packet": 16, "columns_per_frame": 1024,
    "pixel_shift_by_row": [12, 8, 4, 0, 12, 8, 4, 0, 12, 8, 4, 0, 12, 8, 4, 0],
    "column_window": [0, 63], "udp_profile_lidar": "LEGACY", "udp_profile_imu": "LEGACY"}})";
+}
+
+/// The calibration given with every `hdl64` input (the ROS driver's YAML): 64 lasers from
+/// -24.8° to +2°, rotation corrections within ±8°, distance corrections near 1.3 m, beam
+/// origins 15-22 cm up their normals and 2.6 cm aside, two-point corrections on the even
+/// lasers (as tests/fuzz/make_reader_corpus.py builds the captures for).
+inline std::string hdl64_calibration() {
+  std::string y = "distance_resolution: 0.002\nlasers:\n";
+  char buf[512];
+  for (int l = 0; l < 64; ++l) {
+    const int k = l < 32 ? l : l - 32;
+    const double vert = (l < 32 ? 2.0 - 0.34 * (k * 7 % 32) : -8.8 - 0.5 * (k * 5 % 32)) * 3.14159265358979 / 180;
+    const double rot = 8.0 * std::sin(1.7 * l + 0.3) * 3.14159265358979 / 180, dist = 1.2 + 0.005 * (l * 13 % 40);
+    std::snprintf(buf, sizeof buf,
+                  "- {laser_id: %d, rot_correction: %.12g, vert_correction: %.12g, dist_correction: %.6g, "
+                  "dist_correction_x: %.6g, dist_correction_y: %.6g, vert_offset_correction: %.6g, "
+                  "horiz_offset_correction: %.6g, two_pt_correction_available: %s}\n",
+                  l, rot, vert, dist, dist + 0.03, dist - 0.02, l < 32 ? 0.215 : 0.16, l % 2 == 0 ? 0.026 : -0.026,
+                  l % 2 == 0 ? "true" : "false");
+    y += buf;
+  }
+  return y;
 }
 
 inline void check_failure(const Status& s, const std::string& path) {
@@ -200,12 +222,18 @@ inline void check_reader(const ReaderKind& kind, const std::uint8_t* data, std::
       return;
     }
     case Reader::kPcap:
-    case Reader::kOuster: {
+    case Reader::kOuster:
+    case Reader::kHdl64: {
       io::ReadOptions o;
       if (kind.reader == Reader::kOuster) {
         o.metadata_path = scratch_dir() + "/input.json";
         const char* meta = ouster_metadata();
         write_whole(o.metadata_path, reinterpret_cast<const std::uint8_t*>(meta), std::string_view(meta).size());
+      }
+      if (kind.reader == Reader::kHdl64) {
+        o.metadata_path = scratch_dir() + "/input.yaml";
+        static const std::string calibration = hdl64_calibration();
+        write_whole(o.metadata_path, reinterpret_cast<const std::uint8_t*>(calibration.data()), calibration.size());
       }
       const auto r = io::read_sensor_log(path, o);
       if (!r.ok()) return check_failure(r.status(), path);

@@ -197,6 +197,25 @@ def velodyne():
     put("pcap", "vlp32c_dual.pcap", pcap_file(packets, 331.776, 2368))
 
 
+def hdl64():
+    """HDL-64E packets (upper and lower blocks of one azimuth, no factory byte) over 1.2
+    turns, 3.6° a firing; read with the calibration fuzz_readers.hpp gives (hdl64e)."""
+    packets = []
+    az = 100
+    for k in range(20):
+        p = bytearray()
+        for pair in range(6):
+            for bank, flag in ((0, 0xEEFF), (1, 0xDDFF)):
+                p += struct.pack("<HH", flag, az % 36000)
+                for f in range(32):
+                    d = int((6.0 + 2.0 * math.sin(0.0005 * az + 0.2 * f + bank)) / 0.002) if (f + pair + k) % 11 else 0
+                    p += struct.pack("<HB", d, 10 + f + 32 * bank)
+            az += 360
+        p += struct.pack("<IBB", k * 288, 0xA5, k & 255)
+        packets.append(bytes(p))
+    put("hdl64", "hdl64e_s2.pcap", pcap_file(packets, 288.0, 2368))
+
+
 def ouster():
     """LEGACY packets of the 16-beam sensor in fuzz_readers.hpp's metadata (a 64-column
     azimuth window: 4 packets a frame), two frames and the start of a third."""
@@ -223,5 +242,6 @@ if __name__ == "__main__":
     las()
     velodyne()
     ouster()
+    hdl64()
     for k in sorted(os.listdir(OUT)):
         print(k, sorted(os.listdir(os.path.join(OUT, k))))

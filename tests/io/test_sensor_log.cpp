@@ -756,7 +756,8 @@ TEST(SensorLogErrors, Hdl64eWithoutOrWithAWrongCalibration) {
   // 32 lasers
   std::string y = calib.yaml();
   write_bytes(o.metadata_path, y.substr(0, y.find("- dist_correction", y.find("laser_id: 31"))));
-  EXPECT_TRUE(bad(read_sensor_log(pcap, o), o.metadata_path, "32 lasers"));
+  EXPECT_TRUE(bad(read_sensor_log(pcap, o), pcap, "32 lasers"));
+  EXPECT_TRUE(bad(read_sensor_log(pcap, o), o.metadata_path, "32 lasers"));  // (both named)
   // a NaN angle, a missing angle, a repeated id
   for (const auto& [from, to, what] : std::vector<std::tuple<std::string, std::string, std::string>>{
            {"laser_id: 5\n  rot_correction: ", "laser_id: 5\n  rot_correction: nan #", "laser 5: rotation"},
