@@ -484,6 +484,23 @@ void run_info(const InfoOptions& o) {
     imin = *lo;
     imax = *hi;
   }
+  // (the ring and time spans, and how the source stored ring, intensity and time)
+  std::uint16_t ring_min = 0, ring_max = 0;
+  if (c.has_rings()) {
+    const auto [lo, hi] = std::minmax_element(c.ring.begin(), c.ring.end());
+    ring_min = *lo;
+    ring_max = *hi;
+  }
+  double time_min = 0.0, time_max = 0.0;
+  if (c.has_time()) {
+    const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
+    time_min = *lo;
+    time_max = *hi;
+  }
+  const auto source_text = [](const SourceField& s, bool time) {
+    if (!s.given()) return std::string();
+    return " (" + s.name + " " + field_type_name(s.type) + (time && !is_float_type(s.type) ? " nanoseconds" : "") + ")";
+  };
   const auto res = estimate_angular_resolution(c);
   const double rad2deg = 180.0 / M_PI;
   const double r_min = quantile(ranges, 0.0), r_med = quantile(ranges, 0.5), r_max = quantile(ranges, 1.0);
@@ -502,7 +519,25 @@ void run_info(const InfoOptions& o) {
       j.numbers("bounds_max", {b.max.x(), b.max.y(), b.max.z()});
     }
     j.begin_object("range_m").value("min", r_min).value("median", r_med).value("max", r_max).end_object();
-    if (c.has_intensity()) j.begin_object("intensity").value("min", imin).value("max", imax).end_object();
+    // (each with the name and type its source stored it in, where the reader recorded them)
+    const auto source_json = [&j](const SourceField& src) {
+      if (src.given()) j.value("source_name", src.name).value("source_type", std::string(field_type_name(src.type)));
+    };
+    if (c.has_intensity()) {
+      j.begin_object("intensity").value("min", imin).value("max", imax);
+      source_json(c.intensity_source);
+      j.end_object();
+    }
+    if (c.has_rings()) {
+      j.begin_object("ring").value("min", static_cast<std::uint64_t>(ring_min)).value("max", static_cast<std::uint64_t>(ring_max));
+      source_json(c.ring_source);
+      j.end_object();
+    }
+    if (c.has_time()) {
+      j.begin_object("time_s").value("min", time_min).value("max", time_max);
+      source_json(c.time_source);
+      j.end_object();
+    }
     if (res)
       j.begin_object("angular_resolution_deg")
           .value("azimuth", res->azimuth_rad * rad2deg)
@@ -564,7 +599,12 @@ void run_info(const InfoOptions& o) {
                 static_cast<double>(b.max.y()), static_cast<double>(b.max.z()));
   if (!ranges.empty()) std::printf("range          min %.3f  median %.3f  max %.3f m\n", r_min, r_med, r_max);
   if (c.has_intensity())
-    std::printf("intensity      %.4g .. %.4g\n", static_cast<double>(imin), static_cast<double>(imax));
+    std::printf("intensity      %.4g .. %.4g%s\n", static_cast<double>(imin), static_cast<double>(imax),
+                source_text(c.intensity_source, false).c_str());
+  if (c.has_rings())
+    std::printf("ring           %u .. %u%s\n", unsigned{ring_min}, unsigned{ring_max}, source_text(c.ring_source, false).c_str());
+  if (c.has_time())
+    std::printf("time           %.9g .. %.9g s%s\n", time_min, time_max, source_text(c.time_source, true).c_str());
   if (res)
     std::printf("beam spacing   %.4f deg horizontal, %.4f deg vertical (estimated)\n", res->azimuth_rad * rad2deg,
                 res->elevation_rad * rad2deg);
