@@ -49,8 +49,11 @@ StatusOr<SensorLog> read_sensor_log_impl(const std::string& path, const ReadOpti
   std::size_t velodyne = 0;
   for (const auto& d : datagrams) velodyne += detail::is_velodyne_packet(d.payload) ? 1 : 0;
   std::string metadata = options.metadata_path;
-  const bool ouster_json = detail::extension_lower(metadata) == ".json";
-  if (velodyne > 0 && !ouster_json) {
+  // (a calibration file given makes it a Velodyne capture; a metadata JSON an Ouster one)
+  const std::string ext = detail::extension_lower(metadata);
+  const bool calibration = ext == ".xml" || ext == ".yaml" || ext == ".yml";
+  const bool ouster_json = ext == ".json";
+  if (calibration || (velodyne > 0 && !ouster_json)) {
     // a Velodyne calibration given, or beside the capture (db.xml or the ROS driver's YAML)
     if (metadata.empty()) metadata = metadata_beside(path, {".xml", ".yaml", ".yml"});
     s = detail::decode_velodyne(path, options.sensor_model, metadata, datagrams, log);
