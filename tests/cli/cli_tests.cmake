@@ -553,6 +553,22 @@ if(EXISTS "${WORK}/fake.lex3dm" OR EXISTS "${WORK}/fake.pcd")
   message(SEND_ERROR "[pcap.not_a_capture] an output was written for a bad capture")
 endif()
 run(1 pcap.bad_model info "${WORK}/fake.pcap" --sensor-model hdl64)
+# An HDL-64E capture: with its calibration (the ROS driver's YAML) it compresses within the
+# bound; without one it exits 2 naming the capture and writing nothing.
+set(HDL64 "${SAMPLES}/../tests/fuzz/readers/hdl64/hdl64e_s2.pcap")
+set(HDL64_CAL "${SAMPLES}/../tests/data/io/hdl64e_calibration.yaml")
+run(0 pcap.hdl64e_info info "${HDL64}" --metadata "${HDL64_CAL}")
+expect_match(pcap.hdl64e_info "${LAST_OUT}" "sensor +HDL-64E, 64 lasers, 100 columns a turn")
+run(0 pcap.hdl64e_compress compress "${HDL64}" --metadata "${HDL64_CAL}" -o "${WORK}/hdl64e.lex3dm" --max-error 0.01 --json)
+expect_match(pcap.hdl64e_compress "${LAST_OUT}" "\"coding\":\"sensor-geometry\".*\"source\":\"calibration [^\"]*hdl64e_calibration.yaml\"")
+run(0 pcap.hdl64e_convert convert "${HDL64}" "${WORK}/hdl64e_ref.pcd" --metadata "${HDL64_CAL}")
+run(0 pcap.hdl64e_decompress decompress "${WORK}/hdl64e.lex3dm" -o "${WORK}/hdl64e_back.pcd" --reference "${WORK}/hdl64e_ref.pcd" --json)
+expect_match(pcap.hdl64e_decompress "${LAST_OUT}" "\"hausdorff_m\":0\.0(0[0-9]|10)")
+run(2 pcap.hdl64e_no_calibration compress "${HDL64}" -o "${WORK}/hdl64e_none.lex3dm")
+expect_match(pcap.hdl64e_no_calibration "${LAST_ERR}" "hdl64e_s2.pcap: an HDL-64E capture needs the sensor's calibration")
+if(EXISTS "${WORK}/hdl64e_none.lex3dm")
+  message(SEND_ERROR "[pcap.hdl64e_no_calibration] an output was written without a calibration")
+endif()
 
 # --- place database: build, multi-scan query (JSON Lines), query and add from model files,
 # append in place, upgrade, bad database files (exit 2 naming the file and the byte) ---

@@ -119,3 +119,20 @@ write("tiny.pose", b"100 200 300\n0 90 0\n")
 #              "sensor_info": {"prod_line": d["prod_line"], "prod_sn": d["prod_sn"]},
 #              "config_params": {"udp_profile_lidar": "LEGACY", "lidar_mode": d["lidar_mode"]}},
 #             open(out, "w"), indent=1)
+
+# hdl64e_calibration.yaml: the ROS driver's calibration layout for a made-up HDL-64E (the
+# values tests/fuzz/fuzz_readers.hpp's hdl64_calibration() gives the `hdl64` fuzz target),
+# with which tests/fuzz/readers/hdl64/hdl64e_s2.pcap decodes (the CLI tests use both).
+import math
+lines = ["distance_resolution: 0.002", "lasers:"]
+for l in range(64):
+    k = l if l < 32 else l - 32
+    vert = (2.0 - 0.34 * (k * 7 % 32) if l < 32 else -8.8 - 0.5 * (k * 5 % 32)) * 3.14159265358979 / 180
+    rot = 8.0 * math.sin(1.7 * l + 0.3) * 3.14159265358979 / 180
+    dist = 1.2 + 0.005 * (l * 13 % 40)
+    lines.append("- {laser_id: %d, rot_correction: %.12g, vert_correction: %.12g, dist_correction: %.6g, "
+                 "dist_correction_x: %.6g, dist_correction_y: %.6g, vert_offset_correction: %.6g, "
+                 "horiz_offset_correction: %.6g, two_pt_correction_available: %s}"
+                 % (l, rot, vert, dist, dist + 0.03, dist - 0.02, 0.215 if l < 32 else 0.16,
+                    0.026 if l % 2 == 0 else -0.026, "true" if l % 2 == 0 else "false"))
+write("hdl64e_calibration.yaml", ("\n".join(lines) + "\n").encode())
