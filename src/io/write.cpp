@@ -556,6 +556,9 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
       if (organised) {
         Cloud grid;
         grid.T_cloud_sensor = cloud.T_cloud_sensor;
+        grid.ring_source = cloud.ring_source;  // (each column as its source stored it)
+        grid.intensity_source = cloud.intensity_source;
+        grid.time_source = cloud.time_source;
         WriteOptions go = options;
         const float nan = std::numeric_limits<float>::quiet_NaN();
         grid.points.assign(at.size(), Eigen::Vector3f(nan, nan, nan));

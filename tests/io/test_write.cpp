@@ -383,6 +383,21 @@ TEST(WriteRoundTrip, OrganisedPcdKeepsRingAndTime) {
   EXPECT_EQ(r.value().cloud.ring, c.ring);
   EXPECT_EQ(r.value().cloud.column, c.column);
   EXPECT_EQ(r.value().cloud.time, c.time);
+  // with a driver's ring (uint8) and time (`t`, uint32 ns): the organised file keeps them so
+  Cloud d = c;
+  for (std::size_t i = 0; i < d.size(); ++i) d.time[i] = static_cast<double>(1000 * i + 7) * 1e-9;
+  d.ring_source = {"ring", FieldType::kUint8};
+  d.time_source = {"t", FieldType::kUint32};
+  ASSERT_TRUE(write_cloud(path, d).ok());
+  auto s = read_cloud(path);
+  ASSERT_TRUE(s.ok()) << s.status().to_string();
+  EXPECT_EQ(s.value().cloud.rows, 3U);
+  EXPECT_EQ(s.value().cloud.ring_source.type, FieldType::kUint8);
+  EXPECT_EQ(s.value().cloud.time_source.name, "t");
+  EXPECT_EQ(s.value().cloud.time_source.type, FieldType::kUint32);
+  EXPECT_EQ(s.value().cloud.ring, d.ring);
+  ASSERT_EQ(s.value().cloud.time.size(), d.size());
+  for (std::size_t i = 0; i < d.size(); ++i) EXPECT_EQ(std::llround(s.value().cloud.time[i] * 1e9), 1000 * static_cast<long>(i) + 7);
 }
 
 TEST(WriteRoundTrip, ColoursArePreserved) {
