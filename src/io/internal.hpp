@@ -292,10 +292,6 @@ inline unsigned store_field(std::uint8_t* dst, const IntegerField& x, std::size_
   }
 }
 
-/// The source of a reader's ring, intensity or time field named `name` of scalar `s`
-/// (Cloud::ring_source, ...; a 64-bit integer's type is not recorded).
-inline SourceField source_field(const std::string& name, Scalar s);
-
 /// Seconds a unit of a time field of scalar `s`: an integer one counts nanoseconds (the
 /// ouster_ros convention), a float one seconds.
 inline double time_unit(Scalar s) { return s == Scalar::kF32 || s == Scalar::kF64 ? 1.0 : 1e-9; }
@@ -321,6 +317,8 @@ inline std::optional<FieldType> field_type_of(Scalar s) {
   }
 }
 
+/// The source of a reader's ring, intensity or time field named `name` of scalar `s`
+/// (Cloud::ring_source, ...; a 64-bit integer's type is not recorded).
 inline SourceField source_field(const std::string& name, Scalar s) {
   const std::optional<FieldType> t = field_type_of(s);
   return t && *t != FieldType::kUnspecified ? SourceField{name, *t} : SourceField{};

@@ -565,8 +565,13 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   const std::uint32_t orgb = rgb ? field("rgb", kF32, 4) : 0;
   const std::uint32_t oring = !ring ? 0 : sc.ring ? typed(*sc.ring) : field("ring", kU16, 2);
   if (!sc.time) step = (step + 7U) & ~7U;  // the double time aligned (as before typed times)
-  m.names.push_back(sc.time_name);
-  const std::uint32_t ot = !time ? 0 : sc.time ? typed(*sc.time) : field(m.names.back().c_str(), kF64, 8);
+  std::uint32_t ot = 0;
+  if (time && sc.time) {
+    ot = typed(*sc.time);
+  } else if (time) {
+    m.names.push_back(sc.time_name);
+    ot = field(m.names.back().c_str(), kF64, 8);
+  }
   // named fields (Cloud::fields), each in its type
   std::vector<std::uint32_t> onamed;
   for (const IntegerField& f : c.fields) onamed.push_back(typed(f));

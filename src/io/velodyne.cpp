@@ -18,7 +18,6 @@
 #include <array>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <map>
 #include <numeric>
 #include <optional>
@@ -228,11 +227,6 @@ StatusOr<Calibration> parse_calibration_yaml(std::string_view text, const std::s
   double unit = 0.0;
   std::vector<std::map<std::string, std::string>> items;
   std::size_t line_no = 0;
-  const auto trim = [](std::string_view t) {
-    while (!t.empty() && std::isspace(static_cast<unsigned char>(t.front()))) t.remove_prefix(1);
-    while (!t.empty() && std::isspace(static_cast<unsigned char>(t.back()))) t.remove_suffix(1);
-    return t;
-  };
   const auto add_pairs = [&](std::string_view t, std::map<std::string, std::string>& into) -> bool {
     // "k: v" or "k: v, k: v" (inside braces)
     while (!t.empty()) {
@@ -253,7 +247,7 @@ StatusOr<Calibration> parse_calibration_yaml(std::string_view text, const std::s
     text = nl == std::string_view::npos ? std::string_view() : text.substr(nl + 1);
     ++line_no;
     if (const std::size_t hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
-    const bool indented = !line.empty() && std::isspace(static_cast<unsigned char>(line.front()));
+    const bool indented = !line.empty() && is_space(line.front());
     line = trim(line);
     if (line.empty()) continue;
     const std::string where = "line " + std::to_string(line_no) + ": ";
@@ -315,11 +309,10 @@ StatusOr<Calibration> parse_calibration_yaml(std::string_view text, const std::s
 }
 
 StatusOr<Calibration> read_calibration(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status(ErrorCode::kIoError, msg(path, "cannot open the calibration file"));
-  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (text.size() > (16U << 20)) return calibration_error(path, "larger than 16 MB: not a calibration file");
-  std::size_t first = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;
+  auto bytes = read_file(path, 16U << 20);
+  if (!bytes.ok()) return bytes.status();
+  const std::string_view text(reinterpret_cast<const char*>(bytes.value().data()), bytes.value().size());
+  std::size_t first = text.substr(0, 3) == "\xEF\xBB\xBF" ? 3 : 0;
   while (first < text.size() && std::isspace(static_cast<unsigned char>(text[first]))) ++first;
   if (first == text.size()) return calibration_error(path, "the calibration file is empty");
   if (text[first] == '<') return parse_calibration_xml(text, path);
@@ -422,8 +415,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   char period_text[64];
   std::snprintf(period_text, sizeof period_text, "%.0f", period_us);
   std::string keys;
-  for (const Model* m : kModels) keys += std::string(keys.empty() ? "" : ", ") + m->key;
-  keys += std::string(", ") + kHdl64.key;
+  for (const std::string& k : velodyne_models()) keys += (keys.empty() ? "" : ", ") + k;
   if (hdl64) {
     if (!model_key.empty() && to_lower(model_key) != kHdl64.key)
       return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key, 32) +
@@ -606,17 +598,14 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
       // step after it; its origin lies vert_offset along the beam's upward normal (height
       // vert_offset·cos w, vert_offset·sin w behind it) and horiz_offset to its side:
       // radially at angle psi from the beam's azimuth (counter-clockwise).
-      const double beam = -(2.0 * M_PI / columns) * l.share - l.azimuth_deg * M_PI / 180.0;
+      // (an origin on the axis has no angle: psi is then the beam's own offset, which
+      // keeps that offset in beam_azimuth)
+      const double fired = -(2.0 * M_PI / columns) * l.share, offset = l.azimuth_deg * M_PI / 180.0;
       const double along = -l.vert_offset_m * std::sin(w), side = l.horiz_offset_m;
       const double radial = std::hypot(along, side);
-      const double psi = radial > 0.0 ? std::atan2(side, along) : 0.0;
-      if (radial > 0.0) {
-        g.column_azimuth.push_back(beam + psi);
-        g.beam_azimuth.push_back(-psi);
-      } else {
-        g.column_azimuth.push_back(-(2.0 * M_PI / columns) * l.share);
-        g.beam_azimuth.push_back(-l.azimuth_deg * M_PI / 180.0);
-      }
+      const double psi = radial > 0.0 ? std::atan2(side, along) : offset;
+      g.column_azimuth.push_back(radial > 0.0 ? fired - offset + psi : fired);
+      g.beam_azimuth.push_back(-psi);
       g.z_offset.push_back(l.vert_offset_m * std::cos(w));
       g.radial_offset.push_back(radial);
     }

@@ -34,6 +34,7 @@
 #include <iomanip>
 #include <sstream>
 #include <limits>
+#include <optional>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -632,16 +633,21 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
     if (f.kind < previous_kind || (f.kind == previous_kind && f.kind != kNamed))
       return bad_data("attribute field " + f.name + " is out of order or repeated", at);
     previous_kind = f.kind;
-    if (f.kind == kNamed) {
-      // its name: a byte of length, then the name (after the descriptor, before the stream)
-      if (p.size() - f.stream_offset < 1) return bad_data("attribute field name is truncated", f.stream_offset);
+    // A name after the descriptor, before the stream (a named field's; a ring, intensity or
+    // time source's): a byte of length, then the name; `what` names it in messages.
+    const auto read_name = [&](const std::string& what, std::string& name) -> std::optional<Status> {
+      if (p.size() - f.stream_offset < 1) return bad_data(what + " is truncated", f.stream_offset);
       const std::size_t len = p[f.stream_offset];
-      if (p.size() - f.stream_offset - 1 < len) return bad_data("attribute field name is truncated", f.stream_offset);
-      f.name.assign(reinterpret_cast<const char*>(p.data() + f.stream_offset + 1), len);
-      if (!is_field_name(f.name)) return bad_data("attribute field name is not 1-64 letters, digits or underscores", f.stream_offset);
+      if (p.size() - f.stream_offset - 1 < len) return bad_data(what + " is truncated", f.stream_offset);
+      name.assign(reinterpret_cast<const char*>(p.data() + f.stream_offset + 1), len);
+      if (!is_field_name(name)) return bad_data(what + " is not 1-64 letters, digits or underscores", f.stream_offset);
+      f.stream_offset += 1 + len;
+      return std::nullopt;
+    };
+    if (f.kind == kNamed) {
+      if (auto e = read_name("attribute field name", f.name)) return *e;
       for (const Descriptor& e : out)
         if (e.kind == kNamed && e.name == f.name) return bad_data("attribute field " + f.name + " is repeated", at);
-      f.stream_offset += 1 + len;
       // its type (format 1.15; 0: a 32-bit signed integer)
       if (f.transform > static_cast<std::uint32_t>(FieldType::kFloat64))
         return bad_data("attribute field " + f.name + " type " + std::to_string(f.transform) + " is unknown", at + 4);
@@ -663,15 +669,8 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
           type > static_cast<std::uint32_t>(FieldType::kFloat64) ||
           (f.kind == kRing && is_float_type(static_cast<FieldType>(type))))
         return bad_data("attribute field " + f.name + " source type " + std::to_string(f.transform) + " is invalid", at + 4);
-      if (p.size() - f.stream_offset < 1) return bad_data("attribute field " + f.name + " source name is truncated", f.stream_offset);
-      const std::size_t len = p[f.stream_offset];
-      if (p.size() - f.stream_offset - 1 < len)
-        return bad_data("attribute field " + f.name + " source name is truncated", f.stream_offset);
-      f.source.name.assign(reinterpret_cast<const char*>(p.data() + f.stream_offset + 1), len);
-      if (!is_field_name(f.source.name))
-        return bad_data("attribute field " + f.name + " source name is not 1-64 letters, digits or underscores", f.stream_offset);
+      if (auto e = read_name("attribute field " + f.name + " source name", f.source.name)) return *e;
       f.source.type = static_cast<FieldType>(type);
-      f.stream_offset += 1 + len;
     }
     const std::string& name = f.name;
     if (f.transform != 0 && f.kind != kNamed && !(f.kind == kRgb && f.transform == kColourDifferences) &&
