@@ -421,14 +421,22 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
     j.value("fragmented_datagrams", i.fragmented_datagrams).value("incomplete_datagrams_dropped", i.incomplete_datagrams);
     j.value("lidar_packets", i.lidar_packets).value("other_packets", i.other_packets);
     j.begin_array("scans");
-    for (std::size_t k = 0; k < log.scans.size(); ++k)
+    for (std::size_t k = 0; k < log.scans.size(); ++k) {
+      const Cloud& c = log.scans[k];
       j.begin_object()
           .value("frame_id", log.frame_ids[k])
-          .value("points", log.scans[k].size())
+          .value("points", c.size())
           .value("no_returns", log.no_returns[k])
-          .value("rows", log.scans[k].rows)
-          .value("columns", log.scans[k].columns)
-          .end_object();
+          .value("rows", c.rows)
+          .value("columns", c.columns);
+      if (c.has_time()) {
+        const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
+        j.begin_object("time_s").value("min", *lo).value("max", *hi);
+        j.value("source_name", c.time_source.name).value("source_type", std::string(field_type_name(c.time_source.type)));
+        j.end_object();
+      }
+      j.end_object();
+    }
     j.end_array();
     j.end_object();
     std::cout << j.str() << "\n";
@@ -445,10 +453,21 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
   std::printf("packets        %zu lidar, %zu other; %zu capture records, %zu UDP datagrams (%zu reassembled from fragments, %zu cut by the capture dropped)\n",
               i.lidar_packets, i.other_packets, i.pcap_packets, i.udp_datagrams, i.fragmented_datagrams,
               i.incomplete_datagrams);
-  for (std::size_t k = 0; k < log.scans.size(); ++k)
-    std::printf("  turn %-4zu    frame %llu: %zu points, %zu no-returns, %u x %u\n", k,
-                static_cast<unsigned long long>(log.frame_ids[k]), log.scans[k].size(), log.no_returns[k],
-                log.scans[k].rows, log.scans[k].columns);
+  for (std::size_t k = 0; k < log.scans.size(); ++k) {
+    const Cloud& c = log.scans[k];
+    // (each point's time from the turn's first measurement, as the source gives it)
+    std::string times;
+    if (c.has_time()) {
+      const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
+      char buf[160];
+      std::snprintf(buf, sizeof buf, ", times %.3f .. %.3f ms (%s %s)", *lo * 1e3, *hi * 1e3, c.time_source.name.c_str(),
+                    field_type_name(c.time_source.type));
+      times = buf;
+    }
+    std::printf("  turn %-4zu    frame %llu: %zu points, %zu no-returns, %u x %u%s\n", k,
+                static_cast<unsigned long long>(log.frame_ids[k]), c.size(), log.no_returns[k], c.rows, c.columns,
+                times.c_str());
+  }
 }
 
 void run_info(const InfoOptions& o) {

@@ -73,6 +73,9 @@ constexpr std::uint16_t kAttrTypedMinor = 15;
 /// it in (kinds 1-3 with a `transform`, the name after the descriptor) and the first minor
 /// version that has it (model.md §2.10).
 constexpr std::uint16_t kAttrSourceMinor = 16;
+/// An ATTR field coded against the measurement columns of the sensor-geometry layer
+/// (method 6) and the first minor version that has it (model.md §2.10).
+constexpr std::uint16_t kAttrColumnMinor = 17;
 /// A model without instances (no INST chunk, the short MHDR) or without words at all (no
 /// alphabet: flag bits 0 and 1 clear) and the first minor version that has it (model.md
 /// §2.1, §2.4).
@@ -804,7 +807,8 @@ std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
 /// The minor version an ATTR payload needs: kAttrExtendedMinor for a named field (kind 5)
 /// or colour coded as differences (kind 4 with a transform), kAttrTypedMinor for a named
 /// field with its type (kind 5 with a transform), kAttrSourceMinor for a ring, intensity or
-/// time with its source's name and type (kinds 1-3 with a transform), else kAttrMinor; its descriptors walked
+/// time with its source's name and type (kinds 1-3 with a transform), kAttrColumnMinor for a
+/// field coded with method 6, else kAttrMinor; its descriptors walked
 /// as far as they go (the attribute decoder checks them).
 std::uint16_t attributes_minor(const std::uint8_t* p, std::uint64_t size) {
   constexpr std::uint64_t kDescriptor = 56;
@@ -817,6 +821,7 @@ std::uint16_t attributes_minor(const std::uint8_t* p, std::uint64_t size) {
     if (p[at] == 5) minor = std::max(minor, transform != 0 ? kAttrTypedMinor : kAttrExtendedMinor);
     if (p[at] == 4 && transform != 0) minor = std::max(minor, kAttrExtendedMinor);
     if (sourced) minor = std::max(minor, kAttrSourceMinor);
+    if (p[at + 2] == 6) minor = std::max(minor, kAttrColumnMinor);
     std::uint64_t stream = ld_u64(p + at + 48);
     if (p[at] == 5 || sourced) {  // (its name follows the descriptor: a length byte, then the name)
       if (size - at - kDescriptor < 1) break;

@@ -14,8 +14,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <optional>
 
 #include "io/internal.hpp"
@@ -213,6 +215,7 @@ struct Frame {
   std::vector<std::uint16_t> near_ir;
   std::vector<std::uint8_t> second;     // dual profile: second return present
   std::vector<std::uint8_t> have;       // per measurement column
+  std::vector<std::uint64_t> stamp_ns;  // per measurement column: its timestamp
   std::size_t columns_seen = 0;
 };
 
@@ -343,6 +346,20 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     if (with_signal) cloud.fields.push_back({"signal", {}, FieldType::kUint16});
     cloud.fields.push_back({"near_ir", {}, m.profile == Profile::kLowData ? FieldType::kUint8 : FieldType::kUint16});
     for (IntegerField& x : cloud.fields) x.values.reserve(pixels);
+    // Each point's time: its measurement column's timestamp from the frame's first (as
+    // Ouster's ROS driver gives `t`, uint32 nanoseconds). A frame whose timestamps run
+    // backwards or over more than 2^32 ns (a clock jump) gives no time.
+    std::uint64_t t0 = std::numeric_limits<std::uint64_t>::max(), t1 = 0;
+    for (std::uint32_t mc = 0; mc < m.W; ++mc)
+      if (f.have[mc] != 0 && m.in_window(mc)) {
+        t0 = std::min(t0, f.stamp_ns[mc]);
+        t1 = std::max(t1, f.stamp_ns[mc]);
+      }
+    const bool timed = t0 <= t1 && t1 - t0 <= std::numeric_limits<std::uint32_t>::max();
+    if (timed) {
+      cloud.time.reserve(pixels);
+      cloud.time_source = {"t", FieldType::kUint32};
+    }
     IntegerField* signal = with_signal ? &cloud.fields.front() : nullptr;
     IntegerField& near_ir = cloud.fields.back();
     // each measurement column's encoder angle, and its cosine and sine (shared by the beams)
@@ -375,6 +392,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
         near_ir.values.push_back(f.near_ir[k]);
         cloud.ring.push_back(static_cast<std::uint16_t>(l));
         cloud.column.push_back(c);
+        if (timed) cloud.time.push_back(static_cast<double>(f.stamp_ns[mc] - t0) * 1e-9);
       }
     }
     info.no_returns += no_returns;
@@ -419,6 +437,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
       cur->near_ir.assign(HW, 0);
       cur->second.assign(HW, 0);
       cur->have.assign(m.W, 0);
+      cur->stamp_ns.assign(m.W, 0);
     }
     Frame& f = *cur;
     for (std::uint32_t k = 0; k < m.cpp; ++k) {
@@ -434,6 +453,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
       if (m.legacy() && le<std::uint16_t>(col + 10) != frame_id)
         return bad_data(msg(path, record(*d) + ": columns of one packet carry different frame ids"));
       f.have[mid] = 1;
+      f.stamp_ns[mid] = le<std::uint64_t>(col);
       for (std::uint32_t l = 0; l < m.H; ++l) {
         const std::uint8_t* px = col + col_head + static_cast<std::size_t>(l) * m.pixel_bytes();
         const std::size_t idx = static_cast<std::size_t>(l) * m.W + mid;

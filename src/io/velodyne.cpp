@@ -110,6 +110,7 @@ std::uint32_t le32(const std::uint8_t* p) {
 struct Firing {
   double azimuth_deg = 0.0;  // start of the firing, unwrapped across turns
   double step_deg = 0.0;     // azimuth advance over one firing period
+  std::int64_t time_ns = 0;  // start of the firing: the packet's timestamp (unwrapped across hours) plus its place in the packet
   std::array<std::uint16_t, 64> dist{};
   std::array<std::uint8_t, 64> refl{};
   std::array<bool, 64> second{};  // dual return: the pair's other block holds another return
@@ -490,8 +491,23 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   std::vector<Firing> firings;
   firings.reserve(packets.size() * (kBlocks / block_stride) * model->firings_per_block);
   double unwrap = 0.0, prev = -1.0, last_gap = std::nan("");
+  // Firing times: the packet's timestamp (µs past the hour, its first firing's) plus the
+  // firing periods before it in the packet; an HDL-64E's period is the packet period over
+  // its firings (its manual gives no sequence timing).
+  const auto firings_per_packet = static_cast<double>(kBlocks / block_stride * model->firings_per_block);
+  const double firing_ns = model->firing_us > 0.0       ? 1000.0 * model->firing_us
+                           : std::isfinite(period_us) ? 1000.0 * period_us / firings_per_packet
+                                                      : 0.0;
+  const auto slot_ns = static_cast<std::int64_t>(std::llround(1000.0 * model->slot_us));
+  constexpr std::int64_t kHourUs = 3600LL * 1000000LL;
+  std::int64_t hours_us = 0, prev_stamp = -1;
   for (const Datagram* d : packets) {
     const std::uint8_t* b = d->payload.data();
+    auto stamp = static_cast<std::int64_t>(le32(b + 1200));
+    if (prev_stamp >= 0 && stamp + hours_us < prev_stamp - kHourUs / 2) hours_us += kHourUs;
+    stamp += hours_us;
+    prev_stamp = stamp;
+    std::size_t fired = 0;  // firings of this packet so far
     std::array<double, kBlocks> az{};
     for (std::size_t k = 0; k < kBlocks; ++k) {
       const std::uint8_t* blk = b + k * 100;
@@ -529,6 +545,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
         Firing f;
         f.azimuth_deg = a_unwrapped + block_step * s;
         f.step_deg = block_step;
+        f.time_ns = 1000 * stamp + std::llround(firing_ns * static_cast<double>(fired++));
         for (unsigned l = 0; l < model->lasers; ++l) {
           // (an HDL-64E's lasers 32-63 in the lower block, 100 bytes on)
           const std::uint8_t* ch = hdl64 ? blk + (l / 32) * 100 + (l % 32) * 3 : blk + (s * model->lasers + l) * 3;
@@ -609,9 +626,21 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
       g.z_offset.push_back(l.vert_offset_m * std::cos(w));
       g.radial_offset.push_back(radial);
     }
+    // Each point's time from the turn's first firing, as the ROS driver's `time` (float32
+    // seconds): its firing's start plus its laser's slot. Not given where the packets'
+    // timestamps run backwards within the turn or span more than a second.
+    const std::int64_t t0 = firings[begin].time_ns;
+    bool timed = true;
+    for (std::size_t i = begin; i < end && timed; ++i)
+      timed = firings[i].time_ns >= t0 && firings[i].time_ns - t0 <= 1000000000LL;
+    if (timed) {
+      cloud.time_source = {"time", FieldType::kFloat32};
+      cloud.time.reserve(static_cast<std::size_t>(end - begin) * model->lasers);
+    }
     std::size_t no_returns = 0;
     for (unsigned r = 0; r < model->lasers; ++r) {
       const unsigned id = laser_of_ring[r];
+      const std::int64_t slot = static_cast<std::int64_t>(id / model->lasers_per_slot) * slot_ns;
       const Laser& l = lasers[id];
       const double w = g.elevation[r];
       const double cw = std::cos(w), sw = std::sin(w);
@@ -628,6 +657,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
         cloud.intensity.push_back(static_cast<float>(f.refl[id]));
         cloud.ring.push_back(static_cast<std::uint16_t>(r));
         cloud.column.push_back(static_cast<std::uint32_t>(i - begin));
+        if (timed) cloud.time.push_back(static_cast<double>(f.time_ns + slot - t0) * 1e-9);
       }
     }
     cloud.geometry = std::move(g);

@@ -17,7 +17,15 @@
 //    exactly, and the previous values of this laser and of the laser above. A laser's
 //    intensities follow its calibration and its neighbours; the models learn their
 //    distribution given those neighbours, not only a difference;
-//  - method 5 (mixed tree): method 4 over the history of methods 0-2.
+//  - method 5 (mixed tree): method 4 over the history of methods 0-2;
+//  - method 6 (layer column): u against the value of the same measurement column of the
+//    sensor-geometry layer (format 1.17). Each laser's column shift is coded first (the
+//    layer's column less the measurement column: a destaggered Ouster row's pixel shift).
+//    A point whose measurement column has a value already is predicted by that value
+//    plus its laser's last offset from it; one that opens a column by the column before
+//    plus the last step between columns. A raw log's firing times (one timestamp a
+//    measurement column, each laser a fixed slot after it) then cost about one value a
+//    column instead of one a point.
 // Named fields (kind 5: a LAS file's classification, return number...; a PCD's other integer
 // and float fields) are coded as the others, losslessly, their name after their descriptor
 // and their source type in its transform bytes (format 1.15); float ones as intensity is.
@@ -36,6 +44,7 @@
 #include <limits>
 #include <optional>
 #include <memory>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -78,12 +87,14 @@ constexpr std::uint64_t kColourDifferenceSpan = 510;
 constexpr std::size_t kMaxFields = 255;
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
 constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3,
-                       kMethodLayerTree = 4, kMethodMixedTree = 5;
+                       kMethodLayerTree = 4, kMethodMixedTree = 5, kMethodLayerColumn = 6;
 
 bool is_mixed(std::uint8_t method) { return method == kMethodLayerTree || method == kMethodMixedTree; }
 bool is_tree(std::uint8_t method) { return method == kMethodTree || is_mixed(method); }
 /// Methods whose history is keyed by the sensor-geometry layer's lasers.
 bool is_by_layer(std::uint8_t method) { return method == kMethodLayerLaser || method == kMethodLayerTree; }
+/// Methods that need a sensor-geometry layer.
+bool needs_layer(std::uint8_t method) { return is_by_layer(method) || method == kMethodLayerColumn; }
 constexpr std::size_t kDescriptorBytes = 56;  // kind, repr, method, channels, 4 reserved, step, base, max_error, kmin, span, stream_bytes
 constexpr std::uint64_t kMaxSpan = std::uint64_t{1} << 31;  // residuals stay within the integer model's 2^32 - 1
 constexpr std::uint64_t kTreeMaxSpan = 255;
@@ -287,6 +298,257 @@ std::vector<std::uint8_t> code_values(const std::vector<std::vector<std::int64_t
   return enc.finish();
 }
 
+/// Times given in whole nanoseconds (an integer time source: a driver's `t`, a raw log's
+/// timestamps) on the largest step that holds them all, their greatest common divisor, where
+/// it exceeds 1 ns: a sensor clock that counts in 10 ns then costs no digit of its own.
+/// Decoded, base + k·step is that many nanoseconds within far less than half of one, as a
+/// writer of the integer source rounds it. nullopt where a value is not a whole nanosecond
+/// count or they have no common step above 1 ns (the exact steps of quantise_field then).
+std::optional<Quant> whole_nanoseconds(const std::vector<double>& values) {
+  std::int64_t g = 0;
+  for (const double v : values) {
+    const double ns = std::nearbyint(v * 1e9);
+    if (!(std::abs(ns - v * 1e9) <= 1e-3 && std::abs(ns) <= 0x1p52)) return std::nullopt;
+    g = std::gcd(g, std::abs(static_cast<std::int64_t>(ns)));
+  }
+  if (g <= 1) return std::nullopt;
+  Quant q;
+  q.step = static_cast<double>(g) * 1e-9;
+  return q;
+}
+
+/// The history keys of methods 3, 4 and 6: the layer lasers, one key beyond the largest.
+std::size_t key_count(const std::vector<std::uint16_t>& keys) {
+  return keys.empty() ? 1 : static_cast<std::size_t>(*std::max_element(keys.begin(), keys.end())) + 1;
+}
+
+/// Method 6's predictions: each laser's column shift, each measurement column's base
+/// value (the value of its first point less that point's laser offset), each laser's
+/// offset from the bases and the step between neighbouring columns: the last one (`mean`
+/// false: firings a packet apart exactly) or the mean of all so far (`mean` true: each
+/// column's own jittered timestamp). Shared by the encoder and the decoder, which update
+/// it with the same values in the same order.
+class ColumnHistory {
+ public:
+  ColumnHistory(const LayerKeys& layer, std::vector<std::int64_t> shift, bool mean)
+      : layer_(layer), w_(layer.columns), mean_(mean), shift_(std::move(shift)), base_(w_, 0), set_(w_, 0),
+        offset_(shift_.size(), 0), offset_seen_(shift_.size(), 0), last_(shift_.size(), 0) {}
+
+  /// Point j's prediction and its residual's kind: 0 a known column and laser offset, 1 a
+  /// known column, 2 a column opened, 3 a point without a column (a kept word point).
+  struct Guess {
+    std::int64_t value;
+    int kind;
+  };
+  [[nodiscard]] Guess guess(std::size_t j) const {
+    const std::size_t l = layer_.laser[j];
+    if (layer_.column[j] >= w_) return {last_[l], 3};
+    const std::uint32_t m = measurement(j);
+    if (set_[m]) return {base_[m] + offset_[l], offset_seen_[l] ? 0 : 1};
+    std::int64_t b = 0;
+    const std::int64_t step = !mean_ ? step_ : steps_ > 0 ? step_sum_ / steps_ : 0;
+    if (m > 0 && set_[m - 1]) b = base_[m - 1] + step;
+    else if (m + 1 < w_ && set_[m + 1]) b = base_[m + 1] - step;
+    else if (opened_) b = base_[last_opened_] + (static_cast<std::int64_t>(m) - static_cast<std::int64_t>(last_opened_)) * step;
+    return {b + offset_[l], 2};
+  }
+  void update(std::size_t j, std::int64_t u) {
+    const std::size_t l = layer_.laser[j];
+    if (layer_.column[j] >= w_) {
+      last_[l] = u;
+      return;
+    }
+    const std::uint32_t m = measurement(j);
+    if (set_[m]) {
+      offset_[l] = held(u - base_[m]);
+      offset_seen_[l] = 1;
+      return;
+    }
+    base_[m] = held(u - offset_[l]);
+    set_[m] = 1;
+    // (the step from column to column, from whichever neighbour has a value: a layer's
+    // columns may run against the measurement order)
+    const bool before = m > 0 && set_[m - 1], after = m + 1 < w_ && set_[m + 1];
+    if (before || after) {
+      step_ = held(before ? base_[m] - base_[m - 1] : base_[m + 1] - base_[m]);
+      step_sum_ += step_;  // (at most 2^20 columns of at most 2^40: no overflow)
+      ++steps_;
+    }
+    last_opened_ = m;
+    opened_ = true;
+  }
+
+ private:
+  /// (bases, offsets and steps held within ±2^40, so that no prediction overflows whatever
+  /// a damaged stream decodes to; values within 2^31 never reach that)
+  static std::int64_t held(std::int64_t v) {
+    constexpr std::int64_t kHold = std::int64_t{1} << 40;
+    return std::clamp(v, -kHold, kHold);
+  }
+  [[nodiscard]] std::uint32_t measurement(std::size_t j) const {
+    const std::int64_t s = shift_[layer_.laser[j]];
+    return static_cast<std::uint32_t>((static_cast<std::int64_t>(layer_.column[j]) + w_ - s) % w_);
+  }
+  const LayerKeys& layer_;
+  std::int64_t w_;
+  bool mean_;
+  std::vector<std::int64_t> shift_, base_;
+  std::vector<std::uint8_t> set_;
+  std::vector<std::int64_t> offset_;
+  std::vector<std::uint8_t> offset_seen_;
+  std::vector<std::int64_t> last_;
+  std::int64_t step_ = 0, step_sum_ = 0, steps_ = 0;
+  std::uint32_t last_opened_ = 0;
+  bool opened_ = false;
+};
+
+/// Method 6's residual models: four kinds (ColumnHistory::Guess), each in the class of its
+/// last residual; the shifts with their own model.
+struct ColumnModels {
+  IntModel residual{4 * IntModel::kClasses};
+  IntModel shifts{1};
+  std::array<std::int64_t, 4> last{};
+  [[nodiscard]] int context(int kind) const {
+    return kind * IntModel::kClasses + IntModel::context_of(last[static_cast<std::size_t>(kind)]);
+  }
+};
+
+/// Each laser's column shift for method 6 (values in [0, columns)): against the laser with
+/// the most points (shift 0), the most frequent column difference between a point and that
+/// laser's latest point at or before its value, or one column either side of it, whichever
+/// keeps the laser's offset from that laser's values constant most often. (A laser fired
+/// before the reference within one firing finds its latest point a column back; only the
+/// firing's own column keeps the offset, its slot, constant across packets.)
+std::vector<std::int64_t> column_shifts(const std::vector<std::int64_t>& u, const LayerKeys& layer, std::size_t lasers) {
+  const std::uint32_t w = layer.columns;
+  std::vector<std::vector<std::size_t>> of(lasers);
+  for (std::size_t j = 0; j < u.size(); ++j)
+    if (layer.column[j] < w) of[layer.laser[j]].push_back(j);
+  std::vector<std::int64_t> shift(lasers, 0);
+  std::size_t ref = 0;
+  for (std::size_t l = 1; l < lasers; ++l)
+    if (of[l].size() > of[ref].size()) ref = l;
+  if (of[ref].empty()) return shift;
+  std::vector<std::pair<std::int64_t, std::uint32_t>> reference;  // (value, column), by value
+  std::vector<std::int64_t> at_column(w, 0);
+  std::vector<std::uint8_t> has(w, 0);
+  reference.reserve(of[ref].size());
+  for (const std::size_t j : of[ref]) {
+    reference.emplace_back(u[j], layer.column[j]);
+    at_column[layer.column[j]] = u[j];
+    has[layer.column[j]] = 1;
+  }
+  std::sort(reference.begin(), reference.end());
+  std::vector<std::uint32_t> votes(w, 0);
+  std::vector<std::uint32_t> touched;
+  for (std::size_t l = 0; l < lasers; ++l) {
+    if (l == ref || of[l].empty()) continue;
+    touched.clear();
+    for (const std::size_t j : of[l]) {
+      const auto at = std::upper_bound(reference.begin(), reference.end(),
+                                       std::make_pair(u[j], std::numeric_limits<std::uint32_t>::max()));
+      if (at == reference.begin()) continue;
+      const std::uint32_t d = (layer.column[j] + w - std::prev(at)->second) % w;
+      if (votes[d]++ == 0) touched.push_back(d);
+    }
+    std::uint32_t voted = 0, most = 0;
+    for (const std::uint32_t d : touched) {
+      if (votes[d] > most || (votes[d] == most && d < voted)) {
+        voted = d;
+        most = votes[d];
+      }
+      votes[d] = 0;
+    }
+    // (of the voted difference and its neighbours, the one whose offsets change least often)
+    std::size_t fewest = std::numeric_limits<std::size_t>::max();
+    for (const std::uint32_t d : {voted, (voted + w - 1) % w, (voted + 1) % w}) {
+      std::size_t changes = 0;
+      std::int64_t last = 0;
+      bool any = false;
+      for (const std::size_t j : of[l]) {
+        const std::uint32_t m = (layer.column[j] + w - d) % w;
+        if (!has[m]) continue;
+        const std::int64_t offset = u[j] - at_column[m];
+        changes += any && offset != last ? 1 : 0;
+        last = offset;
+        any = true;
+      }
+      if (any && changes < fewest) {
+        fewest = changes;
+        shift[l] = d;
+      }
+    }
+  }
+  return shift;
+}
+
+/// A shift less the one before, wrapped into (-columns/2, columns/2].
+std::int64_t wrapped_difference(std::int64_t s, std::int64_t before, std::int64_t columns) {
+  std::int64_t d = ((s - before) % columns + columns) % columns;
+  return d > columns / 2 ? d - columns : d;
+}
+
+/// Codes one channel with method 6, the shifts and the step predictor given.
+std::vector<std::uint8_t> code_by_column(const std::vector<std::int64_t>& u, const LayerKeys& layer,
+                                         const std::vector<std::int64_t>& shift, bool mean) {
+  RangeEncoder enc;
+  ColumnModels models;
+  models.shifts.put(enc, 0, mean ? 1 : 0);
+  std::int64_t before = 0;
+  for (const std::int64_t s : shift) {
+    models.shifts.put(enc, 0, wrapped_difference(s, before, layer.columns));
+    before = s;
+  }
+  ColumnHistory h(layer, shift, mean);
+  for (std::size_t j = 0; j < u.size(); ++j) {
+    const ColumnHistory::Guess g = h.guess(j);
+    const std::int64_t r = u[j] - g.value;
+    models.residual.put(enc, models.context(g.kind), r);
+    models.last[static_cast<std::size_t>(g.kind)] = r;
+    h.update(j, u[j]);
+  }
+  return enc.finish();
+}
+
+/// Codes one channel with method 6, with each step predictor (ColumnHistory), keeping
+/// the smaller.
+std::vector<std::uint8_t> code_by_column(const std::vector<std::int64_t>& u, const LayerKeys& layer) {
+  const std::vector<std::int64_t> shift = column_shifts(u, layer, key_count(layer.laser));
+  std::vector<std::uint8_t> best;
+  for (const bool mean : {false, true}) {
+    std::vector<std::uint8_t> s = code_by_column(u, layer, shift, mean);
+    if (best.empty() || s.size() < best.size()) best = std::move(s);
+  }
+  return best;
+}
+
+/// Decodes one channel of `out.size()` values coded with method 6; false where a value
+/// falls outside [0, span] or the step predictor is neither 0 nor 1.
+bool decode_by_column(RangeDecoder& dec, std::uint64_t span, const LayerKeys& layer, std::vector<std::int64_t>& out) {
+  const std::size_t lasers = key_count(layer.laser);
+  const auto w = static_cast<std::int64_t>(layer.columns);
+  ColumnModels models;
+  const std::int64_t mode = models.shifts.get(dec, 0);
+  if (mode != 0 && mode != 1) return false;
+  std::vector<std::int64_t> shift(lasers, 0);
+  std::int64_t before = 0;
+  for (std::int64_t& s : shift) {
+    s = ((before + models.shifts.get(dec, 0)) % w + w) % w;
+    before = s;
+  }
+  ColumnHistory h(layer, std::move(shift), mode == 1);
+  for (std::size_t j = 0; j < out.size(); ++j) {
+    const ColumnHistory::Guess g = h.guess(j);
+    const std::int64_t r = models.residual.get(dec, models.context(g.kind));
+    models.last[static_cast<std::size_t>(g.kind)] = r;
+    const std::int64_t v = g.value + r;
+    if (v < 0 || static_cast<std::uint64_t>(v) > span) return false;
+    out[j] = v;
+    h.update(j, v);
+  }
+  return true;
+}
+
 /// Finds how to represent `values` (float32 when `is_f32`) as integers.
 Quant quantise_field(const std::vector<double>& values, bool is_f32, double max_error, bool allow_float_bits,
                      double fallback_error, const char* name) {
@@ -353,10 +615,6 @@ Quant quantise_field(const std::vector<double>& values, bool is_f32, double max_
   return q;
 }
 
-/// The history keys of method 3: the layer lasers, one key beyond the largest.
-std::size_t key_count(const std::vector<std::uint16_t>& keys) {
-  return keys.empty() ? 1 : static_cast<std::size_t>(*std::max_element(keys.begin(), keys.end())) + 1;
-}
 
 struct FieldOut {
   std::string name;  // kNamed only
@@ -387,12 +645,14 @@ void AttributeOptions::validate() const {
 
 std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
                                             const AttributeOptions& options, std::vector<AttributeField>* fields_out,
-                                            const std::vector<std::uint16_t>& layer_lasers) {
+                                            const LayerKeys& layer) {
   options.validate();
   const std::size_t n_in = input.size(), n = sources.size();
-  if (!layer_lasers.empty() && layer_lasers.size() != n)
-    throw std::invalid_argument("attribute layer lasers: " + std::to_string(layer_lasers.size()) + " for " +
-                                std::to_string(n) + " decoded points");
+  const std::vector<std::uint16_t>& layer_lasers = layer.laser;
+  if (!layer_lasers.empty() && (layer_lasers.size() != n || layer.column.size() != n))
+    throw std::invalid_argument("attribute layer keys: " + std::to_string(layer_lasers.size()) + " lasers and " +
+                                std::to_string(layer.column.size()) + " columns for " + std::to_string(n) +
+                                " decoded points");
   const std::size_t layer_keys = key_count(layer_lasers);
   check_size(input.intensity.size(), n_in, "intensity");
   check_size(input.time.size(), n_in, "time");
@@ -447,7 +707,12 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const bool only_bits = kind == kNamed && std::any_of(vals.begin(), vals.end(), [](double v) {
                              return !std::isfinite(v) || (v == 0.0 && std::signbit(v));
                            });
+    // (a time its source holds in integer nanoseconds: on their common step)
+    const std::optional<Quant> ns = kind == kTime && source != nullptr && source->given() && !is_float_type(source->type)
+                                        ? whole_nanoseconds(vals)
+                                        : std::nullopt;
     const Quant q = only_bits ? Quant{kFloatBits, 0.0, 0.0, 0.0, 0}
+                    : ns      ? *ns
                               : quantise_field(vals, is_f32, bound, bits, fallback, kind == kNamed ? name.c_str() : kind_name(kind));
     FieldOut f{name, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
     if (source != nullptr) source_of(f, *source);
@@ -550,16 +815,19 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
       if (transform != 0 && f.kind != kRgb) continue;
       const std::vector<std::vector<std::int64_t>>& u = transform != 0 ? differences : f.u;
       const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
-      for (const std::uint8_t m :
-           {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree, kMethodMixedTree}) {
+      for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree,
+                                   kMethodMixedTree, kMethodLayerColumn}) {
         if (is_tree(m) && span > tree_max_span(m)) continue;
         if (m == kMethodLinear && f.kind != kTime && f.kind != kRing) continue;
-        if (is_by_layer(m) && layer_lasers.empty()) continue;
+        if (needs_layer(m) && layer_lasers.empty()) continue;
+        // (method 6 for times, and named fields that may hold them, of a layer with a grid)
+        if (m == kMethodLayerColumn && ((f.kind != kTime && f.kind != kNamed) || layer.columns == 0)) continue;
         // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
         // scans measured, method 5 never won there): not tried, to save its time.
         if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
-        std::vector<std::uint8_t> s = is_by_layer(m) ? code_values(u, span, m, layer_lasers, layer_keys)
-                                                     : code_values(u, span, m, by, hl);
+        std::vector<std::uint8_t> s = m == kMethodLayerColumn ? code_by_column(u[0], layer)
+                                      : is_by_layer(m)        ? code_values(u, span, m, layer_lasers, layer_keys)
+                                                              : code_values(u, span, m, by, hl);
         if (best.empty() || s.size() < best.size()) {
           best = std::move(s);
           best_method = m;
@@ -678,9 +946,11 @@ StatusOr<std::vector<Descriptor>> read_descriptors(const std::vector<std::uint8_
       return bad_data("attribute field " + name + " has reserved bytes set", at + 4);
     if (f.repr > kFloatBits || (f.repr == kFloatBits && f.kind != kIntensity && f.kind != kNamed))
       return bad_data("attribute field " + name + " representation " + std::to_string(f.repr) + " is invalid", at + 1);
-    if (f.method > kMethodMixedTree) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
+    if (f.method > kMethodLayerColumn) return bad_data("attribute field " + name + " method " + std::to_string(f.method) + " is unknown", at + 2);
     if (f.channels != (f.kind == kRgb ? 3 : 1))
       return bad_data("attribute field " + name + " has " + std::to_string(f.channels) + " channels", at + 3);
+    if (f.method == kMethodLayerColumn && f.kind != kTime && f.kind != kNamed)
+      return bad_data("attribute field " + name + " uses method 6, which codes times and named fields only", at + 2);
     if (f.repr == kQuantised && !(std::isfinite(f.step) && f.step > 0.0 && f.step <= 1e9))
       return bad_data("attribute field " + name + " step is not in (0, 1e9]", at + 8);
     if (!(std::isfinite(f.base) && std::abs(f.base) <= 1e18))
@@ -744,11 +1014,11 @@ StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::
 }
 
 Status decode_attributes(const std::vector<std::uint8_t>& payload, Cloud& decoded) {
-  return detail::decode_attributes(payload, {}, decoded);
+  return detail::decode_attributes(payload, LayerKeys{}, decoded);
 }
 
-Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const std::vector<std::uint16_t>& layer_lasers,
-                                 Cloud& decoded) {
+Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const LayerKeys& layer, Cloud& decoded) {
+  const std::vector<std::uint16_t>& layer_lasers = layer.laser;
   auto desc = read_descriptors(payload);
   if (!desc.ok()) return desc.status();
   const std::uint64_t n = codec::bytes::ld_u64(payload.data());
@@ -756,7 +1026,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
     return bad_data("attribute chunk holds " + std::to_string(n) + " points but " + std::to_string(decoded.size()) +
                         " were decoded",
                     0);
-  if (!layer_lasers.empty() && layer_lasers.size() != n)
+  if (!layer_lasers.empty() && (layer_lasers.size() != n || layer.column.size() != n))
     return bad_data("attribute chunk holds " + std::to_string(n) + " points but the sensor-geometry layer decoded " +
                         std::to_string(layer_lasers.size()),
                     0);
@@ -766,7 +1036,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
   for (const Descriptor& f : desc.value()) {
     const std::string& name = f.name;
     const bool by_layer = is_by_layer(f.method), flags = f.method == kMethodLayerLaser;
-    if (by_layer && layer_lasers.empty())
+    if (needs_layer(f.method) && (layer_lasers.empty() || (f.method == kMethodLayerColumn && layer.columns == 0)))
       return bad_data("attribute field " + name + " is coded by the lasers of a sensor-geometry layer (method " +
                           std::to_string(f.method) + "), but the file has no such layer",
                       f.offset + 2);
@@ -782,7 +1052,12 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
     const bool own = f.kind == kRing;
     const std::vector<std::uint16_t>& key = by_layer ? layer_lasers : laser;
     const std::size_t hl = by_layer ? layer_keys : own ? 1 : lasers;
+    if (f.method == kMethodLayerColumn) {
+      if (!decode_by_column(dec, f.span, layer, u[0]))
+        return bad_data("attribute field " + name + " has a value outside its span", f.stream_offset);
+    }
     for (auto& ch : u) {
+      if (f.method == kMethodLayerColumn) break;
       ChannelCoder coder(f.method, f.span);
       History h(hl);
       std::vector<std::uint8_t> fixed(flags ? hl : 0, 0);

@@ -2187,7 +2187,7 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
 
 std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTable& table, double max_error, double qr,
                                                     double qt, std::uint64_t coded_points, const Pose& T_cloud_sensor,
-                                                    std::vector<Eigen::Vector3f>& out, std::vector<std::uint16_t>* lasers) {
+                                                    std::vector<Eigen::Vector3f>& out, LayerKeys* keys) {
   {
     IntModel m{IntModel::kClasses};
     BitModel pick[2];
@@ -2269,7 +2269,10 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
         const Eigen::Vector3f p = beams.point(b, k, k1, k2, qr, qt);
         if (!p.allFinite()) return LaserDecodeError{"point decodes to a non-finite position", 0};
         out.push_back(p);
-        if (lasers) lasers->push_back(static_cast<std::uint16_t>(l));
+        if (keys) {
+          keys->laser.push_back(static_cast<std::uint16_t>(l));
+          keys->column.push_back(c);
+        }
         pc.update(l, k, res, k1, k2);
         --remaining;
         if (remaining == 0 || !any_more || !dec.get(pc.more[0])) break;

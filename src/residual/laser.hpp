@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "lex3d/core/cloud.hpp"
+#include "lex3d/residual/attributes.hpp"
 #include "residual/range_coder.hpp"
 
 namespace lex3d::residual::detail {
@@ -134,6 +135,6 @@ struct LaserDecodeError {
                                                                   double tangential_step, std::uint64_t coded_points,
                                                                   const Pose& T_cloud_sensor,
                                                                   std::vector<Eigen::Vector3f>& out,
-                                                                  std::vector<std::uint16_t>* lasers = nullptr);
+                                                                  LayerKeys* keys = nullptr);
 
 }  // namespace lex3d::residual::detail

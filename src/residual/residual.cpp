@@ -974,7 +974,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // The input point each decoded point stands for (LayerStats::sources).
   const auto fill_sources = [&](const std::vector<std::uint8_t>& payload, const std::vector<std::uint32_t>* coded_sources) {
     if (!stats || !options.track_sources) return;
-    auto decoded = detail::decode_layer_lasers(payload, words, T_cloud_sensor, n_in, stats->layer_lasers);
+    auto decoded = detail::decode_layer_lasers(payload, words, T_cloud_sensor, n_in, stats->layer);
     if (!decoded.ok()) throw std::logic_error("residual layer does not decode: " + decoded.status().to_string());
     const Cloud& d = decoded.value();
     const std::size_t kept_n = stats->kept_word_points;
@@ -1086,14 +1086,14 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
 
 StatusOr<Cloud> decode_layer(const std::vector<std::uint8_t>& payload, const Cloud& words, const Pose& T_cloud_sensor,
                              std::uint64_t max_points) {
-  std::vector<std::uint16_t> lasers;
-  return detail::decode_layer_lasers(payload, words, T_cloud_sensor, max_points, lasers);
+  LayerKeys keys;
+  return detail::decode_layer_lasers(payload, words, T_cloud_sensor, max_points, keys);
 }
 
 StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& payload, const Cloud& words,
                                             const Pose& T_cloud_sensor, std::uint64_t max_points,
-                                            std::vector<std::uint16_t>& lasers) {
-  lasers.clear();
+                                            LayerKeys& keys) {
+  keys.clear();
   const auto header = read_layer_header(payload.data(), payload.size());
   if (!header.ok()) return header.status();
   const LayerHeader& h = header.value();
@@ -1226,10 +1226,14 @@ StatusOr<Cloud> detail::decode_layer_lasers(const std::vector<std::uint8_t>& pay
     return out;
   }
   if (laser) {
-    lasers.reserve(out.points.size() + static_cast<std::size_t>(n_c));
-    lasers.assign(out.points.size(), static_cast<std::uint16_t>(table.lasers()));  // the kept word points
+    // (the kept word points: a laser of their own, no column)
+    keys.columns = table.columns;
+    keys.laser.reserve(out.points.size() + static_cast<std::size_t>(n_c));
+    keys.laser.assign(out.points.size(), static_cast<std::uint16_t>(table.lasers()));
+    keys.column.reserve(keys.laser.capacity());
+    keys.column.assign(out.points.size(), table.columns);
     if (auto e = detail::decode_laser_points(dec, table, max_error, q, tangential_step, n_c, T_cloud_sensor, out.points,
-                                             &lasers))
+                                             &keys))
       return bad_data("residual layer " + e->message, h.stream_offset);
     return out;
   }
@@ -1306,13 +1310,13 @@ std::optional<double> fit_max_error(const std::function<std::size_t(double)>& si
 
 StatusOr<Cloud> decode_cloud(const codec::ModelData& data) {
   Cloud words = word_cloud(data);
-  std::vector<std::uint16_t> lasers;  // each decoded point's laser in a sensor-geometry layer's table
+  LayerKeys keys;  // each decoded point's laser and column in a sensor-geometry layer's table
   StatusOr<Cloud> decoded = data.residual ? detail::decode_layer_lasers(*data.residual, words, data.T_cloud_sensor,
-                                                                        data.input_points, lasers)
+                                                                        data.input_points, keys)
                                           : StatusOr<Cloud>(std::move(words));
   if (!decoded.ok() || !data.attributes) return decoded;
   Cloud cloud = std::move(decoded).value();
-  if (Status s = detail::decode_attributes(*data.attributes, lasers, cloud); !s.ok())
+  if (Status s = detail::decode_attributes(*data.attributes, keys, cloud); !s.ok())
     return Status(s.code(), "ATTR chunk: " + s.message(), s.offset());
   return cloud;
 }

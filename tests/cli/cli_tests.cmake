@@ -523,7 +523,18 @@ string(REGEX MATCH "\"name\":\"ring\",[^}]*\"bytes\":([0-9]+)" _ "${LAST_OUT}")
 if(NOT CMAKE_MATCH_1 OR CMAKE_MATCH_1 GREATER 200)
   message(SEND_ERROR "[attr.ring_laser] ring field of '${CMAKE_MATCH_1}' bytes, expected at most 200")
 endif()
+# a capture's firing times (float32 seconds from the turn's first firing, as the ROS driver's
+# `time`) against the layer's measurement columns (method 6): a few hundred bytes, not a
+# few thousand, and back in the decoded PCD as float32 `time`
+string(REGEX MATCH "\"name\":\"time\",\"representation\":\"as time float32[^}]*\"bytes\":([0-9]+)" _ "${LAST_OUT}")
+if(NOT CMAKE_MATCH_1 OR CMAKE_MATCH_1 GREATER 600)
+  message(SEND_ERROR "[attr.capture_times] time field of '${CMAKE_MATCH_1}' bytes, expected at most 600")
+endif()
 run(0 attr.ring_laser_back decompress "${WORK}/v_attr.lex3dm" -o "${WORK}/v_attr.pcd")
+run(0 attr.capture_times_back info "${WORK}/v_attr.pcd")
+expect_match(attr.capture_times_back "${LAST_OUT}" "time +0 \\.\\. 0\\.09[0-9]+ s \\(time float32\\)")
+run(0 attr.capture_times_info info "${VLP16}")
+expect_match(attr.capture_times_info "${LAST_OUT}" "turn 0 +frame 0: 28385 points.*times 0\\.000 \\.\\. 99\\.[0-9]+ ms \\(time float32\\)")
 run(0 attr.ring_spherical compress "${VLP16}" -o "${WORK}/v_sph.lex3dm" --max-error 0.014 --words off
     --layer-coding spherical)
 execute_process(COMMAND /usr/bin/python3 -c "

@@ -175,6 +175,36 @@ void expect_organised(const Cloud& c) {
 
 // ------------------------------------------------------------ Ouster
 
+/// An Ouster turn's times (`t`, uint32 ns, as the ROS driver's): every point of one
+/// measurement column (the destaggered column less its row's pixel shift) has that column's
+/// timestamp, the first column's is 0, and they rise with the measurement column evenly
+/// (within the timestamps' jitter of a few µs) over a turn (10 or 20 Hz).
+void expect_ouster_times(const Cloud& c) {
+  ASSERT_EQ(c.time.size(), c.size());
+  EXPECT_EQ(c.time_source.name, "t");
+  EXPECT_EQ(c.time_source.type, FieldType::kUint32);
+  std::map<std::uint32_t, double> of_column;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const auto shift = static_cast<std::int64_t>(std::llround(c.geometry->column_azimuth[c.ring[i]] * c.columns / (2.0 * M_PI)));
+    const auto mc = static_cast<std::uint32_t>(((static_cast<std::int64_t>(c.column[i]) - shift) % c.columns + c.columns) % c.columns);
+    const auto [at, fresh] = of_column.emplace(mc, c.time[i]);
+    ASSERT_TRUE(fresh || at->second == c.time[i]) << "two times in measurement column " << mc;
+    ASSERT_NEAR(c.time[i] * 1e9, std::round(c.time[i] * 1e9), 1e-6) << "whole nanoseconds";
+  }
+  ASSERT_GT(of_column.size(), 2U);
+  const auto& [first_mc, low] = *of_column.begin();
+  const auto& [last_mc, high] = *of_column.rbegin();
+  EXPECT_EQ(low, 0.0);
+  EXPECT_GT(high, 0.045);
+  EXPECT_LT(high, 0.1);
+  const double step = (high - low) / (last_mc - first_mc);
+  for (auto a = of_column.begin(), b = std::next(a); b != of_column.end(); ++a, ++b) {
+    const double s = (b->second - a->second) / (b->first - a->first);
+    ASSERT_GT(s, 0.7 * step) << "measurement column " << b->first;
+    ASSERT_LT(s, 1.3 * step) << "measurement column " << b->first;
+  }
+}
+
 struct OusterCase {
   const char* pcap;
   const char* json;  // nullptr: found beside the capture
@@ -220,6 +250,7 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
       std::printf("[ geometry ] %s turn %zu: %zu points, %zu no-returns, max residual %.3g m\n", k.pcap, s, c.size(),
                   log.no_returns[s], res.max_m);
       EXPECT_LT(res.max_m, 1e-4);
+      expect_ouster_times(c);
       // the packets' signal (not in the low-data profile) and near-infrared channels, kept as
       // named fields in their types: the signal follows the reflectivity, and the
       // near-infrared (an ambient-light image) changes little along a laser's row
@@ -321,6 +352,32 @@ TEST(SensorLog, NestedMetadataLayoutGivesTheSamePoints) {
 
 // ------------------------------------------------------------ Velodyne
 
+/// A Velodyne turn's times (`time`, float32 seconds from the turn's first firing, as the
+/// ROS driver's): a laser's rise with its column, one firing's lie within a firing period
+/// `firing_us`, and the turn spans its columns' firings.
+void expect_velodyne_times(const Cloud& c, double firing_us) {
+  ASSERT_EQ(c.time.size(), c.size());
+  EXPECT_EQ(c.time_source.name, "time");
+  EXPECT_EQ(c.time_source.type, FieldType::kFloat32);
+  std::map<std::uint32_t, std::pair<double, double>> firing;  // column: (earliest, latest)
+  std::map<std::uint16_t, std::pair<std::uint32_t, double>> laser;  // ring: (last column, its time)
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const double t = c.time[i];
+    ASSERT_GE(t, 0.0);
+    auto [f, fresh] = firing.emplace(c.column[i], std::make_pair(t, t));
+    f->second = {std::min(f->second.first, t), std::max(f->second.second, t)};
+    auto [l, first] = laser.emplace(c.ring[i], std::make_pair(c.column[i], t));
+    if (!first) {
+      ASSERT_GT(c.column[i], l->second.first);
+      ASSERT_GT(t, l->second.second) << "ring " << c.ring[i] << " column " << c.column[i];
+      l->second = {c.column[i], t};
+    }
+  }
+  for (const auto& [column, span] : firing) ASSERT_LT(span.second - span.first, firing_us * 1e-6) << column;
+  const double last = firing.rbegin()->second.second;
+  EXPECT_NEAR(last, c.columns * firing_us * 1e-6, 0.02 * c.columns * firing_us * 1e-6);
+}
+
 void expect_velodyne_turn(const Cloud& c, std::uint32_t lasers) {
   expect_organised(c);
   EXPECT_EQ(c.rows, lasers);
@@ -351,6 +408,7 @@ TEST(SensorLog, Hdl32eCaptureGivesFiveTurns) {
     EXPECT_EQ(c.size() + log.no_returns[s], static_cast<std::size_t>(c.rows) * c.columns);
     EXPECT_GT(c.size(), 30000U);
     expect_velodyne_turn(c, 32);
+    expect_velodyne_times(c, 46.08);
   }
   EXPECT_NEAR(log.scans[0].geometry->elevation.front() * 180 / M_PI, -30.67, 1e-9);
   EXPECT_NEAR(log.scans[0].geometry->elevation.back() * 180 / M_PI, 10.67, 1e-9);
@@ -371,6 +429,7 @@ TEST(SensorLog, Vlp16CapturesGiveOneTurnAndTheWrongModelByteIsCaught) {
     EXPECT_LT(c.columns, 1900U);
     EXPECT_EQ(c.size() + log.no_returns[0], static_cast<std::size_t>(c.rows) * c.columns);
     expect_velodyne_turn(c, 16);
+    expect_velodyne_times(c, 55.296);
     EXPECT_NEAR(c.geometry->elevation.front() * 180 / M_PI, -15.0, 1e-9);
   }
   auto r = read_sensor_log(shared_data("velodyne/vlp16_velodyne_vlp16.pcap"));

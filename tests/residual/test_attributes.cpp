@@ -769,7 +769,7 @@ LaserCoded code_laser(const Cloud& input, double e, bool thin) {
   const Cloud words = residual::decoder_word_cloud(d, *d.alphabet);
   d.residual = residual::encode_layer(input, words, d.T_cloud_sensor, e, &out.stats, lo);
   out.c.sources = out.stats.sources;
-  auto attrs = residual::encode_attributes(input, out.stats.sources, {}, &out.c.fields, out.stats.layer_lasers);
+  auto attrs = residual::encode_attributes(input, out.stats.sources, {}, &out.c.fields, out.stats.layer);
   std::vector<residual::AttributeField> old_fields;
   (void)residual::encode_attributes(input, out.stats.sources, {}, &old_fields);
   for (const auto& f : old_fields)
@@ -800,7 +800,7 @@ TEST(Attributes, RingFollowsTheSensorGeometryLayersLasers) {
   for (auto& r : in.ring) r = static_cast<std::uint16_t>((r * 7 + 3) % 16);  // a permutation of 0..15
   const LaserCoded lc = code_laser(in, 0.01, false);
   ASSERT_TRUE(lc.stats.laser) << "the synthetic scan is not coded by the sensor geometry";
-  ASSERT_EQ(lc.stats.layer_lasers.size(), lc.c.sources.size());
+  ASSERT_EQ(lc.stats.layer.laser.size(), lc.c.sources.size());
   const auto* ring = field(lc.c.fields, "ring");
   ASSERT_NE(ring, nullptr);
   EXPECT_EQ(ring->method, 3);
@@ -1013,10 +1013,14 @@ TEST(Attributes, CorruptLayerTreePayloadsAreRejectedWithoutCrashing) {
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), ErrorCode::kBadData);
   EXPECT_NE(r.status().message().find("sensor-geometry"), std::string::npos) << r.status().to_string();
-  (*t.attributes)[9 + 2] = 6;  // no such method
+  (*t.attributes)[9 + 2] = 6;  // measurement columns: times and named fields only
   r = residual::decode_cloud(t);
   ASSERT_FALSE(r.ok());
-  EXPECT_NE(r.status().message().find("method 6 is unknown"), std::string::npos) << r.status().to_string();
+  EXPECT_NE(r.status().message().find("method 6, which codes times"), std::string::npos) << r.status().to_string();
+  (*t.attributes)[9 + 2] = 7;  // no such method
+  r = residual::decode_cloud(t);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("method 7 is unknown"), std::string::npos) << r.status().to_string();
 }
 
 /// Method 4 beyond the context tree's span of 255 (10-bit counts, as balm's): chosen,
@@ -1081,6 +1085,125 @@ TEST(Attributes, LayerTreeGoldenFileDecodes) {
     ASSERT_TRUE(io::write_file_atomic(path, code_laser(in, 0.02, false).c.file).ok());
   }
   expect_golden_intensity(path, in, 4);
+}
+
+/// `c` (synthetic_scan's column-by-column order, `lasers` a column) with the times of a
+/// staggered lidar's firings, as an Ouster capture gives them (uint32 ns from the turn's
+/// first): measurement column m fires at m·98 µs plus up to ±3 µs of jitter, and laser l's
+/// point of column c belongs to measurement column c − shift(l), the shifts repeating
+/// every four lasers (0, 6, 12, 18 columns).
+Cloud with_staggered_times(Cloud c, int lasers, int columns, std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> jitter(-3000, 3000);
+  std::vector<std::int64_t> stamp(static_cast<std::size_t>(columns));
+  for (int m = 0; m < columns; ++m) stamp[static_cast<std::size_t>(m)] = 3000 + 98000LL * m + jitter(rng);
+  c.time.resize(c.size());
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    const int l = static_cast<int>(i % static_cast<std::size_t>(lasers));
+    const int col = static_cast<int>(i / static_cast<std::size_t>(lasers));
+    const int m = ((col - 6 * (l % 4)) % columns + columns) % columns;
+    c.time[i] = static_cast<double>(stamp[static_cast<std::size_t>(m)]) * 1e-9;
+  }
+  c.time_source = {"t", FieldType::kUint32};
+  return c;
+}
+
+/// Method 6 (the layer's measurement columns) codes a staggered lidar's firing times: chosen,
+/// lossless, about one value a measurement column (under 3 bytes each, where every older
+/// method pays for the jitter at every point), and refused by a reader of format 1.16.
+TEST(Attributes, LayerColumnCodesStaggeredFiringTimes) {
+  constexpr int kLasers = 16, kColumns = 720;
+  const Cloud in = with_staggered_times(calibrated_scan(kLasers, kColumns, 51), kLasers, kColumns, 52);
+  const LaserCoded lc = code_laser(in, 0.01, false);
+  ASSERT_TRUE(lc.stats.laser) << "the synthetic scan is not coded by the sensor geometry";
+  ASSERT_EQ(lc.stats.layer.column.size(), lc.c.sources.size());
+  EXPECT_EQ(lc.stats.layer.columns, static_cast<std::uint32_t>(kColumns));
+  const auto* t = field(lc.c.fields, "time");
+  ASSERT_NE(t, nullptr);
+  EXPECT_EQ(t->method, 6);
+  EXPECT_LT(t->bytes, kDescriptorBytes + 2 + 3 * kColumns);
+  std::vector<residual::AttributeField> old_fields;
+  (void)residual::encode_attributes(in, lc.c.sources, {}, &old_fields);
+  const auto* old = field(old_fields, "time");
+  ASSERT_NE(old, nullptr);
+  std::printf("[ times ] %d lasers x %d columns: method 6 %zu bytes, without the layer's columns %zu bytes\n", kLasers,
+              kColumns, t->bytes, old->bytes);
+  EXPECT_LT(4 * t->bytes, old->bytes);
+  EXPECT_EQ(codec::inspect(lc.c.file).value().minor, 17);
+  auto out = decode(lc.c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  ASSERT_EQ(out.value().size(), in.size());
+  EXPECT_EQ(out.value().time_source.name, "t");
+  for (std::size_t j = 0; j < in.size(); ++j) ASSERT_EQ(out.value().time[j], in.time[lc.c.sources[j]]) << j;
+  // the same bytes again
+  EXPECT_EQ(code_laser(in, 0.01, false).c.file, lc.c.file);
+  auto refused = codec::decode_model(with_minor(lc.c.file, 16));
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("1.17"), std::string::npos) << refused.status().to_string();
+}
+
+/// A time its source holds in whole nanoseconds (uint32 `t`) on a 10 ns clock takes a
+/// 10 ns step and comes back to the nanosecond; the same times without that source take
+/// the exact 1 ns step, bit for bit.
+TEST(Attributes, WholeNanosecondTimesTakeTheirCommonStep) {
+  Cloud in = synthetic_scan(8, 120, 57);
+  for (std::size_t i = 0; i < in.size(); ++i) in.time[i] = static_cast<double>(10 * ((i * 7919) % 9000)) * 1e-9;
+  in.time_source = {"t", FieldType::kUint32};
+  const Coded c = code(in, 0.01);
+  const auto* t = field(c.fields, "time");
+  ASSERT_NE(t, nullptr);
+  EXPECT_NEAR(t->step, 1e-8, 1e-20);
+  EXPECT_EQ(t->max_error, 0.0);
+  auto out = decode(c.file);
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  for (std::size_t j = 0; j < in.size(); ++j)
+    ASSERT_EQ(std::llround(out.value().time[j] * 1e9), std::llround(in.time[c.sources[j]] * 1e9)) << j;
+  in.time_source = {};
+  const Coded plain = code(in, 0.01);
+  EXPECT_NEAR(field(plain.fields, "time")->step, 1e-9, 1e-21);
+  auto back = decode(plain.file);
+  ASSERT_TRUE(back.ok());
+  for (std::size_t j = 0; j < in.size(); ++j) ASSERT_EQ(back.value().time[j], in.time[plain.sources[j]]) << j;
+  EXPECT_LT(t->bytes, field(plain.fields, "time")->bytes);
+}
+
+/// Damaged method 6 streams and descriptors fail with kBadData, never a crash; without a
+/// sensor-geometry layer a method 6 field is refused.
+TEST(Attributes, CorruptLayerColumnPayloadsAreRejectedWithoutCrashing) {
+  constexpr int kLasers = 8, kColumns = 96;
+  Cloud in = with_staggered_times(calibrated_scan(kLasers, kColumns, 53), kLasers, kColumns, 54);
+  in.intensity.clear();  // (the time alone)
+  const LaserCoded lc = code_laser(in, 0.02, false);
+  ASSERT_TRUE(lc.stats.laser);
+  ASSERT_EQ(field(lc.c.fields, "time")->method, 6);
+  auto m = codec::decode_model(lc.c.file);
+  ASSERT_TRUE(m.ok());
+  expect_damaged_payloads_fail(m.value());
+  auto layer = residual::decode_layer(*m.value().residual, Cloud{}, m.value().T_cloud_sensor, in.size());
+  ASSERT_TRUE(layer.ok());
+  Cloud alone = layer.value();
+  const Status s = residual::decode_attributes(*m.value().attributes, alone);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), ErrorCode::kBadData);
+  EXPECT_NE(s.message().find("method 6"), std::string::npos) << s.to_string();
+}
+
+TEST(Attributes, LayerColumnGoldenFileDecodes) {
+  constexpr int kLasers = 8, kColumns = 96;
+  const std::string path = std::string(LEX3D_TEST_DATA_DIR) + "/../residual/golden/attributes_layer_column_1_17.lex3dm";
+  const Cloud in = with_staggered_times(calibrated_scan(kLasers, kColumns, 55), kLasers, kColumns, 56);
+  if (std::getenv("LEX3D_WRITE_GOLDEN") != nullptr) {
+    ASSERT_TRUE(io::write_file_atomic(path, code_laser(in, 0.02, false).c.file).ok());
+  }
+  auto bytes = io::read_file(path);
+  ASSERT_TRUE(bytes.ok()) << path;
+  EXPECT_EQ(codec::inspect(bytes.value()).value().minor, 17);
+  auto out = decode(bytes.value());
+  ASSERT_TRUE(out.ok()) << out.status().to_string();
+  ASSERT_EQ(out.value().size(), in.size());
+  EXPECT_EQ(out.value().time_source.type, FieldType::kUint32);
+  for (std::size_t j = 0; j < out.value().size(); ++j)
+    ASSERT_EQ(out.value().time[j], in.time[nearest_point(in, out.value().points[j])]) << j;
 }
 
 /// The KITTI sample with the sensor-geometry layer (its lasers estimated from the points):

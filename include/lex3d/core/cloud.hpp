@@ -190,7 +190,8 @@ struct Cloud {
   std::uint32_t columns = 0;
   /// Time of each point, seconds, when the source records it (a PCD/PLY `time`, `t` or
   /// `timestamp` field, LAS GPS time, a raw log's firing time); empty otherwise, else
-  /// points.size(). The epoch is the source's (LAS: GPS time; raw logs: the sensor's clock).
+  /// points.size(). The epoch is the source's (LAS: GPS time; raw logs: the turn's first
+  /// measurement, as the sensors' ROS drivers give it).
   std::vector<double> time;
   /// The name and type the source gave the ring, intensity and time fields (SourceField;
   /// kept through a model file since format 1.16).

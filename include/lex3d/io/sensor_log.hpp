@@ -12,7 +12,9 @@
 ///   (pixel_shift_by_row), and each point is placed as Ouster's beam model places it, in
 ///   the "sensor" frame (lidar_to_sensor_transform), so the geometry reproduces it exactly.
 ///   Intensity is the reflectivity channel. Zero-range pixels are no-returns (counted, not
-///   points); the dual profile's second returns are counted and not kept.
+///   points); the dual profile's second returns are counted and not kept. Each point's
+///   time is its measurement column's timestamp less the frame's first (`t`, uint32 ns, as
+///   Ouster's ROS driver gives it); a frame whose timestamps span more than 2^32 ns has none.
 /// - Velodyne VLP-16, Puck Hi-Res, HDL-32E and VLP-32C, single or dual return (the last
 ///   return kept, the other counted), with the published per-model tables (elevation, and
 ///   the VLP-32C's azimuth offsets) and firing timing, or the unit's calibration where one
@@ -23,7 +25,11 @@
 ///   the log's first firing (so a log of 1.1 turns gives one). The points use each firing's
 ///   own azimuth from the packets (and each laser's firing time within it); the geometry is
 ///   the best regular grid (columns = the firings of the turn, 360°/columns apart, column 0
-///   placed by least squares over the turn's firings), not an exact one.
+///   placed by least squares over the turn's firings), not an exact one. Each point's time
+///   is its firing's (the packet's timestamp plus the firing periods and its laser's slot
+///   before it; an HDL-64E's firing period is the packet period over its firings) less
+///   the turn's first firing's (`time`, float32 seconds, as Velodyne's ROS driver gives
+///   it); a turn whose packet timestamps run backwards or over a second has none.
 
 #include <cstddef>
 #include <cstdint>

@@ -24,6 +24,22 @@
 
 namespace lex3d::residual {
 
+/// Each decoded point's place in a sensor-geometry residual layer (formats/model.md §2.8):
+/// its laser in the layer's table and its column in the table's grid, the attribute
+/// coder's keys (§2.10, methods 3, 4 and 6). A kept word point has the table's laser count
+/// as its laser and `columns` as its column. Empty for the other codings.
+struct LayerKeys {
+  std::vector<std::uint16_t> laser;
+  std::vector<std::uint32_t> column;
+  std::uint32_t columns = 0;  ///< the grid's columns a turn
+  [[nodiscard]] bool empty() const noexcept { return laser.empty(); }
+  void clear() {
+    laser = {};
+    column = {};
+    columns = 0;
+  }
+};
+
 /// Which attributes the encoder keeps (those the input has), and how.
 struct AttributeOptions {
   bool intensity = true;  ///< keep Cloud::intensity
@@ -48,7 +64,8 @@ struct AttributeField {
   double max_error = 0.0;      ///< 0: lossless
   std::size_t bytes = 0;       ///< stored bytes of the field (descriptor and stream)
   /// 0: context tree; 1: previous value; 2: linear; 3: previous value of the same laser of
-  /// the sensor-geometry layer; 4: mixed tree on the same laser of that layer; 5: mixed tree
+  /// the sensor-geometry layer; 4: mixed tree on the same laser of that layer; 5: mixed tree;
+  /// 6: the value of the same measurement column of that layer (a raw log's firing times)
   std::uint8_t method = 0;
 };
 
@@ -58,15 +75,16 @@ struct AttributeField {
 /// neither 0 nor the point count, a named field whose name is not 1-64 letters, digits or
 /// underscores, repeats, or whose values span more than 2^31, or a source index beyond the
 /// input. An empty result
-/// (no field to keep) means no chunk. `layer_lasers`: with a sensor-geometry residual
-/// layer, each decoded point's laser in its table (LayerStats::layer_lasers), which lets
-/// a field be coded against the last value of the same laser (method 3; a ring that is a
-/// function of the table's laser then costs next to nothing) or by a context tree on it
-/// (method 4); empty otherwise.
+/// (no field to keep) means no chunk. `layer`: with a sensor-geometry residual layer, each
+/// decoded point's laser and column (LayerStats::layer), which lets a field be coded
+/// against the last value of the same laser (method 3; a ring that is a function of the
+/// table's laser then costs next to nothing), by a context tree on it (method 4), or
+/// against the value of the same measurement column (method 6: a time that is its
+/// firing's); empty otherwise.
 [[nodiscard]] std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
                                                           const AttributeOptions& options = {},
                                                           std::vector<AttributeField>* fields = nullptr,
-                                                          const std::vector<std::uint16_t>& layer_lasers = {});
+                                                          const LayerKeys& layer = {});
 
 /// The fields of an `ATTR` payload (descriptors only; the streams are not decoded).
 [[nodiscard]] StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::uint8_t>& payload);

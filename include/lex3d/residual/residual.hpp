@@ -26,6 +26,7 @@
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/core/status.hpp"
+#include "lex3d/residual/attributes.hpp"
 
 // The public API: exported by liblex3d.so, which hides everything else.
 #pragma GCC visibility push(default)
@@ -96,10 +97,9 @@ struct LayerStats {
   /// to it (ties: the lowest index).
   std::vector<std::uint32_t> sources;
   /// With LayerOptions::track_sources and the sensor-geometry coding: each decoded point's
-  /// laser in the layer's table (a kept word point: the table's laser count), as the
-  /// decoder finds it; the attribute coder's history key (formats/model.md §2.10). Empty
-  /// for the other codings.
-  std::vector<std::uint16_t> layer_lasers;
+  /// laser and column in the layer's table (LayerKeys), as the decoder finds them; the
+  /// attribute coder's keys (formats/model.md §2.10). Empty for the other codings.
+  LayerKeys layer;
 };
 
 /// The fixed fields at the start of a residual layer's payload (formats/model.md §2.5,
