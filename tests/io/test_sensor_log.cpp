@@ -635,7 +635,10 @@ TEST(SensorLog, DualReturnPacketsKeepTheLastReturnAndCountTheOthers) {
     ASSERT_EQ(a.points[i].z(), b.points[i].z()) << i;
     const double da = std::remainder(std::atan2(a.points[i].y(), a.points[i].x()) - std::atan2(b.points[i].y(), b.points[i].x()), 2 * M_PI);
     ASSERT_LT(std::abs(da), 0.3 * 2 * M_PI / a.columns) << i;
+    // the same firing times (the second packet of each pair stamped 664 us, 12 firings, on)
+    ASSERT_NEAR(a.time[i], b.time[i], 0.5e-6) << i;
   }
+  expect_velodyne_times(b, 55.296);
   // the moved returns of the kept turn (a share of all moved ones: 1.12 turns captured)
   EXPECT_GT(dual.info.second_returns, a.size() / 20);
   EXPECT_LT(dual.info.second_returns, moved);
@@ -782,6 +785,8 @@ TEST(SensorLog, Hdl64eCaptureWithItsCalibrationPlacesEveryPointOnTheScene) {
   const Cloud& c = log.scans[0];
   EXPECT_EQ(c.columns, 2000U);
   expect_organised(c);
+  // (a packet every 288 us holds 6 firings: 48 us apart, the upper and lower lasers at once)
+  expect_velodyne_times(c, 48.0);
   EXPECT_EQ(c.geometry->source, "calibration " + (dir / "hdl64e.yaml").string());
   // both calibration files give the same points (to float rounding of their units)
   const Cloud& x = from_xml.value().scans[0];
