@@ -283,8 +283,21 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
     if (!r.ok()) throw CliError(exit_code_for(r.status().code()) == 1 ? 1 : 2, r.status().to_string());
     auto turns = std::make_shared<const std::vector<Cloud>>(std::move(r.value().scans));
     const auto& ids = r.value().frame_ids;
-    for (std::size_t k = 0; k < turns->size(); ++k)
-      entries_.push_back({path, path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]) + ")", turns, k, ""});
+    const auto& captured = r.value().captured_ns;
+    const std::string stem = std::filesystem::path(path).stem().string();
+    for (std::size_t k = 0; k < turns->size(); ++k) {
+      // (a turn whose capture time is known is named with it, as a bag's message with its
+      // stamp: a bag written from the scans is stamped with it)
+      std::string name = path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]), scan_stem;
+      if (k < captured.size() && captured[k] > 0) {
+        char stamp[32];
+        std::snprintf(stamp, sizeof stamp, "%llu.%09llu", static_cast<unsigned long long>(captured[k] / 1000000000ULL),
+                      static_cast<unsigned long long>(captured[k] % 1000000000ULL));
+        name += std::string(", captured ") + stamp;
+        scan_stem = stem + "_turn" + std::to_string(k) + "_" + stamp;
+      }
+      entries_.push_back({path, name + ")", turns, k, scan_stem});
+    }
   }
   if (points_in_world && poses_path.empty())
     throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");

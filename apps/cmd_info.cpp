@@ -429,6 +429,7 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
           .value("no_returns", log.no_returns[k])
           .value("rows", c.rows)
           .value("columns", c.columns);
+      if (k < log.captured_ns.size() && log.captured_ns[k] > 0) j.value("captured_ns", log.captured_ns[k]);
       if (c.has_time()) {
         const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
         j.begin_object("time_s").value("min", *lo).value("max", *hi);
@@ -463,6 +464,12 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
       std::snprintf(buf, sizeof buf, ", times %.3f .. %.3f ms (%s %s)", *lo * 1e3, *hi * 1e3, c.time_source.name.c_str(),
                     field_type_name(c.time_source.type));
       times = buf;
+    }
+    if (k < log.captured_ns.size() && log.captured_ns[k] > 0) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, ", captured %llu.%09llu", static_cast<unsigned long long>(log.captured_ns[k] / 1000000000ULL),
+                    static_cast<unsigned long long>(log.captured_ns[k] % 1000000000ULL));
+      times += buf;
     }
     std::printf("  turn %-4zu    frame %llu: %zu points, %zu no-returns, %u x %u%s\n", k,
                 static_cast<unsigned long long>(log.frame_ids[k]), c.size(), log.no_returns[k], c.rows, c.columns,

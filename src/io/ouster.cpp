@@ -216,6 +216,7 @@ struct Frame {
   std::vector<std::uint8_t> second;     // dual profile: second return present
   std::vector<std::uint8_t> have;       // per measurement column
   std::vector<std::uint64_t> stamp_ns;  // per measurement column: its timestamp
+  std::uint64_t captured_ns = 0;        // the capture time of its first packet
   std::size_t columns_seen = 0;
 };
 
@@ -399,6 +400,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     info.points += cloud.size();
     log.no_returns.push_back(no_returns);
     log.frame_ids.push_back(f.id);
+    log.captured_ns.push_back(f.captured_ns);
     log.scans.push_back(std::move(cloud));
   };
 
@@ -438,6 +440,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
       cur->second.assign(HW, 0);
       cur->have.assign(m.W, 0);
       cur->stamp_ns.assign(m.W, 0);
+      cur->captured_ns = d->captured_ns;
     }
     Frame& f = *cur;
     for (std::uint32_t k = 0; k < m.cpp; ++k) {

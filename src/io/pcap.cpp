@@ -71,7 +71,8 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
   if (::stat(path.c_str(), &st) != 0) return io_error(msg(path, std::string("cannot open: ") + std::strerror(errno)));
   if (S_ISDIR(st.st_mode)) return io_error(msg(path, "is a directory"));
   char errbuf[PCAP_ERRBUF_SIZE] = {0};
-  pcap_t* pc = pcap_open_offline(path.c_str(), errbuf);
+  // (record times in nanoseconds whatever the file's own precision)
+  pcap_t* pc = pcap_open_offline_with_tstamp_precision(path.c_str(), PCAP_TSTAMP_PRECISION_NANO, errbuf);
   if (pc == nullptr) return bad_data(msg(path, std::string("not a readable pcap capture: ") + printable(errbuf, 200)));
   Closer closer{pc};
   const int link = pcap_datalink(pc);
@@ -89,12 +90,14 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
   std::unordered_map<std::uint32_t, std::pair<std::size_t, std::size_t>> frag_span;
 
   // `claimed`: the IP payload size the IPv4 header announces (> n when the record is short).
+  std::uint64_t captured_ns = 0;  // the current record's time
   auto emit_udp = [&](std::uint32_t src, std::uint32_t dst, const std::uint8_t* p, std::size_t n, std::size_t claimed,
                       std::size_t record) -> Status {
     Datagram d;
     d.src_ip = src;
     d.dst_ip = dst;
     d.record = record;
+    d.captured_ns = captured_ns;
     if (n < 8) {  // not even the UDP header
       d.truncated = true;
       d.claimed = claimed >= 8 ? claimed - 8 : 0;
@@ -127,6 +130,9 @@ Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, S
                                     " (damaged or truncated capture file)"));
     ++record;
     ++info.pcap_packets;
+    captured_ns = hdr->ts.tv_sec >= 0 && hdr->ts.tv_usec >= 0 && hdr->ts.tv_usec < 1000000000
+                      ? static_cast<std::uint64_t>(hdr->ts.tv_sec) * 1000000000ULL + static_cast<std::uint64_t>(hdr->ts.tv_usec)
+                      : 0;
     const std::uint8_t* p = data;
     std::size_t n = hdr->caplen;
     const bool cut = hdr->caplen < hdr->len;

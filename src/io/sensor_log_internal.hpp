@@ -19,6 +19,9 @@ struct Datagram {
   std::uint16_t src_port = 0;
   std::uint16_t dst_port = 0;
   std::size_t record = 0;  ///< 1-based capture record of its last fragment, or bag message (for messages)
+  /// When that record was captured, nanoseconds since the epoch (the capture file's clock);
+  /// 0 where not known (a bag's packets, a record stamped before 1970).
+  std::uint64_t captured_ns = 0;
   /// The IPv4 or UDP length claims more bytes than the record holds: `payload` is what is
   /// there, `claimed` what the headers announce. A decoder refuses a truncated lidar packet
   /// and counts any other as skipped.

@@ -111,6 +111,7 @@ struct Firing {
   double azimuth_deg = 0.0;  // start of the firing, unwrapped across turns
   double step_deg = 0.0;     // azimuth advance over one firing period
   std::int64_t time_ns = 0;  // start of the firing: the packet's timestamp (unwrapped across hours) plus its place in the packet
+  std::uint64_t captured_ns = 0;  // when the capture recorded its packet (0: not known)
   std::array<std::uint16_t, 64> dist{};
   std::array<std::uint8_t, 64> refl{};
   std::array<bool, 64> second{};  // dual return: the pair's other block holds another return
@@ -546,6 +547,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
         f.azimuth_deg = a_unwrapped + block_step * s;
         f.step_deg = block_step;
         f.time_ns = 1000 * stamp + std::llround(firing_ns * static_cast<double>(fired++));
+        f.captured_ns = d->captured_ns;
         for (unsigned l = 0; l < model->lasers; ++l) {
           // (an HDL-64E's lasers 32-63 in the lower block, 100 bytes on)
           const std::uint8_t* ch = hdl64 ? blk + (l / 32) * 100 + (l % 32) * 3 : blk + (s * model->lasers + l) * 3;
@@ -666,6 +668,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     info.points += cloud.size();
     log.no_returns.push_back(no_returns);
     log.frame_ids.push_back(turn);
+    log.captured_ns.push_back(firings[begin].captured_ns);
     log.scans.push_back(std::move(cloud));
     begin = end;
   }

@@ -132,3 +132,15 @@ set(ENV{LEX3D_ROSBAG_PLUGIN} "${WORK}/not_a_plugin.so")
 run(2 badplugin.info info "${DRIVE}")
 expect_match(badplugin.info "${LAST_ERR}" "drive.bag: ROS bag support cannot be loaded \\(.*not_a_plugin.so: ")
 unset(ENV{LEX3D_ROSBAG_PLUGIN})
+
+# --- a raw capture's turns are stamped with their capture time (the pcap record of the
+# turn's first packet): converted to a bag, and through a sequence file decompressed to one
+set(VLP16 "${SAMPLES}/vlp16_velodyne_example.pcap")
+run(0 capture.stamp_convert convert "${VLP16}" "${WORK}/v_stamped.bag")
+expect_match(capture.stamp_convert "${LAST_OUT}" "turn 0 \\(frame 0, captured 1525347606\\.362040000\\)")
+run(0 capture.stamp_convert_info info "${WORK}/v_stamped.bag" --json)
+expect_match(capture.stamp_convert_info "${LAST_OUT}" "\"start_s\":1525347606[,.]")
+run(0 capture.stamp_sequence compress "${VLP16}" -o "${WORK}/v_stamped.lex3dq" --one-file --max-error 0.02)
+run(0 capture.stamp_sequence_back decompress "${WORK}/v_stamped.lex3dq" -o "${WORK}/v_stamped_back.bag")
+run(0 capture.stamp_sequence_info info "${WORK}/v_stamped_back.bag" --json)
+expect_match(capture.stamp_sequence_info "${LAST_OUT}" "\"start_s\":1525347606[,.]")

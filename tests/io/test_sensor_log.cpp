@@ -285,6 +285,14 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
       }
       points += c.size();
       if (s > 0) EXPECT_EQ(log.frame_ids[s], log.frame_ids[s - 1] + 1);
+      // each frame stamped with its first packet's capture time, a frame period apart
+      // (10 or 20 Hz, within a few ms of the capturing host's scheduling)
+      ASSERT_EQ(log.captured_ns.size(), log.scans.size());
+      EXPECT_GT(log.captured_ns[s], 1400000000ULL * 1000000000ULL);  // after 2014
+      if (s > 0) {
+        const double apart = static_cast<double>(log.captured_ns[s] - log.captured_ns[s - 1]) * 1e-9;
+        EXPECT_NEAR(apart, *std::max_element(c.time.begin(), c.time.end()) > 0.06 ? 0.1 : 0.05, 0.01);
+      }
     }
     EXPECT_EQ(points, log.info.points);
     if (std::string(k.profile).find("DUAL") != std::string::npos) {
@@ -411,6 +419,13 @@ TEST(SensorLog, Hdl32eCaptureGivesFiveTurns) {
     expect_velodyne_times(c, 46.08);
   }
   EXPECT_NEAR(log.scans[0].geometry->elevation.front() * 180 / M_PI, -30.67, 1e-9);
+  // each turn stamped with its first packet's capture time, a turn (85 ms) after the one before
+  ASSERT_EQ(log.captured_ns.size(), 5U);
+  for (std::size_t s = 1; s < 5; ++s) {
+    const double apart = static_cast<double>(log.captured_ns[s] - log.captured_ns[s - 1]) * 1e-9;
+    const auto& t = log.scans[s - 1].time;
+    EXPECT_NEAR(apart, *std::max_element(t.begin(), t.end()), 0.002) << s;
+  }
   EXPECT_NEAR(log.scans[0].geometry->elevation.back() * 180 / M_PI, 10.67, 1e-9);
 }
 

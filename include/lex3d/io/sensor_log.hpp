@@ -72,6 +72,10 @@ struct SensorLog {
   SensorLogInfo info;
   std::vector<Cloud> scans;
   std::vector<std::uint64_t> frame_ids;        ///< Ouster frame_id, or the turn's index (Velodyne)
+  /// Per scan: when the capture recorded the packet of the turn's first measurement,
+  /// nanoseconds since the epoch (the capturing host's clock, the pcap record's time: the
+  /// sensor's own clock may count from its boot or the hour); 0 where not known.
+  std::vector<std::uint64_t> captured_ns;
   std::vector<std::size_t> no_returns;         ///< per scan
 };
 
