@@ -416,7 +416,7 @@ struct ColumnModels {
 /// Each laser's column shift for method 6 (values in [0, columns)): against the laser with
 /// the most points (shift 0), the most frequent column difference between a point and that
 /// laser's latest point at or before its value, or one column either side of it, whichever
-/// keeps the laser's offset from that laser's values constant most often. (A laser fired
+/// changes the laser's offset from that laser's values least. (A laser fired
 /// before the reference within one firing finds its latest point a column back; only the
 /// firing's own column keeps the offset, its slot, constant across packets.)
 std::vector<std::int64_t> column_shifts(const std::vector<std::int64_t>& u, const LayerKeys& layer, std::size_t lasers) {
@@ -459,22 +459,24 @@ std::vector<std::int64_t> column_shifts(const std::vector<std::int64_t>& u, cons
       }
       votes[d] = 0;
     }
-    // (of the voted difference and its neighbours, the one whose offsets change least often)
-    std::size_t fewest = std::numeric_limits<std::size_t>::max();
+    // (of the voted difference and its neighbours, the one whose offsets change least: the
+    // sum of their changes, which a float32 time's rounding moves by a few steps a point
+    // and a wrong column by a firing's jitter)
+    double least = std::numeric_limits<double>::infinity();
     for (const std::uint32_t d : {voted, (voted + w - 1) % w, (voted + 1) % w}) {
-      std::size_t changes = 0;
+      double changes = 0.0;
       std::int64_t last = 0;
       bool any = false;
       for (const std::size_t j : of[l]) {
         const std::uint32_t m = (layer.column[j] + w - d) % w;
         if (!has[m]) continue;
         const std::int64_t offset = u[j] - at_column[m];
-        changes += any && offset != last ? 1 : 0;
+        if (any) changes += std::abs(static_cast<double>(offset - last));
         last = offset;
         any = true;
       }
-      if (any && changes < fewest) {
-        fewest = changes;
+      if (any && changes < least) {
+        least = changes;
         shift[l] = d;
       }
     }
@@ -510,13 +512,91 @@ std::vector<std::uint8_t> code_by_column(const std::vector<std::int64_t>& u, con
   return enc.finish();
 }
 
+/// For a value with several keys (a float32 time: `lowest` to `highest` give it back), the
+/// keys method 6 codes: each laser's offset from its measurement columns' bases (the median
+/// of its key ranges' midpoints less those of the same measurement column's point of the
+/// laser with the most points), then, column by column in order, the base every point of
+/// the column allows (its key range less its laser's offset) nearest the line through the
+/// last two bases, each point taking that base plus its offset; the points of a column
+/// that allows none keep their nearest keys `u`. A raw log's firing times stored as float32
+/// (a driver's `time`) then come back on their firings' grid and cost what exact ones do.
+std::vector<std::int64_t> column_keys(const std::vector<std::int64_t>& u, const LayerKeys& layer,
+                                      const std::vector<std::int64_t>& shift, const std::vector<std::int64_t>& lowest,
+                                      const std::vector<std::int64_t>& highest) {
+  const std::int64_t w = layer.columns;
+  const std::size_t lasers = shift.size(), n = u.size();
+  std::vector<std::vector<std::size_t>> at(static_cast<std::size_t>(w));  // points by measurement column
+  std::vector<std::size_t> count(lasers, 0);
+  for (std::size_t j = 0; j < n; ++j) {
+    if (layer.column[j] >= w) continue;
+    const std::int64_t m = (static_cast<std::int64_t>(layer.column[j]) + w - shift[layer.laser[j]]) % w;
+    at[static_cast<std::size_t>(m)].push_back(j);
+    ++count[layer.laser[j]];
+  }
+  const auto ref = static_cast<std::uint16_t>(std::max_element(count.begin(), count.end()) - count.begin());
+  // Each laser's offset: the most frequent difference where both points have one key (times
+  // near the turn's start, where float32 is finer than the step), else the median of the
+  // differences of their ranges' midpoints (twice them, to stay in integers).
+  std::vector<std::vector<std::int64_t>> exact(lasers), apart(lasers);
+  for (const auto& points : at) {
+    const auto r = std::find_if(points.begin(), points.end(), [&](std::size_t j) { return layer.laser[j] == ref; });
+    if (r == points.end()) continue;
+    for (const std::size_t j : points) {
+      if (lowest[j] == highest[j] && lowest[*r] == highest[*r]) exact[layer.laser[j]].push_back(lowest[j] - lowest[*r]);
+      apart[layer.laser[j]].push_back(lowest[j] + highest[j] - lowest[*r] - highest[*r]);
+    }
+  }
+  std::vector<std::int64_t> offset(lasers, 0);
+  for (std::size_t l = 0; l < lasers; ++l) {
+    if (!exact[l].empty()) {
+      auto& e = exact[l];
+      std::sort(e.begin(), e.end());
+      std::size_t most = 0;
+      for (std::size_t a = 0, b = 0; a < e.size(); a = b) {
+        while (b < e.size() && e[b] == e[a]) ++b;
+        if (b - a > most) {
+          most = b - a;
+          offset[l] = e[a];
+        }
+      }
+      continue;
+    }
+    if (apart[l].empty()) continue;
+    auto& a = apart[l];
+    std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2), a.end());
+    const std::int64_t twice = a[a.size() / 2];
+    offset[l] = twice >= 0 ? twice / 2 : -((1 - twice) / 2);
+  }
+  std::vector<std::int64_t> keys(u);
+  std::int64_t last = 0, last_m = -1, step = 0;
+  for (std::int64_t m = 0; m < w; ++m) {
+    const auto& points = at[static_cast<std::size_t>(m)];
+    if (points.empty()) continue;
+    std::int64_t lo = std::numeric_limits<std::int64_t>::min(), hi = std::numeric_limits<std::int64_t>::max();
+    for (const std::size_t j : points) {
+      lo = std::max(lo, lowest[j] - offset[layer.laser[j]]);
+      hi = std::min(hi, highest[j] - offset[layer.laser[j]]);
+    }
+    if (lo > hi) continue;
+    const std::int64_t base = last_m < 0 ? lo + (hi - lo) / 2 : std::clamp(last + (m - last_m) * step, lo, hi);
+    if (last_m >= 0 && m - last_m == 1) step = base - last;
+    last = base;
+    last_m = m;
+    for (const std::size_t j : points) keys[j] = base + offset[layer.laser[j]];
+  }
+  return keys;
+}
+
 /// Codes one channel with method 6, with each step predictor (ColumnHistory), keeping
-/// the smaller.
-std::vector<std::uint8_t> code_by_column(const std::vector<std::int64_t>& u, const LayerKeys& layer) {
+/// the smaller; a value with several keys (`lowest` to `highest`, else none) with those of
+/// column_keys.
+std::vector<std::uint8_t> code_by_column(const std::vector<std::int64_t>& u, const LayerKeys& layer,
+                                         const std::vector<std::int64_t>& lowest, const std::vector<std::int64_t>& highest) {
   const std::vector<std::int64_t> shift = column_shifts(u, layer, key_count(layer.laser));
+  const std::vector<std::int64_t> keys = lowest.empty() ? u : column_keys(u, layer, shift, lowest, highest);
   std::vector<std::uint8_t> best;
   for (const bool mean : {false, true}) {
-    std::vector<std::uint8_t> s = code_by_column(u, layer, shift, mean);
+    std::vector<std::uint8_t> s = code_by_column(keys, layer, shift, mean);
     if (best.empty() || s.size() < best.size()) best = std::move(s);
   }
   return best;
@@ -626,6 +706,9 @@ struct FieldOut {
   std::int64_t kmin = 0;
   std::vector<std::vector<std::int64_t>> u;
   std::uint32_t type = 0;  // kNamed: the source type (FieldType), stored in `transform`
+  /// A time its source holds as float32: per point the keys (less kmin) whose float32 is
+  /// its value, lowest and highest; method 6 codes the one nearest its prediction.
+  std::vector<std::int64_t> lowest, highest;
 };
 
 void check_size(std::size_t have, std::size_t points, const char* name) {
@@ -711,9 +794,13 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     const std::optional<Quant> ns = kind == kTime && source != nullptr && source->given() && !is_float_type(source->type)
                                         ? whole_nanoseconds(vals)
                                         : std::nullopt;
+    // (a time its source holds as float32: a step on which every float32 comes back)
+    const bool f32_time = kind == kTime && source != nullptr && source->given() && source->type == FieldType::kFloat32 &&
+                          std::all_of(vals.begin(), vals.end(), [](double v) { return static_cast<double>(static_cast<float>(v)) == v; });
     const Quant q = only_bits ? Quant{kFloatBits, 0.0, 0.0, 0.0, 0}
                     : ns      ? *ns
-                              : quantise_field(vals, is_f32, bound, bits, fallback, kind == kNamed ? name.c_str() : kind_name(kind));
+                              : quantise_field(vals, is_f32 || f32_time, bound, bits, fallback,
+                                               kind == kNamed ? name.c_str() : kind_name(kind));
     FieldOut f{name, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
     if (source != nullptr) source_of(f, *source);
     f.u.assign(1, std::vector<std::int64_t>(n));
@@ -725,10 +812,28 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
       kmin = std::min(kmin, k);
       kmax = std::max(kmax, k);
     }
+    // Where several keys give a float32 time back (its float32 is coarser than the step),
+    // each point's lowest and highest such key.
+    if (f32_time && q.repr == kQuantised && q.max_error == 0.0) {
+      f.lowest.resize(n);
+      f.highest.resize(n);
+      const auto back = [&](std::int64_t k) { return static_cast<double>(static_cast<float>(q.base + static_cast<double>(k) * q.step)); };
+      for (std::size_t j = 0; j < n; ++j) {
+        std::int64_t a = f.u[0][j], b = f.u[0][j];
+        while (a > f.u[0][j] - 64 && back(a - 1) == vals[j]) --a;
+        while (b < f.u[0][j] + 64 && back(b + 1) == vals[j]) ++b;
+        f.lowest[j] = a;
+        f.highest[j] = b;
+        kmin = std::min(kmin, a);
+        kmax = std::max(kmax, b);
+      }
+    }
     if (n == 0) kmin = kmax = 0;
     // Stored: kmin and u = k − kmin; a value decodes as T(base + (kmin + u)·step).
     f.kmin = kmin;
     for (auto& k : f.u[0]) k -= kmin;
+    for (auto& k : f.lowest) k -= kmin;
+    for (auto& k : f.highest) k -= kmin;
     f.span = static_cast<std::uint64_t>(kmax - kmin);
     fields.push_back(std::move(f));
   };
@@ -825,7 +930,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
         // scans measured, method 5 never won there): not tried, to save its time.
         if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
-        std::vector<std::uint8_t> s = m == kMethodLayerColumn ? code_by_column(u[0], layer)
+        std::vector<std::uint8_t> s = m == kMethodLayerColumn ? code_by_column(u[0], layer, f.lowest, f.highest)
                                       : is_by_layer(m)        ? code_values(u, span, m, layer_lasers, layer_keys)
                                                               : code_values(u, span, m, by, hl);
         if (best.empty() || s.size() < best.size()) {

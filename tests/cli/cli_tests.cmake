@@ -533,6 +533,18 @@ endif()
 run(0 attr.ring_laser_back decompress "${WORK}/v_attr.lex3dm" -o "${WORK}/v_attr.pcd")
 run(0 attr.capture_times_back info "${WORK}/v_attr.pcd")
 expect_match(attr.capture_times_back "${LAST_OUT}" "time +0 \\.\\. 0\\.09[0-9]+ s \\(time float32\\)")
+# the same turn as a driver writes it: unorganised, its ring and float32 time: the columns
+# come from the firing times and the times cost as little; back in float32
+run(0 attr.driver_times_ply convert "${VLP16}" "${WORK}/v_driver.ply")
+run(0 attr.driver_times compress "${WORK}/v_driver.ply" -o "${WORK}/v_driver.lex3dm" --max-error 0.014 --json)
+expect_match(attr.driver_times "${LAST_OUT}" "\"source\":\"estimated from the input's lasers \\(columns by firing time\\)\"")
+string(REGEX MATCH "\"name\":\"time\",\"representation\":\"as time float32[^}]*\"bytes\":([0-9]+)" _ "${LAST_OUT}")
+if(NOT CMAKE_MATCH_1 OR CMAKE_MATCH_1 GREATER 600)
+  message(SEND_ERROR "[attr.driver_times] time field of '${CMAKE_MATCH_1}' bytes, expected at most 600")
+endif()
+run(0 attr.driver_times_back decompress "${WORK}/v_driver.lex3dm" -o "${WORK}/v_driver_back.ply")
+run(0 attr.driver_times_back_info info "${WORK}/v_driver_back.ply")
+expect_match(attr.driver_times_back_info "${LAST_OUT}" "time +0 \\.\\. 0\\.09[0-9]+ s \\(time float32\\)")
 run(0 attr.capture_times_info info "${VLP16}")
 expect_match(attr.capture_times_info "${LAST_OUT}" "turn 0 +frame 0: 28385 points.*times 0\\.000 \\.\\. 99\\.[0-9]+ ms \\(time float32\\)")
 run(0 attr.ring_spherical compress "${VLP16}" -o "${WORK}/v_sph.lex3dm" --max-error 0.014 --words off

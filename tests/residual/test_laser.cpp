@@ -440,16 +440,24 @@ TEST(ResidualLaser, RealScansWithLessToGoOn) {
     if (!test::has_shared_data(path)) continue;
     ++ran;
     Cloud scan = test::load_or_fail(test::shared_data(path));
+    const std::uint32_t firings = scan.columns;
     scan.geometry.reset();
     scan.column.clear();
     scan.rows = scan.columns = 0;
     residual::LayerStats st;
-    const Bytes rings_only = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, 0.014, &st);
-    EXPECT_TRUE(st.laser) << path;
-    EXPECT_NE(st.laser_table_source.find("columns by azimuth"), std::string::npos) << st.laser_table_source;
-    const Bytes spherical = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, 0.014, nullptr, only(false));
-    EXPECT_LT(static_cast<double>(rings_only.size()), 0.9 * static_cast<double>(spherical.size())) << path;
-    expect_layer_bound(rings_only, scan, scan.T_cloud_sensor, 0.014);
+    // with the points' firing times the columns come from them (the capture's own count),
+    // without them from the azimuths
+    for (const bool timed : {true, false}) {
+      if (!timed) scan.time.clear();
+      const Bytes rings_only = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, 0.014, &st);
+      EXPECT_TRUE(st.laser) << path;
+      EXPECT_NE(st.laser_table_source.find(timed ? "columns by firing time" : "columns by azimuth"), std::string::npos)
+          << st.laser_table_source;
+      if (timed) EXPECT_EQ(st.columns, firings) << path;
+      const Bytes spherical = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, 0.014, nullptr, only(false));
+      EXPECT_LT(static_cast<double>(rings_only.size()), 0.9 * static_cast<double>(spherical.size())) << path;
+      expect_layer_bound(rings_only, scan, scan.T_cloud_sensor, 0.014);
+    }
     // nothing: shuffled points
     std::mt19937 rng(2);
     std::vector<std::size_t> perm(scan.size());
