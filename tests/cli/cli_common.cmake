@@ -26,3 +26,13 @@ function(expect_match name text regex)
     message(SEND_ERROR "[${name}] output does not match '${regex}':\n${text}")
   endif()
 endfunction()
+
+# The attribute `field` of a `compress --json` output `text` (its entry matching `what`
+# right after the name, e.g. "\"representation\":\"as time float32"; empty for any) holds
+# at most `most` bytes.
+function(expect_field_bytes name text field what most)
+  string(REGEX MATCH "\"name\":\"${field}\",${what}[^}]*\"bytes\":([0-9]+)" _ "${text}")
+  if(NOT CMAKE_MATCH_1 OR CMAKE_MATCH_1 GREATER ${most})
+    message(SEND_ERROR "[${name}] ${field} field of '${CMAKE_MATCH_1}' bytes, expected at most ${most}")
+  endif()
+endfunction()

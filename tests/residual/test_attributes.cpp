@@ -983,6 +983,22 @@ TEST(Attributes, LayerTreeCodesCalibratedLasersLosslessly) {
   EXPECT_EQ(code_laser(in, 0.01, false).c.file, lc.c.file);
 }
 
+/// Every truncation and byte flip of `lc`'s attribute chunk (coded on a sensor-geometry
+/// layer) fails cleanly or decodes to a cloud of the right size, and the chunk given to
+/// decode_attributes without the layer's keys is refused naming `method`.
+void expect_layer_method_checked(const LaserCoded& lc, std::size_t points, const std::string& method) {
+  auto m = codec::decode_model(lc.c.file);
+  ASSERT_TRUE(m.ok());
+  expect_damaged_payloads_fail(m.value());
+  auto layer = residual::decode_layer(*m.value().residual, Cloud{}, m.value().T_cloud_sensor, points);
+  ASSERT_TRUE(layer.ok());
+  Cloud alone = layer.value();
+  const Status s = residual::decode_attributes(*m.value().attributes, alone);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), ErrorCode::kBadData);
+  EXPECT_NE(s.message().find(method), std::string::npos) << s.to_string();
+}
+
 /// Every truncation and byte flip of a method 4 chunk fails cleanly or decodes to a cloud
 /// of the right size; method 4 in a file without a sensor-geometry layer, or given to
 /// decode_attributes alone, is refused with a message naming it.
@@ -991,17 +1007,7 @@ TEST(Attributes, CorruptLayerTreePayloadsAreRejectedWithoutCrashing) {
   const LaserCoded lc = code_laser(in, 0.02, false);
   ASSERT_TRUE(lc.stats.laser);
   ASSERT_EQ(field(lc.c.fields, "intensity")->method, 4);
-  auto m = codec::decode_model(lc.c.file);
-  ASSERT_TRUE(m.ok());
-  expect_damaged_payloads_fail(m.value());
-
-  auto layer = residual::decode_layer(*m.value().residual, Cloud{}, m.value().T_cloud_sensor, in.size());
-  ASSERT_TRUE(layer.ok());
-  Cloud alone = layer.value();
-  const Status s = residual::decode_attributes(*m.value().attributes, alone);
-  ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.code(), ErrorCode::kBadData);
-  EXPECT_NE(s.message().find("method 4"), std::string::npos) << s.to_string();
+  expect_layer_method_checked(lc, in.size(), "method 4");
 
   const Coded sph = code(in, 0.02);  // spherical layer: its intensity field's method set to 4
   auto sm = codec::decode_model(sph.file);
@@ -1205,16 +1211,7 @@ TEST(Attributes, CorruptLayerColumnPayloadsAreRejectedWithoutCrashing) {
   const LaserCoded lc = code_laser(in, 0.02, false);
   ASSERT_TRUE(lc.stats.laser);
   ASSERT_EQ(field(lc.c.fields, "time")->method, 6);
-  auto m = codec::decode_model(lc.c.file);
-  ASSERT_TRUE(m.ok());
-  expect_damaged_payloads_fail(m.value());
-  auto layer = residual::decode_layer(*m.value().residual, Cloud{}, m.value().T_cloud_sensor, in.size());
-  ASSERT_TRUE(layer.ok());
-  Cloud alone = layer.value();
-  const Status s = residual::decode_attributes(*m.value().attributes, alone);
-  ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.code(), ErrorCode::kBadData);
-  EXPECT_NE(s.message().find("method 6"), std::string::npos) << s.to_string();
+  expect_layer_method_checked(lc, in.size(), "method 6");
 }
 
 TEST(Attributes, LayerColumnGoldenFileDecodes) {
