@@ -97,18 +97,73 @@ void add_fields(lex3d::Cloud& cloud, const py::object& fields) {
   }
 }
 
+/// Sets `cloud`'s ring from `ring`: an (N,) integer array of laser numbers in 0..65535 (its
+/// dtype kept as the source's type where it is not uint16). ValueError otherwise.
+void add_ring(lex3d::Cloud& cloud, const py::object& ring) {
+  if (!py::isinstance<py::array>(ring)) throw py::value_error("ring must be a numpy array of shape (N,)");
+  const auto a = py::reinterpret_borrow<py::array>(ring);
+  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != cloud.size())
+    throw py::value_error("ring must have shape (" + std::to_string(cloud.size()) + ",), got " + lex3d::python::shape_of(a));
+  const char kind = a.dtype().kind();
+  if (kind != 'i' && kind != 'u') throw py::value_error("ring must be an integer array, got " + lex3d::python::dtype_of(a));
+  const py::array_t<std::int64_t, py::array::forcecast> values(a);
+  const auto v = values.unchecked<1>();
+  cloud.ring.resize(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const std::int64_t k = v(static_cast<py::ssize_t>(i));
+    if (k < 0 || k > 65535) throw py::value_error("ring: value " + std::to_string(i) + " is outside 0..65535");
+    cloud.ring[i] = static_cast<std::uint16_t>(k);
+  }
+  if (kind == 'u' && a.dtype().itemsize() == 1) cloud.ring_source = {"ring", lex3d::FieldType::kUint8};
+}
+
+/// Sets `cloud`'s time from `time`: an (N,) float32 or float64 array of seconds, or an
+/// integer one of nanoseconds (as ouster_ros's `t`), its dtype kept as the source's type
+/// (float32: `time`, as velodyne_pointcloud's; integers: `t`). ValueError otherwise.
+void add_time(lex3d::Cloud& cloud, const py::object& time) {
+  if (!py::isinstance<py::array>(time)) throw py::value_error("time must be a numpy array of shape (N,)");
+  const auto a = py::reinterpret_borrow<py::array>(time);
+  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != cloud.size())
+    throw py::value_error("time must have shape (" + std::to_string(cloud.size()) + ",), got " + lex3d::python::shape_of(a));
+  const char kind = a.dtype().kind();
+  const auto size = a.dtype().itemsize();
+  cloud.time.resize(cloud.size());
+  if (kind == 'f' && (size == 4 || size == 8)) {
+    const py::array_t<double, py::array::forcecast> values(a);
+    const auto v = values.unchecked<1>();
+    for (std::size_t i = 0; i < cloud.size(); ++i) cloud.time[i] = v(static_cast<py::ssize_t>(i));
+    if (size == 4) cloud.time_source = {"time", lex3d::FieldType::kFloat32};
+  } else if ((kind == 'i' || kind == 'u') && size <= 4) {
+    const py::array_t<std::int64_t, py::array::forcecast> values(a);
+    const auto v = values.unchecked<1>();
+    for (std::size_t i = 0; i < cloud.size(); ++i) cloud.time[i] = static_cast<double>(v(static_cast<py::ssize_t>(i))) * 1e-9;
+    cloud.time_source = {"t", kind == 'u' ? (size == 4 ? lex3d::FieldType::kUint32 : size == 2 ? lex3d::FieldType::kUint16 : lex3d::FieldType::kUint8)
+                                        : (size == 4 ? lex3d::FieldType::kInt32 : size == 2 ? lex3d::FieldType::kInt16 : lex3d::FieldType::kInt8)};
+  } else {
+    throw py::value_error("time must be float32/float64 seconds or integer nanoseconds of up to 32 bits, got " +
+                          lex3d::python::dtype_of(a));
+  }
+  for (std::size_t i = 0; i < cloud.size(); ++i)
+    if (!std::isfinite(cloud.time[i])) throw py::value_error("time: value " + std::to_string(i) + " is not finite");
+}
+
 py::object compress(const py::object& points, const py::object& intensity, std::optional<double> max_error,
                     std::optional<double> target_bpp, const std::optional<std::string>& words,
                     const std::string& coding, bool keep_all_points, const std::optional<py::bytes>& alphabet,
                     double word_radius, int iterations, std::uint64_t seed, int threads, bool report,
-                    const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields) {
+                    const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields,
+                    const py::object& ring, const py::object& time) {
   // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept).
   const bool from_file = lex3d::python::is_path(points);
   if (from_file && !intensity.is_none()) throw py::value_error("intensity goes with an array of points, not a path");
   if (from_file && !fields.is_none()) throw py::value_error("fields go with an array of points, not a path");
+  if (from_file && (!ring.is_none() || !time.is_none()))
+    throw py::value_error("ring and time go with an array of points, not a path");
   lex3d::Cloud cloud = from_file ? lex3d::python::scan_from(points, nullptr, "points")
                                  : lex3d::python::to_cloud(points, intensity, "points");
   if (!fields.is_none()) add_fields(cloud, fields);
+  if (!ring.is_none()) add_ring(cloud, ring);
+  if (!time.is_none()) add_time(cloud, time);
   lex3d::CompressOptions o;
   o.max_error = max_error;
   o.target_bpp = target_bpp.value_or(0.0);
@@ -294,7 +349,7 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("word_radius") = 0.0, py::arg("iterations") = lex3d::LearnParams{}.max_iterations,
         py::arg("seed") = lex3d::LearnParams{}.seed, py::arg("threads") = 2, py::arg("report") = false,
         py::arg("sensor") = py::none(), py::arg("fields") = py::none(),
-        py::arg("drop_fields") = std::vector<std::string>{},
+        py::arg("drop_fields") = std::vector<std::string>{}, py::arg("ring") = py::none(), py::arg("time") = py::none(),
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
@@ -306,6 +361,13 @@ intensity: optional (N,) float or 8- or 16-bit integer array (an integer one com
 fields: optional dict of name -> (N,) array, further per-point fields kept with a residual
     layer (losslessly), each given back by decompress(attributes=True) in its dtype: integers
     of up to 32 bits (uint32 values below 2^31), float32, float64 that float32 holds.
+ring: optional (N,) integer array, each point's laser (0..65535), as a driver's `ring`.
+time: optional (N,) array, each point's time: float32 or float64 seconds, or integer
+    nanoseconds (as ouster_ros's `t`). With ring and time, a spinning lidar's columns come from
+    the firing times (the sensor-geometry layer codes the scan as from its raw log) and the
+    times cost about one value a firing. Both kept with a residual layer (losslessly; a float32
+    time as float32); decompress(attributes=True) gives ring back in its dtype and time as
+    float64 seconds.
 drop_fields: names of fields not to keep ('intensity', 'ring', 'time', 'rgb' or a named
     field's, as report lists them), like `compress --drop-field`.
 max_error: residual-layer bound in metres, [1e-4, 10]: every point has a decoded point within it

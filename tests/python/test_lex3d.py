@@ -150,6 +150,29 @@ def test_an_integer_intensity_comes_back_in_its_dtype(kitti):
             lex3d.compress(points, bad, max_error=0.014)
 
 
+def test_a_drivers_ring_and_float32_time_code_as_the_capture_does():
+    """The VLP-16 sample's turn as a driver gives it (points, intensity, ring, float32 time):
+    the columns come from the firing times, the times cost a few hundred bytes and come back
+    to the float32; a time of the wrong shape or dtype raises ValueError."""
+    capture = lex3d.compress(str(SAMPLES / "vlp16_velodyne_example.pcap"), max_error=0.014, keep_all_points=True)
+    points, fields = lex3d.decompress(capture, attributes=True)
+    ring, time = fields["ring"], fields["time"].astype(np.float32)
+    data, info = lex3d.compress(points, fields["intensity"], max_error=0.014, threads=1, report=True, ring=ring, time=time)
+    assert info["attributes"] == ["ring", "intensity", "time"]
+    without = lex3d.compress(points, fields["intensity"], max_error=0.014, threads=1, ring=ring, time=time,
+                             drop_fields=["time"])
+    assert 0 < len(data) - len(without) < 600
+    back, got = lex3d.decompress(data, attributes=True)
+    assert got["ring"].dtype == ring.dtype
+    assert np.array_equal(np.sort(got["time"].astype(np.float32)), np.sort(time))
+    with pytest.raises(ValueError, match="time must have shape"):
+        lex3d.compress(points, max_error=0.014, time=time[:-1])
+    with pytest.raises(ValueError, match="time must be"):
+        lex3d.compress(points, max_error=0.014, time=time.astype(np.complex64))
+    with pytest.raises(ValueError, match="ring: value"):
+        lex3d.compress(points, max_error=0.014, ring=np.full(len(points), 70000, dtype=np.int64))
+
+
 def test_corrupt_and_truncated_files_raise_value_error(small):
     data = lex3d.compress(small, max_error=0.02)
     for n in (0, 3, len(data) // 2, len(data) - 1):
