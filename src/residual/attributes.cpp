@@ -534,38 +534,41 @@ std::vector<std::int64_t> column_keys(const std::vector<std::int64_t>& u, const 
     ++count[layer.laser[j]];
   }
   const auto ref = static_cast<std::uint16_t>(std::max_element(count.begin(), count.end()) - count.begin());
-  // Each laser's offset: the most frequent difference where both points have one key (times
-  // near the turn's start, where float32 is finer than the step), else the median of the
-  // differences of their ranges' midpoints (twice them, to stay in integers).
-  std::vector<std::vector<std::int64_t>> exact(lasers), apart(lasers);
+  // Each laser's offset from the reference laser: of the offsets within 16 steps of the
+  // median difference of their key ranges' midpoints (twice them, to stay in integers) in
+  // one measurement column, the one that leaves the two ranges of the most such pairs
+  // overlapping (the true one overlaps them all; a narrow range, near the turn's start where
+  // float32 is finer than the step, rules the others out); ties: nearest the median.
+  struct Pair {
+    std::size_t j, r;
+  };
+  std::vector<std::vector<Pair>> pairs(lasers);
   for (const auto& points : at) {
     const auto r = std::find_if(points.begin(), points.end(), [&](std::size_t j) { return layer.laser[j] == ref; });
     if (r == points.end()) continue;
-    for (const std::size_t j : points) {
-      if (lowest[j] == highest[j] && lowest[*r] == highest[*r]) exact[layer.laser[j]].push_back(lowest[j] - lowest[*r]);
-      apart[layer.laser[j]].push_back(lowest[j] + highest[j] - lowest[*r] - highest[*r]);
-    }
+    for (const std::size_t j : points) pairs[layer.laser[j]].push_back({j, *r});
   }
   std::vector<std::int64_t> offset(lasers, 0);
   for (std::size_t l = 0; l < lasers; ++l) {
-    if (!exact[l].empty()) {
-      auto& e = exact[l];
-      std::sort(e.begin(), e.end());
-      std::size_t most = 0;
-      for (std::size_t a = 0, b = 0; a < e.size(); a = b) {
-        while (b < e.size() && e[b] == e[a]) ++b;
-        if (b - a > most) {
-          most = b - a;
-          offset[l] = e[a];
-        }
+    if (l == ref || pairs[l].empty()) continue;
+    std::vector<std::int64_t> twice;
+    twice.reserve(pairs[l].size());
+    for (const Pair& p : pairs[l]) twice.push_back(lowest[p.j] + highest[p.j] - lowest[p.r] - highest[p.r]);
+    std::nth_element(twice.begin(), twice.begin() + static_cast<std::ptrdiff_t>(twice.size() / 2), twice.end());
+    const std::int64_t t = twice[twice.size() / 2];
+    const std::int64_t centre = t >= 0 ? t / 2 : -((1 - t) / 2);
+    std::size_t most = 0;
+    offset[l] = centre;
+    for (std::int64_t d = 0; d <= 32; ++d) {
+      const std::int64_t o = centre + (d % 2 == 0 ? d / 2 : -(d + 1) / 2);  // centre, +1, -1, +2, ...
+      std::size_t overlap = 0;
+      for (const Pair& p : pairs[l])
+        overlap += std::max(lowest[p.j] - o, lowest[p.r]) <= std::min(highest[p.j] - o, highest[p.r]) ? 1 : 0;
+      if (overlap > most) {
+        most = overlap;
+        offset[l] = o;
       }
-      continue;
     }
-    if (apart[l].empty()) continue;
-    auto& a = apart[l];
-    std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2), a.end());
-    const std::int64_t twice = a[a.size() / 2];
-    offset[l] = twice >= 0 ? twice / 2 : -((1 - twice) / 2);
   }
   std::vector<std::int64_t> keys(u);
   std::int64_t last = 0, last_m = -1, step = 0;

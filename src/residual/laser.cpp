@@ -942,13 +942,13 @@ bool estimate_columns(const ScanPoints& scan, const std::vector<std::uint16_t>& 
 /// The columns of points whose lasers and firing times are known (a driver's unorganised
 /// cloud with `ring` and `time`): a spinning lidar fires all its lasers once a column, so
 /// the points' times count the firings. Along each laser, each gap between consecutive
-/// times is a whole number of firing periods (the median gap), so that the timestamps'
-/// jitter does not add up over the turn; each laser's count is then aligned with the laser
+/// times is a whole number of firing periods (the mean period: the median gap, refined),
+/// so that the timestamps' jitter does not add up over the turn; each laser's count is then aligned with the laser
 /// with the most points by the offset most of its points agree with (to that laser's point
 /// nearest in time); a point's column is its firing from the turn's first plus its laser's
-/// stagger, the columns by which it looks ahead of its firing. The columns a turn: 2π over
-/// the azimuth a laser advances a firing (between its points at most 4 firings apart).
-/// False where the times do not fall on firings (fewer than 90 % of the
+/// stagger, the whole columns by which it looks ahead of its firing. The columns a turn: 2π
+/// over the azimuth a laser advances a firing (between its points at most 4 firings apart),
+/// or the turn's firings where they exceed that by at most 1 %. False where the times do not fall on firings (fewer than 90 % of the
 /// gaps within 10 % of a whole number of periods) or the firings do not fit in one turn.
 constexpr double kTimeColumnsCost = 1.25;
 
@@ -976,18 +976,48 @@ bool columns_from_times(const ScanPoints& scan, const std::vector<double>& time,
     whole += std::abs(f - std::round(f)) < 0.1 ? 1 : 0;
   }
   if (10 * whole < 9 * gaps.size()) return false;
-  // each laser's firings counted along its own times
+  // Each laser's firings counted along its own times. The median gap is off the mean
+  // period by a share of the timestamps' jitter, which a gap of hundreds of firings (a
+  // laser's stretch of sky) multiplies: the period is refined first by the gaps of at most
+  // 4 firings, then by the slope of every laser's times over its firings.
   std::vector<std::int64_t> firing(n, 0);
-  std::size_t ref = 0;
-  for (std::uint32_t l = 0; l < lasers; ++l) {
-    const auto& idx = of[l];
-    for (std::size_t k = 1; k < idx.size(); ++k) {
-      const double f = std::round((time[idx[k]] - time[idx[k - 1]]) / period);
-      if (!(f <= static_cast<double>(kMaxLaserColumns))) return false;
-      firing[idx[k]] = firing[idx[k - 1]] + static_cast<std::int64_t>(f);
+  const auto count = [&](double p) {
+    for (const auto& idx : of)
+      for (std::size_t k = 1; k < idx.size(); ++k) {
+        const double f = std::round((time[idx[k]] - time[idx[k - 1]]) / p);
+        if (!(f <= static_cast<double>(kMaxLaserColumns))) return false;
+        firing[idx[k]] = firing[idx[k - 1]] + static_cast<std::int64_t>(f);
+      }
+    return true;
+  };
+  double short_span = 0.0, short_firings = 0.0;
+  for (const double g : gaps) {
+    const double f = std::round(g / period);
+    if (f >= 1.0 && f <= 4.0) {
+      short_span += g;
+      short_firings += f;
     }
-    if (idx.size() > of[ref].size()) ref = l;
   }
+  if (!(short_firings > 0.0) || !count(short_span / short_firings)) return false;
+  double sxy = 0.0, sxx = 0.0;
+  for (const auto& idx : of) {
+    if (idx.size() < 2) continue;
+    double mk = 0.0, mt = 0.0;
+    for (const std::uint32_t i : idx) {
+      mk += static_cast<double>(firing[i]);
+      mt += time[i];
+    }
+    mk /= static_cast<double>(idx.size());
+    mt /= static_cast<double>(idx.size());
+    for (const std::uint32_t i : idx) {
+      sxy += (static_cast<double>(firing[i]) - mk) * (time[i] - mt);
+      sxx += (static_cast<double>(firing[i]) - mk) * (static_cast<double>(firing[i]) - mk);
+    }
+  }
+  if (!(sxx > 0.0 && sxy > 0.0) || !count(sxy / sxx)) return false;
+  std::size_t ref = 0;
+  for (std::uint32_t l = 1; l < lasers; ++l)
+    if (of[l].size() > of[ref].size()) ref = l;
   // aligned with the reference laser's count: the offset to its point nearest in time
   const auto& reference = of[ref];
   for (std::uint32_t l = 0; l < lasers; ++l) {
@@ -1038,8 +1068,12 @@ bool columns_from_times(const ScanPoints& scan, const std::vector<double>& time,
     fired += static_cast<double>(st.firings);
   }
   if (!(azimuth > 0.0)) return false;
-  const double w = std::round(kTwoPi * fired / azimuth);
-  if (!(w >= 16 && w <= kMaxLaserColumns && static_cast<double>(last - first) < w)) return false;
+  // (a turn cut a firing or two past 360°, as a driver may cut it, takes its firings as
+  // its columns, as a raw log's turn does)
+  const auto firings = static_cast<double>(last - first + 1);
+  double w = std::round(kTwoPi * fired / azimuth);
+  if (firings > w && firings <= 1.01 * w + 1.0) w = firings;
+  if (!(w >= 16 && w <= kMaxLaserColumns && firings <= w)) return false;
   columns = static_cast<std::uint32_t>(w);
   // Each laser's stagger: how many columns ahead of its firing it looks (the circular mean
   // of its points' azimuths less their firings' turn, against the laser with the most
@@ -1057,8 +1091,12 @@ bool columns_from_times(const ScanPoints& scan, const std::vector<double>& time,
     if (scan.rho[i] >= 0.3) look[ring[i]] += std::polar(1.0, scan.azimuth[i] - dir * step * static_cast<double>(firing[i]));
   std::vector<std::int64_t> stagger(lasers, 0);
   for (std::uint32_t l = 0; l < lasers; ++l)
-    if (std::abs(look[l]) > 0.0 && std::abs(look[ref]) > 0.0)
-      stagger[l] = std::llround(dir * wrap_angle(std::arg(look[l]) - std::arg(look[ref])) / step);
+    if (std::abs(look[l]) > 0.0 && std::abs(look[ref]) > 0.0) {
+      // (within a column of the reference: none; a sequence's lasers fired across one
+      // firing, as a Velodyne's, look up to half a column either side)
+      const double ahead = dir * wrap_angle(std::arg(look[l]) - std::arg(look[ref])) / step;
+      stagger[l] = std::abs(ahead) < 1.0 ? 0 : std::llround(ahead);
+    }
   const auto wide = static_cast<std::int64_t>(w);
   column.resize(n);
   for (std::size_t i = 0; i < n; ++i)
