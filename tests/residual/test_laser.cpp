@@ -446,14 +446,17 @@ TEST(ResidualLaser, RealScansWithLessToGoOn) {
     scan.rows = scan.columns = 0;
     residual::LayerStats st;
     // with the points' firing times the columns come from them (the capture's own count),
-    // without them from the azimuths
-    for (const bool timed : {true, false}) {
-      if (!timed) scan.time.clear();
+    // with times that are not firings (shuffled among the points) or without times from
+    // the azimuths
+    const std::vector<double> times = scan.time;
+    for (const int timed : {1, 2, 0}) {
+      scan.time = timed == 0 ? std::vector<double>{} : times;
+      if (timed == 2) std::shuffle(scan.time.begin(), scan.time.end(), std::mt19937(5));
       const Bytes rings_only = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, 0.014, &st);
       EXPECT_TRUE(st.laser) << path;
-      EXPECT_NE(st.laser_table_source.find(timed ? "columns by firing time" : "columns by azimuth"), std::string::npos)
+      EXPECT_NE(st.laser_table_source.find(timed == 1 ? "columns by firing time" : "columns by azimuth"), std::string::npos)
           << st.laser_table_source;
-      if (timed) EXPECT_EQ(st.columns, firings) << path;
+      if (timed == 1) EXPECT_EQ(st.columns, firings) << path;
       const Bytes spherical = residual::encode_layer(scan, Cloud{}, scan.T_cloud_sensor, 0.014, nullptr, only(false));
       EXPECT_LT(static_cast<double>(rings_only.size()), 0.9 * static_cast<double>(spherical.size())) << path;
       expect_layer_bound(rings_only, scan, scan.T_cloud_sensor, 0.014);
