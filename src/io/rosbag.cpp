@@ -259,6 +259,9 @@ bool is_packet_type(const std::string& type) {
   return type == "ouster_ros/PacketMsg" || type == "ouster_sensor_msgs/PacketMsg";
 }
 
+/// velodyne_driver's recording of a Velodyne's packets (a scan's worth a message).
+constexpr const char* kVelodyneScan = "velodyne_msgs/VelodyneScan";
+
 /// A bag checked (check_bag_container) and opened; the library opens only a file that
 /// passes (opening costs a few ms).
 StatusOr<std::unique_ptr<OpenBag>> open_bag(const std::string& path, std::uint64_t& file_bytes) {
@@ -451,6 +454,71 @@ Status read_packets(const std::string& path, OpenBag& bag, const BagInfo& info, 
   return {};
 }
 
+/// The data packets of a topic of velodyne_msgs/VelodyneScan (ROS 1 serialization: a
+/// std_msgs/Header, u32 seq, time stamp, string frame_id; then a u32 count of
+/// velodyne_msgs/VelodynePacket, each a time stamp and 1206 bytes), decoded as a capture of
+/// them is, each turn stamped with its first packet's stamp. The calibration (`--metadata`,
+/// required for an HDL-64E) and the model (`--sensor-model`) as for a capture.
+Status read_velodyne_scans(const std::string& path, OpenBag& bag, const BagTopic& topic, const ReadOptions& options,
+                           BagScans& out) {
+  constexpr std::size_t kPacket = 1206, kStamped = 8 + kPacket;
+  std::vector<detail::Datagram> datagrams;
+  std::string frame_id;
+  std::size_t k = 0;
+  Status s = for_each_message(path, bag, topic.name, [&](lex3d_bag_time, const std::uint8_t* b, std::size_t n) {
+    ++k;
+    const auto truncated = [&](const std::string& what) {
+      return bad_data(detail::msg(path, "message " + std::to_string(k) + " on " + topic.name +
+                                            ": a truncated velodyne_msgs/VelodyneScan (" + what + ")"));
+    };
+    if (n < 16) return truncated("its header");
+    std::uint32_t frame_bytes = 0, count = 0;
+    std::memcpy(&frame_bytes, b + 12, 4);
+    if (frame_bytes > n - 16) return truncated("its frame_id");
+    if (k == 1) frame_id.assign(reinterpret_cast<const char*>(b + 16), frame_bytes);
+    std::size_t at = 16 + static_cast<std::size_t>(frame_bytes);
+    if (n - at < 4) return truncated("its packet count");
+    std::memcpy(&count, b + at, 4);
+    at += 4;
+    if (count > (n - at) / kStamped)
+      return truncated(std::to_string(count) + " packets announced, " + std::to_string((n - at) / kStamped) + " held");
+    for (std::uint32_t i = 0; i < count; ++i, at += kStamped) {
+      std::uint32_t sec = 0, nsec = 0;
+      std::memcpy(&sec, b + at, 4);
+      std::memcpy(&nsec, b + at + 4, 4);
+      detail::Datagram d;
+      d.record = k;
+      d.captured_ns = static_cast<std::uint64_t>(sec) * 1000000000ULL + nsec;
+      d.claimed = kPacket;
+      d.payload.assign(b + at + 8, b + at + kStamped);
+      datagrams.push_back(std::move(d));
+    }
+    return Status{};
+  });
+  if (!s.ok()) return s;
+  SensorLog log;
+  s = detail::decode_velodyne(path, options.sensor_model, options.metadata_path, datagrams, log);
+  if (!s.ok()) return s;
+  out.sensor = log.info.sensor;
+  out.incomplete_frames = log.info.incomplete_frames;
+  out.no_return_dropped = log.info.no_returns;
+  if (log.info.other_packets > 0)
+    out.notes.push_back(std::to_string(log.info.other_packets) + " packets on " + topic.name +
+                        " are not Velodyne data packets: skipped");
+  if (log.info.second_returns > 0)
+    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept");
+  for (std::size_t i = 0; i < log.scans.size(); ++i) {
+    BagScan scan;
+    scan.cloud = std::move(log.scans[i]);
+    const std::uint64_t t = i < log.captured_ns.size() ? log.captured_ns[i] : 0;
+    scan.stamp_sec = static_cast<std::uint32_t>(t / 1000000000ULL);
+    scan.stamp_nsec = static_cast<std::uint32_t>(t % 1000000000ULL);
+    scan.frame_id = frame_id;
+    out.scans.push_back(std::move(scan));
+  }
+  return {};
+}
+
 StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& topic, const ReadOptions& options) {
   std::uint64_t bytes = 0;
   auto opened = open_bag(path, bytes);
@@ -470,7 +538,8 @@ StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& top
     std::vector<const BagTopic*> clouds, packets;
     for (const auto& t : info.topics) {
       if (t.type == kPointCloud2) clouds.push_back(&t);
-      if (is_packet_type(t.type) && t.name.find("imu") == std::string::npos) packets.push_back(&t);
+      if ((is_packet_type(t.type) && t.name.find("imu") == std::string::npos) || t.type == kVelodyneScan)
+        packets.push_back(&t);
     }
     if (clouds.size() == 1) chosen = clouds.front();
     else if (clouds.empty() && packets.size() == 1) chosen = packets.front();
@@ -485,10 +554,11 @@ StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& top
   Status s;
   if (chosen->type == kPointCloud2) s = read_clouds(path, bag, md5[chosen->name], *chosen, out);
   else if (is_packet_type(chosen->type)) s = read_packets(path, bag, info, *chosen, options, out);
+  else if (chosen->type == kVelodyneScan) s = read_velodyne_scans(path, bag, *chosen, options, out);
   else
     return bad_data(detail::msg(path, "topic " + chosen->name + " holds " + chosen->type +
-                                          " messages; lex3d reads sensor_msgs/PointCloud2 and Ouster packets "
-                                          "(ouster_ros/PacketMsg)"));
+                                          " messages; lex3d reads sensor_msgs/PointCloud2, Ouster packets "
+                                          "(ouster_ros/PacketMsg) and Velodyne packets (velodyne_msgs/VelodyneScan)"));
   if (!s.ok()) return s;
   if (out.scans.empty()) return bad_data(detail::msg(path, "topic " + chosen->name + " holds no message"));
   return out;

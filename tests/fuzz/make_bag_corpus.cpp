@@ -2,10 +2,12 @@
 // bag library: a few small PointCloud2 bags, one for each chunk compression the format has
 // (none, bz2, lz4), one organised with no-return pixels, one of two chunks, and Ouster
 // packets with their metadata (the first five lidar packets of the ouster seed capture, a
-// frame and one packet of the next, and the metadata fuzz_readers.hpp gives that capture).
+// frame and one packet of the next, and the metadata fuzz_readers.hpp gives that capture),
+// and Velodyne packets as velodyne_driver records them (the VLP-16 seed capture's 24
+// packets, two turns, in velodyne_msgs/VelodyneScan messages of 6).
 // Small on purpose: libFuzzer mutates them hundreds of times a second.
 //
-//   make_bag_corpus DIR OUSTER_PCAP
+//   make_bag_corpus DIR OUSTER_PCAP VELODYNE_PCAP
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -83,8 +85,8 @@ sensor_msgs::PointCloud2 small_cloud(std::uint32_t width, std::uint32_t sec) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 3) {
-    std::fprintf(stderr, "usage: %s DIR OUSTER_PCAP\n", argv[0]);
+  if (argc != 4) {
+    std::fprintf(stderr, "usage: %s DIR OUSTER_PCAP VELODYNE_PCAP\n", argv[0]);
     return 1;
   }
   const std::string dir = argv[1];
@@ -112,5 +114,21 @@ int main(int argc, char** argv) {
     bag.write("/os_node/lidar_packets", ros::Time(1700000000, static_cast<std::uint32_t>(1 + i * 1562500)), m);
   }
   bag.close();
+  const auto velodyne = udp_payloads(argv[3], 24);
+  if (velodyne.size() != 24) {
+    std::fprintf(stderr, "%s: not 24 packets\n", argv[3]);
+    return 1;
+  }
+  rosbag::Bag vbag;
+  vbag.open(dir + "/velodyne_packets_lz4.bag", rosbag::bagmode::Write);
+  vbag.setCompression(rosbag::compression::LZ4);
+  for (std::size_t at = 0; at < velodyne.size(); at += 6) {
+    std::vector<bagfix::StampedPacket> part;
+    for (std::size_t i = at; i < at + 6; ++i)
+      part.push_back({1700000000, static_cast<std::uint32_t>(i * 552960), velodyne[i]});
+    vbag.write("/velodyne_packets", ros::Time(part.front().sec, part.front().nsec),
+               bagfix::velodyne_scan(static_cast<std::uint32_t>(at / 6), part));
+  }
+  vbag.close();
   return 0;
 }

@@ -119,6 +119,38 @@ inline void write(const std::string& path, const std::string& topic, const std::
   bag.close();
 }
 
+/// A velodyne_msgs/VelodyneScan as its serialized bytes (velodyne_msgs is not packaged: the
+/// bag library writes these bytes under that type, as velodyne_driver records them).
+struct VelodyneScanBytes {
+  std::vector<std::uint8_t> bytes;
+};
+
+/// One VelodyneScan message: header (seq, stamp, frame_id "velodyne"), then each packet's
+/// stamp and its 1206 bytes.
+struct StampedPacket {
+  std::uint32_t sec = 0, nsec = 0;
+  std::vector<std::uint8_t> data;  // 1206 bytes
+};
+inline VelodyneScanBytes velodyne_scan(std::uint32_t seq, const std::vector<StampedPacket>& packets) {
+  VelodyneScanBytes m;
+  auto u32 = [&](std::uint32_t v) {
+    for (int k = 0; k < 4; ++k) m.bytes.push_back(static_cast<std::uint8_t>(v >> (8 * k)));
+  };
+  u32(seq);
+  u32(packets.empty() ? 0 : packets.front().sec);
+  u32(packets.empty() ? 0 : packets.front().nsec);
+  const std::string frame = "velodyne";
+  u32(static_cast<std::uint32_t>(frame.size()));
+  m.bytes.insert(m.bytes.end(), frame.begin(), frame.end());
+  u32(static_cast<std::uint32_t>(packets.size()));
+  for (const StampedPacket& p : packets) {
+    u32(p.sec);
+    u32(p.nsec);
+    m.bytes.insert(m.bytes.end(), p.data.begin(), p.data.end());
+  }
+  return m;
+}
+
 /// Where the first chunk record of a bag lies: its `size` field's 4 bytes (the declared
 /// uncompressed size) and its data.
 struct ChunkAt {
@@ -178,3 +210,41 @@ inline std::vector<RecordAt> records(const std::vector<char>& b) {
 }
 
 }  // namespace bagfix
+
+namespace ros {
+namespace message_traits {
+template <>
+struct MD5Sum<bagfix::VelodyneScanBytes> {
+  static const char* value() { return "50804fc9533a0e579e6322c04ae70566"; }
+  static const char* value(const bagfix::VelodyneScanBytes&) { return value(); }
+};
+template <>
+struct DataType<bagfix::VelodyneScanBytes> {
+  static const char* value() { return "velodyne_msgs/VelodyneScan"; }
+  static const char* value(const bagfix::VelodyneScanBytes&) { return value(); }
+};
+template <>
+struct Definition<bagfix::VelodyneScanBytes> {
+  static const char* value() {
+    return "Header header\nVelodynePacket[] packets\n================\nMSG: velodyne_msgs/VelodynePacket\ntime stamp\n"
+           "uint8[1206] data\n";
+  }
+  static const char* value(const bagfix::VelodyneScanBytes&) { return value(); }
+};
+}  // namespace message_traits
+namespace serialization {
+template <>
+struct Serializer<bagfix::VelodyneScanBytes> {
+  template <typename Stream>
+  static void write(Stream& stream, const bagfix::VelodyneScanBytes& m) {
+    std::memcpy(stream.advance(static_cast<std::uint32_t>(m.bytes.size())), m.bytes.data(), m.bytes.size());
+  }
+  template <typename Stream>
+  static void read(Stream& stream, bagfix::VelodyneScanBytes& m) {
+    m.bytes.resize(stream.getLength());
+    std::memcpy(m.bytes.data(), stream.advance(stream.getLength()), m.bytes.size());
+  }
+  static std::uint32_t serializedLength(const bagfix::VelodyneScanBytes& m) { return static_cast<std::uint32_t>(m.bytes.size()); }
+};
+}  // namespace serialization
+}  // namespace ros

@@ -22,6 +22,8 @@
 #include "bag_fixtures.hpp"
 #include "io/rosbag_internal.hpp"
 #include "io/rosbag_plugin.h"
+#include "io/sensor_log_internal.hpp"
+#include "lex3d/io/sensor_log.hpp"
 #include "lex3d/io/io.hpp"
 #include "lex3d/io/rosbag.hpp"
 #include "test_config.hpp"
@@ -376,6 +378,67 @@ TEST_F(Bags, SharedOusterPacketBag) {
   auto first = io::read_cloud(p);
   ASSERT_TRUE(first.ok()) << first.status().to_string();
   EXPECT_EQ(first.value().cloud.size(), c.size());
+}
+
+/// The VLP-16 sample's packets recorded as velodyne_driver records them (VelodyneScan
+/// messages of 40 packets, each packet stamped with its capture time): the same turn as the
+/// capture, point for point, with its times, stamped with its first packet's time. A
+/// message that announces more packets than it holds is refused naming it.
+TEST_F(Bags, VelodyneScanPacketsReadAsTheirCapture) {
+  const std::string pcap = std::string(LEX3D_SAMPLES_DIR) + "/vlp16_velodyne_example.pcap";
+  auto capture = io::read_sensor_log(pcap);
+  ASSERT_TRUE(capture.ok()) << capture.status().to_string();
+  std::vector<io::detail::Datagram> datagrams;
+  io::SensorLogInfo info;
+  ASSERT_TRUE(io::detail::read_udp_datagrams(pcap, datagrams, info).ok());
+  std::vector<bagfix::StampedPacket> packets;
+  for (const auto& d : datagrams)
+    if (io::detail::is_velodyne_packet(d.payload))
+      packets.push_back({static_cast<std::uint32_t>(d.captured_ns / 1000000000ULL),
+                         static_cast<std::uint32_t>(d.captured_ns % 1000000000ULL), d.payload});
+  ASSERT_GT(packets.size(), 80U);
+  const std::string bag_path = path("velodyne_packets.bag");
+  {
+    rosbag::Bag bag;
+    bag.open(bag_path, rosbag::bagmode::Write);
+    for (std::size_t at = 0, seq = 0; at < packets.size(); at += 40, ++seq) {
+      const std::vector<bagfix::StampedPacket> part(packets.begin() + static_cast<std::ptrdiff_t>(at),
+                                                    packets.begin() + static_cast<std::ptrdiff_t>(std::min(packets.size(), at + 40)));
+      bag.write("/velodyne_packets", ros::Time(part.front().sec, part.front().nsec),
+                bagfix::velodyne_scan(static_cast<std::uint32_t>(seq), part));
+    }
+    bag.close();
+  }
+  auto r = io::read_bag(bag_path, "");
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  const io::BagScans& b = r.value();
+  EXPECT_EQ(b.topic, "/velodyne_packets");
+  EXPECT_EQ(b.sensor, "VLP-16");
+  ASSERT_EQ(b.scans.size(), capture.value().scans.size());
+  const Cloud& c = b.scans[0].cloud;
+  const Cloud& want = capture.value().scans[0];
+  EXPECT_EQ(c.points, want.points);
+  EXPECT_EQ(c.ring, want.ring);
+  EXPECT_EQ(c.column, want.column);
+  EXPECT_EQ(c.time, want.time);
+  EXPECT_EQ(b.scans[0].frame_id, "velodyne");
+  EXPECT_EQ(static_cast<std::uint64_t>(b.scans[0].stamp_sec) * 1000000000ULL + b.scans[0].stamp_nsec,
+            capture.value().captured_ns[0]);
+  // a message announcing a packet more than it holds
+  {
+    rosbag::Bag bag;
+    bag.open(path("velodyne_short.bag"), rosbag::bagmode::Write);
+    bagfix::VelodyneScanBytes m = bagfix::velodyne_scan(0, {packets[0], packets[1]});
+    m.bytes[16 + 8] = 3;  // the count (after the header: seq, stamp, "velodyne")
+    bag.write("/velodyne_packets", ros::Time(packets[0].sec, packets[0].nsec), m);
+    bag.close();
+  }
+  auto bad = io::read_bag(path("velodyne_short.bag"), "");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), ErrorCode::kBadData);
+  EXPECT_NE(bad.status().message().find("message 1 on /velodyne_packets: a truncated velodyne_msgs/VelodyneScan (3 packets announced, 2 held)"),
+            std::string::npos)
+      << bad.status().to_string();
 }
 
 TEST_F(Bags, AnOusterPacketErrorNamesTheMessage) {

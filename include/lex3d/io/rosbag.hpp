@@ -21,7 +21,9 @@
 /// NaN and (0, 0, 0) pixels no-returns. A topic of Ouster packets (`ouster_ros/PacketMsg`,
 /// `ouster_sensor_msgs/PacketMsg`) is decoded with the sensor metadata the bag holds on a
 /// `std_msgs/String` topic (or the JSON given as ReadOptions::metadata_path), one scan a
-/// complete frame, exactly as a pcap capture of the same packets (sensor_log.hpp).
+/// complete frame, exactly as a pcap capture of the same packets (sensor_log.hpp); a topic
+/// of Velodyne packets (`velodyne_msgs/VelodyneScan`, as velodyne_driver records them) one
+/// scan a complete turn, as a capture of them.
 
 #include <cstdint>
 #include <string>
@@ -85,8 +87,10 @@ struct BagScans {
 };
 
 /// Reads the scans of `topic` (empty: the bag's only PointCloud2 topic, else its only
-/// Ouster lidar-packet topic). `options.metadata_path` overrides the bag's metadata topic
-/// for packets. Errors (kBadData, one line naming the file): no such topic (the message
+/// Ouster lidar-packet or velodyne_msgs/VelodyneScan topic). `options.metadata_path`
+/// overrides the bag's metadata topic for Ouster packets and gives a Velodyne's calibration
+/// (`options.sensor_model` its model, as for a capture); a Velodyne turn is stamped with its
+/// first packet's stamp, and its frame is the first message's. Errors (kBadData, one line naming the file): no such topic (the message
 /// lists the bag's topics), a topic of another type, a PointCloud2 with fields that do not
 /// fit (a field beyond point_step, row_step smaller than width × point_step, data not
 /// row_step × height bytes, an unknown datatype, no x/y/z field, is_bigendian set), a
