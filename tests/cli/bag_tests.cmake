@@ -144,3 +144,14 @@ run(0 capture.stamp_sequence compress "${VLP16}" -o "${WORK}/v_stamped.lex3dq" -
 run(0 capture.stamp_sequence_back decompress "${WORK}/v_stamped.lex3dq" -o "${WORK}/v_stamped_back.bag")
 run(0 capture.stamp_sequence_info info "${WORK}/v_stamped_back.bag" --json)
 expect_match(capture.stamp_sequence_info "${LAST_OUT}" "\"start_s\":1525347606[,.]")
+
+# --- Velodyne packets recorded as velodyne_driver records them (velodyne_msgs/VelodyneScan):
+# each turn a scan named and stamped after its first packet, through a sequence file and back
+set(VBAG "${SAMPLES}/../tests/fuzz/readers/bag/velodyne_packets_lz4.bag")
+run(0 velodyne.info info "${VBAG}")
+expect_match(velodyne.info "${LAST_OUT}" "/velodyne_packets +velodyne_msgs/VelodyneScan +4 messages")
+run(0 velodyne.compress compress "${VBAG}" -o "${WORK}/vbag.lex3dq" --one-file --max-error 0.02)
+expect_match(velodyne.compress "${LAST_OUT}" "/velodyne_packets frame 1 \\(stamp 1700000000\\.005529600\\)")
+run(0 velodyne.back decompress "${WORK}/vbag.lex3dq" -o "${WORK}/vbag_back.bag")
+run(0 velodyne.back_info info "${WORK}/vbag_back.bag")
+expect_match(velodyne.back_info "${LAST_OUT}" "messages +2 over 0\\.006 s")
