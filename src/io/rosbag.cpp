@@ -365,6 +365,28 @@ Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::st
   });
 }
 
+/// What a packet decoder's log tells of a topic (its sensor, the frames and pixels it
+/// dropped, the packets it skipped, described by `skipped`, and the second returns not
+/// kept), and each of its turns as a scan, stamped by `stamp` (turn index -> bag time).
+template <typename Stamp>
+void take_turns(SensorLog& log, const std::string& skipped, Stamp stamp, const std::string& frame_id, BagScans& out) {
+  out.sensor = log.info.sensor;
+  out.incomplete_frames = log.info.incomplete_frames;
+  out.no_return_dropped = log.info.no_returns;
+  if (log.info.other_packets > 0) out.notes.push_back(std::to_string(log.info.other_packets) + " " + skipped + ": skipped");
+  if (log.info.second_returns > 0)
+    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept");
+  for (std::size_t i = 0; i < log.scans.size(); ++i) {
+    BagScan scan;
+    scan.cloud = std::move(log.scans[i]);
+    const lex3d_bag_time t = stamp(i);
+    scan.stamp_sec = t.sec;
+    scan.stamp_nsec = t.nsec;
+    scan.frame_id = frame_id;
+    out.scans.push_back(std::move(scan));
+  }
+}
+
 Status read_packets(const std::string& path, OpenBag& bag, const BagInfo& info, const BagTopic& topic,
                     const ReadOptions& options, BagScans& out) {
   std::vector<std::uint8_t> metadata;
@@ -429,24 +451,13 @@ Status read_packets(const std::string& path, OpenBag& bag, const BagInfo& info, 
     if (p.size() >= 12) std::memcpy(&id, p.data() + (log.info.profile == "LEGACY" ? 10 : 2), 2);
     first_seen.emplace(id, times[j]);
   }
-  out.sensor = log.info.sensor;
-  out.incomplete_frames = log.info.incomplete_frames;
-  out.no_return_dropped = log.info.no_returns;
-  if (log.info.other_packets > 0)
-    out.notes.push_back(std::to_string(log.info.other_packets) + " messages on " + topic.name +
-                        " are not lidar packets of the metadata's size: skipped");
-  if (log.info.second_returns > 0)
-    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept");
-  for (std::size_t i = 0; i < log.scans.size(); ++i) {
-    BagScan scan;
-    scan.cloud = std::move(log.scans[i]);
-    const auto it = first_seen.find(log.frame_ids[i] & 0xFFFFU);
-    if (it != first_seen.end()) {
-      scan.stamp_sec = it->second.sec;
-      scan.stamp_nsec = it->second.nsec;
-    }
-    out.scans.push_back(std::move(scan));
-  }
+  take_turns(
+      log, "messages on " + topic.name + " are not lidar packets of the metadata's size",
+      [&](std::size_t i) {
+        const auto it = first_seen.find(log.frame_ids[i] & 0xFFFFU);
+        return it != first_seen.end() ? it->second : lex3d_bag_time{};
+      },
+      "", out);
   if (out.scans.empty())
     return bad_data(detail::msg(path, "topic " + topic.name + ": no complete frame (" +
                                           std::to_string(log.info.lidar_packets) + " packets, " +
@@ -499,23 +510,13 @@ Status read_velodyne_scans(const std::string& path, OpenBag& bag, const BagTopic
   SensorLog log;
   s = detail::decode_velodyne(path, options.sensor_model, options.metadata_path, datagrams, log);
   if (!s.ok()) return s;
-  out.sensor = log.info.sensor;
-  out.incomplete_frames = log.info.incomplete_frames;
-  out.no_return_dropped = log.info.no_returns;
-  if (log.info.other_packets > 0)
-    out.notes.push_back(std::to_string(log.info.other_packets) + " packets on " + topic.name +
-                        " are not Velodyne data packets: skipped");
-  if (log.info.second_returns > 0)
-    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept");
-  for (std::size_t i = 0; i < log.scans.size(); ++i) {
-    BagScan scan;
-    scan.cloud = std::move(log.scans[i]);
-    const std::uint64_t t = i < log.captured_ns.size() ? log.captured_ns[i] : 0;
-    scan.stamp_sec = static_cast<std::uint32_t>(t / 1000000000ULL);
-    scan.stamp_nsec = static_cast<std::uint32_t>(t % 1000000000ULL);
-    scan.frame_id = frame_id;
-    out.scans.push_back(std::move(scan));
-  }
+  take_turns(
+      log, "packets on " + topic.name + " are not Velodyne data packets",
+      [&](std::size_t i) {
+        const std::uint64_t t = i < log.captured_ns.size() ? log.captured_ns[i] : 0;
+        return lex3d_bag_time{static_cast<std::uint32_t>(t / 1000000000ULL), static_cast<std::uint32_t>(t % 1000000000ULL)};
+      },
+      frame_id, out);
   return {};
 }
 
