@@ -710,8 +710,8 @@ struct FieldOut {
   std::vector<std::vector<std::int64_t>> u;
   std::uint32_t type = 0;  // kNamed: the source type (FieldType), stored in `transform`
   /// A time its source holds as float32: per point the keys (less kmin) whose float32 is
-  /// its value, lowest and highest; method 6 codes the one nearest its prediction.
-  std::vector<std::int64_t> lowest, highest;
+  /// its value, lowest and highest; method 6 codes those of column_keys.
+  std::vector<std::int64_t> lowest{}, highest{};
 };
 
 void check_size(std::size_t have, std::size_t points, const char* name) {
@@ -772,7 +772,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     f.type = static_cast<std::uint32_t>(src.type);
   };
   if (options.ring && kept("ring") && input.has_rings()) {
-    FieldOut f{{}, kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+    FieldOut f{{}, kRing, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}, 0, {}, {}};
     if (!is_float_type(input.ring_source.type)) source_of(f, input.ring_source);
     f.u.assign(1, std::vector<std::int64_t>(n));
     laser.resize(n);
@@ -804,7 +804,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
                     : ns      ? *ns
                               : quantise_field(vals, is_f32 || f32_time, bound, bits, fallback,
                                                kind == kNamed ? name.c_str() : kind_name(kind));
-    FieldOut f{name, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}};
+    FieldOut f{name, kind, q.repr, 1, q.step, q.repr == kFloatBits ? 0.0 : q.base, q.max_error, 0, 0, {}, 0, {}, {}};
     if (source != nullptr) source_of(f, *source);
     f.u.assign(1, std::vector<std::int64_t>(n));
     std::int64_t kmin = std::numeric_limits<std::int64_t>::max(), kmax = std::numeric_limits<std::int64_t>::min();
@@ -847,7 +847,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
   if (options.time && kept("time") && input.has_time())
     scalar(kTime, input.time, false, 0.0, false, options.time_error, {}, &input.time_source);
   if (options.rgb && kept("rgb") && input.has_rgb()) {
-    FieldOut f{{}, kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}};
+    FieldOut f{{}, kRgb, kQuantised, 3, 1.0, 0.0, 0.0, 255, 0, {}, 0, {}, {}};
     f.u.assign(3, std::vector<std::int64_t>(n));
     for (std::size_t j = 0; j < n; ++j)
       for (int c = 0; c < 3; ++c) f.u[static_cast<std::size_t>(c)][j] = input.rgb[sources[j]][static_cast<std::size_t>(c)];
@@ -872,7 +872,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         fields.back().type = static_cast<std::uint32_t>(x.type);
         continue;
       }
-      FieldOut f{x.name, kNamed, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}};
+      FieldOut f{x.name, kNamed, kQuantised, 1, 1.0, 0.0, 0.0, 0, 0, {}, 0, {}, {}};
       f.type = static_cast<std::uint32_t>(x.type);
       const auto [type_lo, type_hi] = field_type_range(x.type);
       f.u.assign(1, std::vector<std::int64_t>(n));

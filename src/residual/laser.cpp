@@ -1032,9 +1032,9 @@ bool columns_from_times(const ScanPoints& scan, const std::vector<double>& time,
     }
     std::int64_t offset = 0;
     std::size_t most = 0;
-    for (const auto& [d, count] : votes)
-      if (count > most) {
-        most = count;
+    for (const auto& [d, agreeing] : votes)
+      if (agreeing > most) {
+        most = agreeing;
         offset = d;
       }
     for (const std::uint32_t i : of[l]) firing[i] += offset;
