@@ -1879,21 +1879,30 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       // (377,004); the VLP-16's rough cost was 1.08 times the azimuths'.
       std::vector<std::uint32_t> by_time;
       std::uint32_t time_columns = 0;
+      // (the table of the columns kept, for the lasers and columns it was estimated with)
+      std::optional<LaserTable> kept;
+      const std::uint32_t compared_lasers = lasers;
       if (by_azimuth && input.has_time() && columns_from_times(scan, input.time, a.ring, lasers, by_time, time_columns)) {
         const std::vector<double> none(lasers, 0.0);
-        const auto azimuth_table = estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
-        const auto time_table = estimate_table(scan, a.ring, by_time, lasers, time_columns, none);
+        auto azimuth_table = estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
+        auto time_table = estimate_table(scan, a.ring, by_time, lasers, time_columns, none);
         if (time_table && (!azimuth_table || assignment_cost(scan.p, a.ring, by_time, *time_table) <
                                                  kTimeColumnsCost * assignment_cost(scan.p, a.ring, a.column, *azimuth_table))) {
           a.column = std::move(by_time);
           columns = time_columns;
           tangential = none;
           a.source = "estimated from the input's lasers (columns by firing time)";
+          kept = std::move(time_table);
+        } else {
+          kept = std::move(azimuth_table);
         }
       }
+      const std::uint32_t compared_columns = columns;
       if (input.rows > 0 && input.has_rings()) lasers = std::max(lasers, input.rows);
       if (input.columns > 0 && input.has_columns()) columns = std::max(columns, input.columns);
-      auto t = estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
+      auto t = kept && lasers == compared_lasers && columns == compared_columns
+                   ? std::move(kept)
+                   : estimate_table(scan, a.ring, a.column, lasers, columns, tangential);
       if (!t) return std::nullopt;
       a.table = std::move(*t);
     }
