@@ -290,10 +290,8 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
       // stamp: a bag written from the scans is stamped with it)
       std::string name = path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]), scan_stem;
       if (k < captured.size() && captured[k] > 0) {
-        char stamp[32];
-        std::snprintf(stamp, sizeof stamp, "%llu.%09llu", static_cast<unsigned long long>(captured[k] / 1000000000ULL),
-                      static_cast<unsigned long long>(captured[k] % 1000000000ULL));
-        name += std::string(", captured ") + stamp;
+        const std::string stamp = stamp_text(captured[k]);
+        name += ", captured " + stamp;
         scan_stem = stem + "_turn" + std::to_string(k) + "_" + stamp;
       }
       entries_.push_back({path, name + ")", turns, k, scan_stem});
@@ -327,8 +325,7 @@ void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options
   const std::shared_ptr<const std::vector<Cloud>> shared = scans;
   const std::string stem = std::filesystem::path(path).stem().string();
   for (std::size_t k = 0; k < bag.scans.size(); ++k) {
-    char stamp[32];
-    std::snprintf(stamp, sizeof stamp, "%u.%09u", bag.scans[k].stamp_sec, bag.scans[k].stamp_nsec);
+    const std::string stamp = stamp_text(bag.scans[k].stamp_sec, bag.scans[k].stamp_nsec);
     const char* what = bag.type == "sensor_msgs/PointCloud2" ? " message " : " frame ";
     entries_.push_back({path, path + " " + bag.topic + what + std::to_string(k) + " (stamp " + stamp + ")", shared, k,
                         stem + "_" + stamp});
@@ -419,6 +416,12 @@ bool is_bag_output(const std::string& output) {
   std::string ext = std::filesystem::path(output).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return ext == ".bag";
+}
+
+std::string stamp_text(std::uint64_t sec, std::uint32_t nsec) {
+  char text[40];
+  std::snprintf(text, sizeof text, "%llu.%09u", static_cast<unsigned long long>(sec), nsec);
+  return text;
 }
 
 bool stamp_from_name(const std::string& name, std::uint32_t& sec, std::uint32_t& nsec) {

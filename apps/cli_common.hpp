@@ -181,6 +181,13 @@ bool is_bag_output(const std::string& output);
 /// bag's message); false when the name holds none.
 bool stamp_from_name(const std::string& name, std::uint32_t& sec, std::uint32_t& nsec);
 
+/// A stamp as names and messages show it: "<sec>.<nsec>", nine digits of nanoseconds.
+std::string stamp_text(std::uint64_t sec, std::uint32_t nsec);
+/// The same of a time in nanoseconds.
+inline std::string stamp_text(std::uint64_t ns) {
+  return stamp_text(ns / 1000000000ULL, static_cast<std::uint32_t>(ns % 1000000000ULL));
+}
+
 /// Registration of each subcommand (one file each).
 void register_info(CLI::App& app);
 void register_features(CLI::App& app);

@@ -465,12 +465,7 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
                     field_type_name(c.time_source.type));
       times = buf;
     }
-    if (k < log.captured_ns.size() && log.captured_ns[k] > 0) {
-      char buf[64];
-      std::snprintf(buf, sizeof buf, ", captured %llu.%09llu", static_cast<unsigned long long>(log.captured_ns[k] / 1000000000ULL),
-                    static_cast<unsigned long long>(log.captured_ns[k] % 1000000000ULL));
-      times += buf;
-    }
+    if (k < log.captured_ns.size() && log.captured_ns[k] > 0) times += ", captured " + stamp_text(log.captured_ns[k]);
     std::printf("  turn %-4zu    frame %llu: %zu points, %zu no-returns, %u x %u%s\n", k,
                 static_cast<unsigned long long>(log.frame_ids[k]), c.size(), log.no_returns[k], c.rows, c.columns,
                 times.c_str());

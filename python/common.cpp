@@ -13,6 +13,14 @@ namespace lex3d::python {
 
 std::string dtype_of(const py::array& a) { return py::str(a.dtype()).cast<std::string>(); }
 
+py::array per_point_array(const py::handle& obj, std::size_t n, const std::string& what) {
+  if (!py::isinstance<py::array>(obj)) throw py::value_error(what + " must be a numpy array of shape (N,)");
+  auto a = py::reinterpret_borrow<py::array>(obj);
+  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != n)
+    throw py::value_error(what + " must have shape (" + std::to_string(n) + ",), got " + shape_of(a));
+  return a;
+}
+
 std::string shape_of(const py::array& a) {
   std::string s = "(";
   for (py::ssize_t d = 0; d < a.ndim(); ++d) s += (d ? ", " : "") + std::to_string(a.shape(d));
@@ -87,10 +95,7 @@ Cloud to_cloud(const py::handle& points_obj, const py::object& intensity_obj, co
   }
   if (!intensity_obj.is_none()) {
     const std::string iwhat = what == "points" ? "intensity" : what + " intensity";
-    if (!py::isinstance<py::array>(intensity_obj)) throw py::value_error(iwhat + " must be a numpy array of shape (N,)");
-    const auto in = py::reinterpret_borrow<py::array>(intensity_obj);
-    if (in.ndim() != 1 || static_cast<std::size_t>(in.shape(0)) != cloud.size())
-      throw py::value_error(iwhat + " must have shape (" + std::to_string(cloud.size()) + ",), got " + shape_of(in));
+    const py::array in = per_point_array(intensity_obj, cloud.size(), iwhat);
     // (an 8- or 16-bit integer intensity is kept as its values and comes back in its dtype)
     const char kind = in.dtype().kind();
     const auto size = in.dtype().itemsize();

@@ -19,6 +19,8 @@ namespace py = pybind11;
 std::string shape_of(const py::array& a);
 /// An array's dtype as numpy names it ("float32").
 std::string dtype_of(const py::array& a);
+/// `obj` as an array of one value a point (shape (n,)); ValueError naming `what` otherwise.
+py::array per_point_array(const py::handle& obj, std::size_t n, const std::string& what);
 
 /// An (N, 3) float array (and optional (N,) intensity) as a Cloud; ValueError naming
 /// `what` and what is wrong otherwise.

@@ -60,11 +60,7 @@ void add_fields(lex3d::Cloud& cloud, const py::object& fields) {
     for (const char* taken : {"intensity", "ring", "time", "rgb"})
       if (name == taken) throw py::value_error(what + ": " + name + " is not a named field (intensity= gives the intensity)");
     if (cloud.field(name) != nullptr) throw py::value_error(what + " is given twice");
-    if (!py::isinstance<py::array>(item.second)) throw py::value_error(what + " must be a numpy array of shape (N,)");
-    const auto a = py::reinterpret_borrow<py::array>(item.second);
-    if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != cloud.size())
-      throw py::value_error(what + " must have shape (" + std::to_string(cloud.size()) + ",), got " +
-                            lex3d::python::shape_of(a));
+    const py::array a = lex3d::python::per_point_array(item.second, cloud.size(), what);
     const char kind = a.dtype().kind();
     const auto size = a.dtype().itemsize();
     lex3d::IntegerField x{name, std::vector<std::int32_t>(cloud.size()), lex3d::FieldType::kUnspecified};
@@ -100,10 +96,7 @@ void add_fields(lex3d::Cloud& cloud, const py::object& fields) {
 /// Sets `cloud`'s ring from `ring`: an (N,) integer array of laser numbers in 0..65535 (its
 /// dtype kept as the source's type where it is not uint16). ValueError otherwise.
 void add_ring(lex3d::Cloud& cloud, const py::object& ring) {
-  if (!py::isinstance<py::array>(ring)) throw py::value_error("ring must be a numpy array of shape (N,)");
-  const auto a = py::reinterpret_borrow<py::array>(ring);
-  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != cloud.size())
-    throw py::value_error("ring must have shape (" + std::to_string(cloud.size()) + ",), got " + lex3d::python::shape_of(a));
+  const py::array a = lex3d::python::per_point_array(ring, cloud.size(), "ring");
   const char kind = a.dtype().kind();
   if (kind != 'i' && kind != 'u') throw py::value_error("ring must be an integer array, got " + lex3d::python::dtype_of(a));
   const py::array_t<std::int64_t, py::array::forcecast> values(a);
@@ -121,10 +114,7 @@ void add_ring(lex3d::Cloud& cloud, const py::object& ring) {
 /// integer one of nanoseconds (as ouster_ros's `t`), its dtype kept as the source's type
 /// (float32: `time`, as velodyne_pointcloud's; integers: `t`). ValueError otherwise.
 void add_time(lex3d::Cloud& cloud, const py::object& time) {
-  if (!py::isinstance<py::array>(time)) throw py::value_error("time must be a numpy array of shape (N,)");
-  const auto a = py::reinterpret_borrow<py::array>(time);
-  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != cloud.size())
-    throw py::value_error("time must have shape (" + std::to_string(cloud.size()) + ",), got " + lex3d::python::shape_of(a));
+  const py::array a = lex3d::python::per_point_array(time, cloud.size(), "time");
   const char kind = a.dtype().kind();
   const auto size = a.dtype().itemsize();
   cloud.time.resize(cloud.size());

@@ -322,6 +322,13 @@ std::size_t key_count(const std::vector<std::uint16_t>& keys) {
   return keys.empty() ? 1 : static_cast<std::size_t>(*std::max_element(keys.begin(), keys.end())) + 1;
 }
 
+/// Point j's measurement column under method 6's column `shift`s: its layer column less its
+/// laser's shift, on the layer's grid (a point with a column on it).
+std::uint32_t measurement_column(const LayerKeys& layer, const std::vector<std::int64_t>& shift, std::size_t j) {
+  const auto w = static_cast<std::int64_t>(layer.columns);
+  return static_cast<std::uint32_t>((static_cast<std::int64_t>(layer.column[j]) + w - shift[layer.laser[j]]) % w);
+}
+
 /// Method 6's predictions: each laser's column shift, each measurement column's base
 /// value (the value of its first point less that point's laser offset), each laser's
 /// offset from the bases and the step between neighbouring columns: the last one (`mean`
@@ -385,10 +392,7 @@ class ColumnHistory {
     constexpr std::int64_t kHold = std::int64_t{1} << 40;
     return std::clamp(v, -kHold, kHold);
   }
-  [[nodiscard]] std::uint32_t measurement(std::size_t j) const {
-    const std::int64_t s = shift_[layer_.laser[j]];
-    return static_cast<std::uint32_t>((static_cast<std::int64_t>(layer_.column[j]) + w_ - s) % w_);
-  }
+  [[nodiscard]] std::uint32_t measurement(std::size_t j) const { return measurement_column(layer_, shift_, j); }
   const LayerKeys& layer_;
   std::int64_t w_;
   bool mean_;
@@ -529,8 +533,7 @@ std::vector<std::int64_t> column_keys(const std::vector<std::int64_t>& u, const 
   std::vector<std::size_t> count(lasers, 0);
   for (std::size_t j = 0; j < n; ++j) {
     if (layer.column[j] >= w) continue;
-    const std::int64_t m = (static_cast<std::int64_t>(layer.column[j]) + w - shift[layer.laser[j]]) % w;
-    at[static_cast<std::size_t>(m)].push_back(j);
+    at[measurement_column(layer, shift, j)].push_back(j);
     ++count[layer.laser[j]];
   }
   const auto ref = static_cast<std::uint16_t>(std::max_element(count.begin(), count.end()) - count.begin());
