@@ -439,6 +439,12 @@ bool stamp_from_name(const std::string& name, std::uint32_t& sec, std::uint32_t&
 }
 
 void note_fields_not_written(const std::string& output, const Cloud& cloud, const io::WriteOptions& options) {
+  // (a bag's message keeps the scan's stamp and frame; the point-cloud formats hold neither)
+  if (cloud.stamp && !is_bag_output(output))
+    std::fprintf(stderr, "note: %s: the scan's stamp (%s, %s)%s not written (the format holds none; a model file or a bag keeps %s)\n",
+                 output.c_str(), stamp_source_name(*cloud.stamp), stamp_text(cloud.stamp->sec, cloud.stamp->nsec).c_str(),
+                 cloud.stamp->frame_id.empty() ? "" : (" and frame " + cloud.stamp->frame_id).c_str(),
+                 cloud.stamp->frame_id.empty() ? "it" : "them");
   const std::vector<std::string> missing = io::fields_not_written(output, cloud, options);
   if (missing.empty()) return;
   std::string list;

@@ -183,6 +183,10 @@ bool stamp_from_name(const std::string& name, std::uint32_t& sec, std::uint32_t&
 
 /// A stamp as names and messages show it: "<sec>.<nsec>", nine digits of nanoseconds.
 std::string stamp_text(std::uint64_t sec, std::uint32_t nsec);
+/// What a scan's stamp is: "message stamp" or "capture time of its first packet".
+inline const char* stamp_source_name(const ScanStamp& s) {
+  return s.source == ScanStamp::Source::kCapture ? "capture time of its first packet" : "message stamp";
+}
 /// The same of a time in nanoseconds.
 inline std::string stamp_text(std::uint64_t ns) {
   return stamp_text(ns / 1000000000ULL, static_cast<std::uint32_t>(ns % 1000000000ULL));

@@ -117,6 +117,7 @@ bool info_lex3d_file(const InfoOptions& o) {
   if (!info.ok()) throw CliError(2, o.path + ": " + info.status().to_string());
   const codec::FileInfo& fi = info.value();
   std::optional<Georeference> georef;
+  std::optional<ScanStamp> stamp;
   bool all_crc_ok = true;
   for (const auto& c : fi.chunks) all_crc_ok = all_crc_ok && c.crc_ok;
   std::size_t words = 0, word_points = 0, instances = 0;
@@ -162,6 +163,7 @@ bool info_lex3d_file(const InfoOptions& o) {
     }
     auto m = codec::decode_model(b, o.alphabet.empty() ? nullptr : &alphabet_file);
     if (m.ok()) georef = m.value().georef;
+    if (m.ok()) stamp = m.value().stamp;
     if (m.ok()) {
       instances = m.value().model.instances.size();
       input_points = m.value().input_points;
@@ -256,6 +258,11 @@ bool info_lex3d_file(const InfoOptions& o) {
     }
     if (layer) j.end_object();
     if (georef) georef_json(j, *georef);
+    if (stamp)
+      j.begin_object("stamp").value("sec", stamp->sec).value("nsec", static_cast<std::uint64_t>(stamp->nsec))
+          .value("text", stamp_text(stamp->sec, stamp->nsec))
+          .value("source", stamp->source == ScanStamp::Source::kCapture ? "capture" : "message")
+          .value("frame_id", stamp->frame_id).end_object();
     if (fi.kind == "model") {
       j.begin_array("attributes");
       for (const auto& a : attributes)
@@ -311,6 +318,9 @@ bool info_lex3d_file(const InfoOptions& o) {
       std::printf("instance steps %.4g m, %.4g rad\n", *translation_step, *rotation_step);
     if (words) std::printf("words          %zu (%zu points)\n", words, word_points);
     if (georef) print_georef(*georef, false);
+    if (stamp)
+      std::printf("scan stamp     %s (%s)%s\n", stamp_text(stamp->sec, stamp->nsec).c_str(), stamp_source_name(*stamp),
+                  stamp->frame_id.empty() ? "" : (", frame " + stamp->frame_id).c_str());
     if (fi.kind == "model") {
       std::printf("fields         x y z");
       for (const auto& a : attributes) std::printf(" %s", a.name.c_str());

@@ -107,6 +107,7 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
   words_data.input_points = cloud.size();
   words_data.T_cloud_sensor = cloud.T_cloud_sensor;
   words_data.georef = cloud.georef;  // true coordinates: origin + point (formats/model.md §2.8)
+  words_data.stamp = cloud.stamp;  // when and in which frame (formats/model.md §2.13)
   if (embeds_alphabet()) words_data.alphabet = alphabet_;
   else words_data.alphabet_hash = hash_;
   const codec::Quantization& q = quantization_;

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <set>
 #include <stdexcept>
@@ -62,6 +63,10 @@ constexpr std::uint16_t kGeorMinor = 5;
 constexpr std::uint64_t kGeorFixedBytes = 96;
 /// The point attributes chunk and the first minor version that has it (model.md §2.10).
 constexpr char kAttrType[] = "ATTR";
+/// The scan's stamp and frame (model.md §2.13): an optional chunk, so no format version.
+constexpr char kScanType[] = "scan";
+constexpr std::size_t kScanHeadBytes = 15;     // source u8, sec u64, nsec u32, frame length u16
+constexpr std::size_t kMaxFrameIdBytes = 1024;
 constexpr std::uint16_t kAttrMinor = 6;
 /// An ATTR chunk holding a named integer field (kind 5) or colour coded as differences
 /// (rgb `transform` 1) and the first minor version that has them (model.md §2.10).
@@ -372,9 +377,11 @@ bool has_chunk(const std::uint8_t* d, std::size_t size, const char* type) {
 /// order (the first and the last are the first and end chunks); `known` lists every
 /// chunk type of the format (a known type missing from `sequence` is out of place).
 /// `on_chunk(index in sequence, chunk)` decodes a payload.
+/// `on_optional(chunk)`, where given, sees every optional chunk this walk does not know.
 template <typename OnChunk>
 Status walk_chunks(const std::uint8_t* d, std::size_t size, const Ctx& ctx, const std::vector<const char*>& sequence,
-                   const std::vector<const char*>& known, OnChunk&& on_chunk) {
+                   const std::vector<const char*>& known, OnChunk&& on_chunk,
+                   const std::function<Status(const Chunk&)>& on_optional = {}) {
   std::size_t pos = kHeaderBytes;
   std::size_t next = 0;  // index in `sequence` of the next expected known chunk
   for (;;) {
@@ -389,6 +396,8 @@ Status walk_chunks(const std::uint8_t* d, std::size_t size, const Ctx& ctx, cons
     if (in_seq == sequence.end()) {
       if (is_known) return ctx.error("chunk " + c.name + " does not belong in this file (see its flags)", pos);
       if (c.required()) return ctx.error("unknown required chunk " + c.name, pos);
+      if (on_optional)
+        if (Status s = on_optional(c); !s.ok()) return s;
       pos = static_cast<std::size_t>(c.payload_offset + c.length + kChunkCrcBytes);  // unknown optional: skip
       continue;
     }
@@ -908,6 +917,48 @@ std::uint64_t alphabet_hash(const std::vector<std::uint8_t>& alphabet_file) {
 namespace {
 
 // ---------------------------------------------------------------------------------------
+// scan: the scan's stamp and frame (model.md §2.13)
+// ---------------------------------------------------------------------------------------
+
+std::vector<std::uint8_t> scan_payload(const ScanStamp& st) {
+  if (st.nsec >= 1000000000U || (st.source != ScanStamp::Source::kMessage && st.source != ScanStamp::Source::kCapture) ||
+      st.frame_id.size() > kMaxFrameIdBytes || st.frame_id.find('\0') != std::string::npos)
+    throw std::invalid_argument("lex3d::codec::encode_model: invalid scan stamp (nanoseconds >= 1e9, unknown source, "
+                                "or a frame_id with a NUL or over 1024 bytes)");
+  std::vector<std::uint8_t> p;
+  p.push_back(static_cast<std::uint8_t>(st.source));
+  put_u64(p, st.sec);
+  put_u32(p, st.nsec);
+  put_u16(p, static_cast<std::uint16_t>(st.frame_id.size()));
+  p.insert(p.end(), st.frame_id.begin(), st.frame_id.end());
+  return p;
+}
+
+Status read_scan(const Chunk& c, const Ctx& ctx, ScanStamp& st) {
+  const std::uint8_t* p = c.payload;
+  const std::uint64_t base = c.payload_offset;
+  if (c.length < kScanHeadBytes)
+    return ctx.error("chunk 'scan' payload is " + std::to_string(c.length) + " bytes, at least " +
+                         std::to_string(kScanHeadBytes) + " expected",
+                     c.offset + 4);
+  if (p[0] != static_cast<std::uint8_t>(ScanStamp::Source::kMessage) &&
+      p[0] != static_cast<std::uint8_t>(ScanStamp::Source::kCapture))
+    return ctx.error("scan stamp source " + std::to_string(p[0]) + " is neither 1 (a message) nor 2 (a capture)", base);
+  st.source = static_cast<ScanStamp::Source>(p[0]);
+  st.sec = ld_u64(p + 1);
+  st.nsec = ld_u32(p + 9);
+  if (st.nsec >= 1000000000U) return ctx.error("scan stamp nanoseconds " + std::to_string(st.nsec) + " are 1e9 or more", base + 9);
+  const std::uint16_t n = ld_u16(p + 13);
+  if (n > kMaxFrameIdBytes || c.length != kScanHeadBytes + n)
+    return ctx.error("scan frame_id of " + std::to_string(n) + " bytes does not fill the chunk's " +
+                         std::to_string(c.length - kScanHeadBytes) + " (at most " + std::to_string(kMaxFrameIdBytes) + ")",
+                     base + 13);
+  st.frame_id.assign(reinterpret_cast<const char*>(p + kScanHeadBytes), n);
+  if (st.frame_id.find('\0') != std::string::npos) return ctx.error("scan frame_id holds a NUL byte", base + kScanHeadBytes);
+  return {};
+}
+
+// ---------------------------------------------------------------------------------------
 // GEOR: the georeference (model.md §2.9)
 // ---------------------------------------------------------------------------------------
 
@@ -1168,6 +1219,7 @@ std::vector<std::uint8_t> encode_model(const ModelData& data, const Quantization
   if (data.residual) put_chunk(out, layer_chunk.type, *data.residual);
   if (data.georef) put_chunk(out, kGeorType, geor);
   if (data.attributes) put_chunk(out, kAttrType, *data.attributes);
+  if (data.stamp) put_chunk(out, kScanType, scan_payload(*data.stamp));
   put_chunk(out, "IEND", {});
   return out;
 }
@@ -1238,6 +1290,12 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
   if (has_attr) sequence.push_back(kAttrType);
   sequence.push_back("IEND");
   if (wordless) out.alphabet = Alphabet{};
+  // (the optional `scan` chunk: anywhere between MHDR and IEND, at most once)
+  const auto on_optional = [&](const Chunk& c) -> Status {
+    if (!c.is(kScanType)) return {};
+    if (out.stamp) return ctx.error("chunk 'scan' is repeated", c.offset);
+    return read_scan(c, ctx, out.stamp.emplace());
+  };
   const Status s = walk_chunks(d, bytes.size(), ctx, sequence, known, [&](std::size_t, const Chunk& c) -> Status {
     if (c.is(kGeorType)) return read_geor(c, ctx, h.minor, out.georef.emplace());
     if (c.is(kAttrType)) {
@@ -1328,7 +1386,7 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
                        c.payload_offset + at);
     }
     return {};
-  });
+  }, on_optional);
   if (!s.ok()) return s;
   out.input_points = mhdr.input_points;
   out.T_cloud_sensor = mhdr.T_cloud_sensor;

@@ -401,6 +401,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     log.no_returns.push_back(no_returns);
     log.frame_ids.push_back(f.id);
     log.captured_ns.push_back(f.captured_ns);
+    cloud.stamp = capture_stamp(f.captured_ns);
     log.scans.push_back(std::move(cloud));
   };
 

@@ -330,6 +330,16 @@ void add_unique(std::vector<std::string>& list, const std::string& s) {
   if (std::find(list.begin(), list.end(), s) == list.end()) list.push_back(s);
 }
 
+/// A message's stamp and frame, as a scan keeps them (Cloud::stamp).
+ScanStamp message_stamp(const BagScan& scan) {
+  ScanStamp s;
+  s.source = ScanStamp::Source::kMessage;
+  s.sec = scan.stamp_sec;
+  s.nsec = scan.stamp_nsec;
+  s.frame_id = scan.frame_id;
+  return s;
+}
+
 Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::string>& md5s, const BagTopic& topic,
                    BagScans& out) {
   const std::string expected = bag.api().pointcloud2_md5;
@@ -355,6 +365,7 @@ Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::st
       scan.stamp_sec = t.sec;
       scan.stamp_nsec = t.nsec;
     }
+    scan.cloud.stamp = message_stamp(scan);
     out.non_finite_dropped += r.non_finite_dropped;
     out.no_return_dropped += r.no_return_dropped;
     for (const auto& f : r.dropped_fields) add_unique(out.dropped_fields, f);
@@ -383,6 +394,7 @@ void take_turns(SensorLog& log, const std::string& skipped, Stamp stamp, const s
     scan.stamp_sec = t.sec;
     scan.stamp_nsec = t.nsec;
     scan.frame_id = frame_id;
+    scan.cloud.stamp = message_stamp(scan);
     out.scans.push_back(std::move(scan));
   }
 }
@@ -613,7 +625,7 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   const Cloud& c = scan.cloud;
   Message m;
   m.stamp = stamp;
-  m.frame_id = scan.frame_id;
+  m.frame_id = scan.frame_id.empty() && c.stamp ? c.stamp->frame_id : scan.frame_id;
   std::uint32_t step = 0;
   auto field = [&](const char* name, std::uint8_t type, std::uint32_t size) {
     m.fields.push_back({name, step, type, 1});
@@ -695,7 +707,7 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   return m;
 }
 
-/// The scans' bag times: each its stamp; a bag cannot hold time 0, so a scan without one is
+/// The scans' bag times: each its stamp (the BagScan's, else its cloud's); a bag cannot hold time 0, so a scan without one is
 /// placed 1 s after the one before (the first at 1 s) and the bag's time order is the
 /// scans' order. False when a time passes ROS time's last second.
 bool bag_times(const std::vector<BagScan>& scans, std::vector<lex3d_bag_time>& times) {
@@ -706,6 +718,9 @@ bool bag_times(const std::vector<BagScan>& scans, std::vector<lex3d_bag_time>& t
     if (s.stamp_sec != 0 || s.stamp_nsec != 0) {
       sec = std::uint64_t{s.stamp_sec} + s.stamp_nsec / kNs;
       nsec = s.stamp_nsec % kNs;
+    } else if (s.cloud.stamp && (s.cloud.stamp->sec != 0 || s.cloud.stamp->nsec != 0)) {
+      sec = s.cloud.stamp->sec + s.cloud.stamp->nsec / kNs;
+      nsec = s.cloud.stamp->nsec % kNs;
     }
     if (sec > 0xFFFFFFFFULL) return false;
     times.push_back({static_cast<std::uint32_t>(sec), static_cast<std::uint32_t>(nsec)});

@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,16 @@ struct Datagram {
   std::size_t claimed = 0;
   std::vector<std::uint8_t> payload;
 };
+
+/// A turn's stamp from the capture time of its first packet (nullopt where not known).
+inline std::optional<ScanStamp> capture_stamp(std::uint64_t captured_ns) {
+  if (captured_ns == 0) return std::nullopt;
+  ScanStamp s;
+  s.source = ScanStamp::Source::kCapture;
+  s.sec = captured_ns / 1000000000ULL;
+  s.nsec = static_cast<std::uint32_t>(captured_ns % 1000000000ULL);
+  return s;
+}
 
 /// Reads every UDP/IPv4 datagram of a libpcap/pcapng capture (Ethernet with VLAN tags,
 /// Linux cooked, raw IP or BSD loopback link types), reassembling IPv4 fragments. Fills the

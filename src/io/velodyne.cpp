@@ -669,6 +669,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     log.no_returns.push_back(no_returns);
     log.frame_ids.push_back(turn);
     log.captured_ns.push_back(firings[begin].captured_ns);
+    cloud.stamp = capture_stamp(firings[begin].captured_ns);
     log.scans.push_back(std::move(cloud));
     begin = end;
   }

@@ -1314,6 +1314,7 @@ StatusOr<Cloud> decode_cloud(const codec::ModelData& data) {
   StatusOr<Cloud> decoded = data.residual ? detail::decode_layer_lasers(*data.residual, words, data.T_cloud_sensor,
                                                                         data.input_points, keys)
                                           : StatusOr<Cloud>(std::move(words));
+  if (decoded.ok()) decoded.value().stamp = data.stamp;
   if (!decoded.ok() || !data.attributes) return decoded;
   Cloud cloud = std::move(decoded).value();
   if (Status s = detail::decode_attributes(*data.attributes, keys, cloud); !s.ok())

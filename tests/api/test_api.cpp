@@ -75,6 +75,26 @@ TEST(Api, LayeredRoundTripOfARealScanMeetsTheBoundBothWays) {
   EXPECT_TRUE(d.value().cloud.has_intensity());
 }
 
+TEST(Api, ScanStampAndFrameComeBackFromTheModelFile) {
+  lex3d::Cloud cloud = sample("newer_college_00.bin");
+  lex3d::CompressOptions o;
+  o.max_error = 0.05;
+  auto plain = lex3d::compress(cloud, o);
+  ASSERT_TRUE(plain.ok()) << plain.status().to_string();
+  cloud.stamp = lex3d::ScanStamp{lex3d::ScanStamp::Source::kMessage, 1700000000, 250000000, "os_sensor"};
+  auto c = lex3d::compress(cloud, o);
+  ASSERT_TRUE(c.ok()) << c.status().to_string();
+  EXPECT_EQ(c.value().bytes.size(), plain.value().bytes.size() + 12 + 15 + 9 + 4);  // the `scan` chunk alone
+  auto d = lex3d::decompress(c.value().bytes);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  ASSERT_TRUE(d.value().cloud.stamp.has_value());
+  EXPECT_EQ(d.value().cloud.stamp->sec, 1700000000U);
+  EXPECT_EQ(d.value().cloud.stamp->nsec, 250000000U);
+  EXPECT_EQ(d.value().cloud.stamp->frame_id, "os_sensor");
+  EXPECT_EQ(d.value().cloud.stamp->source, lex3d::ScanStamp::Source::kMessage);
+  EXPECT_FALSE(lex3d::decompress(plain.value().bytes).value().cloud.stamp.has_value());
+}
+
 TEST(Api, SameBytesAsTheCommandWithALayerAndWithWords) {
   const fs::path dir = work_dir("cli");
   const std::string scan = std::string(LEX3D_SAMPLES_DIR) + "/newer_college_00.bin";

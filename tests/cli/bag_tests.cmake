@@ -145,6 +145,25 @@ run(0 capture.stamp_sequence_back decompress "${WORK}/v_stamped.lex3dq" -o "${WO
 run(0 capture.stamp_sequence_info info "${WORK}/v_stamped_back.bag" --json)
 expect_match(capture.stamp_sequence_info "${LAST_OUT}" "\"start_s\":1525347606[,.]")
 
+# --- a single model file keeps its scan's stamp and frame (the optional `scan` chunk): a
+# turn's capture time, a message's stamp and frame_id, back into a bag; a format that holds
+# neither says so
+run(0 stamp.capture_model compress "${VLP16}" -o "${WORK}/v_single.lex3dm" --max-error 0.02)
+run(0 stamp.capture_info info "${WORK}/v_single.lex3dm")
+expect_match(stamp.capture_info "${LAST_OUT}" "scan stamp +1525347606\\.362040000 \\(capture time of its first packet\\)")
+run(0 stamp.capture_bag decompress "${WORK}/v_single.lex3dm" -o "${WORK}/v_single.bag")
+run(0 stamp.capture_bag_info info "${WORK}/v_single.bag" --json)
+expect_match(stamp.capture_bag_info "${LAST_OUT}" "\"start_s\":1525347606[,.]")
+run(0 stamp.capture_pcd decompress "${WORK}/v_single.lex3dm" -o "${WORK}/v_single.pcd")
+expect_match(stamp.capture_pcd "${LAST_ERR}" "v_single.pcd: the scan's stamp \\(capture time of its first packet, 1525347606\\.362040000\\) not written")
+run(0 stamp.message_models compress "${DRIVE}" --topic /points -o "${WORK}/m.lex3dm")
+run(0 stamp.message_info info "${WORK}/m_001.lex3dm" --json)
+expect_match(stamp.message_info "${LAST_OUT}" "\"stamp\":\\{\"sec\":1700000000,\"nsec\":200000000,\"text\":\"1700000000\\.200000000\",\"source\":\"message\",\"frame_id\":\"lidar\"\\}")
+run(0 stamp.message_bag decompress "${WORK}/m_001.lex3dm" -o "${WORK}/m_001.bag")
+run(0 stamp.message_again compress "${WORK}/m_001.bag" -o "${WORK}/m_again.lex3dm")
+run(0 stamp.message_again_info info "${WORK}/m_again.lex3dm")
+expect_match(stamp.message_again_info "${LAST_OUT}" "scan stamp +1700000000\\.200000000 \\(message stamp\\), frame lidar")
+
 # --- Velodyne packets recorded as velodyne_driver records them (velodyne_msgs/VelodyneScan):
 # each turn a scan named and stamped after its first packet, through a sequence file and back
 set(VBAG "${SAMPLES}/../tests/fuzz/readers/bag/velodyne_packets_lz4.bag")

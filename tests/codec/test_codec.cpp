@@ -17,6 +17,8 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include <functional>
 #include <zlib.h>
 
 #include "lex3d/codec/codec.hpp"
@@ -861,6 +863,51 @@ TEST_F(CodecCorrupt, UnknownOptionalChunkIsSkipped) {
   Bytes b = f.build();
   b[f.offset("xtra") + 12 + 5] ^= 1;
   EXPECT_TRUE(is_bad(decode_model(b), "chunk 'xtra' CRC mismatch"));
+}
+
+TEST_F(CodecCorrupt, ScanStampRoundTripsAndItsChunkIsChecked) {
+  ModelData d = data_;
+  d.stamp = ScanStamp{ScanStamp::Source::kCapture, 1525347606, 362040000, "velodyne"};
+  const Bytes bytes = encode_model(d);
+  EXPECT_EQ(bytes.size(), model_.size() + 12 + 15 + 8 + 4);  // chunk head, fields, frame, CRC
+  EXPECT_EQ(bytes[10], model_[10]);                          // no format version of its own
+  auto r = decode_model(bytes);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  ASSERT_TRUE(r.value().stamp.has_value());
+  EXPECT_EQ(r.value().stamp->source, ScanStamp::Source::kCapture);
+  EXPECT_EQ(r.value().stamp->sec, 1525347606U);
+  EXPECT_EQ(r.value().stamp->nsec, 362040000U);
+  EXPECT_EQ(r.value().stamp->frame_id, "velodyne");
+  EXPECT_FALSE(decode_model(model_).value().stamp.has_value());
+  // Anywhere between MHDR and IEND (an optional chunk), at most once.
+  File f = File::parse(bytes);
+  const auto scan = std::find_if(f.chunks.begin(), f.chunks.end(), [](const auto& c) { return c.type == "scan"; });
+  ASSERT_NE(scan, f.chunks.end());
+  auto moved = *scan;
+  f.chunks.erase(scan);
+  f.chunks.insert(f.chunks.begin() + 1, moved);
+  auto m = model_of(f);
+  ASSERT_TRUE(m.ok()) << m.status().to_string();
+  EXPECT_EQ(m.value().stamp->frame_id, "velodyne");
+  f.chunks.insert(f.chunks.begin() + 2, moved);
+  EXPECT_TRUE(is_bad(model_of(f), "chunk 'scan' is repeated"));
+  // Its fields.
+  const auto with = [&](const std::function<void(Bytes&)>& edit) {
+    File g = File::parse(bytes);
+    edit(g.chunk("scan").payload);
+    return model_of(g);
+  };
+  EXPECT_TRUE(is_bad(with([](Bytes& p) { p[0] = 3; }), "scan stamp source 3 is neither 1"));
+  EXPECT_TRUE(is_bad(with([](Bytes& p) { p[12] = 0x3C; }), "scan stamp nanoseconds"));
+  EXPECT_TRUE(is_bad(with([](Bytes& p) { p[13] = 9; }), "scan frame_id of 9 bytes does not fill"));
+  EXPECT_TRUE(is_bad(with([](Bytes& p) { p.resize(10); }), "chunk 'scan' payload is 10 bytes, at least 15"));
+  EXPECT_TRUE(is_bad(with([](Bytes& p) { p[16] = 0; }), "scan frame_id holds a NUL byte"));
+  // And the encoder refuses what it could not store.
+  ModelData bad = data_;
+  bad.stamp = ScanStamp{ScanStamp::Source::kMessage, 1, 1000000000, ""};
+  EXPECT_THROW((void)encode_model(bad), std::invalid_argument);
+  bad.stamp = ScanStamp{ScanStamp::Source::kMessage, 1, 0, std::string(1025, 'f')};
+  EXPECT_THROW((void)encode_model(bad), std::invalid_argument);
 }
 
 TEST_F(CodecCorrupt, UnknownRequiredChunkIsRejected) {

@@ -137,6 +137,12 @@ TEST_F(Bags, DriverCloudFieldsAreKeptAndOthersReported) {
   EXPECT_EQ(b.scans[0].stamp_nsec, 250000000U);
   EXPECT_EQ(b.scans[1].stamp_nsec, 350000000U);
   EXPECT_EQ(b.scans[0].frame_id, "lidar");
+  // the cloud keeps them (through a model file, Cloud::stamp)
+  ASSERT_TRUE(b.scans[1].cloud.stamp.has_value());
+  EXPECT_EQ(b.scans[1].cloud.stamp->source, ScanStamp::Source::kMessage);
+  EXPECT_EQ(b.scans[1].cloud.stamp->sec, 1700000000U);
+  EXPECT_EQ(b.scans[1].cloud.stamp->nsec, 350000000U);
+  EXPECT_EQ(b.scans[1].cloud.stamp->frame_id, "lidar");
   const Cloud& c = b.scans[0].cloud;
   ASSERT_EQ(c.size(), 400U);
   ASSERT_TRUE(c.has_intensity() && c.has_rings() && c.has_time());
@@ -202,20 +208,26 @@ TEST_F(Bags, WrittenBagReadsBackExactly) {
   // `timestamp`, which comes back under that name)
   plain.intensity_source = {"intensity", FieldType::kUint16};
   plain.time_source = {"timestamp", FieldType::kFloat64};
-  std::vector<io::BagScan> scans(2);
+  std::vector<io::BagScan> scans(3);
   scans[0].cloud = c;
   scans[0].stamp_sec = 1700000123;
   scans[0].stamp_nsec = 5;
   scans[1].cloud = plain;
+  // (the third's stamp and frame from its cloud, as a decoded model file gives them)
+  scans[2].cloud = plain;
+  scans[2].cloud.stamp = ScanStamp{ScanStamp::Source::kCapture, 1700000200, 75, "os_lidar"};
   const std::string p = path("written.bag");
   ASSERT_TRUE(io::write_bag(p, scans, "/lex3d/points").ok());
   auto r = io::read_bag(p, "/lex3d/points");
   ASSERT_TRUE(r.ok()) << r.status().to_string();
-  ASSERT_EQ(r.value().scans.size(), 2U);
+  ASSERT_EQ(r.value().scans.size(), 3U);
   EXPECT_TRUE(r.value().dropped_fields.empty());
   const io::BagScan& a = r.value().scans[0];
   EXPECT_EQ(a.stamp_sec, 1700000123U);
   EXPECT_EQ(a.stamp_nsec, 5U);
+  EXPECT_EQ(r.value().scans[2].stamp_sec, 1700000200U);
+  EXPECT_EQ(r.value().scans[2].stamp_nsec, 75U);
+  EXPECT_EQ(r.value().scans[2].frame_id, "os_lidar");
   EXPECT_EQ(a.cloud.rows, 5U);
   EXPECT_EQ(a.cloud.columns, 12U);
   EXPECT_EQ(r.value().no_return_dropped, 10U);

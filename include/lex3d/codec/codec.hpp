@@ -69,6 +69,9 @@ struct ModelData {
   /// lex3d/residual/attributes.hpp codes and decodes it), or nullopt. A model with one is
   /// written as format 1.6 (an ATTR chunk).
   std::optional<std::vector<std::uint8_t>> attributes;
+  /// When and in which frame the scan was taken (Cloud::stamp), or nullopt: an optional
+  /// `scan` chunk (formats/model.md §2.13), which needs no format version.
+  std::optional<ScanStamp> stamp;
 };
 
 /// Encodes an alphabet file. Throws std::invalid_argument for an invalid `q` or alphabet

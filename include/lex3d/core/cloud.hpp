@@ -161,6 +161,21 @@ struct SourceField {
   [[nodiscard]] bool given() const noexcept { return type != FieldType::kUnspecified && !name.empty(); }
 };
 
+/// When and in which frame a scan was taken, as its source gives it: a ROS message's
+/// header (its stamp and frame_id), or a raw capture's turn (the capture time of the turn's
+/// first packet: the recording host's clock, not the sensor's). Kept through a model file
+/// (its optional `scan` chunk, formats/model.md §2.13) and written back into a bag.
+struct ScanStamp {
+  enum class Source : std::uint8_t {
+    kMessage = 1,  ///< a message header's stamp (a PointCloud2's, or a packet message's)
+    kCapture = 2,  ///< the capture time of the turn's first packet (a pcap record's)
+  };
+  Source source = Source::kMessage;
+  std::uint64_t sec = 0;   ///< seconds since the Unix epoch
+  std::uint32_t nsec = 0;  ///< [0, 1e9)
+  std::string frame_id;    ///< the header's frame_id; empty where the source names none
+};
+
 struct Cloud {
   /// Point positions in metres.
   std::vector<Eigen::Vector3f> points;
@@ -204,6 +219,8 @@ struct Cloud {
   /// Where the local frame sits in a georeferenced (projected) frame, when the source's
   /// coordinates are large (a LAS file, a UTM cloud): true coordinates are origin + point.
   std::optional<Georeference> georef;
+  /// When and in which frame the scan was taken, where the source says (ScanStamp).
+  std::optional<ScanStamp> stamp;
   /// Further per-point fields by name, each with points.size() values and its source type
   /// (a LAS file's classification, return_number, scan_angle_rank...; a PCD's or PLY's other
   /// integer and float fields; a raw Ouster capture's signal and near_ir; see

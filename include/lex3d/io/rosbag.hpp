@@ -68,7 +68,10 @@ struct BagInfo {
 /// One scan of a bag.
 struct BagScan {
   Cloud cloud;
-  std::uint32_t stamp_sec = 0;   ///< the message header's stamp (PointCloud2), else its bag time
+  /// The message header's stamp (PointCloud2), else its bag time. Reading sets the cloud's
+  /// stamp (Cloud::stamp) to it and the frame too; writing takes the cloud's where these
+  /// are 0 and empty.
+  std::uint32_t stamp_sec = 0;
   std::uint32_t stamp_nsec = 0;
   std::string frame_id;          ///< the message header's frame (PointCloud2; empty for packets)
 };
