@@ -276,7 +276,15 @@ py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alp
                            : py::none();
     fields["ring"] = typed.is_none() ? py::object(py::array_t<std::uint16_t>(n, cloud.ring.data())) : typed;
   }
-  if (cloud.has_time()) fields["time"] = py::array_t<double>(n, cloud.time.data());
+  if (cloud.has_time()) {
+    // (in the type its source gave it: float32 seconds, integer nanoseconds; else float64 seconds)
+    const lex3d::FieldType t = cloud.time_source.given() ? cloud.time_source.type : lex3d::FieldType::kFloat64;
+    const auto ns = [&](py::ssize_t i) { return std::llround(cloud.time[static_cast<std::size_t>(i)] * 1e9); };
+    py::object typed = t == lex3d::FieldType::kFloat32  ? py::object(py::array_t<float>(py::array_t<double>(n, cloud.time.data())))
+                       : lex3d::is_float_type(t)        ? py::none()
+                                                        : as_source(cloud.time_source, ns);
+    fields["time"] = typed.is_none() ? py::object(py::array_t<double>(n, cloud.time.data())) : typed;
+  }
   if (cloud.has_rgb()) {
     py::array_t<std::uint8_t> rgb({n, py::ssize_t{3}});
     auto c = rgb.mutable_unchecked<2>();
@@ -384,7 +392,8 @@ as UTM ones), a float64 array of their true coordinates in the file's units.
 alphabet: the alphabet file (bytes) the model references, if it references one.
 attributes: also return the per-point fields the file keeps, as (points, fields) with fields a
 dict of (M,) arrays by name: "intensity" (float32, or the integer dtype it was given in), "ring" (uint16, or
-the integer type its source gave it), "time" (float64, seconds),
+the integer type its source gave it), "time" (seconds as float64, or as the float32 its source gave;
+integer nanoseconds in the integer type of a source such as ouster_ros's uint32 "t"),
 "rgb" ((M, 3) uint8) and each named integer field (int32; a LAS file's "classification",
 "return_number", "scan_angle_rank"...).
 Raises ValueError for a malformed, truncated or corrupt file (the message names the byte offset)

@@ -164,7 +164,15 @@ def test_a_drivers_ring_and_float32_time_code_as_the_capture_does():
     assert 0 < len(data) - len(without) < 600
     back, got = lex3d.decompress(data, attributes=True)
     assert got["ring"].dtype == ring.dtype
-    assert np.array_equal(np.sort(got["time"].astype(np.float32)), np.sort(time))
+    assert got["time"].dtype == np.float32  # as given (and as the capture's own)
+    assert fields["time"].dtype == np.float32
+    assert np.array_equal(np.sort(got["time"]), np.sort(time))
+    # integer nanoseconds (ouster_ros's uint32 `t`) come back as such
+    ns = np.round(time.astype(np.float64) * 1e9).astype(np.uint32)
+    data_ns = lex3d.compress(points, max_error=0.014, threads=1, ring=ring, time=ns)
+    _, got_ns = lex3d.decompress(data_ns, attributes=True)
+    assert got_ns["time"].dtype == np.uint32
+    assert np.array_equal(np.sort(got_ns["time"]), np.sort(ns))
     with pytest.raises(ValueError, match="time must have shape"):
         lex3d.compress(points, max_error=0.014, time=time[:-1])
     with pytest.raises(ValueError, match="time must be"):
