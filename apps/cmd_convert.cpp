@@ -62,7 +62,9 @@ void run_convert(const ConvertOptions& o) {
       note_fields_not_written(out, cloud);
     }
     std::printf("%s -> %s: %zu points%s\n", loader.name(i).c_str(), out.c_str(), cloud.size(),
-                cloud.rows > 0 ? (" (" + std::to_string(cloud.rows) + " x " + std::to_string(cloud.columns) + " organised)").c_str() : "");
+                cloud.rows > 0 ? (" (" + std::to_string(cloud.rows) + " x " + std::to_string(cloud.columns) +
+                                  (io::pixel_points(cloud).empty() ? ", written unorganised: pixels with two returns)" : " organised)")).c_str()
+                               : "");
     if (bag) bag_scans.back().cloud = std::move(cloud);
   }
   if (bag) throw_if_error(io::write_bag(files.staged(o.output), bag_scans));

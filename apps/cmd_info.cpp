@@ -426,7 +426,7 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
     if (!i.model_note.empty()) j.value("model", i.model_note);
     j.value("lasers", i.lasers).value("columns", i.columns).value("frames", i.frames);
     j.value("incomplete_frames_dropped", i.incomplete_frames).value("points", i.points).value("no_returns", i.no_returns);
-    j.value("second_returns_not_kept", i.second_returns);
+    j.value("second_returns", i.second_returns);
     j.value("pcap_records", i.pcap_packets).value("udp_datagrams", i.udp_datagrams);
     j.value("fragmented_datagrams", i.fragmented_datagrams).value("incomplete_datagrams_dropped", i.incomplete_datagrams);
     j.value("lidar_packets", i.lidar_packets).value("other_packets", i.other_packets);
@@ -460,7 +460,7 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
   if (!i.model_note.empty()) std::printf("model          %s\n", i.model_note.c_str());
   std::printf("frames         %zu complete (%zu incomplete dropped)\n", i.frames, i.incomplete_frames);
   std::printf("points         %zu (%zu no-returns not counted)\n", i.points, i.no_returns);
-  if (i.second_returns) std::printf("second returns %zu (not kept)\n", i.second_returns);
+  if (i.second_returns) std::printf("second returns %zu (kept, each a point of its own: return 1)\n", i.second_returns);
   std::printf("packets        %zu lidar, %zu other; %zu capture records, %zu UDP datagrams (%zu reassembled from fragments, %zu cut by the capture dropped)\n",
               i.lidar_packets, i.other_packets, i.pcap_packets, i.udp_datagrams, i.fragmented_datagrams,
               i.incomplete_datagrams);

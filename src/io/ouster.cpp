@@ -213,7 +213,9 @@ struct Frame {
   std::vector<std::uint16_t> refl;
   std::vector<std::uint16_t> signal;    // (not in the low-data profile)
   std::vector<std::uint16_t> near_ir;
-  std::vector<std::uint8_t> second;     // dual profile: second return present
+  std::vector<std::uint32_t> range2_mm;  // dual profile: the second return's range,
+  std::vector<std::uint16_t> refl2;      // reflectivity
+  std::vector<std::uint16_t> signal2;    // and signal
   std::vector<std::uint8_t> have;       // per measurement column
   std::vector<std::uint64_t> stamp_ns;  // per measurement column: its timestamp
   std::uint64_t captured_ns = 0;        // the capture time of its first packet
@@ -346,6 +348,11 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     const bool with_signal = m.profile != Profile::kLowData;
     if (with_signal) cloud.fields.push_back({"signal", {}, FieldType::kUint16});
     cloud.fields.push_back({"near_ir", {}, m.profile == Profile::kLowData ? FieldType::kUint8 : FieldType::kUint16});
+    // The dual profile's second returns are points of their own, at their pixel, with their
+    // reflectivity and signal (the near-infrared is the pixel's): `return` says which (0 the
+    // strongest, 1 the second strongest).
+    const bool dual = m.profile == Profile::kDual;
+    if (dual) cloud.fields.push_back({"return", {}, FieldType::kUint8});
     for (IntegerField& x : cloud.fields) x.values.reserve(pixels);
     // Each point's time: its measurement column's timestamp from the frame's first (as
     // Ouster's ROS driver gives `t`, uint32 nanoseconds). A frame whose timestamps run
@@ -362,7 +369,8 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
       cloud.time_source = {"t", FieldType::kUint32};
     }
     IntegerField* signal = with_signal ? &cloud.fields.front() : nullptr;
-    IntegerField& near_ir = cloud.fields.back();
+    IntegerField& near_ir = cloud.fields[with_signal ? 1 : 0];
+    IntegerField* which = dual ? &cloud.fields.back() : nullptr;
     // each measurement column's encoder angle, and its cosine and sine (shared by the beams)
     std::vector<double> theta(m.W), cos_theta(m.W), sin_theta(m.W);
     for (std::uint32_t mc = 0; mc < m.W; ++mc) {
@@ -377,23 +385,28 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
         const auto mc = static_cast<std::uint32_t>(((static_cast<std::int64_t>(c) - m.shift[l]) % m.W + m.W) % m.W);
         if (!m.in_window(mc)) continue;
         const std::size_t k = static_cast<std::size_t>(l) * m.W + mc;
-        if (f.second[k] != 0) ++info.second_returns;
-        const std::uint32_t r_mm = f.range_mm[k];
-        if (r_mm == 0) {
+        const std::uint32_t r2_mm = dual ? f.range2_mm[k] : 0;
+        if (r2_mm != 0) ++info.second_returns;
+        if (f.range_mm[k] == 0 && r2_mm == 0) {
           ++no_returns;
           continue;
         }
         const double a = theta[mc] + g.beam_azimuth[l];
-        const double r = r_mm / 1000.0 - n_m;
-        const Eigen::Vector3d p(r * std::cos(a) * cphi + n_m * cos_theta[mc], r * std::sin(a) * cphi + n_m * sin_theta[mc],
-                                r * sphi + z_m);
-        cloud.points.push_back((T_sensor_lidar * p).cast<float>());
-        cloud.intensity.push_back(static_cast<float>(f.refl[k]));
-        if (signal != nullptr) signal->values.push_back(f.signal[k]);
-        near_ir.values.push_back(f.near_ir[k]);
-        cloud.ring.push_back(static_cast<std::uint16_t>(l));
-        cloud.column.push_back(c);
-        if (timed) cloud.time.push_back(static_cast<double>(f.stamp_ns[mc] - t0) * 1e-9);
+        const double ca = std::cos(a), sa = std::sin(a);
+        for (int ret = 0; ret < 2; ++ret) {
+          const std::uint32_t r_mm = ret == 0 ? f.range_mm[k] : r2_mm;
+          if (r_mm == 0) continue;
+          const double r = r_mm / 1000.0 - n_m;
+          const Eigen::Vector3d p(r * ca * cphi + n_m * cos_theta[mc], r * sa * cphi + n_m * sin_theta[mc], r * sphi + z_m);
+          cloud.points.push_back((T_sensor_lidar * p).cast<float>());
+          cloud.intensity.push_back(static_cast<float>(ret == 0 ? f.refl[k] : f.refl2[k]));
+          if (signal != nullptr) signal->values.push_back(ret == 0 ? f.signal[k] : f.signal2[k]);
+          near_ir.values.push_back(f.near_ir[k]);
+          if (which != nullptr) which->values.push_back(ret);
+          cloud.ring.push_back(static_cast<std::uint16_t>(l));
+          cloud.column.push_back(c);
+          if (timed) cloud.time.push_back(static_cast<double>(f.stamp_ns[mc] - t0) * 1e-9);
+        }
       }
     }
     info.no_returns += no_returns;
@@ -438,7 +451,11 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
       cur->refl.assign(HW, 0);
       cur->signal.assign(HW, 0);
       cur->near_ir.assign(HW, 0);
-      cur->second.assign(HW, 0);
+      if (m.profile == Profile::kDual) {
+        cur->range2_mm.assign(HW, 0);
+        cur->refl2.assign(HW, 0);
+        cur->signal2.assign(HW, 0);
+      }
       cur->have.assign(m.W, 0);
       cur->stamp_ns.assign(m.W, 0);
       cur->captured_ns = d->captured_ns;
@@ -479,8 +496,10 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
           case Profile::kDual:
             f.range_mm[idx] = le<std::uint32_t>(px) & 0x7FFFFU;
             f.refl[idx] = px[3];
-            f.second[idx] = (le<std::uint32_t>(px + 4) & 0x7FFFFU) != 0 ? 1 : 0;
+            f.range2_mm[idx] = le<std::uint32_t>(px + 4) & 0x7FFFFU;
+            f.refl2[idx] = px[7];
             f.signal[idx] = le<std::uint16_t>(px + 8);
+            f.signal2[idx] = le<std::uint16_t>(px + 10);
             f.near_ir[idx] = le<std::uint16_t>(px + 12);
             break;
           case Profile::kLowData:

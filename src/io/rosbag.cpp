@@ -377,16 +377,14 @@ Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::st
 }
 
 /// What a packet decoder's log tells of a topic (its sensor, the frames and pixels it
-/// dropped, the packets it skipped, described by `skipped`, and the second returns not
-/// kept), and each of its turns as a scan, stamped by `stamp` (turn index -> bag time).
+/// dropped, the packets it skipped, described by `skipped`), and each of its turns as a
+/// scan, stamped by `stamp` (turn index -> bag time).
 template <typename Stamp>
 void take_turns(SensorLog& log, const std::string& skipped, Stamp stamp, const std::string& frame_id, BagScans& out) {
   out.sensor = log.info.sensor;
   out.incomplete_frames = log.info.incomplete_frames;
   out.no_return_dropped = log.info.no_returns;
   if (log.info.other_packets > 0) out.notes.push_back(std::to_string(log.info.other_packets) + " " + skipped + ": skipped");
-  if (log.info.second_returns > 0)
-    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept");
   for (std::size_t i = 0; i < log.scans.size(); ++i) {
     BagScan scan;
     scan.cloud = std::move(log.scans[i]);
@@ -661,21 +659,12 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   m.point_step = step;
   // organised: every point has a distinct pixel (row, column) of the shape
   std::vector<std::size_t> pixel;  // point -> pixel
-  bool organised = c.rows > 1 && c.columns > 0 && c.has_rings() && c.has_columns() &&
-                   static_cast<std::uint64_t>(c.rows) * c.columns <= (1ULL << 32);
+  const std::vector<std::int64_t> at = pixel_points(c);
+  const bool organised = !at.empty();
   if (organised) {
-    std::vector<std::uint8_t> used(static_cast<std::size_t>(c.rows) * c.columns, 0);
     pixel.resize(c.size());
-    for (std::size_t i = 0; organised && i < c.size(); ++i) {
-      if (c.ring[i] >= c.rows || c.column[i] >= c.columns) {
-        organised = false;
-        break;
-      }
-      const std::size_t px = static_cast<std::size_t>(c.ring[i]) * c.columns + c.column[i];
-      if (used[px] != 0) organised = false;
-      used[px] = 1;
-      pixel[i] = px;
-    }
+    for (std::size_t px = 0; px < at.size(); ++px)
+      if (at[px] >= 0) pixel[static_cast<std::size_t>(at[px])] = px;
   }
   m.height = organised ? c.rows : 1;
   m.width = organised ? c.columns : static_cast<std::uint32_t>(c.size());

@@ -11,8 +11,9 @@
 //
 // Dual-return packets (return mode 0x39) hold each firing twice, in a pair of blocks with
 // the same azimuth: the first of the pair the last return, the second the strongest (the
-// second strongest where the last is the strongest). The last return is kept; the other
-// block's returns that differ from it are counted as second returns, not kept.
+// second strongest where the last is the strongest). Both are kept: the other block's
+// returns that differ from the last are points of their own at the same pixel, with a
+// `return` field (0 the last return, 1 the other).
 
 #include <algorithm>
 #include <array>
@@ -114,7 +115,8 @@ struct Firing {
   std::uint64_t captured_ns = 0;  // when the capture recorded its packet (0: not known)
   std::array<std::uint16_t, 64> dist{};
   std::array<std::uint8_t, 64> refl{};
-  std::array<bool, 64> second{};  // dual return: the pair's other block holds another return
+  std::array<std::uint16_t, 64> dist2{};  // dual return: the pair's other block's return, where it differs
+  std::array<std::uint8_t, 64> refl2{};
 };
 
 /// One laser as its points are placed: at the firing's azimuth advanced by `share` of the
@@ -457,7 +459,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
   if (!hdl64 && mode != 0x37 && mode != 0x38 && mode != 0x39)
     return bad_data(msg(path, "Velodyne return mode byte " + hex(mode) + " is not one of 0x37 (strongest), 0x38 (last), 0x39 (dual)"));
   info.sensor = model->name;
-  info.profile = hdl64 ? "single return" : mode == 0x37 ? "strongest" : mode == 0x38 ? "last" : "dual (last return kept)";
+  info.profile = hdl64 ? "single return" : mode == 0x37 ? "strongest" : mode == 0x38 ? "last" : "dual (both returns kept)";
   info.lasers = model->lasers;
 
   // The lasers: the model's published table, or the calibration's (its laser count must be
@@ -555,7 +557,10 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
           f.refl[l] = ch[2];
           if (dual) {
             const std::uint16_t other = le16(ch + 100);
-            f.second[l] = other != 0 && other != f.dist[l];
+            if (other != 0 && other != f.dist[l]) {
+              f.dist2[l] = other;
+              f.refl2[l] = ch[102];
+            }
           }
         }
         firings.push_back(f);
@@ -597,6 +602,11 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     Cloud cloud;
     cloud.rows = model->lasers;
     cloud.columns = columns;
+    IntegerField* which = nullptr;  // dual return: each point's return (0 last, 1 the other)
+    if (dual) {
+      cloud.fields.push_back({"return", {}, FieldType::kUint8});
+      which = &cloud.fields.back();
+    }
     SensorGeometry g;
     g.columns = columns;
     g.direction = -1;
@@ -648,18 +658,23 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
       const double cw = std::cos(w), sw = std::sin(w);
       for (std::size_t i = begin; i < end; ++i) {
         const Firing& f = firings[i];
-        info.second_returns += f.second[id] ? 1 : 0;
-        if (f.dist[id] == 0) {
+        info.second_returns += f.dist2[id] != 0 ? 1 : 0;
+        if (f.dist[id] == 0 && f.dist2[id] == 0) {
           ++no_returns;
           continue;
         }
-        const double d = f.dist[id] * range_unit + l.dist_m;
         const double a = (f.azimuth_deg + f.step_deg * l.share + l.azimuth_deg) * M_PI / 180.0;
-        cloud.points.push_back(place(l, cw, sw, d, a));
-        cloud.intensity.push_back(static_cast<float>(f.refl[id]));
-        cloud.ring.push_back(static_cast<std::uint16_t>(r));
-        cloud.column.push_back(static_cast<std::uint32_t>(i - begin));
-        if (timed) cloud.time.push_back(static_cast<double>(f.time_ns + slot - t0) * 1e-9);
+        for (int ret = 0; ret < 2; ++ret) {
+          const std::uint16_t dist = ret == 0 ? f.dist[id] : f.dist2[id];
+          if (dist == 0) continue;
+          const double d = dist * range_unit + l.dist_m;
+          cloud.points.push_back(place(l, cw, sw, d, a));
+          cloud.intensity.push_back(static_cast<float>(ret == 0 ? f.refl[id] : f.refl2[id]));
+          if (which != nullptr) which->values.push_back(ret);
+          cloud.ring.push_back(static_cast<std::uint16_t>(r));
+          cloud.column.push_back(static_cast<std::uint32_t>(i - begin));
+          if (timed) cloud.time.push_back(static_cast<double>(f.time_ns + slot - t0) * 1e-9);
+        }
       }
     }
     cloud.geometry = std::move(g);

@@ -538,20 +538,10 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
   std::vector<std::uint8_t> bytes;
   switch (f) {
     case Format::kPcd: {
-      // An organised cloud (rows x columns, each point's ring and column known, one point a
-      // pixel) is written organised: HEIGHT rows, NaN at its no-return pixels.
-      const std::uint64_t pixels = static_cast<std::uint64_t>(cloud.rows) * cloud.columns;
-      bool organised = cloud.rows > 1 && cloud.columns > 0 && cloud.has_rings() && cloud.has_columns() &&
-                       pixels >= cloud.size() && pixels <= (1ULL << 31);
-      std::vector<std::int64_t> at;
-      if (organised) {
-        at.assign(static_cast<std::size_t>(pixels), -1);
-        for (std::size_t i = 0; i < cloud.size() && organised; ++i) {
-          const std::uint64_t k = static_cast<std::uint64_t>(cloud.ring[i]) * cloud.columns + cloud.column[i];
-          organised = cloud.ring[i] < cloud.rows && cloud.column[i] < cloud.columns && at[k] < 0;
-          if (organised) at[k] = static_cast<std::int64_t>(i);
-        }
-      }
+      // An organised cloud (one point a pixel) is written organised: HEIGHT rows, NaN at
+      // its no-return pixels.
+      const std::vector<std::int64_t> at = pixel_points(cloud);
+      const bool organised = !at.empty();
       Status s;
       if (organised) {
         Cloud grid;
@@ -602,6 +592,21 @@ Status write_cloud_impl(const std::string& path, const Cloud& cloud, const Write
 }
 
 }  // namespace
+
+std::vector<std::int64_t> pixel_points(const Cloud& cloud) {
+  const std::uint64_t pixels = static_cast<std::uint64_t>(cloud.rows) * cloud.columns;
+  if (!(cloud.rows > 1 && cloud.columns > 0 && cloud.has_rings() && cloud.has_columns() && pixels >= cloud.size() &&
+        pixels <= (1ULL << 31)))
+    return {};
+  std::vector<std::int64_t> at(static_cast<std::size_t>(pixels), -1);
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    if (cloud.ring[i] >= cloud.rows || cloud.column[i] >= cloud.columns) return {};
+    const std::uint64_t k = static_cast<std::uint64_t>(cloud.ring[i]) * cloud.columns + cloud.column[i];
+    if (at[k] >= 0) return {};  // (two points a pixel: a dual-return turn)
+    at[k] = static_cast<std::int64_t>(i);
+  }
+  return at;
+}
 
 std::vector<std::string> fields_not_written(const std::string& path, const Cloud& cloud, const WriteOptions& options) {
   const auto format = output_format(path, options);

@@ -156,21 +156,25 @@ Residual geometry_residual(const Cloud& c) {
   return res;
 }
 
-void expect_organised(const Cloud& c) {
-  ASSERT_TRUE(c.has_rings());
-  ASSERT_TRUE(c.has_columns());
-  ASSERT_TRUE(c.has_intensity());
-  ASSERT_TRUE(c.geometry.has_value());
+/// The pixels a turn's points take (one point a pixel and return: a dual-return turn's
+/// `return` field tells a pixel's two apart).
+std::size_t expect_organised(const Cloud& c) {
+  EXPECT_TRUE(c.has_rings() && c.has_columns() && c.has_intensity() && c.geometry.has_value());
+  if (!c.has_rings() || !c.has_columns() || !c.geometry) return 0;
   EXPECT_EQ(c.geometry->lasers(), c.rows);
-  std::set<std::uint64_t> seen;
+  const IntegerField* ret = c.field("return");
+  std::set<std::uint64_t> seen, pixels;
   for (std::size_t i = 0; i < c.size(); ++i) {
-    ASSERT_LT(c.ring[i], c.rows);
-    ASSERT_LT(c.column[i], c.columns);
-    ASSERT_TRUE(seen.insert(static_cast<std::uint64_t>(c.ring[i]) * c.columns + c.column[i]).second)
+    EXPECT_LT(c.ring[i], c.rows);
+    EXPECT_LT(c.column[i], c.columns);
+    const std::uint64_t px = static_cast<std::uint64_t>(c.ring[i]) * c.columns + c.column[i];
+    pixels.insert(px);
+    EXPECT_TRUE(seen.insert(2 * px + (ret != nullptr ? static_cast<std::uint64_t>(ret->values[i]) : 0U)).second)
         << "two points in one pixel";
-    ASSERT_TRUE(c.points[i].allFinite());
-    ASSERT_GT(c.points[i].norm(), 0.0F);
+    EXPECT_TRUE(c.points[i].allFinite());
+    EXPECT_GT(c.points[i].norm(), 0.0F);
   }
+  return pixels.size();
 }
 
 // ------------------------------------------------------------ Ouster
@@ -242,9 +246,9 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
       const Cloud& c = log.scans[s];
       EXPECT_EQ(c.rows, k.beams);
       EXPECT_EQ(c.columns, 1024U);
-      expect_organised(c);
-      // every pixel of the full column window is a point or a counted no-return
-      EXPECT_EQ(c.size() + log.no_returns[s], static_cast<std::size_t>(k.beams) * 1024U);
+      const std::size_t pixels = expect_organised(c);
+      // every pixel of the full column window holds points or is a counted no-return
+      EXPECT_EQ(pixels + log.no_returns[s], static_cast<std::size_t>(k.beams) * 1024U);
       EXPECT_GT(c.size(), c.rows * c.columns / 2);
       const Residual res = geometry_residual(c);
       std::printf("[ geometry ] %s turn %zu: %zu points, %zu no-returns, max residual %.3g m\n", k.pcap, s, c.size(),
@@ -255,8 +259,9 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
       // named fields in their types: the signal follows the reflectivity, and the
       // near-infrared (an ambient-light image) changes little along a laser's row
       const bool low_data = std::string(k.profile) == "RNG15_RFL8_NIR8";
-      ASSERT_EQ(c.fields.size(), low_data ? 1U : 2U);
-      const IntegerField& nir = c.fields.back();
+      const bool dual = std::string(k.profile).find("DUAL") != std::string::npos;
+      ASSERT_EQ(c.fields.size(), (low_data ? 1U : 2U) + (dual ? 1U : 0U));
+      const IntegerField& nir = c.fields[low_data ? 0 : 1];
       EXPECT_EQ(nir.name, "near_ir");
       EXPECT_EQ(nir.type, low_data ? FieldType::kUint8 : FieldType::kUint16);
       ASSERT_EQ(nir.values.size(), c.size());
@@ -296,7 +301,27 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
     }
     EXPECT_EQ(points, log.info.points);
     if (std::string(k.profile).find("DUAL") != std::string::npos) {
+      // the second returns are points of their own: `return` 1, after the pixel's first
+      // return where it has one, further along the same beam
       EXPECT_GT(log.info.second_returns, 0U);
+      std::size_t seconds = 0, behind = 0;
+      for (const Cloud& c : log.scans) {
+        const IntegerField& ret = c.fields.back();
+        ASSERT_EQ(ret.name, "return");
+        ASSERT_EQ(ret.type, FieldType::kUint8);
+        ASSERT_EQ(ret.values.size(), c.size());
+        for (std::size_t i = 0; i < c.size(); ++i) {
+          ASSERT_TRUE(ret.values[i] == 0 || ret.values[i] == 1);
+          if (ret.values[i] == 0) continue;
+          ++seconds;
+          if (i == 0 || ret.values[i - 1] != 0 || c.ring[i - 1] != c.ring[i] || c.column[i - 1] != c.column[i]) continue;
+          ++behind;
+          EXPECT_EQ(c.time[i - 1], c.time[i]);
+          EXPECT_NEAR(c.points[i].normalized().dot(c.points[i - 1].normalized()), 1.0, 1e-3);  // one beam
+        }
+      }
+      EXPECT_EQ(seconds, log.info.second_returns);
+      EXPECT_GT(behind, 0U);
     } else {
       EXPECT_EQ(log.info.second_returns, 0U);
     }
@@ -592,7 +617,7 @@ TEST(SensorLog, Vlp32cPacketsUseItsTableAzimuthOffsetsAndRangeUnit) {
   EXPECT_GT(checked, 100U);
 }
 
-TEST(SensorLog, DualReturnPacketsKeepTheLastReturnAndCountTheOthers) {
+TEST(SensorLog, DualReturnPacketsKeepBothReturns) {
   // The VLP-16 sample turned into dual-return packets: each packet's 12 blocks go into two
   // packets of 6 block pairs (the block, then a copy with every third return moved 20 cm
   // as a distinct strongest return), mode byte 0x39, packets twice as often.
@@ -632,13 +657,40 @@ TEST(SensorLog, DualReturnPacketsKeepTheLastReturnAndCountTheOthers) {
   c.records = std::move(out);
   const SensorLog dual = decode_edited(c, "dual.pcap");
   EXPECT_EQ(dual.info.sensor, "VLP-16");
-  EXPECT_EQ(dual.info.profile, "dual (last return kept)");
+  EXPECT_EQ(dual.info.profile, "dual (both returns kept)");
   EXPECT_NE(dual.info.model_note.find("(agrees)"), std::string::npos) << dual.info.model_note;
   ASSERT_EQ(dual.scans.size(), single.scans.size());
   ASSERT_EQ(dual.scans.size(), 1U);
   const Cloud& a = single.scans[0];
-  const Cloud& b = dual.scans[0];
-  EXPECT_EQ(a.columns, b.columns);
+  const Cloud& all = dual.scans[0];
+  EXPECT_EQ(a.columns, all.columns);
+  // the last returns (`return` 0) are the single-return turn's points; the others (`return`
+  // 1) follow them at the same pixel and time, 100 range units (0.2 m) further along the beam
+  ASSERT_EQ(all.fields.size(), 1U);
+  const IntegerField& ret = all.fields[0];
+  EXPECT_EQ(ret.name, "return");
+  Cloud b;
+  std::size_t others = 0;
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (ret.values[i] == 1) {
+      ++others;
+      ASSERT_GT(i, 0U);
+      ASSERT_EQ(ret.values[i - 1], 0);
+      ASSERT_EQ(all.ring[i], all.ring[i - 1]);
+      ASSERT_EQ(all.column[i], all.column[i - 1]);
+      ASSERT_EQ(all.time[i], all.time[i - 1]);
+      ASSERT_NEAR(all.points[i].norm() - all.points[i - 1].norm(), 0.2, 0.01) << i;
+      continue;
+    }
+    b.points.push_back(all.points[i]);
+    b.ring.push_back(all.ring[i]);
+    b.column.push_back(all.column[i]);
+    b.time.push_back(all.time[i]);
+  }
+  EXPECT_EQ(others, dual.info.second_returns);
+  b.columns = all.columns;
+  b.rows = all.rows;
+  b.time_source = all.time_source;
   ASSERT_EQ(a.size(), b.size());
   // the same ranges, lasers and columns; azimuths within 0.3 of a firing step (a packet's
   // last block pair places its second firing and its lasers' firing times by the gap from

@@ -143,6 +143,12 @@ struct WriteOptions {
 /// `path` is written in (options.format, else its extension) cannot hold: a KITTI `.bin`
 /// keeps the intensity only, an x y z `.bin` nothing, text the intensity, LAS everything but
 /// the ring; PCD and PLY keep them all. Empty when every one is written.
+/// Each pixel's point of an organised cloud (rows × columns, every point's ring and column
+/// known and in range), row by row, -1 at a no-return pixel; empty where the cloud is not
+/// organised or a pixel holds two points (a dual-return turn's second returns), which the
+/// writers (PCD, a bag's PointCloud2) then write unorganised.
+[[nodiscard]] std::vector<std::int64_t> pixel_points(const Cloud& cloud);
+
 [[nodiscard]] std::vector<std::string> fields_not_written(const std::string& path, const Cloud& cloud,
                                                           const WriteOptions& options = {});
 

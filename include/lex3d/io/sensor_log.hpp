@@ -12,11 +12,13 @@
 ///   (pixel_shift_by_row), and each point is placed as Ouster's beam model places it, in
 ///   the "sensor" frame (lidar_to_sensor_transform), so the geometry reproduces it exactly.
 ///   Intensity is the reflectivity channel. Zero-range pixels are no-returns (counted, not
-///   points); the dual profile's second returns are counted and not kept. Each point's
+///   points); the dual profile's second returns are points of their own at their pixel
+///   (their reflectivity and signal), marked by a uint8 `return` field (0 the strongest, 1
+///   the second strongest). Each point's
 ///   time is its measurement column's timestamp less the frame's first (`t`, uint32 ns, as
 ///   Ouster's ROS driver gives it); a frame whose timestamps span more than 2^32 ns has none.
-/// - Velodyne VLP-16, Puck Hi-Res, HDL-32E and VLP-32C, single or dual return (the last
-///   return kept, the other counted), with the published per-model tables (elevation, and
+/// - Velodyne VLP-16, Puck Hi-Res, HDL-32E and VLP-32C, single or dual return (dual: the
+///   last return and the other where it differs, a uint8 `return` field 0 and 1), with the published per-model tables (elevation, and
 ///   the VLP-32C's azimuth offsets) and firing timing, or the unit's calibration where one
 ///   is given (db.xml, VeloView XML, the ROS driver's YAML: `metadata_path`, else beside the
 ///   capture); the HDL-64E (single return) with its calibration only. Rings are the
@@ -63,7 +65,7 @@ struct SensorLogInfo {
   std::size_t fragmented_datagrams = 0;  ///< datagrams reassembled from IPv4 fragments
   std::size_t incomplete_datagrams = 0;  ///< fragment sets cut by the capture's start or end, dropped
   std::size_t no_returns = 0;         ///< zero-range pixels of the decoded turns (not points)
-  std::size_t second_returns = 0;     ///< dual-return profile: second returns seen, not kept
+  std::size_t second_returns = 0;     ///< dual-return profile: second returns (points of their own)
   std::size_t points = 0;             ///< points of all decoded turns
 };
 
