@@ -11,11 +11,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "common.hpp"
+#include "lex3d/codec/codec.hpp"
 #include "lex3d/io/io.hpp"
 #include "lex3d/lex3d.hpp"
 #include "lex3d/residual/sensor_profile.hpp"
@@ -137,12 +139,52 @@ void add_time(lex3d::Cloud& cloud, const py::object& time) {
     if (!std::isfinite(cloud.time[i])) throw py::value_error("time: value " + std::to_string(i) + " is not finite");
 }
 
+/// Sets `cloud`'s stamp from a dict {"sec": int, "nsec": int, "frame_id": str} (nsec and
+/// frame_id optional), as a ROS message header's. ValueError otherwise.
+void set_stamp(lex3d::Cloud& cloud, const py::object& stamp) {
+  if (!py::isinstance<py::dict>(stamp)) throw py::value_error("stamp must be a dict with 'sec', 'nsec' and 'frame_id'");
+  const auto d = stamp.cast<py::dict>();
+  for (const auto& item : d) {
+    const std::string key = py::str(item.first);
+    if (key != "sec" && key != "nsec" && key != "frame_id")
+      throw py::value_error("stamp: unknown key '" + key + "' (sec, nsec, frame_id)");
+  }
+  if (!d.contains("sec")) throw py::value_error("stamp needs 'sec' (seconds since the Unix epoch)");
+  lex3d::ScanStamp s;
+  const auto whole = [&](const char* key, long long most) {
+    const py::object v = d[key];
+    if (!py::isinstance<py::int_>(v)) throw py::value_error(std::string("stamp: '") + key + "' must be an integer");
+    const long long x = v.cast<long long>();
+    if (x < 0 || x > most) throw py::value_error(std::string("stamp: '") + key + "' is outside 0.." + std::to_string(most));
+    return x;
+  };
+  s.sec = static_cast<std::uint64_t>(whole("sec", std::numeric_limits<long long>::max()));
+  if (d.contains("nsec")) s.nsec = static_cast<std::uint32_t>(whole("nsec", 999999999LL));
+  if (d.contains("frame_id")) {
+    s.frame_id = py::str(d["frame_id"]);
+    if (s.frame_id.size() > 1024 || s.frame_id.find('\0') != std::string::npos)
+      throw py::value_error("stamp: 'frame_id' must be at most 1024 bytes, without NUL");
+  }
+  cloud.stamp = std::move(s);
+}
+
+/// A stamp as Python sees it: {"sec", "nsec", "frame_id", "source"}.
+py::object stamp_dict(const std::optional<lex3d::ScanStamp>& s) {
+  if (!s) return py::none();
+  py::dict d;
+  d["sec"] = s->sec;
+  d["nsec"] = s->nsec;
+  d["frame_id"] = s->frame_id;
+  d["source"] = s->source == lex3d::ScanStamp::Source::kCapture ? "capture" : "message";
+  return std::move(d);
+}
+
 py::object compress(const py::object& points, const py::object& intensity, std::optional<double> max_error,
                     std::optional<double> target_bpp, const std::optional<std::string>& words,
                     const std::string& coding, bool keep_all_points, const std::optional<py::bytes>& alphabet,
                     double word_radius, int iterations, std::uint64_t seed, int threads, bool report,
                     const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields,
-                    const py::object& ring, const py::object& time) {
+                    const py::object& ring, const py::object& time, const py::object& stamp) {
   // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept).
   const bool from_file = lex3d::python::is_path(points);
   if (from_file && !intensity.is_none()) throw py::value_error("intensity goes with an array of points, not a path");
@@ -154,6 +196,7 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   if (!fields.is_none()) add_fields(cloud, fields);
   if (!ring.is_none()) add_ring(cloud, ring);
   if (!time.is_none()) add_time(cloud, time);
+  if (!stamp.is_none()) set_stamp(cloud, stamp);
   lex3d::CompressOptions o;
   o.max_error = max_error;
   o.target_bpp = target_bpp.value_or(0.0);
@@ -215,6 +258,16 @@ py::array_t<T> typed_field(const lex3d::IntegerField& x) {
   auto w = a.template mutable_unchecked<1>();
   for (std::size_t i = 0; i < x.values.size(); ++i) w(static_cast<py::ssize_t>(i)) = static_cast<T>(x.value(i));
   return a;
+}
+
+/// The stamp a model file keeps (its `scan` chunk), or None.
+py::object stamp(const py::bytes& data, const std::optional<py::bytes>& alphabet) {
+  const std::vector<std::uint8_t> bytes = to_vector(data);
+  std::vector<std::uint8_t> alphabet_file;
+  if (alphabet) alphabet_file = to_vector(*alphabet);
+  auto d = lex3d::codec::decode_model(bytes, alphabet ? &alphabet_file : nullptr);
+  if (!d.ok()) raise(d.status());
+  return stamp_dict(d.value().stamp);
 }
 
 py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alphabet, bool attributes) {
@@ -348,6 +401,7 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("seed") = lex3d::LearnParams{}.seed, py::arg("threads") = 2, py::arg("report") = false,
         py::arg("sensor") = py::none(), py::arg("fields") = py::none(),
         py::arg("drop_fields") = std::vector<std::string>{}, py::arg("ring") = py::none(), py::arg("time") = py::none(),
+        py::arg("stamp") = py::none(),
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
@@ -364,8 +418,11 @@ time: optional (N,) array, each point's time: float32 or float64 seconds, or int
     nanoseconds (as ouster_ros's `t`). With ring and time, a spinning lidar's columns come from
     the firing times (the sensor-geometry layer codes the scan as from its raw log) and the
     times cost about one value a firing. Both kept with a residual layer (losslessly; a float32
-    time as float32); decompress(attributes=True) gives ring back in its dtype and time as
-    float64 seconds.
+    time as float32); decompress(attributes=True) gives both back in their dtypes.
+stamp: optional dict {"sec": int, "nsec": int, "frame_id": str} (nsec and frame_id optional):
+    when and in which frame the scan was taken, as a ROS message header's; the file keeps it
+    (lex3d.stamp reads it back). A path's own stamp (a bag's message, a capture's turn) is kept
+    without it.
 drop_fields: names of fields not to keep ('intensity', 'ring', 'time', 'rgb' or a named
     field's, as report lists them), like `compress --drop-field`.
 max_error: residual-layer bound in metres, [1e-4, 10]: every point has a decoded point within it
@@ -398,6 +455,13 @@ integer nanoseconds in the integer type of a source such as ouster_ros's uint32 
 "return_number", "scan_angle_rank"...).
 Raises ValueError for a malformed, truncated or corrupt file (the message names the byte offset)
 or a missing or mismatched alphabet.)");
+  m.def("stamp", &stamp, py::arg("data"), py::arg("alphabet") = py::none(),
+        R"(When and in which frame the scan of a model file (bytes) was taken, as its source gave
+it: a dict {"sec", "nsec", "frame_id", "source"} (source "message": a ROS message header's
+stamp, or compress(stamp=); "capture": a raw capture's turn, the capture time of its first
+packet), or None where the file keeps none.
+alphabet: the alphabet file (bytes) the model references, if it references one.
+Raises ValueError for a malformed, truncated or corrupt file.)");
   lex3d::python::bind_place(m);
   lex3d::python::bind_learning(m);
   m.def("learn_alphabet", &learn_alphabet, py::arg("clouds"), py::kw_only(), py::arg("word_radius") = 0.0,

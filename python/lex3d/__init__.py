@@ -9,6 +9,6 @@ The bytes are those `lex3d compress` writes for the same settings (formats/model
 lex3d.dask (imported on its own) runs the same work on a Dask cluster.
 """
 
-from ._lex3d import PlaceDatabase, __version__, compress, decompress, learn_alphabet
+from ._lex3d import PlaceDatabase, __version__, compress, decompress, learn_alphabet, stamp
 
-__all__ = ["compress", "decompress", "learn_alphabet", "PlaceDatabase", "__version__"]
+__all__ = ["compress", "decompress", "learn_alphabet", "stamp", "PlaceDatabase", "__version__"]

@@ -152,7 +152,8 @@ inline void check_cloud(const Cloud& c) {
   check_per_point(c.column, n, "column");
   check_per_point(c.time, n, "time");
   check_per_point(c.rgb, n, "rgb");
-  if (c.rows > 0 && static_cast<std::uint64_t>(c.rows) * c.columns < n) reader_fail("organised shape smaller than the cloud", "");
+  // (a pixel holds one point, or two in a dual-return turn: its second return)
+  if (c.rows > 0 && 2 * static_cast<std::uint64_t>(c.rows) * c.columns < n) reader_fail("organised shape too small for the cloud", "");
   // (A ring field may name more lasers than an organised cloud has rows: its values are
   // the file's, and the laser coder sizes its tables by both.)
   if (c.rows > 0 && !c.column.empty())

@@ -181,6 +181,22 @@ def test_a_drivers_ring_and_float32_time_code_as_the_capture_does():
         lex3d.compress(points, max_error=0.014, ring=np.full(len(points), 70000, dtype=np.int64))
 
 
+def test_a_scans_stamp_and_frame_are_kept(small):
+    """compress(stamp=) keeps a scan's stamp and frame (a ROS header's) in the file and
+    lex3d.stamp reads them back; a capture keeps its turn's capture time; bad stamps raise."""
+    assert lex3d.stamp(lex3d.compress(small, max_error=0.02)) is None
+    data = lex3d.compress(small, max_error=0.02, stamp={"sec": 1700000000, "nsec": 250000000, "frame_id": "os_sensor"})
+    assert lex3d.stamp(data) == {"sec": 1700000000, "nsec": 250000000, "frame_id": "os_sensor", "source": "message"}
+    capture = lex3d.compress(str(SAMPLES / "vlp16_velodyne_example.pcap"), max_error=0.05)
+    assert lex3d.stamp(capture) == {"sec": 1525347606, "nsec": 362040000, "frame_id": "", "source": "capture"}
+    for bad, message in (({"nsec": 1}, "needs 'sec'"), ({"sec": -1}, "outside"), ({"sec": 1, "nsec": 10**9}, "outside"),
+                         ({"sec": 1, "when": 2}, "unknown key"), ({"sec": 1.5}, "integer"), ((1, 2), "must be a dict")):
+        with pytest.raises(ValueError, match=message):
+            lex3d.compress(small, max_error=0.02, stamp=bad)
+    with pytest.raises(ValueError):
+        lex3d.stamp(data[: len(data) // 2])
+
+
 def test_corrupt_and_truncated_files_raise_value_error(small):
     data = lex3d.compress(small, max_error=0.02)
     for n in (0, 3, len(data) // 2, len(data) - 1):
