@@ -22,11 +22,13 @@ struct ConvertOptions {
   std::string sensor_model;
   std::string topic;
   std::string sensor;  ///< --sensor: a sensor profile whose lasers become the ring field
+  bool single_return = false;
 };
 
 void run_convert(const ConvertOptions& o) {
   io::ReadOptions options = read_options(parse_format_option(o.format), o.metadata, o.sensor_model);
   options.bag_topic = o.topic;
+  options.single_return = o.single_return;
   const ScanLoader loader({o.input}, options, "", false);
   std::vector<std::string> outputs;
   const bool bag = is_bag_output(o.output);  // one bag, a message a scan
@@ -85,6 +87,7 @@ void register_convert(CLI::App& app) {
   sub->add_option("--topic", o->topic, "The topic of a ROS bag to read (default: its only point cloud topic)");
   sub->add_option("--sensor", o->sensor,
                   "Sensor profile (formats/sensor_profile.md): write each point's laser by its table as the ring field");
+  sub->add_flag("--single-return", o->single_return, "A dual-return capture: keep one return a pixel (Ouster's strongest, Velodyne's last), as a single-return capture gives it, organised; the second returns are counted, not kept (default: each a point of its own with a return field)");
   sub->callback([o] { run_convert(*o); });
 }
 

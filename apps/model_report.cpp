@@ -41,6 +41,7 @@ void ScanSetOptions::add_to(CLI::App& app) {
   app.add_option("--metadata", metadata, "Metadata of a pcap: an Ouster metadata JSON, or a Velodyne calibration (db.xml, VeloView XML or the ROS driver's YAML; needed for an HDL-64E) (default: the .json, .xml, .yaml or .yml beside it, same stem)");
   app.add_option("--sensor-model", sensor_model, "Read a Velodyne pcap as this model: vlp16, puck-hires, hdl32e, vlp32c or hdl64e (default: detected from the packets)");
   app.add_option("--topic", topic, "The topic of a ROS bag to read (default: its only PointCloud2 or Ouster packet topic)");
+  app.add_flag("--single-return", single_return, "A dual-return capture: keep one return a pixel (Ouster's strongest, Velodyne's last), as a single-return capture gives it, organised; the second returns are counted, not kept (default: each a point of its own with a return field)");
   app.add_option("--poses", poses, "World <- sensor pose of each scan (KITTI poses.txt layout)");
   app.add_option("--input-frame", input_frame,
                  "Frame of the scans' points: sensor (each scan in its own sensor frame), or world (already in "
@@ -63,6 +64,7 @@ std::vector<Cloud> ScanSetOptions::load(const std::vector<std::string>& inputs) 
 ScanLoader ScanSetOptions::loader(const std::vector<std::string>& inputs) const {
   io::ReadOptions options = read_options(parse_format_option(format), metadata, sensor_model);
   options.bag_topic = topic;
+  options.single_return = single_return;
   return ScanLoader(inputs, options, poses, input_frame == "world");
 }
 

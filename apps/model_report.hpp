@@ -34,6 +34,7 @@ struct ScanSetOptions {
   std::string metadata;      ///< --metadata: an Ouster capture's metadata JSON
   std::string sensor_model;  ///< --sensor-model: a Velodyne capture's model
   std::string topic;         ///< --topic: a ROS bag's topic
+  bool single_return = false;  ///< --single-return: a dual-return capture's first returns only
   std::string poses;
   std::string input_frame = "sensor";  ///< "world": the points are in the frame of the poses
   int iterations = LearnParams{}.max_iterations;

@@ -23,6 +23,42 @@
 
 namespace lex3d::io::detail {
 
+/// Keeps the points of `c` for which keep(i) holds (called once a point, in order), with
+/// every per-point channel that holds one value a point: intensity, laser, column, time,
+/// colour, named fields and `colors` where given (a reader's). Returns how many were kept.
+template <class Keep>
+std::size_t keep_cloud_points(Cloud& c, Keep keep, std::vector<std::array<std::uint8_t, 3>>* colors = nullptr) {
+  const std::size_t n = c.points.size();
+  const auto compact = [&](auto& channel, std::size_t i, std::size_t to) {
+    if (channel.size() == n) channel[to] = channel[i];
+  };
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!keep(i)) continue;
+    c.points[kept] = c.points[i];
+    compact(c.intensity, i, kept);
+    compact(c.ring, i, kept);
+    compact(c.column, i, kept);
+    compact(c.time, i, kept);
+    compact(c.rgb, i, kept);
+    if (colors != nullptr) compact(*colors, i, kept);
+    for (IntegerField& field : c.fields) compact(field.values, i, kept);
+    ++kept;
+  }
+  const auto shrink = [&](auto& channel) {
+    if (channel.size() == n) channel.resize(kept);
+  };
+  shrink(c.intensity);
+  shrink(c.ring);
+  shrink(c.column);
+  shrink(c.time);
+  shrink(c.rgb);
+  if (colors != nullptr) shrink(*colors);
+  for (IntegerField& field : c.fields) shrink(field.values);
+  c.points.resize(kept);
+  return kept;
+}
+
 /// `s` made safe for a one-line message: control and non-ASCII bytes become
 /// '?', and it is cut to `max_len` characters (with "..." when cut).
 std::string printable(std::string_view s, std::size_t max_len = 48);

@@ -50,40 +50,10 @@ std::vector<std::string_view> split_ws(std::string_view line) {
 // coordinates stay within the extent and the origin reads well. Anything else is rounded
 // to float32 as before.
 /// Keeps the points of `r` for which keep(i) holds (called once a point, in order), with
-/// every per-point channel that holds one value a point: intensity, laser, column, time,
-/// colour (the cloud's and the result's) and named fields. Returns how many were kept.
+/// every per-point channel (keep_cloud_points) and the result's colours.
 template <class Keep>
 std::size_t keep_points(ReadResult& r, Keep keep) {
-  Cloud& c = r.cloud;
-  const std::size_t n = c.points.size();
-  const auto compact = [&](auto& channel, std::size_t i, std::size_t to) {
-    if (channel.size() == n) channel[to] = channel[i];
-  };
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!keep(i)) continue;
-    c.points[kept] = c.points[i];
-    compact(c.intensity, i, kept);
-    compact(c.ring, i, kept);
-    compact(c.column, i, kept);
-    compact(c.time, i, kept);
-    compact(c.rgb, i, kept);
-    compact(r.colors, i, kept);
-    for (IntegerField& field : c.fields) compact(field.values, i, kept);
-    ++kept;
-  }
-  const auto shrink = [&](auto& channel) {
-    if (channel.size() == n) channel.resize(kept);
-  };
-  shrink(c.intensity);
-  shrink(c.ring);
-  shrink(c.column);
-  shrink(c.time);
-  shrink(c.rgb);
-  shrink(r.colors);
-  for (IntegerField& field : c.fields) shrink(field.values);
-  c.points.resize(kept);
-  return kept;
+  return keep_cloud_points(r.cloud, keep, &r.colors);
 }
 
 std::optional<Eigen::Vector3d> wide_origin(const std::vector<Eigen::Vector3d>& points) {

@@ -377,10 +377,16 @@ Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::st
 }
 
 /// What a packet decoder's log tells of a topic (its sensor, the frames and pixels it
-/// dropped, the packets it skipped, described by `skipped`), and each of its turns as a
-/// scan, stamped by `stamp` (turn index -> bag time).
+/// dropped, the packets it skipped, described by `skipped`, the second returns dropped for
+/// ReadOptions::single_return), and each of its turns as a scan, stamped by `stamp` (turn
+/// index -> bag time).
 template <typename Stamp>
-void take_turns(SensorLog& log, const std::string& skipped, Stamp stamp, const std::string& frame_id, BagScans& out) {
+void take_turns(SensorLog& log, const std::string& skipped, Stamp stamp, const std::string& frame_id,
+                const ReadOptions& options, BagScans& out) {
+  if (options.single_return && log.info.second_returns > 0) {
+    detail::drop_second_returns(log);
+    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept (single return)");
+  }
   out.sensor = log.info.sensor;
   out.incomplete_frames = log.info.incomplete_frames;
   out.no_return_dropped = log.info.no_returns;
@@ -467,7 +473,7 @@ Status read_packets(const std::string& path, OpenBag& bag, const BagInfo& info, 
         const auto it = first_seen.find(log.frame_ids[i] & 0xFFFFU);
         return it != first_seen.end() ? it->second : lex3d_bag_time{};
       },
-      "", out);
+      "", options, out);
   if (out.scans.empty())
     return bad_data(detail::msg(path, "topic " + topic.name + ": no complete frame (" +
                                           std::to_string(log.info.lidar_packets) + " packets, " +
@@ -526,7 +532,7 @@ Status read_velodyne_scans(const std::string& path, OpenBag& bag, const BagTopic
         const std::uint64_t t = i < log.captured_ns.size() ? log.captured_ns[i] : 0;
         return lex3d_bag_time{static_cast<std::uint32_t>(t / 1000000000ULL), static_cast<std::uint32_t>(t % 1000000000ULL)};
       },
-      frame_id, out);
+      frame_id, options, out);
   return {};
 }
 

@@ -5,6 +5,7 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <new>
@@ -14,6 +15,16 @@
 #include "io/sensor_log_internal.hpp"
 
 namespace lex3d::io {
+
+void detail::drop_second_returns(SensorLog& log) {
+  for (Cloud& c : log.scans) {
+    const auto it = std::find_if(c.fields.begin(), c.fields.end(), [](const IntegerField& f) { return f.name == "return"; });
+    if (it == c.fields.end()) continue;
+    const std::vector<std::int32_t> which = it->values;
+    c.fields.erase(it);
+    keep_cloud_points(c, [&](std::size_t i) { return which[i] == 0; });
+  }
+}
 
 namespace {
 
@@ -71,6 +82,7 @@ StatusOr<SensorLog> read_sensor_log_impl(const std::string& path, const ReadOpti
     s = detail::decode_ouster(path, metadata, datagrams, log);
   }
   if (!s.ok()) return s;
+  if (options.single_return) detail::drop_second_returns(log);
   if (log.scans.empty())
     return bad_data(detail::msg(path, "no complete turn: " + std::to_string(log.info.lidar_packets) + " " + log.info.sensor +
                                           " packets, " + std::to_string(log.info.incomplete_frames) +

@@ -41,6 +41,10 @@ inline std::optional<ScanStamp> capture_stamp(std::uint64_t captured_ns) {
   return s;
 }
 
+/// Drops the second returns of a dual-return log's turns (the points whose `return` field is
+/// 1) and the field itself, for ReadOptions::single_return; they stay counted.
+void drop_second_returns(SensorLog& log);
+
 /// Reads every UDP/IPv4 datagram of a libpcap/pcapng capture (Ethernet with VLAN tags,
 /// Linux cooked, raw IP or BSD loopback link types), reassembling IPv4 fragments. Fills the
 /// capture counters of `info`. A datagram whose headers claim more bytes than were captured

@@ -322,6 +322,19 @@ TEST(SensorLog, EveryOusterCaptureDecodesAndTheGeometryReproducesEveryPoint) {
       }
       EXPECT_EQ(seconds, log.info.second_returns);
       EXPECT_GT(behind, 0U);
+      // read with single_return: the strongest returns alone, one a pixel
+      ReadOptions first = o;
+      first.single_return = true;
+      auto single = read_sensor_log(shared_data(std::string("ouster/") + k.pcap), first);
+      ASSERT_TRUE(single.ok()) << single.status().to_string();
+      std::size_t firsts = 0;
+      for (const Cloud& c : log.scans) firsts += c.size();
+      for (const Cloud& c : single.value().scans) {
+        EXPECT_EQ(c.field("return"), nullptr);
+        EXPECT_FALSE(pixel_points(c).empty());
+        firsts -= c.size();
+      }
+      EXPECT_EQ(firsts, seconds);
     } else {
       EXPECT_EQ(log.info.second_returns, 0U);
     }
@@ -706,6 +719,22 @@ TEST(SensorLog, DualReturnPacketsKeepBothReturns) {
     ASSERT_NEAR(a.time[i], b.time[i], 0.5e-6) << i;
   }
   expect_velodyne_times(b, 55.296);
+  // read with single_return: the last returns alone, as the single-return turn, organised
+  ReadOptions one;
+  one.single_return = true;
+  const SensorLog lasts = decode_edited(c, "dual_single.pcap", one);
+  ASSERT_EQ(lasts.scans.size(), 1U);
+  const Cloud& l = lasts.scans[0];
+  EXPECT_EQ(lasts.info.second_returns, dual.info.second_returns);  // still counted
+  EXPECT_TRUE(l.fields.empty());
+  ASSERT_EQ(l.size(), b.size());
+  for (std::size_t i = 0; i < l.size(); ++i) {
+    ASSERT_EQ(l.points[i], b.points[i]);
+    ASSERT_EQ(l.column[i], b.column[i]);
+    ASSERT_EQ(l.time[i], b.time[i]);
+  }
+  EXPECT_FALSE(io::pixel_points(l).empty());
+  EXPECT_TRUE(io::pixel_points(all).empty());
   // the moved returns of the kept turn (a share of all moved ones: 1.12 turns captured)
   EXPECT_GT(dual.info.second_returns, a.size() / 20);
   EXPECT_LT(dual.info.second_returns, moved);

@@ -69,6 +69,11 @@ struct ReadOptions {
   std::string sensor_model;
   /// For a ROS bag (io/rosbag.hpp): the topic to read; empty: its only point cloud topic.
   std::string bag_topic;
+  /// For a dual-return capture (kPcap, or a bag of packets): keep one return a pixel, the
+  /// one a single-return capture gives (Ouster's strongest, Velodyne's last), as an
+  /// organised turn; the second returns are counted (SensorLogInfo::second_returns), not
+  /// kept. Off: they are points of their own with a `return` field.
+  bool single_return = false;
 };
 
 struct ReadResult {

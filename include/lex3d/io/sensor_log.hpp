@@ -14,7 +14,7 @@
 ///   Intensity is the reflectivity channel. Zero-range pixels are no-returns (counted, not
 ///   points); the dual profile's second returns are points of their own at their pixel
 ///   (their reflectivity and signal), marked by a uint8 `return` field (0 the strongest, 1
-///   the second strongest). Each point's
+///   the second strongest; ReadOptions::single_return drops them). Each point's
 ///   time is its measurement column's timestamp less the frame's first (`t`, uint32 ns, as
 ///   Ouster's ROS driver gives it); a frame whose timestamps span more than 2^32 ns has none.
 /// - Velodyne VLP-16, Puck Hi-Res, HDL-32E and VLP-32C, single or dual return (dual: the
