@@ -129,7 +129,8 @@ std::string path_of(const py::handle& obj) {
   return p.cast<std::string>();
 }
 
-Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what) {
+Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what,
+                const io::ReadOptions& options) {
   if (py::isinstance<py::bytes>(scan)) return decode_model_file(to_vector(py::reinterpret_borrow<py::bytes>(scan)), alphabet, what);
   if (!is_path(scan)) return to_cloud(scan, py::none(), what);
   const std::string path = path_of(scan);
@@ -143,7 +144,7 @@ Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabe
   StatusOr<io::ReadResult> r = Status(ErrorCode::kBadData, "");
   {
     py::gil_scoped_release unlocked;
-    r = io::read_cloud(path);
+    r = io::read_cloud(path, options);
   }
   if (!r.ok()) raise(r.status());
   // never drop silently: what the file holds that lex3d does not keep, and what the reader noticed

@@ -11,6 +11,7 @@
 
 #include "lex3d/core/cloud.hpp"
 #include "lex3d/core/status.hpp"
+#include "lex3d/io/io.hpp"
 
 namespace lex3d::python {
 
@@ -29,8 +30,10 @@ Cloud to_cloud(const py::handle& points, const py::object& intensity, const std:
 /// A scan given as an (N, 3) float array, a path (str or os.PathLike: any point cloud
 /// format lex3d reads, or a .lex3dm model file) or the bytes of a model file. `alphabet`:
 /// the alphabet file a model references (may be null). A file's notes and the fields it
-/// drops become UserWarnings naming the file.
-Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what);
+/// drops become UserWarnings naming the file. `options`: how a path is read (a capture's
+/// metadata, a bag's topic, a dual-return capture's single_return).
+Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what,
+                const io::ReadOptions& options = {});
 
 /// True for str and os.PathLike objects.
 bool is_path(const py::handle& obj);

@@ -184,14 +184,21 @@ py::object compress(const py::object& points, const py::object& intensity, std::
                     const std::string& coding, bool keep_all_points, const std::optional<py::bytes>& alphabet,
                     double word_radius, int iterations, std::uint64_t seed, int threads, bool report,
                     const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields,
-                    const py::object& ring, const py::object& time, const py::object& stamp) {
+                    const py::object& ring, const py::object& time, const py::object& stamp,
+                    const std::string& metadata, const std::string& topic, bool single_return) {
   // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept).
   const bool from_file = lex3d::python::is_path(points);
   if (from_file && !intensity.is_none()) throw py::value_error("intensity goes with an array of points, not a path");
   if (from_file && !fields.is_none()) throw py::value_error("fields go with an array of points, not a path");
   if (from_file && (!ring.is_none() || !time.is_none()))
     throw py::value_error("ring and time go with an array of points, not a path");
-  lex3d::Cloud cloud = from_file ? lex3d::python::scan_from(points, nullptr, "points")
+  if (!from_file && (!metadata.empty() || !topic.empty() || single_return))
+    throw py::value_error("metadata, topic and single_return go with a path, not an array of points");
+  lex3d::io::ReadOptions read;
+  read.metadata_path = metadata;
+  read.bag_topic = topic;
+  read.single_return = single_return;
+  lex3d::Cloud cloud = from_file ? lex3d::python::scan_from(points, nullptr, "points", read)
                                  : lex3d::python::to_cloud(points, intensity, "points");
   if (!fields.is_none()) add_fields(cloud, fields);
   if (!ring.is_none()) add_ring(cloud, ring);
@@ -401,7 +408,7 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("seed") = lex3d::LearnParams{}.seed, py::arg("threads") = 2, py::arg("report") = false,
         py::arg("sensor") = py::none(), py::arg("fields") = py::none(),
         py::arg("drop_fields") = std::vector<std::string>{}, py::arg("ring") = py::none(), py::arg("time") = py::none(),
-        py::arg("stamp") = py::none(),
+        py::arg("stamp") = py::none(), py::arg("metadata") = "", py::arg("topic") = "", py::arg("single_return") = false,
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
@@ -423,6 +430,9 @@ stamp: optional dict {"sec": int, "nsec": int, "frame_id": str} (nsec and frame_
     when and in which frame the scan was taken, as a ROS message header's; the file keeps it
     (lex3d.stamp reads it back). A path's own stamp (a bag's message, a capture's turn) is kept
     without it.
+metadata, topic, single_return: how a path is read, as `lex3d compress`'s --metadata (a pcap's
+    Ouster metadata JSON or Velodyne calibration), --topic (a ROS bag's) and --single-return (a
+    dual-return capture's first returns only); a capture or bag gives its first scan.
 drop_fields: names of fields not to keep ('intensity', 'ring', 'time', 'rgb' or a named
     field's, as report lists them), like `compress --drop-field`.
 max_error: residual-layer bound in metres, [1e-4, 10]: every point has a decoded point within it

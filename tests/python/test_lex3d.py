@@ -197,6 +197,23 @@ def test_a_scans_stamp_and_frame_are_kept(small):
         lex3d.stamp(data[: len(data) // 2])
 
 
+def test_a_path_is_read_with_the_commands_read_options(small, tmp_path):
+    """compress(path, metadata=, topic=, single_return=) reads as --metadata, --topic and
+    --single-return do; they go with a path only; a missing or bad metadata file raises."""
+    pcap = str(SAMPLES / "vlp16_velodyne_example.pcap")
+    plain = lex3d.compress(pcap, max_error=0.05, threads=1)
+    assert lex3d.compress(pcap, max_error=0.05, threads=1, single_return=True) == plain  # single return already
+    with pytest.raises(ValueError, match="go with a path"):
+        lex3d.compress(small, max_error=0.05, single_return=True)
+    with pytest.raises(OSError, match="missing.json"):
+        lex3d.compress(pcap, max_error=0.05, metadata=str(tmp_path / "missing.json"))
+    # a calibration given is read: a VLP-16 db.xml whose lasers are not the packets' model's
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<boost_serialization><DB><enabled_><count>16</count></enabled_></DB></boost_serialization>")
+    with pytest.raises(ValueError, match="bad.xml"):
+        lex3d.compress(pcap, max_error=0.05, metadata=str(bad))
+
+
 def test_corrupt_and_truncated_files_raise_value_error(small):
     data = lex3d.compress(small, max_error=0.02)
     for n in (0, 3, len(data) // 2, len(data) - 1):
