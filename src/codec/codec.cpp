@@ -61,12 +61,12 @@ constexpr std::size_t kVoxelContextsOffset = 65;
 constexpr char kGeorType[] = "GEOR";
 constexpr std::uint16_t kGeorMinor = 5;
 constexpr std::uint64_t kGeorFixedBytes = 96;
-/// The point attributes chunk and the first minor version that has it (model.md §2.10).
-constexpr char kAttrType[] = "ATTR";
 /// The scan's stamp and frame (model.md §2.13): an optional chunk, so no format version.
 constexpr char kScanType[] = "scan";
 constexpr std::size_t kScanHeadBytes = 15;     // source u8, sec u64, nsec u32, frame length u16
 constexpr std::size_t kMaxFrameIdBytes = 1024;
+/// The point attributes chunk and the first minor version that has it (model.md §2.10).
+constexpr char kAttrType[] = "ATTR";
 constexpr std::uint16_t kAttrMinor = 6;
 /// An ATTR chunk holding a named integer field (kind 5) or colour coded as differences
 /// (rgb `transform` 1) and the first minor version that has them (model.md §2.10).

@@ -352,7 +352,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
     // reflectivity and signal (the near-infrared is the pixel's): `return` says which (0 the
     // strongest, 1 the second strongest).
     const bool dual = m.profile == Profile::kDual;
-    if (dual) cloud.fields.push_back({"return", {}, FieldType::kUint8});
+    if (dual) cloud.fields.push_back({kReturnField, {}, FieldType::kUint8});
     for (IntegerField& x : cloud.fields) x.values.reserve(pixels);
     // Each point's time: its measurement column's timestamp from the frame's first (as
     // Ouster's ROS driver gives `t`, uint32 nanoseconds). A frame whose timestamps run

@@ -18,7 +18,7 @@ namespace lex3d::io {
 
 void detail::drop_second_returns(SensorLog& log) {
   for (Cloud& c : log.scans) {
-    const auto it = std::find_if(c.fields.begin(), c.fields.end(), [](const IntegerField& f) { return f.name == "return"; });
+    const auto it = std::find_if(c.fields.begin(), c.fields.end(), [](const IntegerField& f) { return f.name == kReturnField; });
     if (it == c.fields.end()) continue;
     const std::vector<std::int32_t> which = it->values;
     c.fields.erase(it);

@@ -31,6 +31,10 @@ struct Datagram {
   std::vector<std::uint8_t> payload;
 };
 
+/// The named field of a dual-return turn's points saying which return each is (uint8: 0 the
+/// sensor's first, 1 its second), written by the decoders and read by drop_second_returns.
+constexpr char kReturnField[] = "return";
+
 /// A turn's stamp from the capture time of its first packet (nullopt where not known).
 inline std::optional<ScanStamp> capture_stamp(std::uint64_t captured_ns) {
   if (captured_ns == 0) return std::nullopt;

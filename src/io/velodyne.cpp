@@ -604,7 +604,7 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     cloud.columns = columns;
     IntegerField* which = nullptr;  // dual return: each point's return (0 last, 1 the other)
     if (dual) {
-      cloud.fields.push_back({"return", {}, FieldType::kUint8});
+      cloud.fields.push_back({kReturnField, {}, FieldType::kUint8});
       which = &cloud.fields.back();
     }
     SensorGeometry g;
