@@ -1446,7 +1446,14 @@ void set_motion(LaserTable& t, const TurnMotion& m) {
 /// their points' RMS distance) are merged, cones left with too few points dropped. This
 /// keeps lasers whose beams start at different heights (a HDL-64E's two blocks) whole where
 /// elevations seen from one height split or merge them. `z_rms`: the points' RMS distance
-/// (in z) from their cones.
+/// (in z) from their cones. False where the rounds do not settle within kConeRounds: the
+/// points do not lie on cones.
+/// (On the shared scans and the lidars re-sampled from them, the rounds settled within 2-5
+/// rounds where the points lie on cones; on scans that the sensor's motion moved off them
+/// (KITTI's), balm's non-spinning scans and the VLS-128 re-sampled from KITTI they did not
+/// settle in 12, and the lasers by elevation were coded instead, or as small.)
+constexpr int kConeRounds = 8;
+
 bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers, double& z_rms) {
   const std::vector<Eigen::Vector3d>& p = scan.p;
   const std::vector<double>& rho = scan.rho;
@@ -1565,7 +1572,8 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
     }
   };
   assign(true, work);
-  for (int round = 0; round < 12; ++round) {
+  bool converged = false;
+  for (int round = 0; round < kConeRounds; ++round) {
     const std::size_t m = T.size();
     std::vector<double> sr(m, 0), sz(m, 0), srr(m, 0), srz(m, 0), cnt(m, 0), r0(m, 1e30), r1(m, 0);
     for (std::uint32_t i : work) {
@@ -1631,8 +1639,12 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
     assign(false, work);
     std::size_t changed = 0;
     for (std::size_t k = 0; k < work.size(); ++k) changed += before[k] != ring[work[k]] ? 1 : 0;
-    if (!merged && changed == 0) break;
+    if (!merged && changed == 0) {
+      converged = true;
+      break;
+    }
   }
+  if (!converged) return false;
   assign(true, all);
   assign(false, all);
   lasers = static_cast<std::uint32_t>(T.size());
