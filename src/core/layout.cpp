@@ -18,15 +18,46 @@ struct Direction {
   bool valid = false;
 };
 
-/// The share of sampled pairs (i, i + gap), both real returns, in about the same direction.
-double share_alike(const std::vector<Direction>& d, std::size_t gap, bool same_azimuth_too) {
+/// The points' directions, each worked out the first time it is asked for: the tests
+/// below sample a few tens of thousands of pairs, and most clouds fail them.
+class Directions {
+ public:
+  explicit Directions(const std::vector<Eigen::Vector3f>& points) : points_(points), d_(points.size()), done_(points.size(), 0) {}
+  [[nodiscard]] std::size_t size() const { return d_.size(); }
+  const Direction& operator[](std::size_t i) {
+    if (done_[i] == 0) {
+      done_[i] = 1;
+      const Eigen::Vector3d p = points_[i].cast<double>();
+      const double rho = std::hypot(p.x(), p.y());
+      if (rho > 0.3 && p.allFinite())
+        d_[i] = {static_cast<float>(std::atan2(p.z(), rho)), static_cast<float>(std::atan2(p.y(), p.x())), true};
+    }
+    return d_[i];
+  }
+
+ private:
+  const std::vector<Eigen::Vector3f>& points_;
+  std::vector<Direction> d_;
+  std::vector<std::uint8_t> done_;
+};
+
+/// Whether `misses` among at most `total` sampled pairs already leave the share alike below
+/// `need` (with a pair to spare for rounding).
+bool out_of_reach(std::size_t misses, std::size_t total, double need) {
+  return need > 0.0 && static_cast<double>(misses) > (1.0 - need) * static_cast<double>(total) + 1.0;
+}
+
+/// The share of sampled pairs (i, i + gap), both real returns, in about the same direction;
+/// 0 as soon as it cannot reach `need` (where given).
+double share_alike(Directions& d, std::size_t gap, bool same_azimuth_too, double need = 0.0) {
   if (gap >= d.size()) return 0.0;
   const std::size_t pairs = d.size() - gap;
   const std::size_t stride = std::max<std::size_t>(1, pairs / kMaxPairs);
+  const std::size_t total = (pairs + stride - 1) / stride;
   std::size_t alike = 0, seen = 0;
   for (std::size_t i = 0; i < pairs; i += stride) {
-    const Direction& a = d[i];
-    const Direction& b = d[i + gap];
+    const Direction a = d[i];
+    const Direction b = d[i + gap];
     if (!a.valid || !b.valid) continue;
     ++seen;
     double daz = std::abs(static_cast<double>(a.azimuth) - b.azimuth);
@@ -34,6 +65,8 @@ double share_alike(const std::vector<Direction>& d, std::size_t gap, bool same_a
     if (std::abs(static_cast<double>(a.elevation) - b.elevation) < kSameElevation &&
         (!same_azimuth_too || daz < kSameAzimuth))
       ++alike;
+    else if (out_of_reach(seen - alike, total, need))
+      return 0.0;
   }
   return seen >= 64 ? static_cast<double>(alike) / static_cast<double>(seen) : 0.0;
 }
@@ -43,13 +76,7 @@ double share_alike(const std::vector<Direction>& d, std::size_t gap, bool same_a
 std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f>& points) {
   const std::size_t n = points.size();
   if (n < 256) return std::nullopt;
-  std::vector<Direction> d(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3d p = points[i].cast<double>();
-    const double rho = std::hypot(p.x(), p.y());
-    if (!(rho > 0.3) || !p.allFinite()) continue;
-    d[i] = {static_cast<float>(std::atan2(p.z(), rho)), static_cast<float>(std::atan2(p.y(), p.x())), true};
-  }
+  Directions d(points);
   const double neighbours_alike = share_alike(d, 1, false);
   OrderLayout layout;
   bool found = false;
@@ -57,7 +84,7 @@ std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f
   if (neighbours_alike < 0.5)
     for (std::uint32_t l = 2; l <= 1024 && !found; ++l) {
       if (n % l != 0 || n / l < 16) continue;
-      if (share_alike(d, l, true) >= 0.9) {
+      if (share_alike(d, l, true, 0.9) >= 0.9) {
         layout.lasers = l;
         layout.columns = static_cast<std::uint32_t>(n / l);
         layout.firing_major = true;
@@ -73,13 +100,17 @@ std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f
       // a row apart: same azimuth, another elevation
       const std::size_t pairs = n - w;
       const std::size_t stride = std::max<std::size_t>(1, pairs / kMaxPairs);
+      const std::size_t total = (pairs + stride - 1) / stride;
       std::size_t same_az = 0, seen = 0;
       for (std::size_t i = 0; i < pairs; i += stride) {
-        if (!d[i].valid || !d[i + w].valid) continue;
+        const Direction a = d[i];
+        const Direction b = d[i + w];
+        if (!a.valid || !b.valid) continue;
         ++seen;
-        double daz = std::abs(static_cast<double>(d[i].azimuth) - d[i + w].azimuth);
+        double daz = std::abs(static_cast<double>(a.azimuth) - b.azimuth);
         daz = std::min(daz, 2.0 * kPi - daz);
         if (daz < kSameAzimuth) ++same_az;
+        else if (out_of_reach(seen - same_az, total, 0.9)) break;
       }
       if (seen >= 64 && static_cast<double>(same_az) >= 0.9 * static_cast<double>(seen)) {
         layout.lasers = rows;
@@ -92,7 +123,7 @@ std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f
   // Lasers numbered from the top beam down by the median elevation of their points.
   std::vector<std::vector<float>> el(layout.lasers);
   for (std::size_t i = 0; i < n; ++i)
-    if (d[i].valid) el[layout.firing_major ? i % layout.lasers : i / layout.columns].push_back(d[i].elevation);
+    if (const Direction& a = d[i]; a.valid) el[layout.firing_major ? i % layout.lasers : i / layout.columns].push_back(a.elevation);
   std::vector<float> median(layout.lasers, 0.0F);
   for (std::uint32_t l = 0; l < layout.lasers; ++l) {
     auto& v = el[l];

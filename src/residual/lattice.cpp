@@ -207,21 +207,23 @@ std::optional<Lattice> find_lattice(const std::vector<Eigen::Vector3f>& input, c
   std::size_t aligned = 0;
   for (const std::uint32_t k : sample) {
     const auto [cx, cy] = key(input[k].x(), input[k].y());
+    // (by squared distance, its root taken once: a lidar scan crowds thousands of points into
+    // the cells near its sensor)
     double best = std::numeric_limits<double>::infinity(), bx = 0.0, by = 0.0;
     for (std::int64_t dx = -1; dx <= 1; ++dx)
       for (std::int64_t dy = -1; dy <= 1; ++dy)
         in_cell(cx + dx, cy + dy, [&](std::uint32_t m) {
           const double vx = static_cast<double>(input[m].x()) - input[k].x();
           const double vy = static_cast<double>(input[m].y()) - input[k].y();
-          const double d = std::hypot(vx, vy);
-          if (d > 0.0 && d < best) {
-            best = d;
+          const double d2 = vx * vx + vy * vy;
+          if ((vx != 0.0 || vy != 0.0) && d2 < best) {
+            best = d2;
             bx = vx;
             by = vy;
           }
         });
     if (!std::isfinite(best)) continue;
-    nearest.push_back(best);
+    nearest.push_back(std::hypot(bx, by));
     aligned += std::min(std::abs(bx), std::abs(by)) < 0.25 * std::max(std::abs(bx), std::abs(by)) ? 1 : 0;
   }
   if (nearest.size() < 32 || 4 * aligned < 3 * nearest.size()) return std::nullopt;
