@@ -1144,12 +1144,27 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
     far.swap(sample);
   }
   double best_h = 0.0, best_sharp = -1.0;
+  // (the search bins the elevations' tangents, kBin wide: as fine as kBin at the horizon and
+  // finer above and below it, with no arc tangent a point; points steeper than kSteep, no
+  // spinning lidar's beams, left out)
+  constexpr double kSteep = 6.0;  // tan 80.5°
+  std::vector<double> tan_hist;
   const auto sharpness = [&](double h) {
-    std::vector<double> hist;
-    double lo = 0;
-    histogram(h, hist, lo);
+    double mn = kSteep, mx = -kSteep;
+    elevation.clear();
+    for (const std::uint32_t i : far) {
+      const double t = (p[i].z() - h) / rho[i];
+      if (!(std::abs(t) <= kSteep)) continue;
+      elevation.push_back(t);
+      mn = std::min(mn, t);
+      mx = std::max(mx, t);
+    }
+    if (elevation.empty()) return;
+    const double lo = mn - 4 * kBin;
+    tan_hist.assign(static_cast<std::size_t>((mx - lo) / kBin) + 8, 0.0);
+    for (const double t : elevation) tan_hist[static_cast<std::size_t>((t - lo) / kBin)] += 1.0;
     double sharp = 0;
-    for (double c : hist) sharp += c * c;
+    for (double c : tan_hist) sharp += c * c;
     if (sharp > best_sharp) {
       best_sharp = sharp;
       best_h = h;
