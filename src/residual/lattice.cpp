@@ -203,9 +203,11 @@ std::optional<Lattice> find_lattice(const std::vector<Eigen::Vector3f>& input, c
   std::vector<std::uint32_t> sample;
   for (std::size_t k = 0; k < coded.size(); k += stride) sample.push_back(coded[k]);
   // Each sampled point's nearest neighbour: on a lattice, mostly along x or y.
+  // (stopped once more than a quarter of the sample is not aligned: the test below fails)
   std::vector<double> nearest;
   std::size_t aligned = 0;
   for (const std::uint32_t k : sample) {
+    if (4 * (nearest.size() - aligned) > sample.size()) return std::nullopt;
     const auto [cx, cy] = key(input[k].x(), input[k].y());
     // (by squared distance, its root taken once: a lidar scan crowds thousands of points into
     // the cells near its sensor)
