@@ -12,6 +12,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
+#include <mutex>
 #include <sstream>
 #include <sys/stat.h>
 #include <thread>
@@ -261,6 +263,63 @@ std::string ScanLoader::stem(std::size_t i) const {
   return s;
 }
 
+/// A raw log's turns for ScanLoader::load, read from the capture as they are asked for (the
+/// capture is never held whole). Turns come in about their order, two at once with two
+/// threads: a turn read on the way to another, up to two before it, is held for its caller;
+/// one asked for behind the reader opens the capture again.
+class ScanLoader::LogTurns {
+ public:
+  LogTurns(std::string path, io::ReadOptions options) : path_(std::move(path)), options_(std::move(options)) {}
+
+  /// Reads the whole capture once: each turn's frame id and capture time (the turns' names),
+  /// and every error the capture holds, before any scan is coded.
+  void survey(std::vector<std::uint64_t>& frame_ids, std::vector<std::uint64_t>& captured_ns) {
+    auto reader = open();
+    for (;;) {
+      auto t = reader->next();
+      if (!t.ok()) throw CliError(exit_code_for(t.status().code()) == 1 ? 1 : 2, t.status().to_string());
+      if (!t.value()) break;
+      frame_ids.push_back(t.value()->frame_id);
+      captured_ns.push_back(t.value()->captured_ns);
+    }
+  }
+
+  Cloud turn(std::size_t k) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (const auto it = held_.find(k); it != held_.end()) {
+      Cloud c = std::move(it->second);
+      held_.erase(it);
+      return c;
+    }
+    if (!reader_ || k < next_) {
+      reader_ = open();
+      next_ = 0;
+    }
+    for (;;) {
+      auto t = reader_->next();
+      if (!t.ok()) throw CliError(2, t.status().to_string());
+      if (!t.value()) throw CliError(2, path_ + ": turn " + std::to_string(k) + " is no longer in the capture");
+      const std::size_t at = next_++;
+      if (at == k) return std::move(t.value()->cloud);
+      if (at + 2 >= k) held_[at] = std::move(t.value()->cloud);
+    }
+  }
+
+ private:
+  std::unique_ptr<io::SensorLogReader> open() const {
+    auto r = io::SensorLogReader::open(path_, options_);
+    if (!r.ok()) throw CliError(exit_code_for(r.status().code()) == 1 ? 1 : 2, r.status().to_string());
+    return std::move(r).value();
+  }
+
+  std::string path_;
+  io::ReadOptions options_;
+  std::mutex mutex_;
+  std::unique_ptr<io::SensorLogReader> reader_;
+  std::size_t next_ = 0;  // the turn reader_ gives next
+  std::map<std::size_t, Cloud> held_;
+};
+
 ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path,
                        bool points_in_world)
     : ScanLoader(paths, read_options(format, "", ""), poses_path, points_in_world) {}
@@ -276,16 +335,14 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
       continue;
     }
     if (!log) {
-      entries_.push_back({path, path, nullptr, 0, ""});
+      entries_.push_back({path, path, nullptr, 0, "", nullptr});
       continue;
     }
-    auto r = io::read_sensor_log(path, options);
-    if (!r.ok()) throw CliError(exit_code_for(r.status().code()) == 1 ? 1 : 2, r.status().to_string());
-    auto turns = std::make_shared<const std::vector<Cloud>>(std::move(r.value().scans));
-    const auto& ids = r.value().frame_ids;
-    const auto& captured = r.value().captured_ns;
+    auto turns = std::make_shared<LogTurns>(path, options);
+    std::vector<std::uint64_t> ids, captured;
+    turns->survey(ids, captured);
     const std::string stem = std::filesystem::path(path).stem().string();
-    for (std::size_t k = 0; k < turns->size(); ++k) {
+    for (std::size_t k = 0; k < ids.size(); ++k) {
       // (a turn whose capture time is known is named with it, as a bag's message with its
       // stamp: a bag written from the scans is stamped with it)
       std::string name = path + " turn " + std::to_string(k) + " (frame " + std::to_string(ids[k]), scan_stem;
@@ -294,7 +351,7 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
         name += ", captured " + stamp;
         scan_stem = stem + "_turn" + std::to_string(k) + "_" + stamp;
       }
-      entries_.push_back({path, name + ")", turns, k, scan_stem});
+      entries_.push_back({path, name + ")", nullptr, k, scan_stem, turns});
     }
   }
   if (points_in_world && poses_path.empty())
@@ -328,7 +385,7 @@ void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options
     const std::string stamp = stamp_text(bag.scans[k].stamp_sec, bag.scans[k].stamp_nsec);
     const char* what = bag.type == "sensor_msgs/PointCloud2" ? " message " : " frame ";
     entries_.push_back({path, path + " " + bag.topic + what + std::to_string(k) + " (stamp " + stamp + ")", shared, k,
-                        stem + "_" + stamp});
+                        stem + "_" + stamp, nullptr});
   }
 }
 
@@ -343,7 +400,7 @@ std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans) {
 
 Cloud ScanLoader::load(std::size_t i) const {
   const Entry& e = entries_.at(i);
-  Cloud cloud = e.turns ? (*e.turns)[e.turn] : load_cloud(e.path, options_).cloud;
+  Cloud cloud = e.log ? e.log->turn(e.turn) : e.turns ? (*e.turns)[e.turn] : load_cloud(e.path, options_).cloud;
   set_current_file(e.name);
   if (!poses_.empty()) {
     if (points_in_world_) {

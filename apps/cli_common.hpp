@@ -146,12 +146,14 @@ class ScanLoader {
   [[nodiscard]] std::string stem(std::size_t i) const;
 
  private:
+  class LogTurns;
   struct Entry {
     std::string path;
     std::string name;
-    std::shared_ptr<const std::vector<Cloud>> turns;  // raw log or ROS bag: its scans
+    std::shared_ptr<const std::vector<Cloud>> turns;  // ROS bag: its scans
     std::size_t turn = 0;
     std::string stem;  // ROS bag: "<stem>_<sec>.<nsec>", the message's stamp
+    std::shared_ptr<LogTurns> log;  // raw log: read turn by turn as the scans are loaded
   };
   void add_bag(const std::string& path, const io::ReadOptions& options);
   std::vector<Entry> entries_;

@@ -413,10 +413,43 @@ void info_bag(const InfoOptions& o) {
 }
 
 void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
-  auto r = io::read_sensor_log(o.path, ro);
-  if (!r.ok()) throw CliError(exit_code_for(r.status().code()), r.status().to_string());
-  const io::SensorLog& log = r.value();
-  const io::SensorLogInfo& i = log.info;
+  // (turn by turn: what each turn shows, not its points, is kept)
+  struct Turn {
+    std::uint64_t frame_id = 0, captured_ns = 0;
+    std::size_t points = 0, no_returns = 0;
+    std::uint32_t rows = 0, columns = 0;
+    bool timed = false;
+    double time_lo = 0.0, time_hi = 0.0;
+    std::string time_name;
+    FieldType time_type = FieldType::kFloat64;
+  };
+  std::vector<Turn> turns;
+  auto reader = io::SensorLogReader::open(o.path, ro);
+  if (!reader.ok()) throw CliError(exit_code_for(reader.status().code()), reader.status().to_string());
+  for (;;) {
+    auto next = reader.value()->next();
+    if (!next.ok()) throw CliError(exit_code_for(next.status().code()), next.status().to_string());
+    if (!next.value()) break;
+    const io::SensorTurn& t = *next.value();
+    const Cloud& c = t.cloud;
+    Turn u;
+    u.frame_id = t.frame_id;
+    u.captured_ns = t.captured_ns;
+    u.points = c.size();
+    u.no_returns = t.no_returns;
+    u.rows = c.rows;
+    u.columns = c.columns;
+    if (c.has_time()) {
+      const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
+      u.timed = true;
+      u.time_lo = *lo;
+      u.time_hi = *hi;
+      u.time_name = c.time_source.name;
+      u.time_type = c.time_source.type;
+    }
+    turns.push_back(std::move(u));
+  }
+  const io::SensorLogInfo& i = reader.value()->info();
   if (o.json) {
     Json j;
     j.begin_object();
@@ -431,19 +464,17 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
     j.value("fragmented_datagrams", i.fragmented_datagrams).value("incomplete_datagrams_dropped", i.incomplete_datagrams);
     j.value("lidar_packets", i.lidar_packets).value("other_packets", i.other_packets);
     j.begin_array("scans");
-    for (std::size_t k = 0; k < log.scans.size(); ++k) {
-      const Cloud& c = log.scans[k];
+    for (const Turn& t : turns) {
       j.begin_object()
-          .value("frame_id", log.frame_ids[k])
-          .value("points", c.size())
-          .value("no_returns", log.no_returns[k])
-          .value("rows", c.rows)
-          .value("columns", c.columns);
-      if (k < log.captured_ns.size() && log.captured_ns[k] > 0) j.value("captured_ns", log.captured_ns[k]);
-      if (c.has_time()) {
-        const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
-        j.begin_object("time_s").value("min", *lo).value("max", *hi);
-        j.value("source_name", c.time_source.name).value("source_type", std::string(field_type_name(c.time_source.type)));
+          .value("frame_id", t.frame_id)
+          .value("points", t.points)
+          .value("no_returns", t.no_returns)
+          .value("rows", t.rows)
+          .value("columns", t.columns);
+      if (t.captured_ns > 0) j.value("captured_ns", t.captured_ns);
+      if (t.timed) {
+        j.begin_object("time_s").value("min", t.time_lo).value("max", t.time_hi);
+        j.value("source_name", t.time_name).value("source_type", std::string(field_type_name(t.time_type)));
         j.end_object();
       }
       j.end_object();
@@ -464,21 +495,19 @@ void info_sensor_log(const InfoOptions& o, const io::ReadOptions& ro) {
   std::printf("packets        %zu lidar, %zu other; %zu capture records, %zu UDP datagrams (%zu reassembled from fragments, %zu cut by the capture dropped)\n",
               i.lidar_packets, i.other_packets, i.pcap_packets, i.udp_datagrams, i.fragmented_datagrams,
               i.incomplete_datagrams);
-  for (std::size_t k = 0; k < log.scans.size(); ++k) {
-    const Cloud& c = log.scans[k];
+  for (std::size_t k = 0; k < turns.size(); ++k) {
+    const Turn& t = turns[k];
     // (each point's time from the turn's first measurement, as the source gives it)
     std::string times;
-    if (c.has_time()) {
-      const auto [lo, hi] = std::minmax_element(c.time.begin(), c.time.end());
+    if (t.timed) {
       char buf[160];
-      std::snprintf(buf, sizeof buf, ", times %.3f .. %.3f ms (%s %s)", *lo * 1e3, *hi * 1e3, c.time_source.name.c_str(),
-                    field_type_name(c.time_source.type));
+      std::snprintf(buf, sizeof buf, ", times %.3f .. %.3f ms (%s %s)", t.time_lo * 1e3, t.time_hi * 1e3, t.time_name.c_str(),
+                    field_type_name(t.time_type));
       times = buf;
     }
-    if (k < log.captured_ns.size() && log.captured_ns[k] > 0) times += ", captured " + stamp_text(log.captured_ns[k]);
+    if (t.captured_ns > 0) times += ", captured " + stamp_text(t.captured_ns);
     std::printf("  turn %-4zu    frame %llu: %zu points, %zu no-returns, %u x %u%s\n", k,
-                static_cast<unsigned long long>(log.frame_ids[k]), c.size(), log.no_returns[k], c.rows, c.columns,
-                times.c_str());
+                static_cast<unsigned long long>(t.frame_id), t.points, t.no_returns, t.rows, t.columns, times.c_str());
   }
 }
 

@@ -222,115 +222,116 @@ struct Frame {
   std::size_t columns_seen = 0;
 };
 
-}  // namespace
-
-Status decode_ouster(const std::string& path, const std::string& metadata_path,
-                     const std::vector<Datagram>& datagrams, SensorLog& log) {
-  auto text = read_file(metadata_path, 64ULL << 20);
-  if (!text.ok()) return text.status();
-  return decode_ouster_packets(path, metadata_path, text.value(), datagrams, false, log);
-}
-
-Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
-                             const std::vector<std::uint8_t>& tb, const std::vector<Datagram>& datagrams,
-                             bool by_size, SensorLog& log, const std::string& topic) {
-  // Where a datagram came from, in error messages.
-  auto record = [&topic](const Datagram& d) {
-    return topic.empty() ? "capture record " + std::to_string(d.record)
-                         : "message " + std::to_string(d.record) + " on " + topic;
-  };
-  const json j = json::parse(tb.begin(), tb.end(), nullptr, false);
-  if (j.is_discarded()) {
-    const std::string s(tb.begin(), tb.end());
-    const bool nan = s.find("NaN") != std::string::npos || s.find("Infinity") != std::string::npos;
-    return bad_data(msg(metadata_path, nan ? "a number is NaN or Infinity (the laser table must be finite numbers)"
-                                           : "not valid JSON"));
+/// The Ouster decoder, fed one datagram at a time: a frame is assembled until a packet of
+/// another frame_id comes, then handed on (SensorTurn) when its columns cover the window.
+class OusterDecoder final : public LogDecoder {
+ public:
+  OusterDecoder(std::string path, std::string metadata_path, Meta meta, bool by_size, std::string topic, SensorLogInfo& info)
+      : path_(std::move(path)), metadata_path_(std::move(metadata_path)), topic_(std::move(topic)), m_(std::move(meta)),
+        info_(info) {
+    info.vendor = "ouster";
+    info.sensor = m_.prod_line.empty() ? "Ouster" : m_.prod_line;
+    info.profile = m_.profile_name;
+    info.metadata_path = metadata_path_;
+    info.lasers = m_.H;
+    info.columns = m_.W;
+    want_ = m_.packet_bytes();
+    expect_ = m_.profile_name + ", " + std::to_string(m_.H) + " beams, " + std::to_string(m_.cpp) +
+              " columns a packet: " + std::to_string(want_) + " bytes";
+    port_ = by_size ? 0 : m_.udp_port_lidar;
+    T_sensor_lidar_.linear() = m_.lidar_to_sensor.topLeftCorner<3, 3>();
+    T_sensor_lidar_.translation() = m_.lidar_to_sensor.topRightCorner<3, 1>() / 1000.0;
+    window_columns_ = m_.window0 <= m_.window1 ? m_.window1 - m_.window0 + 1 : m_.W - m_.window0 + m_.window1 + 1;
+    g_.columns = m_.W;
+    g_.azimuth0 = 0.0;
+    g_.direction = -1;
+    g_.T_sensor_head = T_sensor_lidar_;
+    g_.source = "metadata";
+    g_.sensor = info.sensor;
+    const double two_pi = 2.0 * M_PI;
+    for (std::uint32_t l = 0; l < m_.H; ++l) {
+      g_.elevation.push_back(m_.altitude_deg[l] * M_PI / 180.0);
+      g_.beam_azimuth.push_back(-m_.azimuth_deg[l] * M_PI / 180.0);
+      g_.column_azimuth.push_back(two_pi * m_.shift[l] / m_.W);
+      g_.z_offset.push_back(m_.z_mm / 1000.0);
+      g_.radial_offset.push_back(m_.n_mm / 1000.0);
+    }
   }
-  Meta m;
-  try {
-    m = parse_meta(j);
-  } catch (const MetaError& e) {
-    return bad_data(msg(metadata_path, e.what));
-  } catch (const json::exception& e) {
-    return bad_data(msg(metadata_path, std::string("unexpected value: ") + printable(e.what(), 120)));
-  }
-  SensorLogInfo& info = log.info;
-  info.vendor = "ouster";
-  info.sensor = m.prod_line.empty() ? "Ouster" : m.prod_line;
-  info.profile = m.profile_name;
-  info.metadata_path = metadata_path;
-  info.lasers = m.H;
-  info.columns = m.W;
-  const std::size_t want = m.packet_bytes();
-  const std::string expect = m.profile_name + ", " + std::to_string(m.H) + " beams, " + std::to_string(m.cpp) +
-                             " columns a packet: " + std::to_string(want) + " bytes";
 
   // Which datagrams are lidar packets: those to the metadata's lidar port, else those of
   // the expected size, else those to Ouster's default port 7502 (to report a mismatch).
-  const int port = by_size ? 0 : m.udp_port_lidar;
-  std::vector<const Datagram*> packets;
-  std::size_t on_default_port = 0, default_port_size = 0;
-  for (const auto& d : datagrams) {
-    if (d.truncated && (port != 0 ? d.dst_port == port : (d.dst_port == 7502 || d.claimed == want)))
-      return bad_data(msg(path, record(d) + ": lidar packet truncated: " +
-                                    std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
-                                    " bytes captured"));
-    if (d.truncated) continue;  // some other datagram, counted below
-    const bool lidar = port != 0 ? d.dst_port == port : d.payload.size() == want;
-    if (lidar) packets.push_back(&d);
-    if (d.dst_port == 7502) {
-      ++on_default_port;
-      default_port_size = d.payload.size();
+  // Lidar packets of another size than the metadata's: an error at the first such packet
+  // where a packet of the right size comes before or after it (a truncated packet), the
+  // metadata's mismatch where none does.
+  Status push(const Datagram& d) override {
+    ++datagrams_;
+    const bool lidar_port = port_ != 0 ? d.dst_port == port_ : (d.dst_port == 7502 || d.claimed == want_);
+    if (d.truncated && lidar_port)
+      return bad_data(msg(path_, record(d) + ": lidar packet truncated: " + std::to_string(d.payload.size()) + " of " +
+                                     std::to_string(d.claimed) + " bytes captured"));
+    if (d.dst_port == 7502 && !d.truncated) {
+      ++on_default_port_;
+      default_port_size_ = d.payload.size();
     }
-  }
-  if (packets.empty()) {
-    if (on_default_port > 0)
-      return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: " +
-                                    std::to_string(on_default_port) + " packets on UDP port 7502 are " +
-                                    std::to_string(default_port_size) + " bytes, the metadata (" + expect + ") needs " +
-                                    std::to_string(want)));
-    return bad_data(msg(path, "no Ouster lidar packets (" + std::to_string(datagrams.size()) + " UDP datagrams, none " +
-                                  (port != 0 ? "to port " + std::to_string(port) : "of " + std::to_string(want) + " bytes") +
-                                  ")"));
-  }
-  std::size_t right_size = 0;
-  for (const Datagram* d : packets) right_size += d->payload.size() == want ? 1 : 0;
-  if (right_size == 0)
-    return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: lidar packets are " +
-                                  std::to_string(packets.front()->payload.size()) + " bytes, the metadata (" + expect + ")"));
-  info.other_packets += datagrams.size() - packets.size();
-
-  const std::size_t HW = static_cast<std::size_t>(m.H) * m.W;
-  std::optional<Frame> cur;
-  const double two_pi = 2.0 * M_PI;
-  const double n_m = m.n_mm / 1000.0;
-  const double z_m = m.z_mm / 1000.0;
-  Eigen::Isometry3d T_sensor_lidar = Eigen::Isometry3d::Identity();
-  T_sensor_lidar.linear() = m.lidar_to_sensor.topLeftCorner<3, 3>();
-  T_sensor_lidar.translation() = m.lidar_to_sensor.topRightCorner<3, 1>() / 1000.0;
-  std::uint32_t window_columns =
-      m.window0 <= m.window1 ? m.window1 - m.window0 + 1 : m.W - m.window0 + m.window1 + 1;
-
-  SensorGeometry g;
-  g.columns = m.W;
-  g.azimuth0 = 0.0;
-  g.direction = -1;
-  g.T_sensor_head = T_sensor_lidar;
-  g.source = "metadata";
-  g.sensor = info.sensor;
-  for (std::uint32_t l = 0; l < m.H; ++l) {
-    g.elevation.push_back(m.altitude_deg[l] * M_PI / 180.0);
-    g.beam_azimuth.push_back(-m.azimuth_deg[l] * M_PI / 180.0);
-    g.column_azimuth.push_back(two_pi * m.shift[l] / m.W);
-    g.z_offset.push_back(z_m);
-    g.radial_offset.push_back(n_m);
+    const bool lidar = !d.truncated && (port_ != 0 ? d.dst_port == port_ : d.payload.size() == want_);
+    if (!lidar) {
+      ++info_.other_packets;
+      return {};
+    }
+    ++packets_;
+    if (d.payload.size() != want_) {
+      if (right_size_) return wrong_size(d.record, d.payload.size());
+      if (!first_wrong_) first_wrong_ = {d.record, d.payload.size()};
+      return {};
+    }
+    right_size_ = true;
+    if (first_wrong_) return wrong_size(first_wrong_->first, first_wrong_->second);
+    return decode(d);
   }
 
-  auto finish = [&](Frame& f) {
+  Status finish() override {
+    if (packets_ == 0) {
+      if (on_default_port_ > 0)
+        return bad_data(msg(path_, "the metadata " + display_path(metadata_path_) + " does not match the packets: " +
+                                       std::to_string(on_default_port_) + " packets on UDP port 7502 are " +
+                                       std::to_string(default_port_size_) + " bytes, the metadata (" + expect_ +
+                                       ") needs " + std::to_string(want_)));
+      return bad_data(msg(path_, "no Ouster lidar packets (" + std::to_string(datagrams_) + " UDP datagrams, none " +
+                                     (port_ != 0 ? "to port " + std::to_string(port_) : "of " + std::to_string(want_) + " bytes") +
+                                     ")"));
+    }
+    if (!right_size_)
+      return bad_data(msg(path_, "the metadata " + display_path(metadata_path_) + " does not match the packets: lidar packets are " +
+                                     std::to_string(first_wrong_ ? first_wrong_->second : 0) + " bytes, the metadata (" +
+                                     expect_ + ")"));
+    if (cur_) finish_frame(*cur_);
+    cur_.reset();
+    return {};
+  }
+
+ private:
+  /// Where a datagram came from, in error messages.
+  [[nodiscard]] std::string record(std::size_t r) const {
+    return topic_.empty() ? "capture record " + std::to_string(r) : "message " + std::to_string(r) + " on " + topic_;
+  }
+  [[nodiscard]] std::string record(const Datagram& d) const { return record(d.record); }
+
+  [[nodiscard]] Status wrong_size(std::size_t r, std::size_t bytes) const {
+    return bad_data(msg(path_, record(r) + ": lidar packet of " + std::to_string(bytes) + " bytes, expected " +
+                                   std::to_string(want_) + " (" + expect_ +
+                                   "; truncated packet or metadata of another mode)"));
+  }
+
+  void finish_frame(Frame& f) {
+    const Meta& m = m_;
+    const SensorGeometry& g = g_;
+    const double two_pi = 2.0 * M_PI;
+    const double n_m = m.n_mm / 1000.0;
+    const double z_m = m.z_mm / 1000.0;
     std::size_t in_window = 0;
     for (std::uint32_t c = 0; c < m.W; ++c) in_window += (f.have[c] != 0 && m.in_window(c)) ? 1 : 0;
-    if (in_window < window_columns) {
-      ++info.incomplete_frames;
+    if (in_window < window_columns_) {
+      ++info_.incomplete_frames;
       return;
     }
     Cloud cloud;
@@ -386,7 +387,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
         if (!m.in_window(mc)) continue;
         const std::size_t k = static_cast<std::size_t>(l) * m.W + mc;
         const std::uint32_t r2_mm = dual ? f.range2_mm[k] : 0;
-        if (r2_mm != 0) ++info.second_returns;
+        if (r2_mm != 0) ++info_.second_returns;
         if (f.range_mm[k] == 0 && r2_mm == 0) {
           ++no_returns;
           continue;
@@ -398,7 +399,7 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
           if (r_mm == 0) continue;
           const double r = r_mm / 1000.0 - n_m;
           const Eigen::Vector3d p(r * ca * cphi + n_m * cos_theta[mc], r * sa * cphi + n_m * sin_theta[mc], r * sphi + z_m);
-          cloud.points.push_back((T_sensor_lidar * p).cast<float>());
+          cloud.points.push_back((T_sensor_lidar_ * p).cast<float>());
           cloud.intensity.push_back(static_cast<float>(ret == 0 ? f.refl[k] : f.refl2[k]));
           if (signal != nullptr) signal->values.push_back(ret == 0 ? f.signal[k] : f.signal2[k]);
           near_ir.values.push_back(f.near_ir[k]);
@@ -409,58 +410,58 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
         }
       }
     }
-    info.no_returns += no_returns;
-    info.points += cloud.size();
-    log.no_returns.push_back(no_returns);
-    log.frame_ids.push_back(f.id);
-    log.captured_ns.push_back(f.captured_ns);
+    info_.no_returns += no_returns;
+    info_.points += cloud.size();
+    ++info_.frames;
+    SensorTurn t;
+    t.no_returns = no_returns;
+    t.frame_id = f.id;
+    t.captured_ns = f.captured_ns;
     cloud.stamp = capture_stamp(f.captured_ns);
-    log.scans.push_back(std::move(cloud));
-  };
+    t.cloud = std::move(cloud);
+    turns.push_back(std::move(t));
+  }
 
-  const std::size_t col_bytes = m.column_bytes();
-  const std::size_t head = m.legacy() ? 0 : 32;
-  const std::size_t col_head = m.legacy() ? 16 : 12;
-  for (const Datagram* d : packets) {
-    const std::vector<std::uint8_t>& b = d->payload;
-    if (b.size() != want)
-      return bad_data(msg(path, record(*d) + ": lidar packet of " +
-                                    std::to_string(b.size()) + " bytes, expected " + std::to_string(want) + " (" + expect +
-                                    "; truncated packet or metadata of another mode)"));
-    ++info.lidar_packets;
+  Status decode(const Datagram& d) {
+    const Meta& m = m_;
+    const std::size_t HW = static_cast<std::size_t>(m.H) * m.W;
+    const std::size_t col_bytes = m.column_bytes();
+    const std::size_t head = m.legacy() ? 0 : 32;
+    const std::size_t col_head = m.legacy() ? 16 : 12;
+    const std::vector<std::uint8_t>& b = d.payload;
+    ++info_.lidar_packets;
     std::uint32_t frame_id = 0;
     if (!m.legacy()) {
       const auto type = le<std::uint16_t>(b.data());
       if (type != 1)
-        return bad_data(msg(path, record(*d) + ": packet type " + std::to_string(type) +
-                                      " is not a lidar data packet"));
+        return bad_data(msg(path_, record(d) + ": packet type " + std::to_string(type) + " is not a lidar data packet"));
       frame_id = le<std::uint16_t>(b.data() + 2);
       std::uint64_t sn = 0;
       std::memcpy(&sn, b.data() + 7, 5);
       if (m.prod_sn != 0 && sn != 0 && sn != m.prod_sn)
-        return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: they come from sensor " +
-                                      std::to_string(sn) + ", the metadata is for " + std::to_string(m.prod_sn)));
+        return bad_data(msg(path_, "the metadata " + display_path(metadata_path_) + " does not match the packets: they come from sensor " +
+                                       std::to_string(sn) + ", the metadata is for " + std::to_string(m.prod_sn)));
     } else {
       frame_id = le<std::uint16_t>(b.data() + 10);
     }
-    if (!cur || cur->id != frame_id) {
-      if (cur) finish(*cur);
-      cur.emplace();
-      cur->id = frame_id;
-      cur->range_mm.assign(HW, 0);
-      cur->refl.assign(HW, 0);
-      cur->signal.assign(HW, 0);
-      cur->near_ir.assign(HW, 0);
+    if (!cur_ || cur_->id != frame_id) {
+      if (cur_) finish_frame(*cur_);
+      cur_.emplace();
+      cur_->id = frame_id;
+      cur_->range_mm.assign(HW, 0);
+      cur_->refl.assign(HW, 0);
+      cur_->signal.assign(HW, 0);
+      cur_->near_ir.assign(HW, 0);
       if (m.profile == Profile::kDual) {
-        cur->range2_mm.assign(HW, 0);
-        cur->refl2.assign(HW, 0);
-        cur->signal2.assign(HW, 0);
+        cur_->range2_mm.assign(HW, 0);
+        cur_->refl2.assign(HW, 0);
+        cur_->signal2.assign(HW, 0);
       }
-      cur->have.assign(m.W, 0);
-      cur->stamp_ns.assign(m.W, 0);
-      cur->captured_ns = d->captured_ns;
+      cur_->have.assign(m.W, 0);
+      cur_->stamp_ns.assign(m.W, 0);
+      cur_->captured_ns = d.captured_ns;
     }
-    Frame& f = *cur;
+    Frame& f = *cur_;
     for (std::uint32_t k = 0; k < m.cpp; ++k) {
       const std::uint8_t* col = b.data() + head + k * col_bytes;
       const auto mid = le<std::uint16_t>(col + 8);
@@ -468,11 +469,11 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
                                     : (le<std::uint16_t>(col + 10) & 1U) != 0;
       if (!valid) continue;
       if (mid >= m.W)
-        return bad_data(msg(path, "the metadata " + display_path(metadata_path) + " does not match the packets: " +
-                                      record(*d) + " has measurement_id " + std::to_string(mid) +
-                                      ", columns_per_frame is " + std::to_string(m.W)));
+        return bad_data(msg(path_, "the metadata " + display_path(metadata_path_) + " does not match the packets: " +
+                                       record(d) + " has measurement_id " + std::to_string(mid) +
+                                       ", columns_per_frame is " + std::to_string(m.W)));
       if (m.legacy() && le<std::uint16_t>(col + 10) != frame_id)
-        return bad_data(msg(path, record(*d) + ": columns of one packet carry different frame ids"));
+        return bad_data(msg(path_, record(d) + ": columns of one packet carry different frame ids"));
       f.have[mid] = 1;
       f.stamp_ns[mid] = le<std::uint64_t>(col);
       for (std::uint32_t l = 0; l < m.H; ++l) {
@@ -510,10 +511,60 @@ Status decode_ouster_packets(const std::string& path, const std::string& metadat
         }
       }
     }
+    return {};
   }
-  if (cur) finish(*cur);
-  info.frames = log.scans.size();
-  return {};
+
+  std::string path_, metadata_path_, topic_;
+  Meta m_;
+  SensorLogInfo& info_;
+  std::size_t want_ = 0;
+  std::string expect_;
+  int port_ = 0;
+  Eigen::Isometry3d T_sensor_lidar_ = Eigen::Isometry3d::Identity();
+  std::uint32_t window_columns_ = 0;
+  SensorGeometry g_;
+  std::optional<Frame> cur_;
+  std::size_t datagrams_ = 0, packets_ = 0, on_default_port_ = 0, default_port_size_ = 0;
+  bool right_size_ = false;
+  std::optional<std::pair<std::size_t, std::size_t>> first_wrong_;  // (record, bytes)
+};
+
+}  // namespace
+
+StatusOr<std::unique_ptr<LogDecoder>> ouster_decoder(const std::string& path, const std::string& metadata_path,
+                                                      const std::vector<std::uint8_t>& tb, bool by_size,
+                                                      SensorLogInfo& info, const std::string& topic) {
+  const json j = json::parse(tb.begin(), tb.end(), nullptr, false);
+  if (j.is_discarded()) {
+    const std::string s(tb.begin(), tb.end());
+    const bool nan = s.find("NaN") != std::string::npos || s.find("Infinity") != std::string::npos;
+    return bad_data(msg(metadata_path, nan ? "a number is NaN or Infinity (the laser table must be finite numbers)"
+                                           : "not valid JSON"));
+  }
+  Meta m;
+  try {
+    m = parse_meta(j);
+  } catch (const MetaError& e) {
+    return bad_data(msg(metadata_path, e.what));
+  } catch (const json::exception& e) {
+    return bad_data(msg(metadata_path, std::string("unexpected value: ") + printable(e.what(), 120)));
+  }
+  return std::unique_ptr<LogDecoder>(std::make_unique<OusterDecoder>(path, metadata_path, std::move(m), by_size, topic, info));
+}
+
+Status decode_ouster(const std::string& path, const std::string& metadata_path,
+                     const std::vector<Datagram>& datagrams, SensorLog& log) {
+  auto text = read_file(metadata_path, 64ULL << 20);
+  if (!text.ok()) return text.status();
+  return decode_ouster_packets(path, metadata_path, text.value(), datagrams, false, log);
+}
+
+Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
+                             const std::vector<std::uint8_t>& tb, const std::vector<Datagram>& datagrams,
+                             bool by_size, SensorLog& log, const std::string& topic) {
+  auto decoder = ouster_decoder(path, metadata_path, tb, by_size, log.info, topic);
+  if (!decoder.ok()) return decoder.status();
+  return decode_all(*decoder.value(), datagrams, log);
 }
 
 }  // namespace lex3d::io::detail

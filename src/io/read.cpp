@@ -198,18 +198,23 @@ std::string pose_path_for(const std::string& path) {
   return path.substr(0, dot) + ".pose";
 }
 
-/// A raw log's first complete turn.
+/// A raw log's first complete turn (the others read to count them, one at a time).
 StatusOr<ReadResult> read_log_first_turn(const std::string& path, const ReadOptions& options) {
-  auto log = read_sensor_log(path, options);
-  if (!log.ok()) return log.status();
-  SensorLog& l = log.value();
+  auto reader = SensorLogReader::open(path, options);
+  if (!reader.ok()) return reader.status();
   ReadResult r;
+  for (;;) {
+    auto turn = reader.value()->next();
+    if (!turn.ok()) return turn.status();
+    if (!turn.value()) break;
+    if (r.scans_in_file++ > 0) continue;
+    r.no_return_dropped = turn.value()->no_returns;
+    r.cloud = std::move(turn.value()->cloud);
+  }
+  const SensorLogInfo& info = reader.value()->info();
   r.format = Format::kPcap;
-  r.encoding = l.info.vendor + " " + l.info.profile;
-  r.sensor = l.info.sensor;
-  r.scans_in_file = l.scans.size();
-  r.no_return_dropped = l.no_returns.front();
-  r.cloud = std::move(l.scans.front());
+  r.encoding = info.vendor + " " + info.profile;
+  r.sensor = info.sensor;
   struct stat st {};
   if (::stat(path.c_str(), &st) == 0) r.file_bytes = static_cast<std::uint64_t>(st.st_size);
   return r;

@@ -4,6 +4,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <deque>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -48,6 +50,57 @@ inline std::optional<ScanStamp> capture_stamp(std::uint64_t captured_ns) {
 /// Drops the second returns of a dual-return log's turns (the points whose `return` field is
 /// 1) and the field itself, for ReadOptions::single_return; they stay counted.
 void drop_second_returns(SensorLog& log);
+
+/// The UDP/IPv4 datagrams of a libpcap/pcapng capture, read one at a time (as
+/// read_udp_datagrams reads them all), counted into the SensorLogInfo given to open().
+class PcapDatagrams {
+ public:
+  PcapDatagrams();
+  ~PcapDatagrams();
+  PcapDatagrams(const PcapDatagrams&) = delete;
+  PcapDatagrams& operator=(const PcapDatagrams&) = delete;
+  Status open(const std::string& path, SensorLogInfo& info);
+  /// The next datagram into `out`: true, or false at the capture's end (after the checks of
+  /// the fragment sets left over).
+  StatusOr<bool> next(Datagram& out);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// A vendor's decoder fed one datagram at a time, in capture order: each turn goes to
+/// `turns` once the packets that follow it close it; SensorLogInfo counts as it goes.
+class LogDecoder {
+ public:
+  virtual ~LogDecoder() = default;
+  /// One datagram (one that is not a lidar packet is counted and skipped).
+  virtual Status push(const Datagram& d) = 0;
+  /// The capture's end: the turn still open, and the checks that need every packet.
+  virtual Status finish() = 0;
+  std::deque<SensorTurn> turns;
+};
+
+/// Feeds every datagram to `decoder`, then finishes it; its turns go into `log`.
+Status decode_all(LogDecoder& decoder, const std::vector<Datagram>& datagrams, SensorLog& log);
+/// Moves the decoder's finished turns into `log`.
+void take_turns(LogDecoder& decoder, SensorLog& log);
+
+/// Ouster: the decoder of the metadata's bytes (`metadata_path` names them in messages);
+/// with `by_size` the lidar packets are the datagrams of the metadata's packet size,
+/// whatever their ports (packets recorded without their UDP headers, as in a ROS bag).
+/// `topic`: the bag topic the datagrams are the messages of (errors name "message N on
+/// TOPIC", N being Datagram::record); empty for a capture ("capture record N").
+StatusOr<std::unique_ptr<LogDecoder>> ouster_decoder(const std::string& path, const std::string& metadata_path,
+                                                      const std::vector<std::uint8_t>& metadata, bool by_size,
+                                                      SensorLogInfo& info, const std::string& topic = {});
+
+/// Velodyne: the decoder (`model` and `calibration` as decode_velodyne takes them). The
+/// model, return mode and packet period are read from the first kVelodyneWindow lidar
+/// packets (the whole capture where it is shorter), held until then.
+std::unique_ptr<LogDecoder> velodyne_decoder(const std::string& path, const std::string& model,
+                                             const std::string& calibration, SensorLogInfo& info);
+constexpr std::size_t kVelodyneWindow = 4096;
 
 /// Reads every UDP/IPv4 datagram of a libpcap/pcapng capture (Ethernet with VLAN tags,
 /// Linux cooked, raw IP or BSD loopback link types), reassembling IPv4 fragments. Fills the

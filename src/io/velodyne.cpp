@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <array>
+#include <deque>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -358,204 +359,275 @@ bool is_velodyne_packet(const std::vector<std::uint8_t>& payload) {
   return payload.size() == kPacketBytes && payload[0] == 0xFF && (payload[1] == 0xEE || payload[1] == 0xDD);
 }
 
-Status decode_velodyne(const std::string& path, const std::string& model_key, const std::string& calibration_path,
-                       const std::vector<Datagram>& datagrams, SensorLog& log) {
-  SensorLogInfo& info = log.info;
-  info.vendor = "velodyne";
-  std::vector<const Datagram*> packets;
-  for (const auto& d : datagrams) {
+namespace {
+
+/// The Velodyne decoder, fed one datagram at a time. The first kVelodyneWindow data packets
+/// (or all, in a shorter capture) are held until the model, return mode and packet period
+/// are read from them; then every packet's firings are queued and each turn handed on
+/// (SensorTurn) as soon as a firing past its 360° comes.
+class VelodyneDecoder final : public LogDecoder {
+ public:
+  VelodyneDecoder(std::string path, std::string model_key, std::string calibration_path, SensorLogInfo& info)
+      : path_(std::move(path)), model_key_(std::move(model_key)), calibration_path_(std::move(calibration_path)),
+        info_(info) {
+    info.vendor = "velodyne";
+  }
+
+  Status push(const Datagram& d) override {
     if (d.truncated && (d.dst_port == 2368 || d.claimed == kPacketBytes ||
                         (d.payload.size() >= 2 && d.payload[0] == 0xFF && (d.payload[1] == 0xEE || d.payload[1] == 0xDD))))
-      return bad_data(msg(path, "capture record " + std::to_string(d.record) + ": Velodyne data packet truncated: " +
-                                    std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
-                                    " bytes captured"));
-    if (is_velodyne_packet(d.payload) && !d.truncated) packets.push_back(&d);
-    else ++info.other_packets;
+      return bad_data(msg(path_, "capture record " + std::to_string(d.record) + ": Velodyne data packet truncated: " +
+                                     std::to_string(d.payload.size()) + " of " + std::to_string(d.claimed) +
+                                     " bytes captured"));
+    if (!is_velodyne_packet(d.payload) || d.truncated) {
+      ++info_.other_packets;
+      return {};
+    }
+    ++info_.lidar_packets;
+    if (!started_) {
+      window_.push_back(d);
+      return window_.size() >= kVelodyneWindow ? start() : Status{};
+    }
+    return packet(d);
   }
-  if (packets.empty()) return bad_data(msg(path, "no Velodyne data packets"));
-  info.lidar_packets = packets.size();
 
-  // A calibration file (db.xml, VeloView's XML or the ROS driver's YAML) gives the lasers'
-  // angles and offsets; an HDL-64E (upper 0xEEFF and lower 0xDDFF blocks) needs one.
-  std::optional<Calibration> calibration;
-  if (!calibration_path.empty()) {
-    auto c = read_calibration(calibration_path);
-    if (!c.ok()) return c.status();
-    calibration = std::move(c).value();
-    info.metadata_path = calibration_path;
+  Status finish() override {
+    if (!started_) {
+      if (window_.empty()) return bad_data(msg(path_, "no Velodyne data packets"));
+      Status s = start();
+      if (!s.ok()) return s;
+    }
+    close_turns(true);
+    if (!turn_columns_.empty()) {
+      std::vector<double> c(turn_columns_.begin(), turn_columns_.end());
+      info_.columns = static_cast<std::uint32_t>(median(c));
+    }
+    return {};
   }
-  bool lower_blocks = false;
-  for (std::size_t k = 0; k < kBlocks; ++k) lower_blocks = lower_blocks || packets.front()->payload[k * 100 + 1] == 0xDD;
-  const bool hdl64 = lower_blocks || to_lower(model_key) == kHdl64.key;
 
-  // The model: the factory byte, checked against the packet period (the firing timing is
-  // fixed per model, the azimuth step is not: it follows the motor speed). An HDL-64E has
-  // no factory byte (its last two bytes are status): its blocks tell it.
-  const std::uint8_t product = packets.front()->payload[1205];
-  const std::uint8_t mode = packets.front()->payload[1204];
-  for (const Datagram* d : packets) {
-    if (!hdl64 && (d->payload[1205] != product || d->payload[1204] != mode))
-      return bad_data(msg(path, "capture record " + std::to_string(d->record) +
-                                    ": the factory bytes change within the capture (two sensors on one port?)"));
-  }
-  std::vector<double> dt;
-  for (std::size_t i = 1; i < packets.size(); ++i) {
-    const double a = le32(packets[i - 1]->payload.data() + 1200);
-    const double b = le32(packets[i]->payload.data() + 1200);
-    if (b > a) dt.push_back(b - a);
-  }
-  const double period_us = median(dt);
-  // Dual-return packets hold half the firings of single-return ones: twice as many.
-  const bool dual = !hdl64 && mode == 0x39;
-  const double packet_share = dual ? 0.5 : 1.0;
-  const auto timing_fits = [&](const Model* m) {
-    return std::isfinite(period_us) && std::abs(period_us - m->packet_us * packet_share) < 0.1 * m->packet_us * packet_share;
-  };
-  const Model* timing = nullptr;  // the first model (in kModels' order) whose packet period fits
-  for (const Model* m : kModels)
-    if (timing == nullptr && timing_fits(m)) timing = m;
-  const Model* by_byte = by_product(product);
-  const Model* model = nullptr;
-  char period_text[64];
-  std::snprintf(period_text, sizeof period_text, "%.0f", period_us);
-  std::string keys;
-  for (const std::string& k : velodyne_models()) keys += (keys.empty() ? "" : ", ") + k;
-  if (hdl64) {
-    if (!model_key.empty() && to_lower(model_key) != kHdl64.key)
-      return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key, 32) +
-                                               "' does not fit the capture: its upper and lower blocks are an HDL-64E's"};
-    if (!calibration)
-      return bad_data(msg(path, "an HDL-64E capture needs the sensor's calibration (db.xml or the ROS driver's YAML, "
-                                "beside the capture with its stem or given with --metadata)"));
-    model = &kHdl64;
-    info.model_note = lower_blocks ? "upper and lower blocks (HDL-64E); calibration " + calibration_path
-                                   : "given: HDL-64E; calibration " + calibration_path;
-  } else if (!model_key.empty()) {
-    const std::string k = to_lower(model_key);
+ private:
+  /// The model and everything read from the first packets; then those packets' firings.
+  Status start() {
+    started_ = true;
+    // A calibration file (db.xml, VeloView's XML or the ROS driver's YAML) gives the lasers'
+    // angles and offsets; an HDL-64E (upper 0xEEFF and lower 0xDDFF blocks) needs one.
+    std::optional<Calibration> calibration;
+    if (!calibration_path_.empty()) {
+      auto c = read_calibration(calibration_path_);
+      if (!c.ok()) return c.status();
+      calibration = std::move(c).value();
+      info_.metadata_path = calibration_path_;
+    }
+    const std::vector<std::uint8_t>& front = window_.front().payload;
+    bool lower_blocks = false;
+    for (std::size_t k = 0; k < kBlocks; ++k) lower_blocks = lower_blocks || front[k * 100 + 1] == 0xDD;
+    hdl64_ = lower_blocks || to_lower(model_key_) == kHdl64.key;
+
+    // The model: the factory byte, checked against the packet period (the firing timing is
+    // fixed per model, the azimuth step is not: it follows the motor speed). An HDL-64E has
+    // no factory byte (its last two bytes are status): its blocks tell it.
+    product_ = front[1205];
+    mode_ = front[1204];
+    for (const Datagram& d : window_) {
+      Status s = check_factory_bytes(d);
+      if (!s.ok()) return s;
+    }
+    std::vector<double> dt;
+    for (std::size_t i = 1; i < window_.size(); ++i) {
+      const double a = le32(window_[i - 1].payload.data() + 1200);
+      const double b = le32(window_[i].payload.data() + 1200);
+      if (b > a) dt.push_back(b - a);
+    }
+    const double period_us = median(dt);
+    // Dual-return packets hold half the firings of single-return ones: twice as many.
+    dual_ = !hdl64_ && mode_ == 0x39;
+    const double packet_share = dual_ ? 0.5 : 1.0;
+    const auto timing_fits = [&](const Model* m) {
+      return std::isfinite(period_us) && std::abs(period_us - m->packet_us * packet_share) < 0.1 * m->packet_us * packet_share;
+    };
+    const Model* timing = nullptr;  // the first model (in kModels' order) whose packet period fits
     for (const Model* m : kModels)
-      if (k == m->key) model = m;
-    if (model == nullptr)
-      return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key, 32) + "' is not known (" + keys + ")"};
-    info.model_note = std::string("given: ") + model->name + "; factory byte " + hex(product) + " (" + product_name(product) +
-                      "), packets every " + period_text + " us";
-  } else if (by_byte != nullptr && timing != nullptr && !timing_fits(by_byte)) {
-    model = timing;
-    info.model_note = std::string("read as ") + timing->name + ": the factory byte " + hex(product) + " says " + by_byte->name +
-                      " but packets arrive every " + period_text + " us, the " + timing->name + "'s period";
-  } else if (by_byte != nullptr) {
-    model = by_byte;
-    info.model_note = std::string("factory byte ") + hex(product) + ", packets every " + period_text + " us" +
-                      (timing_fits(by_byte) ? " (agrees)" : " (timing not conclusive)");
-  } else if (timing != nullptr) {
-    model = timing;
-    info.model_note = std::string("read as ") + timing->name + " from the packet period (" + period_text +
-                      " us); factory byte " + hex(product) + " (" + product_name(product) + ")";
-  } else {
-    std::string names;
-    for (const Model* m : kModels) names += std::string(names.empty() ? "" : ", ") + m->name;
-    return bad_data(msg(path, "Velodyne " + product_name(product) + " (factory byte " + hex(product) +
-                                  ") is not supported (" + names + "; HDL-64E with its calibration; give --sensor-model to read it as one)"));
-  }
-  if (!hdl64 && mode != 0x37 && mode != 0x38 && mode != 0x39)
-    return bad_data(msg(path, "Velodyne return mode byte " + hex(mode) + " is not one of 0x37 (strongest), 0x38 (last), 0x39 (dual)"));
-  info.sensor = model->name;
-  info.profile = hdl64 ? "single return" : mode == 0x37 ? "strongest" : mode == 0x38 ? "last" : "dual (both returns kept)";
-  info.lasers = model->lasers;
-
-  // The lasers: the model's published table, or the calibration's (its laser count must be
-  // the model's); the range unit the calibration's where it gives one.
-  std::vector<Laser> lasers(model->lasers);
-  double range_unit = model->range_unit_m;
-  // (laser l fires slot_us · its slot after the sequence starts: that share of the firing step)
-  for (unsigned l = 0; l < model->lasers; ++l) {
-    lasers[l].share = model->firing_us > 0.0 ? (l / model->lasers_per_slot) * model->slot_us / model->firing_us : 0.0;
-    if (l < 32) {
-      lasers[l].elevation_deg = model->elevation_deg[l];
-      lasers[l].azimuth_deg = model->azimuth_deg[l];
+      if (timing == nullptr && timing_fits(m)) timing = m;
+    const Model* by_byte = by_product(product_);
+    const Model* model = nullptr;
+    char period_text[64];
+    std::snprintf(period_text, sizeof period_text, "%.0f", period_us);
+    std::string keys;
+    for (const std::string& k : velodyne_models()) keys += (keys.empty() ? "" : ", ") + k;
+    if (hdl64_) {
+      if (!model_key_.empty() && to_lower(model_key_) != kHdl64.key)
+        return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key_, 32) +
+                                                 "' does not fit the capture: its upper and lower blocks are an HDL-64E's"};
+      if (!calibration)
+        return bad_data(msg(path_, "an HDL-64E capture needs the sensor's calibration (db.xml or the ROS driver's YAML, "
+                                   "beside the capture with its stem or given with --metadata)"));
+      model = &kHdl64;
+      info_.model_note = lower_blocks ? "upper and lower blocks (HDL-64E); calibration " + calibration_path_
+                                      : "given: HDL-64E; calibration " + calibration_path_;
+    } else if (!model_key_.empty()) {
+      const std::string k = to_lower(model_key_);
+      for (const Model* m : kModels)
+        if (k == m->key) model = m;
+      if (model == nullptr)
+        return {ErrorCode::kInvalidArgument, "sensor model '" + printable(model_key_, 32) + "' is not known (" + keys + ")"};
+      info_.model_note = std::string("given: ") + model->name + "; factory byte " + hex(product_) + " (" +
+                         product_name(product_) + "), packets every " + period_text + " us";
+    } else if (by_byte != nullptr && timing != nullptr && !timing_fits(by_byte)) {
+      model = timing;
+      info_.model_note = std::string("read as ") + timing->name + ": the factory byte " + hex(product_) + " says " +
+                         by_byte->name + " but packets arrive every " + period_text + " us, the " + timing->name + "'s period";
+    } else if (by_byte != nullptr) {
+      model = by_byte;
+      info_.model_note = std::string("factory byte ") + hex(product_) + ", packets every " + period_text + " us" +
+                         (timing_fits(by_byte) ? " (agrees)" : " (timing not conclusive)");
+    } else if (timing != nullptr) {
+      model = timing;
+      info_.model_note = std::string("read as ") + timing->name + " from the packet period (" + period_text +
+                         " us); factory byte " + hex(product_) + " (" + product_name(product_) + ")";
+    } else {
+      std::string names;
+      for (const Model* m : kModels) names += std::string(names.empty() ? "" : ", ") + m->name;
+      return bad_data(msg(path_, "Velodyne " + product_name(product_) + " (factory byte " + hex(product_) +
+                                     ") is not supported (" + names + "; HDL-64E with its calibration; give --sensor-model to read it as one)"));
     }
-  }
-  if (calibration) {
-    if (calibration->lasers.size() != model->lasers)
-      return bad_data(msg(path, "the calibration " + calibration_path + " has " +
-                                    std::to_string(calibration->lasers.size()) + " lasers, the " + model->name +
-                                    " capture " + std::to_string(model->lasers)));
+    if (!hdl64_ && mode_ != 0x37 && mode_ != 0x38 && mode_ != 0x39)
+      return bad_data(msg(path_, "Velodyne return mode byte " + hex(mode_) + " is not one of 0x37 (strongest), 0x38 (last), 0x39 (dual)"));
+    model_ = model;
+    info_.sensor = model->name;
+    info_.profile = hdl64_ ? "single return" : mode_ == 0x37 ? "strongest" : mode_ == 0x38 ? "last" : "dual (both returns kept)";
+    info_.lasers = model->lasers;
+
+    // The lasers: the model's published table, or the calibration's (its laser count must be
+    // the model's); the range unit the calibration's where it gives one.
+    lasers_.assign(model->lasers, Laser{});
+    range_unit_ = model->range_unit_m;
+    // (laser l fires slot_us · its slot after the sequence starts: that share of the firing step)
     for (unsigned l = 0; l < model->lasers; ++l) {
-      const double share = lasers[l].share;
-      lasers[l] = calibration->lasers[l];
-      lasers[l].share = share;
+      lasers_[l].share = model->firing_us > 0.0 ? (l / model->lasers_per_slot) * model->slot_us / model->firing_us : 0.0;
+      if (l < 32) {
+        lasers_[l].elevation_deg = model->elevation_deg[l];
+        lasers_[l].azimuth_deg = model->azimuth_deg[l];
+      }
     }
-    if (calibration->range_unit_m > 0.0) range_unit = calibration->range_unit_m;
+    if (calibration) {
+      if (calibration->lasers.size() != model->lasers)
+        return bad_data(msg(path_, "the calibration " + calibration_path_ + " has " +
+                                       std::to_string(calibration->lasers.size()) + " lasers, the " + model->name +
+                                       " capture " + std::to_string(model->lasers)));
+      for (unsigned l = 0; l < model->lasers; ++l) {
+        const double share = lasers_[l].share;
+        lasers_[l] = calibration->lasers[l];
+        lasers_[l].share = share;
+      }
+      if (calibration->range_unit_m > 0.0) range_unit_ = calibration->range_unit_m;
+    }
+    geometry_source_ = calibration ? "calibration " + calibration_path_ : "model table";
+
+    // Firings in capture order, the azimuth unwrapped. A dual-return packet's block pairs
+    // share an azimuth: the first block of each pair is the firing kept. An HDL-64E's upper
+    // and lower blocks of one azimuth make one firing of its 64 lasers.
+    block_stride_ = dual_ || hdl64_ ? 2 : 1;
+    // Firing times: the packet's timestamp (µs past the hour, its first firing's) plus the
+    // firing periods before it in the packet; an HDL-64E's period is the packet period over
+    // its firings (its manual gives no sequence timing).
+    const auto firings_per_packet = static_cast<double>(kBlocks / block_stride_ * model->firings_per_block);
+    firing_ns_ = model->firing_us > 0.0       ? 1000.0 * model->firing_us
+                 : std::isfinite(period_us) ? 1000.0 * period_us / firings_per_packet
+                                            : 0.0;
+    slot_ns_ = static_cast<std::int64_t>(std::llround(1000.0 * model->slot_us));
+
+    // Rings: lasers ordered by elevation, lowest first.
+    laser_of_ring_.resize(model->lasers);
+    std::iota(laser_of_ring_.begin(), laser_of_ring_.end(), 0U);
+    std::stable_sort(laser_of_ring_.begin(), laser_of_ring_.end(),
+                     [&](unsigned a, unsigned b) { return lasers_[a].elevation_deg < lasers_[b].elevation_deg; });
+
+    for (const Datagram& d : window_) {
+      Status s = firings_of(d);
+      if (!s.ok()) return s;
+    }
+    window_.clear();
+    window_.shrink_to_fit();
+    // The firing step a turn's holes are measured in: the median over the first packets.
+    std::vector<double> steps;
+    for (const auto& f : firings_) steps.push_back(f.step_deg);
+    step_ = median(steps);
+    if (!firings_.empty()) a0_ = firings_.front().azimuth_deg;
+    close_turns(false);
+    return {};
   }
 
-  // Firings in capture order, the azimuth unwrapped. A dual-return packet's block pairs
-  // share an azimuth: the first block of each pair is the firing kept. An HDL-64E's upper
-  // and lower blocks of one azimuth make one firing of its 64 lasers.
-  const std::size_t block_stride = dual || hdl64 ? 2 : 1;
-  std::vector<Firing> firings;
-  firings.reserve(packets.size() * (kBlocks / block_stride) * model->firings_per_block);
-  double unwrap = 0.0, prev = -1.0, last_gap = std::nan("");
-  // Firing times: the packet's timestamp (µs past the hour, its first firing's) plus the
-  // firing periods before it in the packet; an HDL-64E's period is the packet period over
-  // its firings (its manual gives no sequence timing).
-  const auto firings_per_packet = static_cast<double>(kBlocks / block_stride * model->firings_per_block);
-  const double firing_ns = model->firing_us > 0.0       ? 1000.0 * model->firing_us
-                           : std::isfinite(period_us) ? 1000.0 * period_us / firings_per_packet
-                                                      : 0.0;
-  const auto slot_ns = static_cast<std::int64_t>(std::llround(1000.0 * model->slot_us));
-  constexpr std::int64_t kHourUs = 3600LL * 1000000LL;
-  std::int64_t hours_us = 0, prev_stamp = -1;
-  for (const Datagram* d : packets) {
-    const std::uint8_t* b = d->payload.data();
+  [[nodiscard]] Status check_factory_bytes(const Datagram& d) const {
+    if (!hdl64_ && (d.payload[1205] != product_ || d.payload[1204] != mode_))
+      return bad_data(msg(path_, "capture record " + std::to_string(d.record) +
+                                     ": the factory bytes change within the capture (two sensors on one port?)"));
+    return {};
+  }
+
+  Status packet(const Datagram& d) {
+    Status s = check_factory_bytes(d);
+    if (!s.ok()) return s;
+    s = firings_of(d);
+    if (!s.ok()) return s;
+    close_turns(false);
+    return {};
+  }
+
+  /// The packet's firings, queued.
+  Status firings_of(const Datagram& d) {
+    constexpr std::int64_t kHourUs = 3600LL * 1000000LL;
+    const Model* model = model_;
+    const std::uint8_t* b = d.payload.data();
     auto stamp = static_cast<std::int64_t>(le32(b + 1200));
-    if (prev_stamp >= 0 && stamp + hours_us < prev_stamp - kHourUs / 2) hours_us += kHourUs;
-    stamp += hours_us;
-    prev_stamp = stamp;
+    if (prev_stamp_ >= 0 && stamp + hours_us_ < prev_stamp_ - kHourUs / 2) hours_us_ += kHourUs;
+    stamp += hours_us_;
+    prev_stamp_ = stamp;
     std::size_t fired = 0;  // firings of this packet so far
     std::array<double, kBlocks> az{};
     for (std::size_t k = 0; k < kBlocks; ++k) {
       const std::uint8_t* blk = b + k * 100;
-      const std::uint8_t want = hdl64 && k % 2 == 1 ? 0xDD : 0xEE;
+      const std::uint8_t want = hdl64_ && k % 2 == 1 ? 0xDD : 0xEE;
       if (blk[0] != 0xFF || blk[1] != want)
-        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": block " + std::to_string(k) +
-                                      " has flag " + hex(blk[0]) + hex(blk[1]).substr(2) +
-                                      (hdl64 ? " (an HDL-64E's blocks alternate upper 0xFFEE and lower 0xFFDD)"
-                                             : blk[1] == 0xDD ? " (an HDL-64E lower block in another model's packet)"
-                                                              : " (not a data block)")));
+        return bad_data(msg(path_, "capture record " + std::to_string(d.record) + ": block " + std::to_string(k) +
+                                       " has flag " + hex(blk[0]) + hex(blk[1]).substr(2) +
+                                       (hdl64_ ? " (an HDL-64E's blocks alternate upper 0xFFEE and lower 0xFFDD)"
+                                               : blk[1] == 0xDD ? " (an HDL-64E lower block in another model's packet)"
+                                                                : " (not a data block)")));
       const std::uint16_t a = le16(blk + 2);
       if (a >= 36000)
-        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": block " + std::to_string(k) +
-                                      " azimuth " + std::to_string(a) + " is not below 36000 (0.01 degree units)"));
+        return bad_data(msg(path_, "capture record " + std::to_string(d.record) + ": block " + std::to_string(k) +
+                                       " azimuth " + std::to_string(a) + " is not below 36000 (0.01 degree units)"));
       az[k] = a / 100.0;
-      if (block_stride == 2 && k % 2 == 1 && le16(blk + 2) != le16(blk - 100 + 2))
-        return bad_data(msg(path, "capture record " + std::to_string(d->record) + ": " +
-                                      (hdl64 ? "upper and lower blocks " : "dual-return blocks ") + std::to_string(k - 1) +
-                                      " and " + std::to_string(k) + " differ in azimuth" +
-                                      (hdl64 ? " (a dual-return HDL-64E S3 capture is not supported)" : "")));
+      if (block_stride_ == 2 && k % 2 == 1 && le16(blk + 2) != le16(blk - 100 + 2))
+        return bad_data(msg(path_, "capture record " + std::to_string(d.record) + ": " +
+                                       (hdl64_ ? "upper and lower blocks " : "dual-return blocks ") + std::to_string(k - 1) +
+                                       " and " + std::to_string(k) + " differ in azimuth" +
+                                       (hdl64_ ? " (a dual-return HDL-64E S3 capture is not supported)" : "")));
     }
-    for (std::size_t k = 0; k < kBlocks; k += block_stride) {
-      const std::size_t next = k + block_stride;
-      double gap = next < kBlocks ? az[next] - az[k] : last_gap;
+    for (std::size_t k = 0; k < kBlocks; k += block_stride_) {
+      const std::size_t next = k + block_stride_;
+      double gap = next < kBlocks ? az[next] - az[k] : last_gap_;
       if (next < kBlocks && gap < 0) gap += 360.0;
       if (!std::isfinite(gap)) gap = 0.0;
-      if (next < kBlocks) last_gap = gap;
-      double a = az[k];
-      if (prev >= 0.0 && a + unwrap < prev - 180.0) unwrap += 360.0;
-      const double a_unwrapped = a + unwrap;
-      prev = a_unwrapped;
+      if (next < kBlocks) last_gap_ = gap;
+      const double a = az[k];
+      if (prev_ >= 0.0 && a + unwrap_ < prev_ - 180.0) unwrap_ += 360.0;
+      const double a_unwrapped = a + unwrap_;
+      prev_ = a_unwrapped;
       const std::uint8_t* blk = b + k * 100 + 4;
       const double block_step = gap / model->firings_per_block;
       for (unsigned s = 0; s < model->firings_per_block; ++s) {
         Firing f;
         f.azimuth_deg = a_unwrapped + block_step * s;
         f.step_deg = block_step;
-        f.time_ns = 1000 * stamp + std::llround(firing_ns * static_cast<double>(fired++));
-        f.captured_ns = d->captured_ns;
+        f.time_ns = 1000 * stamp + std::llround(firing_ns_ * static_cast<double>(fired++));
+        f.captured_ns = d.captured_ns;
         for (unsigned l = 0; l < model->lasers; ++l) {
           // (an HDL-64E's lasers 32-63 in the lower block, 100 bytes on)
-          const std::uint8_t* ch = hdl64 ? blk + (l / 32) * 100 + (l % 32) * 3 : blk + (s * model->lasers + l) * 3;
+          const std::uint8_t* ch = hdl64_ ? blk + (l / 32) * 100 + (l % 32) * 3 : blk + (s * model->lasers + l) * 3;
           f.dist[l] = le16(ch);
           f.refl[l] = ch[2];
-          if (dual) {
+          if (dual_) {
             const std::uint16_t other = le16(ch + 100);
             if (other != 0 && other != f.dist[l]) {
               f.dist2[l] = other;
@@ -563,47 +635,46 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
             }
           }
         }
-        firings.push_back(f);
+        firings_.push_back(f);
       }
+    }
+    return {};
+  }
+
+  /// Turns: 360° of azimuth from the capture's first firing on, each handed on once a
+  /// firing past it is queued (`at_end`: the capture's end, where the turn it cuts is
+  /// counted incomplete). A turn with a hole (an azimuth jump of more than 5 firing steps:
+  /// lost packets) is dropped and counted.
+  void close_turns(bool at_end) {
+    while (!firings_.empty()) {
+      const double end_az = a0_ + 360.0 * static_cast<double>(turn_ + 1);
+      std::size_t end = 0;
+      while (end < firings_.size() && firings_[end].azimuth_deg < end_az) ++end;
+      if (end >= firings_.size()) {  // the capture ends inside this turn, or its packets are still to come
+        if (at_end) {
+          ++info_.incomplete_frames;
+          firings_.clear();
+        }
+        return;
+      }
+      bool hole = false;
+      for (std::size_t i = 1; i < end; ++i) hole = hole || firings_[i].azimuth_deg - firings_[i - 1].azimuth_deg > 5.0 * step_;
+      if (hole || end < 2) ++info_.incomplete_frames;
+      else emit(end);
+      firings_.erase(firings_.begin(), firings_.begin() + static_cast<std::ptrdiff_t>(end));
+      ++turn_;
     }
   }
 
-  // Rings: lasers ordered by elevation, lowest first.
-  std::vector<unsigned> laser_of_ring(model->lasers);
-  std::iota(laser_of_ring.begin(), laser_of_ring.end(), 0U);
-  std::stable_sort(laser_of_ring.begin(), laser_of_ring.end(),
-                   [&](unsigned a, unsigned b) { return lasers[a].elevation_deg < lasers[b].elevation_deg; });
-
-  // Turns: 360° of azimuth from the first firing on. A turn with a hole (an azimuth jump of
-  // more than 5 firing steps: lost packets) is dropped and counted.
-  std::vector<double> steps;
-  for (const auto& f : firings) steps.push_back(f.step_deg);
-  const double step = median(steps);
-  const double a0 = firings.front().azimuth_deg;
-  std::size_t begin = 0;
-  std::vector<std::size_t> turn_columns;
-  for (std::uint64_t turn = 0;; ++turn) {
-    const double end_az = a0 + 360.0 * static_cast<double>(turn + 1);
-    std::size_t end = begin;
-    while (end < firings.size() && firings[end].azimuth_deg < end_az) ++end;
-    if (end >= firings.size()) {  // the capture ends inside this turn
-      if (end > begin) ++info.incomplete_frames;
-      break;
-    }
-    bool hole = false;
-    for (std::size_t i = begin + 1; i < end; ++i)
-      hole = hole || firings[i].azimuth_deg - firings[i - 1].azimuth_deg > 5.0 * step;
-    if (hole || end - begin < 2) {
-      ++info.incomplete_frames;
-      begin = end;
-      continue;
-    }
-    const auto columns = static_cast<std::uint32_t>(end - begin);
+  /// The turn of the queue's first `end` firings.
+  void emit(std::size_t end) {
+    const Model* model = model_;
+    const auto columns = static_cast<std::uint32_t>(end);
     Cloud cloud;
     cloud.rows = model->lasers;
     cloud.columns = columns;
     IntegerField* which = nullptr;  // dual return: each point's return (0 last, 1 the other)
-    if (dual) {
+    if (dual_) {
       cloud.fields.push_back({kReturnField, {}, FieldType::kUint8});
       which = &cloud.fields.back();
     }
@@ -612,15 +683,14 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     g.direction = -1;
     // The grid's column 0: the first firing's azimuth moved by the mean offset of all the
     // firings of the turn from a grid of 360°/columns steps (least squares for that step).
-    double start = firings[begin].azimuth_deg, mean_offset = 0.0;
-    for (std::size_t i = begin; i < end; ++i)
-      mean_offset += firings[i].azimuth_deg - (start + 360.0 * static_cast<double>(i - begin) / columns);
+    double start = firings_[0].azimuth_deg, mean_offset = 0.0;
+    for (std::size_t i = 0; i < end; ++i) mean_offset += firings_[i].azimuth_deg - (start + 360.0 * static_cast<double>(i) / columns);
     start += mean_offset / static_cast<double>(columns);
     g.azimuth0 = std::remainder(M_PI / 2 - start * M_PI / 180.0, 2.0 * M_PI);
-    g.source = calibration ? "calibration " + calibration_path : "model table";
+    g.source = geometry_source_;
     g.sensor = model->name;
     for (unsigned r = 0; r < model->lasers; ++r) {
-      const Laser& l = lasers[laser_of_ring[r]];
+      const Laser& l = lasers_[laser_of_ring_[r]];
       const double w = l.elevation_deg * M_PI / 180.0;
       g.elevation.push_back(w);
       // The beam points azimuth_deg clockwise of its firing's column, fired `share` of a
@@ -641,24 +711,23 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
     // Each point's time from the turn's first firing, as the ROS driver's `time` (float32
     // seconds): its firing's start plus its laser's slot. Not given where the packets'
     // timestamps run backwards within the turn or span more than a second.
-    const std::int64_t t0 = firings[begin].time_ns;
+    const std::int64_t t0 = firings_[0].time_ns;
     bool timed = true;
-    for (std::size_t i = begin; i < end && timed; ++i)
-      timed = firings[i].time_ns >= t0 && firings[i].time_ns - t0 <= 1000000000LL;
+    for (std::size_t i = 0; i < end && timed; ++i) timed = firings_[i].time_ns >= t0 && firings_[i].time_ns - t0 <= 1000000000LL;
     if (timed) {
       cloud.time_source = {"time", FieldType::kFloat32};
-      cloud.time.reserve(static_cast<std::size_t>(end - begin) * model->lasers);
+      cloud.time.reserve(end * model->lasers);
     }
     std::size_t no_returns = 0;
     for (unsigned r = 0; r < model->lasers; ++r) {
-      const unsigned id = laser_of_ring[r];
-      const std::int64_t slot = static_cast<std::int64_t>(id / model->lasers_per_slot) * slot_ns;
-      const Laser& l = lasers[id];
+      const unsigned id = laser_of_ring_[r];
+      const std::int64_t slot = static_cast<std::int64_t>(id / model->lasers_per_slot) * slot_ns_;
+      const Laser& l = lasers_[id];
       const double w = g.elevation[r];
       const double cw = std::cos(w), sw = std::sin(w);
-      for (std::size_t i = begin; i < end; ++i) {
-        const Firing& f = firings[i];
-        info.second_returns += f.dist2[id] != 0 ? 1 : 0;
+      for (std::size_t i = 0; i < end; ++i) {
+        const Firing& f = firings_[i];
+        info_.second_returns += f.dist2[id] != 0 ? 1 : 0;
         if (f.dist[id] == 0 && f.dist2[id] == 0) {
           ++no_returns;
           continue;
@@ -667,33 +736,66 @@ Status decode_velodyne(const std::string& path, const std::string& model_key, co
         for (int ret = 0; ret < 2; ++ret) {
           const std::uint16_t dist = ret == 0 ? f.dist[id] : f.dist2[id];
           if (dist == 0) continue;
-          const double d = dist * range_unit + l.dist_m;
+          const double d = dist * range_unit_ + l.dist_m;
           cloud.points.push_back(place(l, cw, sw, d, a));
           cloud.intensity.push_back(static_cast<float>(ret == 0 ? f.refl[id] : f.refl2[id]));
           if (which != nullptr) which->values.push_back(ret);
           cloud.ring.push_back(static_cast<std::uint16_t>(r));
-          cloud.column.push_back(static_cast<std::uint32_t>(i - begin));
+          cloud.column.push_back(static_cast<std::uint32_t>(i));
           if (timed) cloud.time.push_back(static_cast<double>(f.time_ns + slot - t0) * 1e-9);
         }
       }
     }
     cloud.geometry = std::move(g);
-    turn_columns.push_back(columns);
-    info.no_returns += no_returns;
-    info.points += cloud.size();
-    log.no_returns.push_back(no_returns);
-    log.frame_ids.push_back(turn);
-    log.captured_ns.push_back(firings[begin].captured_ns);
-    cloud.stamp = capture_stamp(firings[begin].captured_ns);
-    log.scans.push_back(std::move(cloud));
-    begin = end;
+    turn_columns_.push_back(columns);
+    info_.no_returns += no_returns;
+    info_.points += cloud.size();
+    ++info_.frames;
+    SensorTurn t;
+    t.no_returns = no_returns;
+    t.frame_id = turn_;
+    t.captured_ns = firings_[0].captured_ns;
+    cloud.stamp = capture_stamp(firings_[0].captured_ns);
+    t.cloud = std::move(cloud);
+    turns.push_back(std::move(t));
   }
-  if (!turn_columns.empty()) {
-    std::vector<double> c(turn_columns.begin(), turn_columns.end());
-    info.columns = static_cast<std::uint32_t>(median(c));
-  }
-  info.frames = log.scans.size();
-  return {};
+
+  std::string path_, model_key_, calibration_path_;
+  SensorLogInfo& info_;
+  bool started_ = false;
+  std::vector<Datagram> window_;  // the first packets, until the model is known
+  // read from the first packets
+  const Model* model_ = nullptr;
+  bool hdl64_ = false, dual_ = false;
+  std::uint8_t product_ = 0, mode_ = 0;
+  std::vector<Laser> lasers_;
+  std::vector<unsigned> laser_of_ring_;
+  double range_unit_ = 0.0;
+  std::string geometry_source_;
+  std::size_t block_stride_ = 1;
+  double firing_ns_ = 0.0;
+  std::int64_t slot_ns_ = 0;
+  double step_ = 0.0;  // the median firing step
+  // the firings, from the turn being assembled on
+  std::deque<Firing> firings_;
+  double a0_ = 0.0;  // the capture's first firing's azimuth
+  std::uint64_t turn_ = 0;
+  double unwrap_ = 0.0, prev_ = -1.0, last_gap_ = std::nan("");
+  std::int64_t hours_us_ = 0, prev_stamp_ = -1;
+  std::vector<std::size_t> turn_columns_;
+};
+
+}  // namespace
+
+std::unique_ptr<LogDecoder> velodyne_decoder(const std::string& path, const std::string& model,
+                                             const std::string& calibration, SensorLogInfo& info) {
+  return std::make_unique<VelodyneDecoder>(path, model, calibration, info);
+}
+
+Status decode_velodyne(const std::string& path, const std::string& model_key, const std::string& calibration_path,
+                       const std::vector<Datagram>& datagrams, SensorLog& log) {
+  auto decoder = velodyne_decoder(path, model_key, calibration_path, log.info);
+  return decode_all(*decoder, datagrams, log);
 }
 
 }  // namespace lex3d::io::detail

@@ -527,6 +527,123 @@ SensorLog decode_edited(const Capture& capture, const std::string& name, const R
   return r.ok() ? r.value() : SensorLog{};
 }
 
+/// The sample VLP-16 capture's first whole turn of packets (its first packet's azimuth
+/// reached again), repeated `turns` times, each repetition's record times and packet
+/// timestamps a turn's span on: a capture as long as wanted whose turns, but the first,
+/// are all alike (each the end of one repetition and the start of the next).
+Capture repeated_vlp16(std::size_t turns) {
+  const Capture one = parse_capture(slurp(test::sample("vlp16_velodyne_example.pcap")));
+  std::vector<Record> packets;
+  for (const Record& r : one.records)
+    if (velodyne_record(r)) packets.push_back(r);
+  const auto azimuth = [](Record& r) {
+    std::uint16_t a = 0;
+    std::memcpy(&a, velodyne_payload(r) + 2, 2);
+    return a / 100.0;
+  };
+  std::size_t end = 0;
+  double turned = 0.0;
+  for (std::size_t i = 1; i < packets.size() && end == 0; ++i) {
+    turned += std::fmod(azimuth(packets[i]) - azimuth(packets[i - 1]) + 360.0, 360.0);
+    if (turned >= 360.0) end = i;
+  }
+  EXPECT_GT(end, 60U);
+  const std::uint64_t span_us = (static_cast<std::uint64_t>(packets[end].sec) * 1000000 + packets[end].usec) -
+                                (static_cast<std::uint64_t>(packets[0].sec) * 1000000 + packets[0].usec);
+  const std::uint32_t stamp_span = payload_time(packets[end]) - payload_time(packets[0]);
+  Capture c;
+  c.header = one.header;
+  for (std::size_t k = 0; k < turns; ++k)
+    for (std::size_t i = 0; i < end; ++i) {
+      Record r = packets[i];
+      const std::uint64_t t = static_cast<std::uint64_t>(r.sec) * 1000000 + r.usec + k * span_us;
+      r.sec = static_cast<std::uint32_t>(t / 1000000);
+      r.usec = static_cast<std::uint32_t>(t % 1000000);
+      set_payload_time(r, static_cast<std::uint32_t>((payload_time(r) + k * stamp_span) % 3600000000U));
+      c.records.push_back(std::move(r));
+    }
+  return c;
+}
+
+bool same_points(const Cloud& a, const Cloud& b) {
+  return a.points == b.points && a.intensity == b.intensity && a.ring == b.ring && a.column == b.column &&
+         a.rows == b.rows && a.columns == b.columns;
+}
+
+// A capture is read turn by turn (SensorLogReader): the first kVelodyneWindow packets tell
+// the model, then each turn is handed on as it closes. 60 repetitions of a whole turn
+// (4,560 packets, past that window; each a little over 360°): 60 complete turns and the
+// rest cut, the turns after the first all alike, the same as read_sensor_log gives, the
+// counters the whole capture's.
+TEST(SensorLogReader, ALongCaptureGivesEveryTurnOneAtATime) {
+  const Capture c = repeated_vlp16(60);
+  const std::string p = (temp_dir("sensor_log_reader") / "long.pcap").string();
+  write_bytes(p, serialise(c));
+  auto reader = SensorLogReader::open(p);
+  ASSERT_TRUE(reader.ok()) << reader.status().to_string();
+  std::vector<SensorTurn> turns;
+  for (;;) {
+    auto t = reader.value()->next();
+    ASSERT_TRUE(t.ok()) << t.status().to_string();
+    if (!t.value()) break;
+    turns.push_back(std::move(*t.value()));
+  }
+  const SensorLogInfo& info = reader.value()->info();
+  ASSERT_EQ(turns.size(), 60U);
+  EXPECT_EQ(info.frames, 60U);
+  EXPECT_EQ(info.lidar_packets, c.records.size());
+  EXPECT_EQ(info.incomplete_frames, 1U);
+  EXPECT_EQ(info.sensor, "VLP-16");
+  std::size_t points = 0;
+  for (std::size_t k = 0; k < turns.size(); ++k) {
+    SCOPED_TRACE(k);
+    points += turns[k].cloud.size();
+    EXPECT_EQ(turns[k].frame_id, k);
+    EXPECT_EQ(turns[k].cloud.stamp.has_value(), true);
+    if (k >= 2) {
+      EXPECT_TRUE(same_points(turns[k].cloud, turns[1].cloud));
+      EXPECT_EQ(turns[k].cloud.time, turns[1].cloud.time);
+      EXPECT_GT(turns[k].captured_ns, turns[k - 1].captured_ns);
+    }
+  }
+  EXPECT_EQ(info.points, points);
+  auto whole = read_sensor_log(p);
+  ASSERT_TRUE(whole.ok()) << whole.status().to_string();
+  ASSERT_EQ(whole.value().scans.size(), turns.size());
+  for (std::size_t k = 0; k < turns.size(); ++k) EXPECT_TRUE(same_points(whole.value().scans[k], turns[k].cloud)) << k;
+  EXPECT_EQ(whole.value().info.points, info.points);
+}
+
+// A packet damaged late in a long capture: the turns before it come first, then its error
+// (one line naming the file and the record); read_sensor_log gives the error alone.
+TEST(SensorLogReader, TurnsBeforeALateErrorComeFirst) {
+  Capture c = repeated_vlp16(60);
+  const std::size_t bad_record = c.records.size() - 200;
+  velodyne_payload(c.records[bad_record])[2] = 0xFF;  // block 0's azimuth: 65,535 hundredths of a degree
+  velodyne_payload(c.records[bad_record])[3] = 0xFF;
+  const std::string p = (temp_dir("sensor_log_reader") / "late_error.pcap").string();
+  write_bytes(p, serialise(c));
+  auto reader = SensorLogReader::open(p);
+  ASSERT_TRUE(reader.ok()) << reader.status().to_string();
+  std::size_t good = 0;
+  Status error;
+  for (;;) {
+    auto t = reader.value()->next();
+    if (!t.ok()) {
+      error = t.status();
+      break;
+    }
+    ASSERT_TRUE(t.value().has_value()) << "the capture ended without its error";
+    EXPECT_GT(t.value()->cloud.size(), 20000U);
+    ++good;
+  }
+  EXPECT_GE(good, 55U);
+  EXPECT_EQ(error.code(), ErrorCode::kBadData);
+  EXPECT_NE(error.message().find("capture record " + std::to_string(bad_record + 1)), std::string::npos) << error.message();
+  EXPECT_NE(error.message().find(p), std::string::npos);
+  EXPECT_TRUE(bad(read_sensor_log(p), p, "block 0 azimuth 65535 is not below 36000"));
+}
+
 TEST(SensorLog, PuckHiResPacketsUseItsElevations) {
   // The VLP-16 sample with the Puck Hi-Res factory byte (same packets and timing, the
   // lasers 4/3° apart within ±10°): every point keeps its range and column, at the Hi-Res

@@ -35,6 +35,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -79,6 +81,43 @@ struct SensorLog {
   /// sensor's own clock may count from its boot or the hour); 0 where not known.
   std::vector<std::uint64_t> captured_ns;
   std::vector<std::size_t> no_returns;         ///< per scan
+};
+
+/// One turn of a raw log, as SensorLogReader gives it.
+struct SensorTurn {
+  Cloud cloud;
+  std::uint64_t frame_id = 0;     ///< Ouster frame_id, or the turn's index (Velodyne)
+  std::uint64_t captured_ns = 0;  ///< as SensorLog::captured_ns
+  std::size_t no_returns = 0;     ///< zero-range pixels (not points)
+};
+
+/// Reads a raw log turn by turn: it holds the turn being assembled and the packets of the
+/// capture's first moments (a Velodyne capture's model and packet period are read from its
+/// first 4,096 data packets; without `metadata_path`, the vendor from the first Velodyne
+/// packet, or from an Ouster metadata JSON beside the capture after 4,096 datagrams with
+/// none), so a capture of any length is read in the memory of a few turns. The turns, counters and errors are
+/// read_sensor_log's; an error met later in the capture comes from the next() that reaches
+/// it, after the turns before it.
+class SensorLogReader {
+ public:
+  /// Opens the capture (kIoError where it cannot be opened, kBadData where it is not a
+  /// capture); the packets are read by next().
+  [[nodiscard]] static StatusOr<std::unique_ptr<SensorLogReader>> open(const std::string& path,
+                                                                      const ReadOptions& options = {});
+  ~SensorLogReader();
+  SensorLogReader(const SensorLogReader&) = delete;
+  SensorLogReader& operator=(const SensorLogReader&) = delete;
+  /// The next complete turn; std::nullopt at the capture's end (a capture with no complete
+  /// turn is an error there, as read_sensor_log's).
+  [[nodiscard]] StatusOr<std::optional<SensorTurn>> next();
+  /// What was read so far: the sensor's fields once next() gave a turn, the counters for
+  /// the whole capture once it gave std::nullopt.
+  [[nodiscard]] const SensorLogInfo& info() const;
+
+ private:
+  SensorLogReader();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 /// The Velodyne models a capture is read as (`ReadOptions::sensor_model` keys): "vlp16",
