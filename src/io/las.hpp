@@ -74,6 +74,31 @@ struct PointField {
 /// order of the record.
 std::vector<PointField> point_fields(int format);
 
+/// The Extra Bytes record (LAS 1.4 R15 §2.5.2): "LASF_Spec" record 4, one 192-byte
+/// descriptor for each extra value at the end of a point record, in record order.
+constexpr char kExtraBytesUser[] = "LASF_Spec";
+constexpr std::uint16_t kExtraBytesRecord = 4;
+constexpr std::size_t kExtraBytesDescriptor = 192;
+
+/// One extra value of a point record, as its descriptor gives it.
+struct ExtraBytes {
+  std::string name;          ///< the descriptor's (up to 32 characters)
+  std::uint8_t data_type = 0;  ///< 1-10 the scalars (uchar, char, ushort, short, ulong, long, u64, i64, float, double); 0 undocumented bytes; 11-30 deprecated arrays
+  std::uint8_t options = 0;    ///< bits: 0 no_data, 1 min, 2 max, 3 scale, 4 offset given
+  std::size_t size = 0;        ///< bytes in the record
+  std::size_t at = 0;          ///< offset in the record
+  double scale = 1.0, offset = 0.0;  ///< applied where options says so: value = raw · scale + offset
+  [[nodiscard]] bool scaled() const { return (options & 0x18U) != 0; }
+};
+
+/// The bytes a value of extra-bytes `data_type` takes (0 for 0, whose size is in options).
+inline std::size_t extra_bytes_size(std::uint8_t data_type) {
+  static constexpr std::uint8_t kSize[11] = {0, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
+  if (data_type <= 10) return kSize[data_type];
+  if (data_type <= 30) return kSize[(data_type - 1) % 10 + 1] * ((data_type - 1) / 10 + 1);  // arrays of 2 and 3
+  return 0;
+}
+
 /// Whether a VLR/EVLR describes the coordinate reference system (and is carried through).
 inline bool is_crs_record(const std::string& user_id, std::uint16_t record_id) {
   if (user_id == "LASF_Projection") return record_id == 34735 || record_id == 34736 || record_id == 34737 ||

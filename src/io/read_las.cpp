@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -373,6 +374,89 @@ std::int64_t round_centre(std::int64_t lo, std::int64_t hi) {
 
 }  // namespace
 
+/// The extra values of `n` records (`extras`, from the Extra Bytes record) into the cloud:
+/// each a field of its type (Cloud::fields) under its name (characters a field name cannot
+/// hold as '_'; "extra_" before a name the cloud has already), a `ring` of small
+/// non-negative integers its lasers (Cloud::ring); a scaled value (raw · scale + offset)
+/// as float32. What a field cannot hold is listed as dropped: 64-bit integers beyond 31
+/// bits, a double that float32 does not hold exactly, arrays and undocumented bytes.
+void read_extra_bytes(const std::vector<las::ExtraBytes>& extras, const std::uint8_t* base, std::size_t n,
+                      std::size_t record_len, ReadResult& r) {
+  for (const las::ExtraBytes& x : extras) {
+    std::string name;
+    for (const char c : x.name) name += std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_' ? c : '_';
+    if (name.empty()) name = "extra";
+    if (name.size() > 64) name.resize(64);
+    const std::string shown = "extra bytes \"" + printable(x.name, 32) + "\"";
+    if (x.data_type == 0 || x.data_type > 10) {
+      r.dropped_fields.push_back(shown + (x.data_type == 0 ? " (undocumented bytes)" : " (an array, deprecated in LAS 1.4)"));
+      continue;
+    }
+    const auto raw = [&](std::size_t i) -> double {
+      const std::uint8_t* p = base + i * record_len + x.at;
+      switch (x.data_type) {
+        case 1: return p[0];
+        case 2: return static_cast<std::int8_t>(p[0]);
+        case 3: return le<std::uint16_t>(p);
+        case 4: return le<std::int16_t>(p);
+        case 5: return le<std::uint32_t>(p);
+        case 6: return le<std::int32_t>(p);
+        case 7: return static_cast<double>(le<std::uint64_t>(p));
+        case 8: return static_cast<double>(le<std::int64_t>(p));
+        case 9: return le<float>(p);
+        default: return le<double>(p);
+      }
+    };
+    IntegerField f;
+    f.values.resize(n);
+    bool fits = true;
+    if (x.scaled() || x.data_type == 9 || x.data_type == 10) {
+      f.type = x.scaled() || x.data_type == 9 ? FieldType::kFloat32 : FieldType::kFloat64;
+      for (std::size_t i = 0; i < n && fits; ++i) {
+        const double v = x.scaled() ? raw(i) * x.scale + x.offset : raw(i);
+        const auto v32 = static_cast<float>(v);
+        fits = f.type == FieldType::kFloat32 || static_cast<double>(v32) == v || std::isnan(v);
+        f.values[i] = float_key(v32);
+      }
+      if (x.scaled()) r.notes.push_back(shown + " read as float32 values (its scale and offset applied)");
+    } else {
+      static constexpr FieldType kType[9] = {FieldType::kUnspecified, FieldType::kUint8, FieldType::kInt8,
+                                             FieldType::kUint16,      FieldType::kInt16, FieldType::kUint32,
+                                             FieldType::kInt32,       FieldType::kInt32, FieldType::kInt32};
+      f.type = kType[x.data_type];
+      const auto [lo, hi] = field_type_range(f.type);
+      for (std::size_t i = 0; i < n && fits; ++i) {
+        const double v = raw(i);
+        fits = v >= static_cast<double>(lo) && v <= static_cast<double>(hi) &&
+               (x.data_type < 7 || v == std::floor(v));
+        f.values[i] = fits ? static_cast<std::int32_t>(v) : 0;
+      }
+    }
+    if (!fits) {
+      r.dropped_fields.push_back(shown + (is_float_type(f.type) ? " (a double that float32 does not hold)"
+                                                                 : " (a value beyond 31 bits)"));
+      continue;
+    }
+    // (a laser number, as a PCD's `ring` is)
+    const bool ring = (name == "ring" || name == "laser_id" || name == "ring_id") && !is_float_type(f.type) &&
+                      !r.cloud.has_rings() && std::all_of(f.values.begin(), f.values.end(), [](std::int32_t v) {
+                        return v >= 0 && v <= 65535;
+                      });
+    if (ring) {
+      r.cloud.ring.assign(f.values.begin(), f.values.end());
+      continue;
+    }
+    if (r.cloud.field(name) != nullptr) name = "extra_" + name;
+    if (name.size() > 64) name.resize(64);
+    if (r.cloud.field(name) != nullptr) {
+      r.dropped_fields.push_back(shown + " (its name is taken twice)");
+      continue;
+    }
+    f.name = name;
+    r.cloud.fields.push_back(std::move(f));
+  }
+}
+
 Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size, ReadResult& r) {
   using namespace las;
   auto bad = [&](const std::string& what, std::uint64_t off) { return bad_data(msg(path, what), off); };
@@ -456,9 +540,16 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
                    " bytes before the point data",
                100);
   std::vector<std::string> not_carried;
+  std::vector<std::uint8_t> extra_record;  // the Extra Bytes descriptors
+  bool extra_records = false;
   auto take_record = [&](const std::uint8_t* h, const std::uint8_t* payload, std::uint64_t len, bool extended) {
     const std::string user = c_string(h + 2, 16);
     const std::uint16_t id = le<std::uint16_t>(h + 18);
+    if (user == kExtraBytesUser && id == kExtraBytesRecord && !extra_records) {
+      extra_records = true;
+      extra_record.assign(payload, payload + len);
+      return;
+    }
     if (!is_crs_record(user, id)) {
       not_carried.push_back(printable(user, 16) + " " + std::to_string(id));
       return;
@@ -536,6 +627,37 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   g.las_global_encoding = global_encoding;
   g.las_system_id = c_string(d + 26, 32);
   g.las_software = c_string(d + 58, 32);
+
+  // --- the extra values at the end of each record, as the Extra Bytes record describes them
+  std::vector<ExtraBytes> extras;
+  std::size_t described_end = kMinRecord[format];
+  if (extra_records) {
+    if (extra_record.size() % kExtraBytesDescriptor != 0)
+      r.notes.push_back("the Extra Bytes record's " + std::to_string(extra_record.size()) +
+                        " bytes are not whole 192-byte descriptors: the extra bytes are not read");
+    else
+      for (std::size_t k = 0; k < extra_record.size() / kExtraBytesDescriptor; ++k) {
+        const std::uint8_t* e = extra_record.data() + k * kExtraBytesDescriptor;
+        ExtraBytes x;
+        x.data_type = e[2];
+        x.options = e[3];
+        x.name = c_string(e + 4, 32);
+        x.size = x.data_type == 0 ? x.options : extra_bytes_size(x.data_type);
+        x.at = described_end;
+        if (x.size == 0 || x.at + x.size > record_len) {
+          r.notes.push_back("the Extra Bytes record describes " + (x.size == 0 ? std::string("a value of type ") +
+                                                                                    std::to_string(x.data_type)
+                                                                              : std::to_string(x.at + x.size) + " bytes") +
+                            " beyond the " + std::to_string(record_len) + "-byte records: the extra bytes from \"" +
+                            printable(x.name, 32) + "\" on are not read");
+          break;
+        }
+        if ((x.options & 0x08U) != 0) x.scale = le<double>(e + 112);
+        if ((x.options & 0x10U) != 0) x.offset = le<double>(e + 136);
+        described_end += x.size;
+        extras.push_back(std::move(x));
+      }
+  }
 
   // --- points: integer bounds, origin on the grid, then metres relative to it
   const std::uint8_t* base = d + point_offset;
@@ -624,7 +746,7 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
     for (std::size_t k = 0; k < kept_fields.size(); ++k)
       kept_seen[k] |= static_cast<std::uint8_t>(kept_fields[k].get(p) != kept_fields[k].plain ? 1 : 0);
     if (!extra_seen)
-      for (std::size_t b = kMinRecord[format]; b < record_len; ++b) extra_seen = extra_seen || p[b] != 0;
+      for (std::size_t b = described_end; b < record_len; ++b) extra_seen = extra_seen || p[b] != 0;
   }
   g.representation_error_m = std::sqrt(worst2);
   for (int a = 0; a < 3; ++a) {
@@ -655,7 +777,10 @@ Status read_las(const std::string& path, const std::uint8_t* d, std::size_t size
   }
   if (time_seen && !time_finite) r.dropped_fields.emplace_back("GPS time (a value is not finite)");
   if (!time_seen || !time_finite) r.cloud.time.clear();
-  if (extra_seen) r.dropped_fields.emplace_back("extra bytes (" + std::to_string(record_len - kMinRecord[format]) + " a record)");
+  if (extra_seen)
+    r.dropped_fields.emplace_back("extra bytes (" + std::to_string(record_len - described_end) + " a record" +
+                                  (extras.empty() ? "" : ", past the described ones") + ")");
+  read_extra_bytes(extras, base, n, record_len, r);
   r.encoding = "LAS 1." + std::to_string(minor) + ", point format " + std::to_string(format);
   r.cloud.georef = std::move(g);
   return {};

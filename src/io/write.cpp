@@ -616,7 +616,7 @@ std::vector<std::string> fields_not_written(const std::string& path, const Cloud
   const bool text_or_bin = f == Format::kKitti || f == Format::kBinXyz || f == Format::kXyz;
   if (cloud.has_intensity() && (f == Format::kBinXyz || (!options.write_intensity && f != Format::kKitti)))
     out.emplace_back("intensity");
-  if (cloud.has_rings() && (text_or_bin || f == Format::kLas)) out.emplace_back("ring");
+  if (cloud.has_rings() && text_or_bin) out.emplace_back("ring");
   if (cloud.has_time() && text_or_bin) out.emplace_back("time");
   if ((cloud.has_rgb() || !options.colors.empty()) && text_or_bin) out.emplace_back("rgb");
   if (text_or_bin)

@@ -5,7 +5,9 @@
 // CRS's units. The point fields a cloud keeps by name (Cloud::fields: classification,
 // return_number, ... as the reader names them) go back into their places; a scan angle
 // kept in the other family's units (scan_angle_rank in degrees, scan_angle in 0.006°) is
-// converted. Fields the cloud lacks are written as zeros, the return number as 1 of 1.
+// converted. Fields the cloud lacks are written as zeros, the return number as 1 of 1. The
+// ring and every other field go into extra bytes (LAS 1.4's Extra Bytes record, in their
+// own types), which makes the file LAS 1.4.
 // Output is deterministic (no creation date is written).
 
 #include <algorithm>
@@ -90,18 +92,48 @@ const IntegerField* integer_field(const Cloud& cloud, const std::string& name) {
   return f != nullptr && !is_float_type(f->type) ? f : nullptr;
 }
 
-}  // namespace
+/// A value written as extra bytes: the cloud's ring, or a field the record has no place for.
+struct ExtraOut {
+  std::string name;
+  std::uint8_t data_type = 0;  // LAS extra-bytes type (1-6, 9, 10)
+  const IntegerField* field = nullptr;  // nullptr: the ring
+};
 
-std::vector<std::string> las_fields_not_written(const Cloud& cloud, const WriteOptions& o) {
-  int minor = 0;
-  const std::vector<las::PointField> fields = las::point_fields(output_format(cloud, o, minor));
-  std::vector<std::string> out;
+/// The extra bytes build_las writes for `cloud` in `format`: its ring (ushort), then each
+/// field no place of the record takes, in its own type (an unspecified one as a long).
+std::vector<ExtraOut> extras_of(const Cloud& cloud, int format) {
+  std::vector<ExtraOut> out;
+  if (cloud.has_rings()) out.push_back({"ring", 3, nullptr});
+  const std::vector<las::PointField> fields = las::point_fields(format);
   for (const IntegerField& x : cloud.fields) {
     bool placed = false;
     for (const las::PointField& f : fields)
       placed = placed || (!is_float_type(x.type) && (x.name == f.name || x.name == other_scan_angle(f.name)));
-    if (!placed) out.push_back(x.name);
+    if (placed || (x.name == "ring" && cloud.has_rings())) continue;
+    std::uint8_t type = 6;
+    switch (x.type) {
+      case FieldType::kUint8: type = 1; break;
+      case FieldType::kInt8: type = 2; break;
+      case FieldType::kUint16: type = 3; break;
+      case FieldType::kInt16: type = 4; break;
+      case FieldType::kUint32: type = 5; break;
+      case FieldType::kFloat32: type = 9; break;
+      case FieldType::kFloat64: type = 10; break;
+      default: type = 6; break;
+    }
+    out.push_back({x.name, type, &x});
   }
+  return out;
+}
+
+}  // namespace
+
+std::vector<std::string> las_fields_not_written(const Cloud& cloud, const WriteOptions& o) {
+  int minor = 0;
+  std::vector<std::string> out;
+  // (the names the Extra Bytes record cannot hold: over its 32 characters)
+  for (const ExtraOut& x : extras_of(cloud, output_format(cloud, o, minor)))
+    if (x.name.size() > 32) out.push_back(x.name);
   return out;
 }
 
@@ -118,7 +150,30 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   int minor = 2;
   const int format = output_format(cloud, o, minor);
   const int rgb_at = las::rgb_offset(format);
-  const std::uint16_t record_len = las::kMinRecord[format];
+  // The ring and the fields the record has no place for, as extra bytes (LAS 1.4's Extra
+  // Bytes record: the file is then LAS 1.4, in the same point format); a name over the
+  // record's 32 characters is not written (las_fields_not_written lists it).
+  std::vector<ExtraOut> extras;
+  for (ExtraOut& x : extras_of(cloud, format))
+    if (x.name.size() <= 32) extras.push_back(std::move(x));
+  std::size_t extra_size = 0;
+  for (const ExtraOut& x : extras) extra_size += las::extra_bytes_size(x.data_type);
+  if (!extras.empty()) minor = 4;
+  if (las::kMinRecord[format] + extra_size > 65535) return invalid("the extra fields do not fit a LAS point record");
+  const auto record_len = static_cast<std::uint16_t>(las::kMinRecord[format] + extra_size);
+  for (const ExtraOut& x : extras)
+    if (x.field != nullptr && x.field->values.size() != n)
+      return invalid("field " + x.name + " has " + std::to_string(x.field->values.size()) + " values for " +
+                     std::to_string(n) + " points");
+  std::vector<std::uint8_t> extra_record;
+  for (const ExtraOut& x : extras) {
+    std::vector<std::uint8_t> e(las::kExtraBytesDescriptor, 0);
+    e[2] = x.data_type;
+    std::memcpy(e.data() + 4, x.name.data(), x.name.size());
+    const std::string about = x.field == nullptr ? "laser (ring) number" : "lex3d field " + x.name;
+    std::memcpy(e.data() + 160, about.data(), std::min<std::size_t>(about.size(), 32));
+    extra_record.insert(extra_record.end(), e.begin(), e.end());
+  }
 
   // The record's fields the cloud holds, each with its values (a scan angle converted from
   // the other family's units), checked to fit.
@@ -194,7 +249,8 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
                         std::to_string(minor) + " VLR");
   }
   const std::size_t header_size = minor >= 4 ? las::kHeader14 : minor == 3 ? las::kHeader13 : las::kHeader12;
-  std::size_t vlr_bytes = 0;
+  std::size_t vlr_bytes = extras.empty() ? 0 : las::kVlrHeader + extra_record.size();
+  if (extra_record.size() > 65535) return invalid("too many extra fields for a LAS Extra Bytes record");
   for (const CrsRecord* r : vlrs) vlr_bytes += las::kVlrHeader + r->data.size();
   const std::uint64_t point_offset = header_size + vlr_bytes;
   if (point_offset > 0xFFFFFFFFULL) return invalid("the CRS records are too large for a LAS header");
@@ -216,7 +272,7 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
   w.le<std::uint16_t>(0);
   w.le<std::uint16_t>(static_cast<std::uint16_t>(header_size));
   w.le<std::uint32_t>(static_cast<std::uint32_t>(point_offset));
-  w.le<std::uint32_t>(static_cast<std::uint32_t>(vlrs.size()));
+  w.le<std::uint32_t>(static_cast<std::uint32_t>(vlrs.size() + (extras.empty() ? 0 : 1)));
   w.b.push_back(static_cast<std::uint8_t>(format));
   w.le<std::uint16_t>(record_len);
   const bool legacy = format < 6 && n <= 0xFFFFFFFFULL;
@@ -242,6 +298,14 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
     w.le<std::uint16_t>(static_cast<std::uint16_t>(r->data.size()));
     w.chars(r->description, 32);
     w.b.insert(w.b.end(), r->data.begin(), r->data.end());
+  }
+  if (!extras.empty()) {
+    w.le<std::uint16_t>(0);
+    w.chars(las::kExtraBytesUser, 16);
+    w.le<std::uint16_t>(las::kExtraBytesRecord);
+    w.le<std::uint16_t>(static_cast<std::uint16_t>(extra_record.size()));
+    w.chars("extra bytes", 32);
+    w.b.insert(w.b.end(), extra_record.begin(), extra_record.end());
   }
 
   Eigen::Vector3d qlo = Eigen::Vector3d::Zero(), qhi = Eigen::Vector3d::Zero();
@@ -270,6 +334,25 @@ Status build_las(const std::string& path, const Cloud& cloud, const WriteOptions
       for (std::size_t c = 0; c < 3; ++c)
         w.put_at<std::uint16_t>(at + static_cast<std::size_t>(rgb_at) + 2 * c,
                                 static_cast<std::uint16_t>(o.colors[i][c] * 257U));
+    std::size_t e = at + las::kMinRecord[format];
+    for (const ExtraOut& x : extras) {
+      if (x.field == nullptr) {
+        w.put_at<std::uint16_t>(e, cloud.ring[i]);
+      } else {
+        const std::int32_t v = x.field->values[i];
+        switch (x.data_type) {
+          case 1: w.b[e] = static_cast<std::uint8_t>(v); break;
+          case 2: w.b[e] = static_cast<std::uint8_t>(static_cast<std::int8_t>(v)); break;
+          case 3: w.put_at<std::uint16_t>(e, static_cast<std::uint16_t>(v)); break;
+          case 4: w.put_at<std::int16_t>(e, static_cast<std::int16_t>(v)); break;
+          case 5: w.put_at<std::uint32_t>(e, static_cast<std::uint32_t>(v)); break;
+          case 9: w.put_at<float>(e, key_float(v)); break;
+          case 10: w.put_at<double>(e, static_cast<double>(key_float(v))); break;
+          default: w.put_at<std::int32_t>(e, v); break;
+        }
+      }
+      e += las::extra_bytes_size(x.data_type);
+    }
   }
   for (int a = 0; a < 3; ++a) {
     w.put_at<double>(bounds_at + 16 * static_cast<std::size_t>(a), qhi[a]);

@@ -310,7 +310,7 @@ TEST(LasFixture, Las14Format6WithWktEvlrRoundTrips) {
 
 TEST(LasFixture, NamedFieldsGoBackIntoTheirPlaces) {
   // Format 6 (LAS 1.4) fields from the cloud, written and read back; one the format has no
-  // place for is named as not written, and a value that does not fit is refused.
+  // place for goes into extra bytes, and a value that does not fit a place is refused.
   Cloud c = fixture_cloud();
   const std::size_t n = c.size();
   const auto field = [n](const char* name, auto value) {
@@ -327,20 +327,16 @@ TEST(LasFixture, NamedFieldsGoBackIntoTheirPlaces) {
               field("point_source_id", [](int i) { return 60000 + i; }),
               field("not_a_las_field", [](int i) { return i; })};
   const std::string path = (temp_dir("las_named") / "named.las").string();
-  const std::vector<std::string> not_written = fields_not_written(path, c, {});
-  EXPECT_EQ(not_written, std::vector<std::string>{"not_a_las_field"});
+  EXPECT_TRUE(fields_not_written(path, c, {}).empty());
   ASSERT_TRUE(write_cloud(path, c, {}).ok());
   const ReadResult r = read_ok(path);
   ASSERT_EQ(r.cloud.size(), n);
   for (const IntegerField& f : c.fields) {
     const IntegerField* back = r.cloud.field(f.name);
-    if (f.name == "not_a_las_field") {
-      EXPECT_EQ(back, nullptr);
-      continue;
-    }
     ASSERT_NE(back, nullptr) << f.name;
     EXPECT_EQ(back->values, f.values) << f.name;
   }
+  EXPECT_EQ(r.cloud.field("not_a_las_field")->type, FieldType::kInt32);  // an extra long
   const Bytes b = file_bytes(path);
   EXPECT_EQ(get<std::uint64_t>(b, 255), 67U);  // points by return: 1, 2, 3 (a third each)
   EXPECT_EQ(get<std::uint64_t>(b, 263), 67U);
@@ -357,7 +353,97 @@ TEST(LasFixture, NamedFieldsGoBackIntoTheirPlaces) {
   ASSERT_NE(rank, nullptr);
   for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(rank->values[i], std::lround((static_cast<double>(i) * 50 - 5000) * 0.006)) << i;
   EXPECT_EQ(r12.cloud.field("classification")->values, c.fields[0].values);
-  EXPECT_EQ(r12.cloud.field("scanner_channel"), nullptr);  // format 1 has none
+  // format 1 has no scanner channel: an extra byte value (the file then LAS 1.4, format 1)
+  ASSERT_NE(r12.cloud.field("scanner_channel"), nullptr);
+  EXPECT_EQ(r12.cloud.field("scanner_channel")->values, c.fields[4].values);
+  EXPECT_EQ(r12.cloud.georef->las_point_format, 1);
+  EXPECT_EQ(r12.cloud.georef->las_version_minor, 4);
+}
+
+// Every field the record has no place for, and the ring, go into extra bytes in their own
+// types (LAS 1.4 R15 §2.5.2: one 192-byte descriptor each in a "LASF_Spec" record 4) and come
+// back; a descriptor with a scale and offset is read as float32 values with them applied; what
+// a field cannot hold (a 64-bit value beyond 31 bits, undocumented bytes) is named as dropped.
+TEST(LasFixture, ExtraBytesOfEveryTypeRoundTrip) {
+  Cloud c = fixture_cloud();
+  c.georef->las_version_minor = 2;
+  c.georef->las_point_format = 1;
+  c.georef->las_global_encoding = 0;
+  c.georef->crs_records.clear();
+  const std::size_t n = c.size();
+  const auto field = [n](const char* name, FieldType type, auto value) {
+    IntegerField f{name, std::vector<std::int32_t>(n), type};
+    for (std::size_t i = 0; i < n; ++i) f.values[i] = value(static_cast<int>(i));
+    return f;
+  };
+  const auto as_float = [](float v) { return float_key(v); };
+  c.fields = {field("u8", FieldType::kUint8, [](int i) { return i % 256; }),
+              field("i8", FieldType::kInt8, [](int i) { return i % 200 - 100; }),
+              field("u16", FieldType::kUint16, [](int i) { return i * 300; }),
+              field("i16", FieldType::kInt16, [](int i) { return i * 150 - 30000; }),
+              field("u32", FieldType::kUint32, [](int i) { return i * 10000000; }),
+              field("i32", FieldType::kInt32, [](int i) { return -i * 10000000; }),
+              field("f32", FieldType::kFloat32, [&](int i) { return as_float(0.1F * static_cast<float>(i) - 3.0F); }),
+              field("f64", FieldType::kFloat64, [&](int i) { return as_float(static_cast<float>(i) * 0.5F); })};
+  c.ring.resize(n);
+  for (std::size_t i = 0; i < n; ++i) c.ring[i] = static_cast<std::uint16_t>(i % 64);
+  const std::string path = (temp_dir("las_extra") / "extra.las").string();
+  EXPECT_TRUE(fields_not_written(path, c, {}).empty());
+  ASSERT_TRUE(write_cloud(path, c, {}).ok());
+  Bytes b = file_bytes(path);
+  EXPECT_EQ(b[25], 4);                                                      // LAS 1.4
+  EXPECT_EQ(b[104], 1);                                                     // point format 1 kept
+  EXPECT_EQ(get<std::uint16_t>(b, 105), 28 + 2 + 1 + 1 + 2 + 2 + 4 + 4 + 4 + 8);  // the record and its extra bytes
+  EXPECT_EQ(get<std::uint32_t>(b, 100), 1U);                                // one VLR
+  const std::size_t vlr = get<std::uint16_t>(b, 94);
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(b.data() + vlr + 2)), "LASF_Spec");
+  EXPECT_EQ(get<std::uint16_t>(b, vlr + 18), 4);
+  EXPECT_EQ(get<std::uint16_t>(b, vlr + 20), 9 * 192);
+  const std::size_t desc = vlr + 54;
+  EXPECT_EQ(b[desc + 2], 3);  // the ring: unsigned short
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(b.data() + desc + 4)), "ring");
+  const std::uint8_t types[] = {3, 1, 2, 3, 4, 5, 6, 9, 10};
+  for (std::size_t k = 0; k < 9; ++k) EXPECT_EQ(b[desc + 192 * k + 2], types[k]) << k;
+
+  const ReadResult r = read_ok(path);
+  ASSERT_EQ(r.cloud.size(), n);
+  EXPECT_EQ(r.cloud.ring, c.ring);
+  for (const IntegerField& f : c.fields) {
+    const IntegerField* back = r.cloud.field(f.name);
+    ASSERT_NE(back, nullptr) << f.name;
+    EXPECT_EQ(back->type, f.type) << f.name;
+    EXPECT_EQ(back->values, f.values) << f.name;
+  }
+  EXPECT_TRUE(r.dropped_fields.empty());
+
+  // the u16 descriptor given a scale of 0.01 and an offset of 5: float32 raw · 0.01 + 5
+  const std::size_t u16 = desc + 192 * 3;
+  b[u16 + 3] = 0x18;
+  put<double>(b, u16 + 112, 0.01);
+  put<double>(b, u16 + 136, 5.0);
+  // the first point's u32 value 2^32 - 1 (beyond the 31 bits a field holds)
+  put<std::uint32_t>(b, get<std::uint32_t>(b, 96) + 28 + 2 + 1 + 1 + 2 + 2, 0xFFFFFFFFU);
+  // the i32 descriptor undocumented bytes (type 0, its 4 bytes in `options`)
+  b[desc + 192 * 6 + 2] = 0;
+  b[desc + 192 * 6 + 3] = 4;
+  const std::string edited = (temp_dir("las_extra") / "edited.las").string();
+  write_bytes(edited, std::string(b.begin(), b.end()));
+  const ReadResult e = read_ok(edited);
+  const IntegerField* scaled = e.cloud.field("u16");
+  ASSERT_NE(scaled, nullptr);
+  EXPECT_EQ(scaled->type, FieldType::kFloat32);
+  for (std::size_t i = 0; i < n; ++i)
+    EXPECT_EQ(key_float(scaled->values[i]), static_cast<float>(static_cast<double>(i * 300) * 0.01 + 5.0)) << i;
+  EXPECT_EQ(e.cloud.field("u32"), nullptr);
+  EXPECT_EQ(e.cloud.field("i32"), nullptr);
+  ASSERT_NE(e.cloud.field("f64"), nullptr);  // the values after them still in their places
+  EXPECT_EQ(e.cloud.field("f64")->values, c.fields[7].values);
+  const auto said = [&](const std::vector<std::string>& lines, const std::string& what) {
+    return std::any_of(lines.begin(), lines.end(), [&](const std::string& l) { return l.find(what) != std::string::npos; });
+  };
+  EXPECT_TRUE(said(e.dropped_fields, "extra bytes \"u32\" (a value beyond 31 bits)"));
+  EXPECT_TRUE(said(e.dropped_fields, "extra bytes \"i32\" (undocumented bytes)"));
+  EXPECT_TRUE(said(e.notes, "extra bytes \"u16\" read as float32 values"));
 }
 
 TEST(LasFixture, FeetFromGeoKeysAreReadIntoMetres) {
