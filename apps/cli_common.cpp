@@ -12,8 +12,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <sys/stat.h>
 #include <thread>
@@ -259,30 +261,21 @@ std::string ScanLoader::stem(std::size_t i) const {
   const Entry& e = entries_.at(i);
   if (!e.stem.empty()) return e.stem;
   std::string s = std::filesystem::path(e.path).stem().string();
-  if (e.turns) s += "_turn" + std::to_string(e.turn);
+  if (e.scans) s += "_turn" + std::to_string(e.turn);
   return s;
 }
 
-/// A raw log's turns for ScanLoader::load, read from the capture as they are asked for (the
-/// capture is never held whole). Turns come in about their order, two at once with two
-/// threads: a turn read on the way to another, up to two before it, is held for its caller;
-/// one asked for behind the reader opens the capture again.
-class ScanLoader::LogTurns {
+/// A file's scans (a raw log's turns, a bag topic's scans) for ScanLoader::load, read from
+/// the file as they are asked for (the file is never held whole). Scans come in about their
+/// order, two at once with two threads: a scan read on the way to another, up to two before
+/// it, is held for its caller; one asked for behind the reader opens the file again.
+class ScanLoader::Turns {
  public:
-  LogTurns(std::string path, io::ReadOptions options) : path_(std::move(path)), options_(std::move(options)) {}
-
-  /// Reads the whole capture once: each turn's frame id and capture time (the turns' names),
-  /// and every error the capture holds, before any scan is coded.
-  void survey(std::vector<std::uint64_t>& frame_ids, std::vector<std::uint64_t>& captured_ns) {
-    auto reader = open();
-    for (;;) {
-      auto t = reader->next();
-      if (!t.ok()) throw CliError(exit_code_for(t.status().code()) == 1 ? 1 : 2, t.status().to_string());
-      if (!t.value()) break;
-      frame_ids.push_back(t.value()->frame_id);
-      captured_ns.push_back(t.value()->captured_ns);
-    }
-  }
+  /// The next scan of an open reader (std::nullopt after the last); throws CliError.
+  using Next = std::function<std::optional<Cloud>()>;
+  /// Opens the file again; throws CliError.
+  using Open = std::function<Next()>;
+  Turns(std::string path, Open open) : path_(std::move(path)), open_(std::move(open)) {}
 
   Cloud turn(std::size_t k) {
     const std::lock_guard<std::mutex> lock(mutex_);
@@ -291,34 +284,47 @@ class ScanLoader::LogTurns {
       held_.erase(it);
       return c;
     }
-    if (!reader_ || k < next_) {
-      reader_ = open();
+    if (!next_fn_ || k < next_) {
+      next_fn_ = open_();
       next_ = 0;
     }
     for (;;) {
-      auto t = reader_->next();
-      if (!t.ok()) throw CliError(2, t.status().to_string());
-      if (!t.value()) throw CliError(2, path_ + ": turn " + std::to_string(k) + " is no longer in the capture");
+      std::optional<Cloud> c = next_fn_();
+      if (!c) throw CliError(2, path_ + ": scan " + std::to_string(k) + " is no longer in the file");
       const std::size_t at = next_++;
-      if (at == k) return std::move(t.value()->cloud);
-      if (at + 2 >= k) held_[at] = std::move(t.value()->cloud);
+      if (at == k) return std::move(*c);
+      if (at + 2 >= k) held_[at] = std::move(*c);
     }
   }
 
  private:
-  std::unique_ptr<io::SensorLogReader> open() const {
-    auto r = io::SensorLogReader::open(path_, options_);
-    if (!r.ok()) throw CliError(exit_code_for(r.status().code()) == 1 ? 1 : 2, r.status().to_string());
-    return std::move(r).value();
-  }
-
   std::string path_;
-  io::ReadOptions options_;
+  Open open_;
   std::mutex mutex_;
-  std::unique_ptr<io::SensorLogReader> reader_;
-  std::size_t next_ = 0;  // the turn reader_ gives next
+  Next next_fn_;
+  std::size_t next_ = 0;  // the scan next_fn_ gives next
   std::map<std::size_t, Cloud> held_;
 };
+
+namespace {
+
+[[noreturn]] void throw_read_error(const Status& s) {
+  throw CliError(s.code() == ErrorCode::kOutOfMemory ? 4 : exit_code_for(s.code()) == 1 ? 1 : 2, s.to_string());
+}
+
+std::shared_ptr<io::SensorLogReader> open_log(const std::string& path, const io::ReadOptions& options) {
+  auto r = io::SensorLogReader::open(path, options);
+  if (!r.ok()) throw_read_error(r.status());
+  return std::shared_ptr<io::SensorLogReader>(std::move(r).value());
+}
+
+std::shared_ptr<io::BagReader> open_bag_reader(const std::string& path, const io::ReadOptions& options) {
+  auto r = io::BagReader::open(path, options.bag_topic, options);
+  if (!r.ok()) throw_read_error(r.status());
+  return std::shared_ptr<io::BagReader>(std::move(r).value());
+}
+
+}  // namespace
 
 ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path,
                        bool points_in_world)
@@ -335,12 +341,30 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
       continue;
     }
     if (!log) {
-      entries_.push_back({path, path, nullptr, 0, "", nullptr});
+      entries_.push_back({path, path, 0, "", nullptr});
       continue;
     }
-    auto turns = std::make_shared<LogTurns>(path, options);
+    // One pass for each turn's frame id and capture time (the turns' names) and every error
+    // the capture holds, before any scan is coded; then turn by turn as they are loaded.
     std::vector<std::uint64_t> ids, captured;
-    turns->survey(ids, captured);
+    {
+      const auto reader = open_log(path, options);
+      for (;;) {
+        auto t = reader->next();
+        if (!t.ok()) throw_read_error(t.status());
+        if (!t.value()) break;
+        ids.push_back(t.value()->frame_id);
+        captured.push_back(t.value()->captured_ns);
+      }
+    }
+    const auto turns = std::make_shared<Turns>(path, [path, options]() -> Turns::Next {
+      return [reader = open_log(path, options)]() -> std::optional<Cloud> {
+        auto t = reader->next();
+        if (!t.ok()) throw_read_error(t.status());
+        if (!t.value()) return std::nullopt;
+        return std::move(t.value()->cloud);
+      };
+    });
     const std::string stem = std::filesystem::path(path).stem().string();
     for (std::size_t k = 0; k < ids.size(); ++k) {
       // (a turn whose capture time is known is named with it, as a bag's message with its
@@ -351,7 +375,7 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
         name += ", captured " + stamp;
         scan_stem = stem + "_turn" + std::to_string(k) + "_" + stamp;
       }
-      entries_.push_back({path, name + ")", nullptr, k, scan_stem, turns});
+      entries_.push_back({path, name + ")", k, scan_stem, turns});
     }
   }
   if (points_in_world && poses_path.empty())
@@ -362,9 +386,20 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
 
 void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options) {
   set_current_file(path);
-  auto r = io::read_bag(path, options.bag_topic, options);
-  if (!r.ok()) throw CliError(r.status().code() == ErrorCode::kOutOfMemory ? 4 : 2, r.status().to_string());
-  io::BagScans& bag = r.value();
+  // One pass for each scan's stamp (its name) and what the topic drops, before any scan is
+  // coded; then scan by scan as they are loaded.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stamps;
+  io::BagScans bag;
+  {
+    const auto reader = open_bag_reader(path, options);
+    for (;;) {
+      auto s = reader->next();
+      if (!s.ok()) throw_read_error(s.status());
+      if (!s.value()) break;
+      stamps.emplace_back(s.value()->stamp_sec, s.value()->stamp_nsec);
+    }
+    bag = reader->summary();
+  }
   // never drop silently: the fields not kept and what the reader noticed
   if (!bag.dropped_fields.empty()) {
     std::string list;
@@ -377,15 +412,20 @@ void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options
     std::fprintf(stderr, "note: %s: %zu points with a NaN or infinite coordinate dropped\n", path.c_str(), bag.non_finite_dropped);
   if (bag.incomplete_frames > 0)
     std::fprintf(stderr, "note: %s: %zu incomplete frame(s) dropped\n", path.c_str(), bag.incomplete_frames);
-  auto scans = std::make_shared<std::vector<Cloud>>();
-  for (auto& s : bag.scans) scans->push_back(std::move(s.cloud));
-  const std::shared_ptr<const std::vector<Cloud>> shared = scans;
+  const auto scans = std::make_shared<Turns>(path, [path, options]() -> Turns::Next {
+    return [reader = open_bag_reader(path, options)]() -> std::optional<Cloud> {
+      auto s = reader->next();
+      if (!s.ok()) throw_read_error(s.status());
+      if (!s.value()) return std::nullopt;
+      return std::move(s.value()->cloud);
+    };
+  });
   const std::string stem = std::filesystem::path(path).stem().string();
-  for (std::size_t k = 0; k < bag.scans.size(); ++k) {
-    const std::string stamp = stamp_text(bag.scans[k].stamp_sec, bag.scans[k].stamp_nsec);
+  for (std::size_t k = 0; k < stamps.size(); ++k) {
+    const std::string stamp = stamp_text(stamps[k].first, stamps[k].second);
     const char* what = bag.type == "sensor_msgs/PointCloud2" ? " message " : " frame ";
-    entries_.push_back({path, path + " " + bag.topic + what + std::to_string(k) + " (stamp " + stamp + ")", shared, k,
-                        stem + "_" + stamp, nullptr});
+    entries_.push_back({path, path + " " + bag.topic + what + std::to_string(k) + " (stamp " + stamp + ")", k,
+                        stem + "_" + stamp, scans});
   }
 }
 
@@ -400,7 +440,7 @@ std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans) {
 
 Cloud ScanLoader::load(std::size_t i) const {
   const Entry& e = entries_.at(i);
-  Cloud cloud = e.log ? e.log->turn(e.turn) : e.turns ? (*e.turns)[e.turn] : load_cloud(e.path, options_).cloud;
+  Cloud cloud = e.scans ? e.scans->turn(e.turn) : load_cloud(e.path, options_).cloud;
   set_current_file(e.name);
   if (!poses_.empty()) {
     if (points_in_world_) {

@@ -146,14 +146,13 @@ class ScanLoader {
   [[nodiscard]] std::string stem(std::size_t i) const;
 
  private:
-  class LogTurns;
+  class Turns;
   struct Entry {
     std::string path;
     std::string name;
-    std::shared_ptr<const std::vector<Cloud>> turns;  // ROS bag: its scans
-    std::size_t turn = 0;
-    std::string stem;  // ROS bag: "<stem>_<sec>.<nsec>", the message's stamp
-    std::shared_ptr<LogTurns> log;  // raw log: read turn by turn as the scans are loaded
+    std::size_t turn = 0;  // raw log or ROS bag: the scan's place in its file
+    std::string stem;  // raw log: "<stem>_turn<k>_<sec>.<nsec>"; ROS bag: "<stem>_<sec>.<nsec>", the message's stamp
+    std::shared_ptr<Turns> scans;  // raw log or ROS bag: read scan by scan as they are loaded
   };
   void add_bag(const std::string& path, const io::ReadOptions& options);
   std::vector<Entry> entries_;

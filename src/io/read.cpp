@@ -220,21 +220,25 @@ StatusOr<ReadResult> read_log_first_turn(const std::string& path, const ReadOpti
   return r;
 }
 
-/// A ROS bag's first scan on the topic options.bag_topic (read_bag).
+/// A ROS bag's first scan on the topic options.bag_topic (the others read to count them,
+/// one at a time: BagReader).
 StatusOr<ReadResult> read_bag_first_scan(const std::string& path, const ReadOptions& options) {
-  auto bag = read_bag(path, options.bag_topic, options);
-  if (!bag.ok()) return bag.status();
-  BagScans& b = bag.value();
-  if (b.scans.empty()) return bad_data(detail::msg(path, "topic " + b.topic + " holds no message"));
+  auto reader = BagReader::open(path, options.bag_topic, options);
+  if (!reader.ok()) return reader.status();
   ReadResult r;
+  for (;;) {
+    auto scan = reader.value()->next();
+    if (!scan.ok()) return scan.status();
+    if (!scan.value()) break;
+    if (r.scans_in_file++ == 0) r.cloud = std::move(scan.value()->cloud);
+  }
+  const BagScans& b = reader.value()->summary();
   r.encoding = "ROS bag " + b.topic + " (" + b.type + ")";
   r.sensor = b.sensor;
-  r.scans_in_file = b.scans.size();
   r.no_return_dropped = b.no_return_dropped;
   r.non_finite_dropped = b.non_finite_dropped;
   r.dropped_fields = b.dropped_fields;
   r.notes = b.notes;
-  r.cloud = std::move(b.scans.front().cloud);
   struct stat st {};
   if (::stat(path.c_str(), &st) == 0) r.file_bytes = static_cast<std::uint64_t>(st.st_size);
   return r;

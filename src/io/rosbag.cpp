@@ -33,7 +33,11 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <condition_variable>
+#include <deque>
 #include <mutex>
+#include <optional>
+#include <thread>
 
 #include "io/rosbag_plugin.h"
 #ifdef LEX3D_ROSBAG_BUILTIN
@@ -65,6 +69,17 @@ Status unsupported(const std::string& path) {
 
 StatusOr<BagInfo> read_bag_info(const std::string& path) { return unsupported(path); }
 StatusOr<BagScans> read_bag(const std::string& path, const std::string&, const ReadOptions&) { return unsupported(path); }
+struct BagReader::Impl {};
+BagReader::BagReader() = default;
+BagReader::~BagReader() = default;
+StatusOr<std::unique_ptr<BagReader>> BagReader::open(const std::string& path, const std::string&, const ReadOptions&) {
+  return unsupported(path);
+}
+StatusOr<std::optional<BagScan>> BagReader::next() { return std::optional<BagScan>(); }
+const BagScans& BagReader::summary() const {
+  static const BagScans kNone;
+  return kNone;
+}
 Status write_bag(const std::string& path, const std::vector<BagScan>&, const std::string&) { return unsupported(path); }
 
 #else
@@ -340,16 +355,23 @@ ScanStamp message_stamp(const BagScan& scan) {
   return s;
 }
 
-Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::string>& md5s, const BagTopic& topic,
-                   BagScans& out) {
-  const std::string expected = bag.api().pointcloud2_md5;
-  for (const std::string& m : md5s)
-    if (m != expected)
-      return bad_data(detail::msg(path, "topic " + topic.name + ": a PointCloud2 of another definition (MD5 " +
-                                            detail::printable(m, 40) + ")"));
-  std::size_t k = 0;
-  return for_each_message(path, bag, topic.name, [&](lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size) {
-    const std::string where = detail::msg(path, "message " + std::to_string(k) + " on " + topic.name);
+/// A topic's scans, made from its messages one at a time (BagReader's producer side).
+class TopicScans {
+ public:
+  virtual ~TopicScans() = default;
+  /// One message of the topic (bag time `t`): the scans it completes go to `out`.
+  virtual Status message(lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size, std::vector<BagScan>& out) = 0;
+  /// The topic's end: its last scans, and `summary` completed.
+  virtual Status finish(std::vector<BagScan>& out) = 0;
+  BagScans summary;  ///< the topic, its type and what reading dropped (no scans)
+};
+
+/// sensor_msgs/PointCloud2: a scan a message, stamped with its header's stamp (else its bag time).
+class CloudScans final : public TopicScans {
+ public:
+  CloudScans(std::string path, std::string topic) : path_(std::move(path)), topic_(std::move(topic)) {}
+  Status message(lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size, std::vector<BagScan>& out) override {
+    const std::string where = detail::msg(path_, "message " + std::to_string(k_) + " on " + topic_);
     detail::PointCloud2Msg pm;
     Status s = detail::parse_pointcloud2(where, bytes, size, pm);
     if (!s.ok()) return s;
@@ -366,143 +388,132 @@ Status read_clouds(const std::string& path, OpenBag& bag, const std::set<std::st
       scan.stamp_nsec = t.nsec;
     }
     scan.cloud.stamp = message_stamp(scan);
-    out.non_finite_dropped += r.non_finite_dropped;
-    out.no_return_dropped += r.no_return_dropped;
-    for (const auto& f : r.dropped_fields) add_unique(out.dropped_fields, f);
-    for (const auto& n : r.notes) add_unique(out.notes, n);
-    out.scans.push_back(std::move(scan));
-    ++k;
-    return Status{};
-  });
-}
-
-/// What a packet decoder's log tells of a topic (its sensor, the frames and pixels it
-/// dropped, the packets it skipped, described by `skipped`, the second returns dropped for
-/// ReadOptions::single_return), and each of its turns as a scan, stamped by `stamp` (turn
-/// index -> bag time).
-template <typename Stamp>
-void take_turns(SensorLog& log, const std::string& skipped, Stamp stamp, const std::string& frame_id,
-                const ReadOptions& options, BagScans& out) {
-  if (options.single_return && log.info.second_returns > 0) {
-    detail::drop_second_returns(log);
-    out.notes.push_back(std::to_string(log.info.second_returns) + " second returns not kept (single return)");
+    summary.non_finite_dropped += r.non_finite_dropped;
+    summary.no_return_dropped += r.no_return_dropped;
+    for (const auto& f : r.dropped_fields) add_unique(summary.dropped_fields, f);
+    for (const auto& n : r.notes) add_unique(summary.notes, n);
+    out.push_back(std::move(scan));
+    ++k_;
+    return {};
   }
-  out.sensor = log.info.sensor;
-  out.incomplete_frames = log.info.incomplete_frames;
-  out.no_return_dropped = log.info.no_returns;
-  if (log.info.other_packets > 0) out.notes.push_back(std::to_string(log.info.other_packets) + " " + skipped + ": skipped");
-  for (std::size_t i = 0; i < log.scans.size(); ++i) {
-    BagScan scan;
-    scan.cloud = std::move(log.scans[i]);
-    const lex3d_bag_time t = stamp(i);
-    scan.stamp_sec = t.sec;
-    scan.stamp_nsec = t.nsec;
-    scan.frame_id = frame_id;
-    scan.cloud.stamp = message_stamp(scan);
-    out.scans.push_back(std::move(scan));
-  }
-}
+  Status finish(std::vector<BagScan>&) override { return {}; }
 
-Status read_packets(const std::string& path, OpenBag& bag, const BagInfo& info, const BagTopic& topic,
-                    const ReadOptions& options, BagScans& out) {
-  std::vector<std::uint8_t> metadata;
-  std::string metadata_name = options.metadata_path;
-  if (!metadata_name.empty()) {
-    auto text = read_file(metadata_name, 64ULL << 20);
-    if (!text.ok()) return text.status();
-    metadata = std::move(text).value();
-  } else {
-    // the bag's metadata: a std_msgs/String topic named ".../metadata", else its only String topic
-    const BagTopic* meta = nullptr;
-    std::size_t strings = 0;
-    for (const auto& t : info.topics) {
-      if (t.type != "std_msgs/String" || t.messages == 0) continue;
-      ++strings;
-      const bool named = t.name.size() >= 8 && t.name.compare(t.name.size() - 8, 8, "metadata") == 0;
-      if (named || meta == nullptr) meta = &t;
-    }
-    if (meta == nullptr || (strings > 1 && meta->name.find("metadata") == std::string::npos))
-      return bad_data(detail::msg(path, "topic " + topic.name + " holds Ouster packets but the bag has no metadata "
-                                        "topic (std_msgs/String named .../metadata): give the sensor's metadata JSON "
-                                        "with --metadata"));
-    bool got = false;  // the first message
-    Status s = for_each_message(path, bag, meta->name, [&](lex3d_bag_time, const std::uint8_t* bytes, std::size_t size) {
-      if (got) return Status{};
-      got = true;
-      const std::uint8_t* b = nullptr;
-      std::size_t n = 0;
-      if (!detail::parse_byte_array(bytes, size, b, n))
-        return bad_data(detail::msg(path, "topic " + meta->name + ": a truncated std_msgs/String"));
-      metadata.assign(b, b + n);
-      return Status{};
-    });
+ private:
+  std::string path_, topic_;
+  std::size_t k_ = 0;
+};
+
+/// Packets (Ouster's, Velodyne's) through a capture's decoder: a scan a turn, stamped with
+/// the time of its first packet (`Datagram::captured_ns`: an Ouster packet message's bag
+/// time, a Velodyne packet's own stamp), framed `frame_id`.
+class PacketScans : public TopicScans {
+ public:
+  PacketScans(std::string path, std::string topic, ReadOptions options, std::string skipped)
+      : path_(std::move(path)), topic_(std::move(topic)), options_(std::move(options)), skipped_(std::move(skipped)) {}
+  Status finish(std::vector<BagScan>& out) override {
+    Status s = decoder_->finish();
     if (!s.ok()) return s;
-    metadata_name = path + " topic " + meta->name;
+    turns(out);
+    if (options_.single_return && info_.second_returns > 0)
+      summary.notes.push_back(std::to_string(info_.second_returns) + " second returns not kept (single return)");
+    summary.sensor = info_.sensor;
+    summary.incomplete_frames = info_.incomplete_frames;
+    summary.no_return_dropped = info_.no_returns;
+    if (info_.other_packets > 0)
+      summary.notes.push_back(std::to_string(info_.other_packets) + " " + skipped_ + ": skipped");
+    if (info_.frames == 0) return no_turn();
+    return {};
   }
-  std::vector<detail::Datagram> datagrams;
-  std::vector<lex3d_bag_time> times;  // each packet's bag time
-  std::size_t k = 0;
-  Status s = for_each_message(path, bag, topic.name, [&](lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size) {
-    ++k;
+
+ protected:
+  /// The decoder's finished turns as scans.
+  void turns(std::vector<BagScan>& out) {
+    for (SensorTurn& t : decoder_->turns) {
+      BagScan scan;
+      scan.cloud = std::move(t.cloud);
+      if (options_.single_return) detail::drop_second_returns(scan.cloud);
+      scan.stamp_sec = static_cast<std::uint32_t>(t.captured_ns / 1000000000ULL);
+      scan.stamp_nsec = static_cast<std::uint32_t>(t.captured_ns % 1000000000ULL);
+      scan.frame_id = frame_id_;
+      scan.cloud.stamp = message_stamp(scan);
+      out.push_back(std::move(scan));
+    }
+    decoder_->turns.clear();
+  }
+  Status push(const detail::Datagram& d, std::vector<BagScan>& out) {
+    Status s = decoder_->push(d);
+    if (!s.ok()) return s;
+    turns(out);
+    return {};
+  }
+  [[nodiscard]] virtual Status no_turn() const { return {}; }
+
+  std::string path_, topic_;
+  ReadOptions options_;
+  std::string skipped_;
+  SensorLogInfo info_;
+  std::unique_ptr<detail::LogDecoder> decoder_;
+  std::string frame_id_;
+  std::size_t k_ = 0;  // messages so far
+};
+
+/// Ouster packets (ouster_ros/PacketMsg: a uint8[] each), with the bag's metadata.
+class OusterScans final : public PacketScans {
+ public:
+  OusterScans(std::string path, std::string topic, ReadOptions options)
+      : PacketScans(std::move(path), topic, std::move(options),
+                    "messages on " + topic + " are not lidar packets of the metadata's size") {}
+  Status start(const std::string& metadata_name, const std::vector<std::uint8_t>& metadata) {
+    auto d = detail::ouster_decoder(path_, metadata_name, metadata, true, info_, topic_);
+    if (!d.ok()) return d.status();
+    decoder_ = std::move(d).value();
+    return {};
+  }
+  Status message(lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size, std::vector<BagScan>& out) override {
+    ++k_;
     const std::uint8_t* b = nullptr;
     std::size_t n = 0;
     if (!detail::parse_byte_array(bytes, size, b, n))
-      return bad_data(detail::msg(path, "message " + std::to_string(k) + " on " + topic.name + ": a truncated packet message"));
+      return bad_data(detail::msg(path_, "message " + std::to_string(k_) + " on " + topic_ + ": a truncated packet message"));
     detail::Datagram d;
-    d.record = k;
+    d.record = k_;
+    d.captured_ns = static_cast<std::uint64_t>(t.sec) * 1000000000ULL + t.nsec;
     d.payload.assign(b, b + n);
-    datagrams.push_back(std::move(d));
-    times.push_back(t);
-    return Status{};
-  });
-  if (!s.ok()) return s;
-  SensorLog log;
-  s = detail::decode_ouster_packets(path, metadata_name, metadata, datagrams, true, log, topic.name);
-  if (!s.ok()) return s;
-  // each frame's time: the bag time of its frame id's first packet
-  std::map<std::uint64_t, lex3d_bag_time> first_seen;
-  for (std::size_t j = 0; j < datagrams.size(); ++j) {
-    const auto& p = datagrams[j].payload;
-    std::uint16_t id = 0;
-    if (p.size() >= 12) std::memcpy(&id, p.data() + (log.info.profile == "LEGACY" ? 10 : 2), 2);
-    first_seen.emplace(id, times[j]);
+    return push(d, out);
   }
-  take_turns(
-      log, "messages on " + topic.name + " are not lidar packets of the metadata's size",
-      [&](std::size_t i) {
-        const auto it = first_seen.find(log.frame_ids[i] & 0xFFFFU);
-        return it != first_seen.end() ? it->second : lex3d_bag_time{};
-      },
-      "", options, out);
-  if (out.scans.empty())
-    return bad_data(detail::msg(path, "topic " + topic.name + ": no complete frame (" +
-                                          std::to_string(log.info.lidar_packets) + " packets, " +
-                                          std::to_string(log.info.incomplete_frames) + " incomplete frame(s) dropped)"));
-  return {};
-}
+
+ private:
+  [[nodiscard]] Status no_turn() const override {
+    return bad_data(detail::msg(path_, "topic " + topic_ + ": no complete frame (" + std::to_string(info_.lidar_packets) +
+                                           " packets, " + std::to_string(info_.incomplete_frames) +
+                                           " incomplete frame(s) dropped)"));
+  }
+};
 
 /// The data packets of a topic of velodyne_msgs/VelodyneScan (ROS 1 serialization: a
 /// std_msgs/Header, u32 seq, time stamp, string frame_id; then a u32 count of
 /// velodyne_msgs/VelodynePacket, each a time stamp and 1206 bytes), decoded as a capture of
-/// them is, each turn stamped with its first packet's stamp. The calibration (`--metadata`,
-/// required for an HDL-64E) and the model (`--sensor-model`) as for a capture.
-Status read_velodyne_scans(const std::string& path, OpenBag& bag, const BagTopic& topic, const ReadOptions& options,
-                           BagScans& out) {
-  constexpr std::size_t kPacket = 1206, kStamped = 8 + kPacket;
-  std::vector<detail::Datagram> datagrams;
-  std::string frame_id;
-  std::size_t k = 0;
-  Status s = for_each_message(path, bag, topic.name, [&](lex3d_bag_time, const std::uint8_t* b, std::size_t n) {
-    ++k;
+/// them is, each turn stamped with its first packet's stamp and framed as the first message.
+/// The calibration (`--metadata`, required for an HDL-64E) and the model (`--sensor-model`)
+/// as for a capture.
+class VelodyneScans final : public PacketScans {
+ public:
+  VelodyneScans(std::string path, std::string topic, ReadOptions options)
+      : PacketScans(path, topic, options, "packets on " + topic + " are not Velodyne data packets") {
+    decoder_ = detail::velodyne_decoder(path_, options_.sensor_model, options_.metadata_path, info_);
+  }
+  Status message(lex3d_bag_time, const std::uint8_t* b, std::size_t n, std::vector<BagScan>& out) override {
+    constexpr std::size_t kPacket = 1206, kStamped = 8 + kPacket;
+    ++k_;
     const auto truncated = [&](const std::string& what) {
-      return bad_data(detail::msg(path, "message " + std::to_string(k) + " on " + topic.name +
-                                            ": a truncated velodyne_msgs/VelodyneScan (" + what + ")"));
+      return bad_data(detail::msg(path_, "message " + std::to_string(k_) + " on " + topic_ +
+                                             ": a truncated velodyne_msgs/VelodyneScan (" + what + ")"));
     };
     if (n < 16) return truncated("its header");
     std::uint32_t frame_bytes = 0, count = 0;
     std::memcpy(&frame_bytes, b + 12, 4);
     if (frame_bytes > n - 16) return truncated("its frame_id");
-    if (k == 1) frame_id.assign(reinterpret_cast<const char*>(b + 16), frame_bytes);
+    if (k_ == 1) frame_id_.assign(reinterpret_cast<const char*>(b + 16), frame_bytes);
     std::size_t at = 16 + static_cast<std::size_t>(frame_bytes);
     if (n - at < 4) return truncated("its packet count");
     std::memcpy(&count, b + at, 4);
@@ -514,33 +525,61 @@ Status read_velodyne_scans(const std::string& path, OpenBag& bag, const BagTopic
       std::memcpy(&sec, b + at, 4);
       std::memcpy(&nsec, b + at + 4, 4);
       detail::Datagram d;
-      d.record = k;
+      d.record = k_;
       d.captured_ns = static_cast<std::uint64_t>(sec) * 1000000000ULL + nsec;
       d.claimed = kPacket;
       d.payload.assign(b + at + 8, b + at + kStamped);
-      datagrams.push_back(std::move(d));
+      Status s = push(d, out);
+      if (!s.ok()) return s;
     }
+    return {};
+  }
+};
+
+/// The bag's Ouster metadata for a packet topic: the JSON given, else the first message of a
+/// std_msgs/String topic named ".../metadata" (or of its only String topic).
+Status ouster_metadata(const std::string& path, OpenBag& bag, const BagInfo& info, const BagTopic& topic,
+                       const ReadOptions& options, std::string& metadata_name, std::vector<std::uint8_t>& metadata) {
+  metadata_name = options.metadata_path;
+  if (!metadata_name.empty()) {
+    auto text = read_file(metadata_name, 64ULL << 20);
+    if (!text.ok()) return text.status();
+    metadata = std::move(text).value();
+    return {};
+  }
+  const BagTopic* meta = nullptr;
+  std::size_t strings = 0;
+  for (const auto& t : info.topics) {
+    if (t.type != "std_msgs/String" || t.messages == 0) continue;
+    ++strings;
+    const bool named = t.name.size() >= 8 && t.name.compare(t.name.size() - 8, 8, "metadata") == 0;
+    if (named || meta == nullptr) meta = &t;
+  }
+  if (meta == nullptr || (strings > 1 && meta->name.find("metadata") == std::string::npos))
+    return bad_data(detail::msg(path, "topic " + topic.name + " holds Ouster packets but the bag has no metadata "
+                                      "topic (std_msgs/String named .../metadata): give the sensor's metadata JSON "
+                                      "with --metadata"));
+  bool got = false;  // the first message
+  Status s = for_each_message(path, bag, meta->name, [&](lex3d_bag_time, const std::uint8_t* bytes, std::size_t size) {
+    if (got) return Status{};
+    got = true;
+    const std::uint8_t* b = nullptr;
+    std::size_t n = 0;
+    if (!detail::parse_byte_array(bytes, size, b, n))
+      return bad_data(detail::msg(path, "topic " + meta->name + ": a truncated std_msgs/String"));
+    metadata.assign(b, b + n);
     return Status{};
   });
   if (!s.ok()) return s;
-  SensorLog log;
-  s = detail::decode_velodyne(path, options.sensor_model, options.metadata_path, datagrams, log);
-  if (!s.ok()) return s;
-  take_turns(
-      log, "packets on " + topic.name + " are not Velodyne data packets",
-      [&](std::size_t i) {
-        const std::uint64_t t = i < log.captured_ns.size() ? log.captured_ns[i] : 0;
-        return lex3d_bag_time{static_cast<std::uint32_t>(t / 1000000000ULL), static_cast<std::uint32_t>(t % 1000000000ULL)};
-      },
-      frame_id, options, out);
+  metadata_name = path + " topic " + meta->name;
   return {};
 }
 
-StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& topic, const ReadOptions& options) {
+/// The topic `topic` names (empty: the bag's only PointCloud2 topic, else its only packet
+/// topic) and the producer of its scans.
+StatusOr<std::unique_ptr<TopicScans>> topic_scans(const std::string& path, OpenBag& bag, const std::string& topic,
+                                                  const ReadOptions& options) {
   std::uint64_t bytes = 0;
-  auto opened = open_bag(path, bytes);
-  if (!opened.ok()) return opened.status();
-  OpenBag& bag = *opened.value();
   std::map<std::string, std::set<std::string>> md5;
   auto listed = bag_info(path, bag, bytes, &md5);
   if (!listed.ok()) return listed.status();
@@ -565,19 +604,32 @@ StatusOr<BagScans> read_bag_impl(const std::string& path, const std::string& top
                                                                                        : "several point cloud topics") +
                                             " (give one with --topic); the bag holds " + topic_list(info)));
   }
-  BagScans out;
-  out.topic = chosen->name;
-  out.type = chosen->type;
-  Status s;
-  if (chosen->type == kPointCloud2) s = read_clouds(path, bag, md5[chosen->name], *chosen, out);
-  else if (is_packet_type(chosen->type)) s = read_packets(path, bag, info, *chosen, options, out);
-  else if (chosen->type == kVelodyneScan) s = read_velodyne_scans(path, bag, *chosen, options, out);
-  else
+  std::unique_ptr<TopicScans> out;
+  if (chosen->type == kPointCloud2) {
+    const std::string expected = bag.api().pointcloud2_md5;
+    for (const std::string& m : md5[chosen->name])
+      if (m != expected)
+        return bad_data(detail::msg(path, "topic " + chosen->name + ": a PointCloud2 of another definition (MD5 " +
+                                              detail::printable(m, 40) + ")"));
+    out = std::make_unique<CloudScans>(path, chosen->name);
+  } else if (is_packet_type(chosen->type)) {
+    std::string metadata_name;
+    std::vector<std::uint8_t> metadata;
+    Status s = ouster_metadata(path, bag, info, *chosen, options, metadata_name, metadata);
+    if (!s.ok()) return s;
+    auto o = std::make_unique<OusterScans>(path, chosen->name, options);
+    s = o->start(metadata_name, metadata);
+    if (!s.ok()) return s;
+    out = std::move(o);
+  } else if (chosen->type == kVelodyneScan) {
+    out = std::make_unique<VelodyneScans>(path, chosen->name, options);
+  } else {
     return bad_data(detail::msg(path, "topic " + chosen->name + " holds " + chosen->type +
                                           " messages; lex3d reads sensor_msgs/PointCloud2, Ouster packets "
                                           "(ouster_ros/PacketMsg) and Velodyne packets (velodyne_msgs/VelodyneScan)"));
-  if (!s.ok()) return s;
-  if (out.scans.empty()) return bad_data(detail::msg(path, "topic " + chosen->name + " holds no message"));
+  }
+  out->summary.topic = chosen->name;
+  out->summary.type = chosen->type;
   return out;
 }
 
@@ -744,8 +796,124 @@ StatusOr<BagInfo> read_bag_info(const std::string& path) {
   });
 }
 
+/// The scans of one topic, made on a thread of their own a few ahead of their reader
+/// (for_each_message hands the messages over one at a time, in a callback).
+struct BagReader::Impl {
+  static constexpr std::size_t kAhead = 2;  // scans made before the reader takes them
+  std::string path;
+  std::unique_ptr<OpenBag> bag;
+  std::unique_ptr<TopicScans> topic;
+  std::string topic_name;
+  std::thread worker;
+  std::mutex m;
+  std::condition_variable cv;
+  std::deque<BagScan> ready;
+  bool done = false, stop = false;
+  Status error;
+  BagScans summary;
+  std::size_t given = 0;
+
+  ~Impl() {
+    {
+      const std::lock_guard<std::mutex> lock(m);
+      stop = true;
+    }
+    cv.notify_all();
+    if (worker.joinable()) worker.join();
+  }
+
+  /// Hands `made` to the reader, waiting while kAhead scans wait for it; not ok when the
+  /// reader is gone.
+  Status deliver(std::vector<BagScan>& made) {
+    for (BagScan& scan : made) {
+      std::unique_lock<std::mutex> lock(m);
+      cv.wait(lock, [&] { return ready.size() < kAhead || stop; });
+      if (stop) return bad_data("stopped");
+      ready.push_back(std::move(scan));
+      cv.notify_all();
+    }
+    made.clear();
+    return {};
+  }
+
+  void run() {
+    const Status s = guarded(path, [&]() -> Status {
+      std::vector<BagScan> made;
+      Status r = for_each_message(path, *bag, topic_name, [&](lex3d_bag_time t, const std::uint8_t* bytes, std::size_t size) {
+        Status st = topic->message(t, bytes, size, made);
+        return st.ok() ? deliver(made) : st;
+      });
+      if (!r.ok()) return r;
+      r = topic->finish(made);
+      return r.ok() ? deliver(made) : r;
+    });
+    const std::lock_guard<std::mutex> lock(m);
+    if (!stop) error = s;
+    summary = std::move(topic->summary);
+    done = true;
+    cv.notify_all();
+  }
+
+  StatusOr<std::optional<BagScan>> next() {
+    std::unique_lock<std::mutex> lock(m);
+    cv.wait(lock, [&] { return !ready.empty() || done; });
+    if (!ready.empty()) {
+      BagScan scan = std::move(ready.front());
+      ready.pop_front();
+      ++given;
+      cv.notify_all();
+      return std::optional<BagScan>(std::move(scan));
+    }
+    if (!error.ok()) return error;
+    if (given == 0) return bad_data(detail::msg(path, "topic " + topic_name + " holds no message"));
+    return std::optional<BagScan>();
+  }
+};
+
+BagReader::BagReader() : impl_(std::make_unique<Impl>()) {}
+BagReader::~BagReader() = default;
+
+StatusOr<std::unique_ptr<BagReader>> BagReader::open(const std::string& path, const std::string& topic,
+                                                     const ReadOptions& options) {
+  return guarded(path, [&]() -> StatusOr<std::unique_ptr<BagReader>> {
+    std::unique_ptr<BagReader> r(new BagReader());
+    Impl& impl = *r->impl_;
+    impl.path = path;
+    std::uint64_t bytes = 0;
+    auto opened = open_bag(path, bytes);
+    if (!opened.ok()) return opened.status();
+    impl.bag = std::move(opened).value();
+    auto scans = topic_scans(path, *impl.bag, topic, options);
+    if (!scans.ok()) return scans.status();
+    impl.topic = std::move(scans).value();
+    impl.topic_name = impl.topic->summary.topic;
+    impl.summary.topic = impl.topic->summary.topic;
+    impl.summary.type = impl.topic->summary.type;
+    impl.worker = std::thread([&impl] { impl.run(); });
+    return r;
+  });
+}
+
+StatusOr<std::optional<BagScan>> BagReader::next() { return impl_->next(); }
+
+const BagScans& BagReader::summary() const {
+  const std::lock_guard<std::mutex> lock(impl_->m);
+  return impl_->summary;
+}
+
 StatusOr<BagScans> read_bag(const std::string& path, const std::string& topic, const ReadOptions& options) {
-  return guarded(path, [&]() -> StatusOr<BagScans> { return read_bag_impl(path, topic, options); });
+  auto reader = BagReader::open(path, topic, options);
+  if (!reader.ok()) return reader.status();
+  std::vector<BagScan> scans;
+  for (;;) {
+    auto scan = reader.value()->next();
+    if (!scan.ok()) return scan.status();
+    if (!scan.value()) break;
+    scans.push_back(std::move(*scan.value()));
+  }
+  BagScans out = reader.value()->summary();
+  out.scans = std::move(scans);
+  return out;
 }
 
 Status write_bag(const std::string& path, const std::vector<BagScan>& scans, const std::string& topic) {

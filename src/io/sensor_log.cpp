@@ -17,11 +17,9 @@
 
 namespace lex3d::io {
 
-namespace {
-
 /// Drops a dual-return turn's second returns (its points whose `return` field is 1) and the
 /// field itself.
-void drop_second_returns(Cloud& c) {
+void detail::drop_second_returns(Cloud& c) {
   const auto it = std::find_if(c.fields.begin(), c.fields.end(), [](const IntegerField& f) { return f.name == detail::kReturnField; });
   if (it == c.fields.end()) return;
   const std::vector<std::int32_t> which = it->values;
@@ -29,10 +27,8 @@ void drop_second_returns(Cloud& c) {
   detail::keep_cloud_points(c, [&](std::size_t i) { return which[i] == 0; });
 }
 
-}  // namespace
-
 void detail::drop_second_returns(SensorLog& log) {
-  for (Cloud& c : log.scans) io::drop_second_returns(c);
+  for (Cloud& c : log.scans) drop_second_returns(c);
 }
 
 void detail::take_turns(LogDecoder& decoder, SensorLog& log) {
@@ -177,7 +173,7 @@ struct SensorLogReader::Impl {
       if (decoder && !decoder->turns.empty()) {
         SensorTurn t = std::move(decoder->turns.front());
         decoder->turns.pop_front();
-        if (options.single_return) drop_second_returns(t.cloud);
+        if (options.single_return) detail::drop_second_returns(t.cloud);
         ++turns_given;
         return std::optional<SensorTurn>(std::move(t));
       }

@@ -50,6 +50,8 @@ inline std::optional<ScanStamp> capture_stamp(std::uint64_t captured_ns) {
 /// Drops the second returns of a dual-return log's turns (the points whose `return` field is
 /// 1) and the field itself, for ReadOptions::single_return; they stay counted.
 void drop_second_returns(SensorLog& log);
+/// The same of one turn.
+void drop_second_returns(Cloud& turn);
 
 /// The UDP/IPv4 datagrams of a libpcap/pcapng capture, read one at a time (as
 /// read_udp_datagrams reads them all), counted into the SensorLogInfo given to open().

@@ -26,6 +26,8 @@
 /// scan a complete turn, as a capture of them.
 
 #include <cstdint>
+#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -103,6 +105,30 @@ struct BagScans {
 /// position); kIoError when the file cannot be opened.
 [[nodiscard]] StatusOr<BagScans> read_bag(const std::string& path, const std::string& topic,
                                           const ReadOptions& options = {});
+
+/// Reads the scans of one topic one at a time (read_bag collects them): the scans read_bag
+/// gives, in the same order, made a couple ahead of the caller on a thread of the reader's
+/// own, so that a bag of any length is read in the memory of a few scans. open() chooses the
+/// topic and reads an Ouster packet topic's metadata (its errors are read_bag's); an error
+/// in a message comes from the next() that reaches it, after the scans before it.
+class BagReader {
+ public:
+  [[nodiscard]] static StatusOr<std::unique_ptr<BagReader>> open(const std::string& path, const std::string& topic,
+                                                                 const ReadOptions& options = {});
+  ~BagReader();
+  BagReader(const BagReader&) = delete;
+  BagReader& operator=(const BagReader&) = delete;
+  /// The next scan; std::nullopt after the last (a topic with none is an error, as read_bag's).
+  [[nodiscard]] StatusOr<std::optional<BagScan>> next();
+  /// The topic, its type and what reading dropped (BagScans without its scans): complete
+  /// once next() gave std::nullopt.
+  [[nodiscard]] const BagScans& summary() const;
+
+ private:
+  BagReader();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 /// Writes `scans` as `sensor_msgs/PointCloud2` messages on `topic` (uncompressed chunks),
 /// each at its stamp (a scan without one 1 s after the scan before it, the first at 1 s),
