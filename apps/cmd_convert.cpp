@@ -44,7 +44,13 @@ void run_convert(const ConvertOptions& o) {
     files.output(out, "output");
     check_output_kind(out, "output", "cloud");
   }
-  std::vector<io::BagScan> bag_scans;
+  // (a bag written message by message as the scans come)
+  std::unique_ptr<io::BagWriter> bag_out;
+  if (bag) {
+    auto w = io::BagWriter::open(files.staged(o.output));
+    if (!w.ok()) throw CliError(exit_code_for(w.status().code()), w.status().to_string());
+    bag_out = std::move(w).value();
+  }
   for (std::size_t i = 0; i < loader.size(); ++i) {
     Cloud cloud = loader.load(i);
     if (profile) {
@@ -56,10 +62,7 @@ void run_convert(const ConvertOptions& o) {
                    fit.value().lasers, fit.value().median_off_beam_m * 1e3);
     }
     const std::string& out = bag ? o.output : outputs[i];
-    if (bag) {
-      bag_scans.emplace_back();
-      stamp_from_name(loader.stem(i), bag_scans.back().stamp_sec, bag_scans.back().stamp_nsec);
-    } else {
+    if (!bag) {
       throw_if_error(io::write_cloud(files.staged(out), cloud));
       note_fields_not_written(out, cloud);
     }
@@ -67,9 +70,14 @@ void run_convert(const ConvertOptions& o) {
                 cloud.rows > 0 ? (" (" + std::to_string(cloud.rows) + " x " + std::to_string(cloud.columns) +
                                   (io::pixel_points(cloud).empty() ? ", written unorganised: pixels with two returns)" : " organised)")).c_str()
                                : "");
-    if (bag) bag_scans.back().cloud = std::move(cloud);
+    if (bag) {
+      io::BagScan scan;
+      stamp_from_name(loader.stem(i), scan.stamp_sec, scan.stamp_nsec);
+      scan.cloud = std::move(cloud);
+      throw_if_error(bag_out->write(scan));
+    }
   }
-  if (bag) throw_if_error(io::write_bag(files.staged(o.output), bag_scans));
+  if (bag) throw_if_error(bag_out->close());
   files.commit();
 }
 

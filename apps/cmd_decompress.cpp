@@ -50,7 +50,7 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   files.input(o.input, "model");
   std::vector<std::string> outputs;
   const bool bag = is_bag_output(o.output);  // one bag, a message a scan (stamped from its name)
-  std::vector<io::BagScan> bag_scans;
+  std::unique_ptr<io::BagWriter> bag_out;
   if (bag) files.output(o.output, "-o");
   for (std::size_t i = 0; i < s.model_files.size() && !bag; ++i) {
     // A file that keeps its scans' names (sequence 1.1) writes OUT_<name>; else OUT_000...
@@ -62,8 +62,8 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   j.begin_object().value("sequence", o.input).value("scans", s.model_files.size()).begin_array("files");
   std::uint64_t input_points = 0, points = 0;
   // Scans are decoded `threads` at a time (each on one thread); what is printed follows the
-  // scan order. Point-cloud files are written by their thread into their own staged file and
-  // memory holds one batch of clouds; a bag gathers every scan and is written at the end.
+  // scan order. Point-cloud files are written by their thread into their own staged file, a
+  // bag's messages in scan order as each batch is done; memory holds one batch of clouds.
   struct Decoded {
     std::uint64_t input_points = 0;
     std::size_t points = 0;
@@ -73,7 +73,12 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
   };
   const std::size_t n = s.model_files.size();
   const std::size_t batch = static_cast<std::size_t>(std::max(1, o.threads));
-  if (bag) outputs.assign(n, o.output);
+  if (bag) {
+    outputs.assign(n, o.output);
+    auto w = io::BagWriter::open(files.staged(o.output));
+    if (!w.ok()) throw CliError(exit_code_for(w.status().code()), w.status().to_string());
+    bag_out = std::move(w).value();
+  }
   std::vector<std::string> staged(n);
   if (!bag)
     for (std::size_t i = 0; i < n; ++i) staged[i] = files.staged(outputs[i]);
@@ -117,15 +122,16 @@ void run_decompress_sequence(const DecompressOptions& o, const std::vector<std::
       else
         std::printf("%s: %zu points (scan %zu of %zu)\n", outputs[i].c_str(), done[k].points, i + 1, n);
       if (bag) {
-        bag_scans.emplace_back();
-        if (!s.names.empty()) stamp_from_name(s.names[i], bag_scans.back().stamp_sec, bag_scans.back().stamp_nsec);
-        bag_scans.back().cloud = std::move(clouds[k]);
+        io::BagScan scan;
+        if (!s.names.empty()) stamp_from_name(s.names[i], scan.stamp_sec, scan.stamp_nsec);
+        scan.cloud = std::move(clouds[k]);
+        throw_if_error(bag_out->write(scan));
       } else {
         note_fields_not_written(outputs[i], clouds[k]);
       }
     }
   }
-  if (bag) throw_if_error(io::write_bag(files.staged(o.output), bag_scans));
+  if (bag) throw_if_error(bag_out->close());
   files.commit();
   const double bpp = input_points ? 8.0 * static_cast<double>(bytes.size()) / static_cast<double>(input_points) : 0.0;
   if (o.json) {

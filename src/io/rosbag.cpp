@@ -81,6 +81,14 @@ const BagScans& BagReader::summary() const {
   return kNone;
 }
 Status write_bag(const std::string& path, const std::vector<BagScan>&, const std::string&) { return unsupported(path); }
+struct BagWriter::Impl {};
+BagWriter::BagWriter() = default;
+BagWriter::~BagWriter() = default;
+StatusOr<std::unique_ptr<BagWriter>> BagWriter::open(const std::string& path, const std::string&) {
+  return unsupported(path);
+}
+Status BagWriter::write(const BagScan&) { return Status(ErrorCode::kInvalidArgument, "no ROS bag support"); }
+Status BagWriter::close() { return Status(ErrorCode::kInvalidArgument, "no ROS bag support"); }
 
 #else
 
@@ -754,29 +762,6 @@ Message to_message(const BagScan& scan, lex3d_bag_time stamp) {
   return m;
 }
 
-/// The scans' bag times: each its stamp (the BagScan's, else its cloud's); a bag cannot hold time 0, so a scan without one is
-/// placed 1 s after the one before (the first at 1 s) and the bag's time order is the
-/// scans' order. False when a time passes ROS time's last second.
-bool bag_times(const std::vector<BagScan>& scans, std::vector<lex3d_bag_time>& times) {
-  constexpr std::uint64_t kNs = 1000000000ULL;
-  std::uint64_t last_sec = 0, last_nsec = 0;
-  for (const BagScan& s : scans) {
-    std::uint64_t sec = last_sec + 1, nsec = last_nsec;
-    if (s.stamp_sec != 0 || s.stamp_nsec != 0) {
-      sec = std::uint64_t{s.stamp_sec} + s.stamp_nsec / kNs;
-      nsec = s.stamp_nsec % kNs;
-    } else if (s.cloud.stamp && (s.cloud.stamp->sec != 0 || s.cloud.stamp->nsec != 0)) {
-      sec = s.cloud.stamp->sec + s.cloud.stamp->nsec / kNs;
-      nsec = s.cloud.stamp->nsec % kNs;
-    }
-    if (sec > 0xFFFFFFFFULL) return false;
-    times.push_back({static_cast<std::uint32_t>(sec), static_cast<std::uint32_t>(nsec)});
-    last_sec = sec;
-    last_nsec = nsec;
-  }
-  return true;
-}
-
 }  // namespace
 
 bool rosbag_supported() noexcept {
@@ -916,47 +901,113 @@ StatusOr<BagScans> read_bag(const std::string& path, const std::string& topic, c
   return out;
 }
 
+/// A bag being written to its temporary file; renamed over `path` by close().
+struct BagWriter::Impl {
+  std::string path, tmp, topic;
+  std::unique_ptr<OpenBag> bag;
+  std::uint64_t last_sec = 0, last_nsec = 0;  // the scan before's bag time
+  bool closed = false;
+
+  ~Impl() {
+    if (closed || !bag) return;
+    lex3d_bag_error ignored{};
+    (void)bag->close(ignored);
+    remove_file_quietly(tmp);
+  }
+  /// A failed write or close: the partial file removed, the writer closed.
+  Status fail(int rc, const lex3d_bag_error& err) {
+    lex3d_bag_error ignored{};
+    (void)bag->close(ignored);  // (already closed when the close failed)
+    remove_file_quietly(tmp);
+    closed = true;
+    return plugin_status(path, rc, err, true);
+  }
+};
+
+BagWriter::BagWriter() : impl_(std::make_unique<Impl>()) {}
+BagWriter::~BagWriter() = default;
+
+StatusOr<std::unique_ptr<BagWriter>> BagWriter::open(const std::string& path, const std::string& topic) {
+  if (topic.empty() || topic.front() != '/')
+    return Status(ErrorCode::kInvalidArgument, "write_bag: topic must start with '/', got '" + topic + "'");
+  auto api = plugin_for(path);
+  if (!api.ok()) return api.status();
+  std::unique_ptr<BagWriter> w(new BagWriter());
+  Impl& impl = *w->impl_;
+  impl.path = path;
+  impl.topic = topic;
+  impl.tmp = temporary_path_for(path);
+  lex3d_bag* opened = nullptr;
+  lex3d_bag_error err{};
+  const int rc = api.value()->open_write(impl.tmp.c_str(), &opened, &err);
+  if (rc != LEX3D_BAG_OK) {
+    remove_file_quietly(impl.tmp);
+    impl.closed = true;
+    return plugin_status(path, rc, err, true);
+  }
+  impl.bag = std::make_unique<OpenBag>(api.value(), opened);
+  return w;
+}
+
+Status BagWriter::write(const BagScan& scan) {
+  Impl& impl = *impl_;
+  if (impl.closed) return Status(ErrorCode::kInvalidArgument, detail::msg(impl.path, "the bag is closed"));
+  if (Status s = detail::check_fields(impl.path, scan.cloud); !s.ok()) return s;
+  try {
+    // The scan's bag time: its stamp (the BagScan's, else its cloud's); a bag cannot hold
+    // time 0, so a scan without one is placed 1 s after the one before (the first at 1 s).
+    constexpr std::uint64_t kNs = 1000000000ULL;
+    std::uint64_t sec = impl.last_sec + 1, nsec = impl.last_nsec;
+    if (scan.stamp_sec != 0 || scan.stamp_nsec != 0) {
+      sec = std::uint64_t{scan.stamp_sec} + scan.stamp_nsec / kNs;
+      nsec = scan.stamp_nsec % kNs;
+    } else if (scan.cloud.stamp && (scan.cloud.stamp->sec != 0 || scan.cloud.stamp->nsec != 0)) {
+      sec = scan.cloud.stamp->sec + scan.cloud.stamp->nsec / kNs;
+      nsec = scan.cloud.stamp->nsec % kNs;
+    }
+    if (sec > 0xFFFFFFFFULL) {
+      lex3d_bag_error ignored{};
+      (void)impl.bag->close(ignored);
+      remove_file_quietly(impl.tmp);
+      impl.closed = true;
+      return io_error(detail::msg(impl.path, "cannot write the bag: a scan's time is beyond ROS time's range"));
+    }
+    const lex3d_bag_time t{static_cast<std::uint32_t>(sec), static_cast<std::uint32_t>(nsec)};
+    impl.last_sec = sec;
+    impl.last_nsec = nsec;
+    const Message m = to_message(scan, t);
+    const lex3d_bag_pointcloud2 v = m.view();
+    lex3d_bag_error err{};
+    const int rc = impl.bag->api().write_pointcloud2(impl.bag->get(), impl.topic.c_str(), t, &v, &err);
+    if (rc != LEX3D_BAG_OK) return impl.fail(rc, err);
+    return {};
+  } catch (const std::bad_alloc&) {
+    return out_of_memory(detail::msg(impl.path, "out of memory writing the bag"));
+  } catch (const std::length_error&) {
+    return out_of_memory(detail::msg(impl.path, "out of memory writing the bag"));
+  }
+}
+
+Status BagWriter::close() {
+  Impl& impl = *impl_;
+  if (impl.closed) return Status(ErrorCode::kInvalidArgument, detail::msg(impl.path, "the bag is closed"));
+  lex3d_bag_error err{};
+  const int rc = impl.bag->close(err);
+  if (rc != LEX3D_BAG_OK) return impl.fail(rc, err);
+  impl.closed = true;
+  return rename_file(impl.tmp, impl.path);
+}
+
 Status write_bag(const std::string& path, const std::vector<BagScan>& scans, const std::string& topic) {
   if (topic.empty() || topic.front() != '/')
     return Status(ErrorCode::kInvalidArgument, "write_bag: topic must start with '/', got '" + topic + "'");
   for (const BagScan& scan : scans)
     if (Status s = detail::check_fields(path, scan.cloud); !s.ok()) return s;
-  auto api = plugin_for(path);
-  if (!api.ok()) return api.status();
-  const std::string tmp = temporary_path_for(path);
-  try {
-    std::vector<lex3d_bag_time> times;
-    if (!bag_times(scans, times))
-      return io_error(detail::msg(path, "cannot write the bag: a scan's time is beyond ROS time's range"));
-    lex3d_bag* opened = nullptr;
-    lex3d_bag_error err{};
-    int rc = api.value()->open_write(tmp.c_str(), &opened, &err);
-    if (rc != LEX3D_BAG_OK) {
-      remove_file_quietly(tmp);
-      return plugin_status(path, rc, err, true);
-    }
-    OpenBag bag(api.value(), opened);
-    for (std::size_t i = 0; i < scans.size(); ++i) {
-      const Message m = to_message(scans[i], times[i]);
-      const lex3d_bag_pointcloud2 v = m.view();
-      rc = bag.api().write_pointcloud2(bag.get(), topic.c_str(), times[i], &v, &err);
-      if (rc != LEX3D_BAG_OK) break;
-    }
-    if (rc == LEX3D_BAG_OK) rc = bag.close(err);
-    if (rc != LEX3D_BAG_OK) {
-      lex3d_bag_error ignored{};
-      (void)bag.close(ignored);  // (already closed when the close failed)
-      remove_file_quietly(tmp);
-      return plugin_status(path, rc, err, true);
-    }
-    return rename_file(tmp, path);
-  } catch (const std::bad_alloc&) {
-    remove_file_quietly(tmp);
-    return out_of_memory(detail::msg(path, "out of memory writing the bag"));
-  } catch (const std::length_error&) {
-    remove_file_quietly(tmp);
-    return out_of_memory(detail::msg(path, "out of memory writing the bag"));
-  }
+  auto w = BagWriter::open(path, topic);
+  if (!w.ok()) return w.status();
+  for (const BagScan& scan : scans)
+    if (Status s = w.value()->write(scan); !s.ok()) return s;
+  return w.value()->close();
 }
 
 #endif  // LEX3D_WITH_ROSBAG

@@ -130,6 +130,27 @@ class BagReader {
   std::unique_ptr<Impl> impl_;
 };
 
+/// Writes scans one at a time as write_bag writes them (their stamps, fields and shapes the
+/// same), into a temporary file that close() renames over `path`: a writer destroyed before
+/// close(), or a write that fails, leaves nothing at `path`. For sequences of any length.
+class BagWriter {
+ public:
+  [[nodiscard]] static StatusOr<std::unique_ptr<BagWriter>> open(const std::string& path,
+                                                                 const std::string& topic = "/points");
+  ~BagWriter();
+  BagWriter(const BagWriter&) = delete;
+  BagWriter& operator=(const BagWriter&) = delete;
+  /// The next message: `scan` at its stamp (or 1 s after the scan before).
+  [[nodiscard]] Status write(const BagScan& scan);
+  /// Writes the bag's index and puts the bag at `path`.
+  [[nodiscard]] Status close();
+
+ private:
+  BagWriter();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 /// Writes `scans` as `sensor_msgs/PointCloud2` messages on `topic` (uncompressed chunks),
 /// each at its stamp (a scan without one 1 s after the scan before it, the first at 1 s),
 /// atomically (a temporary file renamed over `path`). Fields: x y z
