@@ -307,6 +307,40 @@ TEST_F(Bags, ReaderGivesTheScansOneAtATime) {
   EXPECT_NE(missing.status().to_string().find("no topic"), std::string::npos);
 }
 
+// BagWriter writes message by message the bag write_bag writes (the same bytes); a writer
+// dropped before close(), or one whose scan has a field that does not fit, leaves nothing.
+TEST_F(Bags, WriterWritesWhatWriteBagWrites) {
+  std::vector<io::BagScan> scans(5);
+  for (std::size_t k = 0; k < scans.size(); ++k) {
+    for (int i = 0; i < 20; ++i) scans[k].cloud.points.emplace_back(static_cast<float>(k), static_cast<float>(i), 0.0F);
+    if (k != 2) scans[k].stamp_sec = 1700000000U + static_cast<std::uint32_t>(k);  // the third: 1 s after the second
+  }
+  const std::string whole = path("whole.bag"), streamed = path("streamed.bag"), dropped = path("dropped.bag");
+  ASSERT_TRUE(io::write_bag(whole, scans, "/points").ok());
+  {
+    auto w = io::BagWriter::open(streamed, "/points");
+    ASSERT_TRUE(w.ok()) << w.status().to_string();
+    for (const auto& s : scans) ASSERT_TRUE(w.value()->write(s).ok());
+    ASSERT_TRUE(w.value()->close().ok());
+  }
+  EXPECT_EQ(slurp(whole), slurp(streamed));
+  {
+    auto w = io::BagWriter::open(dropped, "/points");
+    ASSERT_TRUE(w.ok());
+    ASSERT_TRUE(w.value()->write(scans[0]).ok());
+  }
+  EXPECT_FALSE(fs::exists(dropped));
+  std::size_t left = 0;
+  for (const auto& e : fs::directory_iterator(dir_)) left += e.path().filename().string().find("dropped") != std::string::npos;
+  EXPECT_EQ(left, 0U);  // nor its temporary file
+  io::BagScan bad = scans[0];
+  bad.cloud.fields = {{"label", {1, 2, 3}, FieldType::kUint8}};  // 3 values for 20 points
+  auto w = io::BagWriter::open(dropped, "/points");
+  ASSERT_TRUE(w.ok());
+  EXPECT_FALSE(w.value()->write(bad).ok());
+  EXPECT_FALSE(io::BagWriter::open(dropped, "points").ok());  // a topic must start with '/'
+}
+
 TEST_F(Bags, MissingTopicListsTheTopics) {
   const std::string p = path("topics.bag");
   bagfix::write(p, "/points", {bagfix::driver_cloud()});
