@@ -16,6 +16,8 @@
 #include <cmath>
 #include <memory>
 #include <complex>
+#include <functional>
+#include <future>
 #include <initializer_list>
 #include <iomanip>
 #include <sstream>
@@ -1473,18 +1475,24 @@ void set_motion(LaserTable& t, const TurnMotion& m) {
 /// their points' RMS distance) are merged, cones left with too few points dropped. This
 /// keeps lasers whose beams start at different heights (a HDL-64E's two blocks) whole where
 /// elevations seen from one height split or merge them. `z_rms`: the points' RMS distance
-/// (in z) from their cones. False where the rounds do not settle within kConeRounds: the
-/// points do not lie on cones.
+/// (in z) from their cones. False where the rounds have not settled after kConeRounds and
+/// there are more cones than `elevation_lasers()` (the lasers seen as elevation peaks,
+/// estimate_rings, 0 where it found none; asked only then): cones that keep splitting and
+/// merging beyond the lasers the elevations show are not the beams; with no more cones than
+/// that (or no peaks) the rounds go on to kMaxConeRounds.
 /// (On the shared scans and the lidars re-sampled from them, the rounds settled within 2-5
 /// rounds where the points lie on cones; on scans that the sensor's motion moved off them
-/// (KITTI's), balm's non-spinning scans and the VLS-128 re-sampled from KITTI they did not
-/// settle in 12, and the lasers by elevation were coded instead, or as small, at 5-14 mm.
-/// One exception: newer_college/raw_00, whose unsettled cones (151 for 64 beams, 67 mm
-/// off them) coded 0.5 % and 1.0 % smaller at 5 and 7 cm. Giving up at 8 rounds takes
-/// 0.19 of kitti00/000000's encoding instructions.)
+/// (KITTI's: 146-179 cones against 89-127 elevation peaks), balm's non-spinning scans
+/// (389-531 against 71-477) and the VLS-128 re-sampled from KITTI (97 against 98) they did
+/// not settle in 12, and the lasers by elevation were coded instead, or as small, at
+/// 5-14 mm. newer_college/raw_00's unsettled cones (151 against 195 peaks, 67 mm off them)
+/// coded 0.5 % and 1.0 % smaller at 5 and 7 cm. Giving up at 8 rounds takes 0.19 of
+/// kitti00/000000's encoding instructions.)
 constexpr int kConeRounds = 8;
+constexpr int kMaxConeRounds = 12;
 
-bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers, double& z_rms) {
+bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers, double& z_rms,
+                    const std::function<std::uint32_t()>& elevation_lasers) {
   const std::vector<Eigen::Vector3d>& p = scan.p;
   const std::vector<double>& rho = scan.rho;
   const std::size_t n = p.size();
@@ -1602,9 +1610,14 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
     }
   };
   assign(true, work);
-  bool converged = false;
-  for (int round = 0; round < kConeRounds; ++round) {
+  bool given_up = false;
+  for (int round = 0; round < kMaxConeRounds; ++round) {
     const std::size_t m = T.size();
+    if (round == kConeRounds) {
+      const std::uint32_t peaks = elevation_lasers();
+      given_up = peaks > 0 && m > peaks;
+      if (given_up) break;
+    }
     std::vector<double> sr(m, 0), sz(m, 0), srr(m, 0), srz(m, 0), cnt(m, 0), r0(m, 1e30), r1(m, 0);
     for (std::uint32_t i : work) {
       if (!(rho[i] >= kNear)) continue;
@@ -1669,12 +1682,9 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
     assign(false, work);
     std::size_t changed = 0;
     for (std::size_t k = 0; k < work.size(); ++k) changed += before[k] != ring[work[k]] ? 1 : 0;
-    if (!merged && changed == 0) {
-      converged = true;
-      break;
-    }
+    if (!merged && changed == 0) break;
   }
-  if (!converged) return false;
+  if (given_up) return false;
   assign(true, all);
   assign(false, all);
   lasers = static_cast<std::uint32_t>(T.size());
@@ -1865,14 +1875,27 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         LaserTable table;
         double cost = std::numeric_limits<double>::infinity();
       };
-      // (the two side by side where there are two threads)
+      // (the two side by side where there are two threads, the elevation peaks first: the
+      // cones may ask for their laser count)
       std::array<Candidate, 2> cand;
-      parallel_for(cand.size(), threads, [&](std::size_t k) {
+      std::promise<std::uint32_t> peaks;
+      std::shared_future<std::uint32_t> peak_lasers = peaks.get_future().share();
+      parallel_for(cand.size(), threads, [&](std::size_t job) {
+        const std::size_t k = 1 - job;
         Candidate& c = cand[k];
         bool found = false;
         double z_rms = 0.0;
-        if (k == 0) found = estimate_cones(scan, c.ring, c.lasers, z_rms);
-        else found = estimate_rings(scan, c.ring, c.lasers);
+        if (k == 0) {
+          found = estimate_cones(scan, c.ring, c.lasers, z_rms, [&peak_lasers] { return peak_lasers.get(); });
+        } else {
+          try {
+            found = estimate_rings(scan, c.ring, c.lasers);
+          } catch (...) {
+            peaks.set_value(0);
+            throw;
+          }
+          peaks.set_value(found ? c.lasers : 0);
+        }
         std::vector<double> tangential;
         if (!found || !estimate_columns(scan, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) return;
         auto t = estimate_table(scan, c.ring, c.column, c.lasers, c.columns, tangential);
