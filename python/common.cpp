@@ -131,6 +131,7 @@ std::string path_of(const py::handle& obj) {
 
 Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what,
                 const io::ReadOptions& options) {
+  if (py::isinstance<PyScan>(scan)) return scan.cast<const PyScan&>().cloud;
   if (py::isinstance<py::bytes>(scan)) return decode_model_file(to_vector(py::reinterpret_borrow<py::bytes>(scan)), alphabet, what);
   if (!is_path(scan)) return to_cloud(scan, py::none(), what);
   const std::string path = path_of(scan);

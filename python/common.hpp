@@ -6,6 +6,7 @@
 #include <pybind11/pybind11.h>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,23 @@ Cloud to_cloud(const py::handle& points, const py::object& intensity, const std:
 /// metadata, a bag's topic, a dual-return capture's single_return).
 Cloud scan_from(const py::handle& scan, const std::vector<std::uint8_t>* alphabet, const std::string& what,
                 const io::ReadOptions& options = {});
+
+/// One scan of a file, as lex3d.scans gives it (lex3d.Scan): everything the file's reader
+/// gives, which lex3d.compress and the others take as they take an array or a path.
+struct PyScan {
+  Cloud cloud;
+  std::string name;  ///< the file, and where in it ("PATH turn 3 (frame 1453)")
+};
+
+/// The points of `cloud` as Python sees them: (N, 3) float32 metres, or float64 true
+/// coordinates for a georeferenced cloud (as decompress gives them).
+py::array points_array(const Cloud& cloud);
+/// Its per-point fields as decompress(attributes=True) gives them: a dict by name.
+py::dict fields_dict(const Cloud& cloud);
+/// Its stamp as a dict {"sec", "nsec", "frame_id", "source"}, or None.
+py::object stamp_dict(const std::optional<ScanStamp>& s);
+
+void bind_scans(py::module_& m);
 
 /// True for str and os.PathLike objects.
 bool is_path(const py::handle& obj);

@@ -168,17 +168,6 @@ void set_stamp(lex3d::Cloud& cloud, const py::object& stamp) {
   cloud.stamp = std::move(s);
 }
 
-/// A stamp as Python sees it: {"sec", "nsec", "frame_id", "source"}.
-py::object stamp_dict(const std::optional<lex3d::ScanStamp>& s) {
-  if (!s) return py::none();
-  py::dict d;
-  d["sec"] = s->sec;
-  d["nsec"] = s->nsec;
-  d["frame_id"] = s->frame_id;
-  d["source"] = s->source == lex3d::ScanStamp::Source::kCapture ? "capture" : "message";
-  return std::move(d);
-}
-
 py::object compress(const py::object& points, const py::object& intensity, std::optional<double> max_error,
                     std::optional<double> target_bpp, const std::optional<std::string>& words,
                     const std::string& coding, bool keep_all_points, const std::optional<py::bytes>& alphabet,
@@ -186,20 +175,25 @@ py::object compress(const py::object& points, const py::object& intensity, std::
                     const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields,
                     const py::object& ring, const py::object& time, const py::object& stamp,
                     const std::string& metadata, const std::string& topic, bool single_return) {
-  // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept).
+  // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept); a
+  // lex3d.Scan gives everything its file gave.
   const bool from_file = lex3d::python::is_path(points);
-  if (from_file && !intensity.is_none()) throw py::value_error("intensity goes with an array of points, not a path");
-  if (from_file && !fields.is_none()) throw py::value_error("fields go with an array of points, not a path");
-  if (from_file && (!ring.is_none() || !time.is_none()))
-    throw py::value_error("ring and time go with an array of points, not a path");
+  const bool scan = py::isinstance<lex3d::python::PyScan>(points);
+  const char* given = from_file ? "a path" : "a lex3d.Scan";
+  if ((from_file || scan) && !intensity.is_none())
+    throw py::value_error(std::string("intensity goes with an array of points, not ") + given);
+  if ((from_file || scan) && !fields.is_none()) throw py::value_error(std::string("fields go with an array of points, not ") + given);
+  if ((from_file || scan) && (!ring.is_none() || !time.is_none()))
+    throw py::value_error(std::string("ring and time go with an array of points, not ") + given);
   if (!from_file && (!metadata.empty() || !topic.empty() || single_return))
-    throw py::value_error("metadata, topic and single_return go with a path, not an array of points");
+    throw py::value_error(std::string("metadata, topic and single_return go with a path, not ") +
+                          (scan ? "a lex3d.Scan (give them to lex3d.scans)" : "an array of points"));
   lex3d::io::ReadOptions read;
   read.metadata_path = metadata;
   read.bag_topic = topic;
   read.single_return = single_return;
-  lex3d::Cloud cloud = from_file ? lex3d::python::scan_from(points, nullptr, "points", read)
-                                 : lex3d::python::to_cloud(points, intensity, "points");
+  lex3d::Cloud cloud = from_file || scan ? lex3d::python::scan_from(points, nullptr, "points", read)
+                                         : lex3d::python::to_cloud(points, intensity, "points");
   if (!fields.is_none()) add_fields(cloud, fields);
   if (!ring.is_none()) add_ring(cloud, ring);
   if (!time.is_none()) add_time(cloud, time);
@@ -258,15 +252,6 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   return py::make_tuple(to_bytes(c.bytes), info);
 }
 
-/// A named field's values as a numpy array of T, its source type (float fields from their keys).
-template <typename T>
-py::array_t<T> typed_field(const lex3d::IntegerField& x) {
-  py::array_t<T> a(static_cast<py::ssize_t>(x.values.size()));
-  auto w = a.template mutable_unchecked<1>();
-  for (std::size_t i = 0; i < x.values.size(); ++i) w(static_cast<py::ssize_t>(i)) = static_cast<T>(x.value(i));
-  return a;
-}
-
 /// The stamp a model file keeps (its `scan` chunk), or None.
 py::object stamp(const py::bytes& data, const std::optional<py::bytes>& alphabet) {
   const std::vector<std::uint8_t> bytes = to_vector(data);
@@ -274,7 +259,7 @@ py::object stamp(const py::bytes& data, const std::optional<py::bytes>& alphabet
   if (alphabet) alphabet_file = to_vector(*alphabet);
   auto d = lex3d::codec::decode_model(bytes, alphabet ? &alphabet_file : nullptr);
   if (!d.ok()) raise(d.status());
-  return stamp_dict(d.value().stamp);
+  return lex3d::python::stamp_dict(d.value().stamp);
 }
 
 py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alphabet, bool attributes) {
@@ -288,84 +273,10 @@ py::object decompress(const py::bytes& data, const std::optional<py::bytes>& alp
   }
   if (!r->ok()) raise(r->status());
   const lex3d::Cloud& cloud = r->value().cloud;
-  py::array out;
-  if (cloud.georef) {
-    // true coordinates, in the CRS's units (as the command's writers give them)
-    py::array_t<double> a({static_cast<py::ssize_t>(cloud.size()), py::ssize_t{3}});
-    auto w = a.mutable_unchecked<2>();
-    for (std::size_t i = 0; i < cloud.size(); ++i) {
-      const Eigen::Vector3d t = cloud.georef->to_crs(cloud.points[i]);
-      for (py::ssize_t k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = t[k];
-    }
-    out = std::move(a);
-  } else {
-    py::array_t<float> a({static_cast<py::ssize_t>(cloud.size()), py::ssize_t{3}});
-    auto w = a.mutable_unchecked<2>();
-    for (std::size_t i = 0; i < cloud.size(); ++i)
-      for (py::ssize_t k = 0; k < 3; ++k) w(static_cast<py::ssize_t>(i), k) = cloud.points[i][k];
-    out = std::move(a);
-  }
+  py::array out = lex3d::python::points_array(cloud);
   if (!attributes) return std::move(out);
   // The per-point fields the file keeps (formats/model.md §2.10), by name.
-  const auto n = static_cast<py::ssize_t>(cloud.size());
-  py::dict fields;
-  // (intensity and ring in the integer type their source gave them, where the file records one)
-  const auto as_source = [n](const lex3d::SourceField& src, auto&& value) -> py::object {
-    lex3d::IntegerField x{src.name, std::vector<std::int32_t>(static_cast<std::size_t>(n)), src.type};
-    for (py::ssize_t i = 0; i < n; ++i) x.values[static_cast<std::size_t>(i)] = static_cast<std::int32_t>(value(i));
-    switch (src.type) {
-      case lex3d::FieldType::kInt8: return typed_field<std::int8_t>(x);
-      case lex3d::FieldType::kUint8: return typed_field<std::uint8_t>(x);
-      case lex3d::FieldType::kInt16: return typed_field<std::int16_t>(x);
-      case lex3d::FieldType::kUint16: return typed_field<std::uint16_t>(x);
-      case lex3d::FieldType::kInt32: return typed_field<std::int32_t>(x);
-      case lex3d::FieldType::kUint32: return typed_field<std::uint32_t>(x);
-      default: return py::none();
-    }
-  };
-  const auto integral = [](const lex3d::SourceField& s) { return s.given() && !lex3d::is_float_type(s.type); };
-  if (cloud.has_intensity()) {
-    py::object typed = integral(cloud.intensity_source)
-                           ? as_source(cloud.intensity_source, [&](py::ssize_t i) { return cloud.intensity[static_cast<std::size_t>(i)]; })
-                           : py::none();
-    fields["intensity"] = typed.is_none() ? py::object(py::array_t<float>(n, cloud.intensity.data())) : typed;
-  }
-  if (cloud.has_rings()) {
-    py::object typed = integral(cloud.ring_source)
-                           ? as_source(cloud.ring_source, [&](py::ssize_t i) { return cloud.ring[static_cast<std::size_t>(i)]; })
-                           : py::none();
-    fields["ring"] = typed.is_none() ? py::object(py::array_t<std::uint16_t>(n, cloud.ring.data())) : typed;
-  }
-  if (cloud.has_time()) {
-    // (in the type its source gave it: float32 seconds, integer nanoseconds; else float64 seconds)
-    const lex3d::FieldType t = cloud.time_source.given() ? cloud.time_source.type : lex3d::FieldType::kFloat64;
-    const auto ns = [&](py::ssize_t i) { return std::llround(cloud.time[static_cast<std::size_t>(i)] * 1e9); };
-    py::object typed = t == lex3d::FieldType::kFloat32  ? py::object(py::array_t<float>(py::array_t<double>(n, cloud.time.data())))
-                       : lex3d::is_float_type(t)        ? py::none()
-                                                        : as_source(cloud.time_source, ns);
-    fields["time"] = typed.is_none() ? py::object(py::array_t<double>(n, cloud.time.data())) : typed;
-  }
-  if (cloud.has_rgb()) {
-    py::array_t<std::uint8_t> rgb({n, py::ssize_t{3}});
-    auto c = rgb.mutable_unchecked<2>();
-    for (py::ssize_t i = 0; i < n; ++i)
-      for (py::ssize_t k = 0; k < 3; ++k) c(i, k) = cloud.rgb[static_cast<std::size_t>(i)][static_cast<std::size_t>(k)];
-    fields["rgb"] = rgb;
-  }
-  // (each in its source type: uint16 as numpy.uint16, float32 as numpy.float32...)
-  for (const lex3d::IntegerField& x : cloud.fields) {
-    if (x.values.size() != cloud.size()) continue;
-    switch (x.type) {
-      case lex3d::FieldType::kInt8: fields[py::str(x.name)] = typed_field<std::int8_t>(x); break;
-      case lex3d::FieldType::kUint8: fields[py::str(x.name)] = typed_field<std::uint8_t>(x); break;
-      case lex3d::FieldType::kInt16: fields[py::str(x.name)] = typed_field<std::int16_t>(x); break;
-      case lex3d::FieldType::kUint16: fields[py::str(x.name)] = typed_field<std::uint16_t>(x); break;
-      case lex3d::FieldType::kUint32: fields[py::str(x.name)] = typed_field<std::uint32_t>(x); break;
-      case lex3d::FieldType::kFloat32: fields[py::str(x.name)] = typed_field<float>(x); break;
-      case lex3d::FieldType::kFloat64: fields[py::str(x.name)] = typed_field<double>(x); break;
-      default: fields[py::str(x.name)] = py::array_t<std::int32_t>(n, x.values.data()); break;
-    }
-  }
+  const py::dict fields = lex3d::python::fields_dict(cloud);
   return py::make_tuple(out, fields);
 }
 
@@ -414,7 +325,8 @@ PYBIND11_MODULE(_lex3d, m) {
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
     coordinates that float32 would round (far from their frame's origin, as UTM ones) are kept
     relative to an origin the file stores; decompress gives them back as they were. Or a path
-    (str or os.PathLike) of a point cloud file, read as `lex3d compress PATH` reads it.
+    (str or os.PathLike) of a point cloud file, read as `lex3d compress PATH` reads it (a
+    capture's or bag's first scan), or a lex3d.Scan (lex3d.scans: every scan of a file).
 intensity: optional (N,) float or 8- or 16-bit integer array (an integer one comes back in its dtype), kept with a residual layer (losslessly); without one
     a UserWarning says it was dropped.
 fields: optional dict of name -> (N,) array, further per-point fields kept with a residual
@@ -472,6 +384,7 @@ stamp, or compress(stamp=); "capture": a raw capture's turn, the capture time of
 packet), or None where the file keeps none.
 alphabet: the alphabet file (bytes) the model references, if it references one.
 Raises ValueError for a malformed, truncated or corrupt file.)");
+  lex3d::python::bind_scans(m);
   lex3d::python::bind_place(m);
   lex3d::python::bind_learning(m);
   m.def("learn_alphabet", &learn_alphabet, py::arg("clouds"), py::kw_only(), py::arg("word_radius") = 0.0,
