@@ -96,6 +96,7 @@ struct SensorLogReader::Impl {
   std::size_t velodyne_seen = 0;
   bool ended = false;
   std::size_t turns_given = 0;
+  Status failed;  // the error that ended the reading
 
   /// The Velodyne decoder, with a calibration given or beside the capture.
   void use_velodyne() {
@@ -231,13 +232,18 @@ StatusOr<std::unique_ptr<SensorLogReader>> SensorLogReader::open(const std::stri
 }
 
 StatusOr<std::optional<SensorTurn>> SensorLogReader::next() {
+  // (an error ends the reading: every call after it gives it again)
+  if (!impl_->failed.ok()) return impl_->failed;
   try {
-    return impl_->next();
+    auto r = impl_->next();
+    if (!r.ok()) impl_->failed = r.status();
+    return r;
   } catch (const std::bad_alloc&) {
-    return out_of_memory(detail::msg(impl_->path, "out of memory reading the capture"));
+    impl_->failed = out_of_memory(detail::msg(impl_->path, "out of memory reading the capture"));
   } catch (const std::length_error&) {
-    return out_of_memory(detail::msg(impl_->path, "out of memory reading the capture"));
+    impl_->failed = out_of_memory(detail::msg(impl_->path, "out of memory reading the capture"));
   }
+  return impl_->failed;
 }
 
 const SensorLogInfo& SensorLogReader::info() const { return impl_->info; }

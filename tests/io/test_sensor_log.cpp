@@ -639,6 +639,9 @@ TEST(SensorLogReader, TurnsBeforeALateErrorComeFirst) {
   }
   EXPECT_GE(good, 55U);
   EXPECT_EQ(error.code(), ErrorCode::kBadData);
+  auto after = reader.value()->next();  // the error ended the reading
+  ASSERT_FALSE(after.ok());
+  EXPECT_EQ(after.status().message(), error.message());
   EXPECT_NE(error.message().find("capture record " + std::to_string(bad_record + 1)), std::string::npos) << error.message();
   EXPECT_NE(error.message().find(p), std::string::npos);
   EXPECT_TRUE(bad(read_sensor_log(p), p, "block 0 azimuth 65535 is not below 36000"));
