@@ -36,6 +36,7 @@ namespace lex3d::io::detail {
 namespace {
 
 constexpr std::size_t kPacketBytes = 1206;
+constexpr std::size_t kMaxTurnFirings = 65536;  // firings a turn may take (27 MB of them)
 constexpr std::size_t kBlocks = 12;
 
 struct Model {
@@ -644,7 +645,9 @@ class VelodyneDecoder final : public LogDecoder {
   /// Turns: 360° of azimuth from the capture's first firing on, each handed on once a
   /// firing past it is queued (`at_end`: the capture's end, where the turn it cuts is
   /// counted incomplete). A turn with a hole (an azimuth jump of more than 5 firing steps:
-  /// lost packets) is dropped and counted.
+  /// lost packets) is dropped and counted. So is one that has not come round in
+  /// kMaxTurnFirings firings (a head not spinning, or spinning up: 18 times a 300 rpm
+  /// VLP-16's turn); the next starts at the newest firing.
   void close_turns(bool at_end) {
     while (!firings_.empty()) {
       const double end_az = a0_ + 360.0 * static_cast<double>(turn_ + 1);
@@ -654,6 +657,13 @@ class VelodyneDecoder final : public LogDecoder {
         if (at_end) {
           ++info_.incomplete_frames;
           firings_.clear();
+        } else if (firings_.size() > kMaxTurnFirings) {
+          ++info_.incomplete_frames;
+          const Firing last = firings_.back();
+          firings_.clear();
+          firings_.push_back(last);
+          ++turn_;
+          a0_ = last.azimuth_deg - 360.0 * static_cast<double>(turn_);
         }
         return;
       }

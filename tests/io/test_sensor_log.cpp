@@ -647,6 +647,30 @@ TEST(SensorLogReader, TurnsBeforeALateErrorComeFirst) {
   EXPECT_TRUE(bad(read_sensor_log(p), p, "block 0 azimuth 65535 is not below 36000"));
 }
 
+// A head that does not spin (every packet at one azimuth): no turn ever closes; the firings
+// held are bounded (past kMaxTurnFirings, 65,536, the open turn is counted incomplete and
+// dropped: here once the first 4,096 packets are read, and at the end) and the capture ends
+// in "no complete turn".
+TEST(SensorLogReader, AHeadThatDoesNotSpinGivesNoTurnAndHoldsNoMore) {
+  Capture c = repeated_vlp16(1);
+  const Record still = c.records.front();
+  c.records.assign(6000, still);  // 144,000 firings at one azimuth
+  for (std::size_t i = 0; i < c.records.size(); ++i) {
+    c.records[i].usec = static_cast<std::uint32_t>(i % 1000000);
+    set_payload_time(c.records[i], static_cast<std::uint32_t>(1327 * i));
+    for (std::size_t k = 0; k < 12; ++k) {  // every block at the same azimuth
+      velodyne_payload(c.records[i])[k * 100 + 2] = 0x10;
+      velodyne_payload(c.records[i])[k * 100 + 3] = 0x27;
+    }
+  }
+  const std::string p = (temp_dir("sensor_log_reader") / "still.pcap").string();
+  write_bytes(p, serialise(c));
+  auto r = read_sensor_log(p);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("no complete turn: 6000 VLP-16 packets, 2 incomplete"), std::string::npos)
+      << r.status().message();
+}
+
 TEST(SensorLog, PuckHiResPacketsUseItsElevations) {
   // The VLP-16 sample with the Puck Hi-Res factory byte (same packets and timing, the
   // lasers 4/3° apart within ±10°): every point keeps its range and column, at the Hi-Res
