@@ -438,7 +438,9 @@ void read_extra_bytes(const std::vector<las::ExtraBytes>& extras, const std::uin
       continue;
     }
     // (a laser number, as a PCD's `ring` is)
-    const bool ring = (name == "ring" || name == "laser_id" || name == "ring_id") && !is_float_type(f.type) &&
+    std::string lower = name;
+    for (char& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    const bool ring = (lower == "ring" || lower == "laser_id" || lower == "ring_id") && !is_float_type(f.type) &&
                       !r.cloud.has_rings() && std::all_of(f.values.begin(), f.values.end(), [](std::int32_t v) {
                         return v >= 0 && v <= 65535;
                       });
@@ -446,7 +448,14 @@ void read_extra_bytes(const std::vector<las::ExtraBytes>& extras, const std::uin
       r.cloud.ring.assign(f.values.begin(), f.values.end());
       continue;
     }
-    if (r.cloud.field(name) != nullptr) name = "extra_" + name;
+    // (a name the point cloud formats give a meaning of their own, or one the cloud has: a
+    // field of its own, after "extra_")
+    static const char* const kReserved[] = {"x",   "y",         "z",         "intensity", "scalar_intensity", "reflectance",
+                                            "ring", "laser_id", "ring_id",   "time",      "t",                "timestamp",
+                                            "rgb", "rgba",      "red",       "green",     "blue",             "diffuse_red",
+                                            "diffuse_green",    "diffuse_blue"};
+    const bool reserved = std::any_of(std::begin(kReserved), std::end(kReserved), [&](const char* k) { return lower == k; });
+    if (reserved || r.cloud.field(name) != nullptr) name = "extra_" + name;
     if (name.size() > 64) name.resize(64);
     if (r.cloud.field(name) != nullptr) {
       r.dropped_fields.push_back(shown + " (its name is taken twice)");

@@ -426,6 +426,9 @@ TEST(LasFixture, ExtraBytesOfEveryTypeRoundTrip) {
   // the i32 descriptor undocumented bytes (type 0, its 4 bytes in `options`)
   b[desc + 192 * 6 + 2] = 0;
   b[desc + 192 * 6 + 3] = 4;
+  // the ring a short, the first point's -1: no laser number, a field "extra_ring" of its own
+  b[desc + 2] = 4;
+  put<std::int16_t>(b, get<std::uint32_t>(b, 96) + 28, -1);
   const std::string edited = (temp_dir("las_extra") / "edited.las").string();
   write_bytes(edited, std::string(b.begin(), b.end()));
   const ReadResult e = read_ok(edited);
@@ -444,6 +447,18 @@ TEST(LasFixture, ExtraBytesOfEveryTypeRoundTrip) {
   EXPECT_TRUE(said(e.dropped_fields, "extra bytes \"u32\" (a value beyond 31 bits)"));
   EXPECT_TRUE(said(e.dropped_fields, "extra bytes \"i32\" (undocumented bytes)"));
   EXPECT_TRUE(said(e.notes, "extra bytes \"u16\" read as float32 values"));
+  EXPECT_FALSE(e.cloud.has_rings());
+  const IntegerField* extra_ring = e.cloud.field("extra_ring");
+  ASSERT_NE(extra_ring, nullptr);
+  EXPECT_EQ(extra_ring->type, FieldType::kInt16);
+  EXPECT_EQ(extra_ring->values[0], -1);
+  EXPECT_EQ(extra_ring->values[5], 5);
+  // written as PCD, every field reads back (a field named "ring" would be read as the lasers)
+  const std::string pcd = (temp_dir("las_extra") / "back.pcd").string();
+  ASSERT_TRUE(write_cloud(pcd, e.cloud).ok());
+  const ReadResult back = read_ok(pcd);
+  ASSERT_NE(back.cloud.field("extra_ring"), nullptr);
+  EXPECT_EQ(back.cloud.field("extra_ring")->values, extra_ring->values);
 }
 
 TEST(LasFixture, FeetFromGeoKeysAreReadIntoMetres) {
