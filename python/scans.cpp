@@ -136,34 +136,12 @@ class PyScans {
     const bool bag = !log && options_.format == io::Format::kAuto && io::is_rosbag(path_);
     std::string ext = path_.size() >= 7 ? path_.substr(path_.size() - 7) : "";
     for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-    py::gil_scoped_release unlocked;
-    if (log) {
-      auto r = io::SensorLogReader::open(path_, options_);
-      if (!r.ok()) {
-        py::gil_scoped_acquire locked;
-        raise(r.status());
-      }
-      log_ = std::move(r).value();
-    } else if (bag) {
-      auto r = io::BagReader::open(path_, options_.bag_topic, options_);
-      if (!r.ok()) {
-        py::gil_scoped_acquire locked;
-        raise(r.status());
-      }
-      bag_ = std::move(r).value();
-    } else if (ext == ".lex3dq") {
-      auto bytes = io::read_file(path_);
-      if (!bytes.ok()) {
-        py::gil_scoped_acquire locked;
-        raise(bytes.status());
-      }
-      auto seq = codec::decode_sequence(bytes.value());
-      if (!seq.ok()) {
-        py::gil_scoped_acquire locked;
-        raise(Status(seq.status().code(), path_ + ": " + seq.status().message()));
-      }
-      sequence_ = std::make_unique<codec::SequenceData>(std::move(seq).value());
+    Status opened;
+    {
+      py::gil_scoped_release unlocked;
+      opened = open(log, bag, ext == ".lex3dq");
     }
+    if (!opened.ok()) raise(opened);
   }
 
   PyScan next() {
@@ -218,6 +196,26 @@ class PyScans {
   }
 
  private:
+  /// The reader of a capture, a bag or a sequence file (none for any other file).
+  Status open(bool log, bool bag, bool sequence) {
+    if (log) {
+      auto r = io::SensorLogReader::open(path_, options_);
+      if (!r.ok()) return r.status();
+      log_ = std::move(r).value();
+    } else if (bag) {
+      auto r = io::BagReader::open(path_, options_.bag_topic, options_);
+      if (!r.ok()) return r.status();
+      bag_ = std::move(r).value();
+    } else if (sequence) {
+      auto bytes = io::read_file(path_);
+      if (!bytes.ok()) return bytes.status();
+      auto seq = codec::decode_sequence(bytes.value());
+      if (!seq.ok()) return Status(seq.status().code(), path_ + ": " + seq.status().message());
+      sequence_ = std::make_unique<codec::SequenceData>(std::move(seq).value());
+    }
+    return {};
+  }
+
   std::string path_;
   io::ReadOptions options_;
   std::unique_ptr<io::SensorLogReader> log_;

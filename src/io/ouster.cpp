@@ -552,19 +552,4 @@ StatusOr<std::unique_ptr<LogDecoder>> ouster_decoder(const std::string& path, co
   return std::unique_ptr<LogDecoder>(std::make_unique<OusterDecoder>(path, metadata_path, std::move(m), by_size, topic, info));
 }
 
-Status decode_ouster(const std::string& path, const std::string& metadata_path,
-                     const std::vector<Datagram>& datagrams, SensorLog& log) {
-  auto text = read_file(metadata_path, 64ULL << 20);
-  if (!text.ok()) return text.status();
-  return decode_ouster_packets(path, metadata_path, text.value(), datagrams, false, log);
-}
-
-Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
-                             const std::vector<std::uint8_t>& tb, const std::vector<Datagram>& datagrams,
-                             bool by_size, SensorLog& log, const std::string& topic) {
-  auto decoder = ouster_decoder(path, metadata_path, tb, by_size, log.info, topic);
-  if (!decoder.ok()) return decoder.status();
-  return decode_all(*decoder.value(), datagrams, log);
-}
-
 }  // namespace lex3d::io::detail

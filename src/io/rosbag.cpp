@@ -908,18 +908,18 @@ struct BagWriter::Impl {
   std::uint64_t last_sec = 0, last_nsec = 0;  // the scan before's bag time
   bool closed = false;
 
-  ~Impl() {
+  ~Impl() { abandon(); }
+  /// The bag closed (already closed where its close failed) and its partial file removed.
+  void abandon() {
     if (closed || !bag) return;
     lex3d_bag_error ignored{};
     (void)bag->close(ignored);
     remove_file_quietly(tmp);
-  }
-  /// A failed write or close: the partial file removed, the writer closed.
-  Status fail(int rc, const lex3d_bag_error& err) {
-    lex3d_bag_error ignored{};
-    (void)bag->close(ignored);  // (already closed when the close failed)
-    remove_file_quietly(tmp);
     closed = true;
+  }
+  /// A failed write or close: the writer abandoned, the plugin's error.
+  Status fail(int rc, const lex3d_bag_error& err) {
+    abandon();
     return plugin_status(path, rc, err, true);
   }
 };
@@ -966,10 +966,7 @@ Status BagWriter::write(const BagScan& scan) {
       nsec = scan.cloud.stamp->nsec % kNs;
     }
     if (sec > 0xFFFFFFFFULL) {
-      lex3d_bag_error ignored{};
-      (void)impl.bag->close(ignored);
-      remove_file_quietly(impl.tmp);
-      impl.closed = true;
+      impl.abandon();
       return io_error(detail::msg(impl.path, "cannot write the bag: a scan's time is beyond ROS time's range"));
     }
     const lex3d_bag_time t{static_cast<std::uint32_t>(sec), static_cast<std::uint32_t>(nsec)};

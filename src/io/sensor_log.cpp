@@ -27,32 +27,6 @@ void detail::drop_second_returns(Cloud& c) {
   detail::keep_cloud_points(c, [&](std::size_t i) { return which[i] == 0; });
 }
 
-void detail::drop_second_returns(SensorLog& log) {
-  for (Cloud& c : log.scans) drop_second_returns(c);
-}
-
-void detail::take_turns(LogDecoder& decoder, SensorLog& log) {
-  for (SensorTurn& t : decoder.turns) {
-    log.no_returns.push_back(t.no_returns);
-    log.frame_ids.push_back(t.frame_id);
-    log.captured_ns.push_back(t.captured_ns);
-    log.scans.push_back(std::move(t.cloud));
-  }
-  decoder.turns.clear();
-}
-
-Status detail::decode_all(LogDecoder& decoder, const std::vector<Datagram>& datagrams, SensorLog& log) {
-  for (const Datagram& d : datagrams) {
-    Status s = decoder.push(d);
-    if (!s.ok()) return s;
-    take_turns(decoder, log);
-  }
-  Status s = decoder.finish();
-  if (!s.ok()) return s;
-  take_turns(decoder, log);
-  return {};
-}
-
 namespace {
 
 bool is_file(const std::string& p) {

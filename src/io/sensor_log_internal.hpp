@@ -47,10 +47,8 @@ inline std::optional<ScanStamp> capture_stamp(std::uint64_t captured_ns) {
   return s;
 }
 
-/// Drops the second returns of a dual-return log's turns (the points whose `return` field is
-/// 1) and the field itself, for ReadOptions::single_return; they stay counted.
-void drop_second_returns(SensorLog& log);
-/// The same of one turn.
+/// Drops the second returns of a dual-return turn (the points whose `return` field is 1)
+/// and the field itself, for ReadOptions::single_return; they stay counted.
 void drop_second_returns(Cloud& turn);
 
 /// The UDP/IPv4 datagrams of a libpcap/pcapng capture, read one at a time (as
@@ -83,11 +81,6 @@ class LogDecoder {
   std::deque<SensorTurn> turns;
 };
 
-/// Feeds every datagram to `decoder`, then finishes it; its turns go into `log`.
-Status decode_all(LogDecoder& decoder, const std::vector<Datagram>& datagrams, SensorLog& log);
-/// Moves the decoder's finished turns into `log`.
-void take_turns(LogDecoder& decoder, SensorLog& log);
-
 /// Ouster: the decoder of the metadata's bytes (`metadata_path` names them in messages);
 /// with `by_size` the lidar packets are the datagrams of the metadata's packet size,
 /// whatever their ports (packets recorded without their UDP headers, as in a ROS bag).
@@ -97,9 +90,11 @@ StatusOr<std::unique_ptr<LogDecoder>> ouster_decoder(const std::string& path, co
                                                       const std::vector<std::uint8_t>& metadata, bool by_size,
                                                       SensorLogInfo& info, const std::string& topic = {});
 
-/// Velodyne: the decoder (`model` and `calibration` as decode_velodyne takes them). The
-/// model, return mode and packet period are read from the first kVelodyneWindow lidar
-/// packets (the whole capture where it is shorter), held until then.
+/// Velodyne: the decoder of the data packets; `model` overrides the detected model (a key of
+/// velodyne_models(); empty: detect); `calibration` (db.xml, VeloView XML or the ROS
+/// driver's YAML; empty: none) gives the lasers' angles and offsets, and is required for an
+/// HDL-64E. The model, return mode and packet period are read from the first
+/// kVelodyneWindow lidar packets (the whole capture where it is shorter), held until then.
 std::unique_ptr<LogDecoder> velodyne_decoder(const std::string& path, const std::string& model,
                                              const std::string& calibration, SensorLogInfo& info);
 constexpr std::size_t kVelodyneWindow = 4096;
@@ -113,27 +108,7 @@ constexpr std::size_t kVelodyneWindow = 4096;
 /// set cut by the capture's start or end is counted (info.incomplete_datagrams).
 Status read_udp_datagrams(const std::string& path, std::vector<Datagram>& out, SensorLogInfo& info);
 
-/// Ouster: decodes the lidar packets of `datagrams` with the metadata at `metadata_path`.
-Status decode_ouster(const std::string& path, const std::string& metadata_path,
-                     const std::vector<Datagram>& datagrams, SensorLog& log);
-
-/// The same with the metadata's bytes given (`metadata_path` names them in messages); with
-/// `by_size` the lidar packets are the datagrams of the metadata's packet size, whatever
-/// their ports (packets recorded without their UDP headers, as in a ROS bag). `topic`: the
-/// bag topic the datagrams are the messages of (errors name "message N on TOPIC", N being
-/// Datagram::record); empty for a capture ("capture record N").
-Status decode_ouster_packets(const std::string& path, const std::string& metadata_path,
-                             const std::vector<std::uint8_t>& metadata, const std::vector<Datagram>& datagrams,
-                             bool by_size, SensorLog& log, const std::string& topic = {});
-
 /// True when the payload looks like a Velodyne data packet (1206 bytes, first block flag).
 bool is_velodyne_packet(const std::vector<std::uint8_t>& payload);
-
-/// Velodyne: decodes the data packets of `datagrams`; `model` overrides the detected model
-/// (a key of velodyne_models(); empty: detect); `calibration` (db.xml, VeloView XML or the
-/// ROS driver's YAML; empty: none) gives the lasers' angles and offsets, and is required
-/// for an HDL-64E.
-Status decode_velodyne(const std::string& path, const std::string& model, const std::string& calibration,
-                       const std::vector<Datagram>& datagrams, SensorLog& log);
 
 }  // namespace lex3d::io::detail

@@ -802,12 +802,6 @@ std::unique_ptr<LogDecoder> velodyne_decoder(const std::string& path, const std:
   return std::make_unique<VelodyneDecoder>(path, model, calibration, info);
 }
 
-Status decode_velodyne(const std::string& path, const std::string& model_key, const std::string& calibration_path,
-                       const std::vector<Datagram>& datagrams, SensorLog& log) {
-  auto decoder = velodyne_decoder(path, model_key, calibration_path, log.info);
-  return decode_all(*decoder, datagrams, log);
-}
-
 }  // namespace lex3d::io::detail
 
 namespace lex3d::io {

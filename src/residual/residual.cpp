@@ -913,12 +913,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         return bound == std::numeric_limits<std::size_t>::max() ? bound : bound > extra ? bound - extra : 0;
       };
       const std::size_t sphere_give_up = give_up_at(in_hand, extra_bytes(ways[best].sweep ? kCodingSweep : 0));
+      // (the spherical winner, coded in full until it passes sphere_give_up)
+      const auto code_winner = [&] {
+        streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best],
+                             &way_sources[best], sphere_give_up, &spherical_out);
+        if (spherical_out) way_sources[best].clear();
+      };
       const std::size_t voxel_give_up = give_up_at(laser ? laser_bytes : in_hand, extra_bytes(kCodingVoxel));
       parallel_for((full_voxel ? 1 : 0) + (full_spherical ? 1 : 0), threads, [&](std::size_t job) {
         if (job == 0 && full_spherical) {
-          streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best],
-                               &way_sources[best], sphere_give_up, &spherical_out);
-          if (spherical_out) way_sources[best].clear();
+          code_winner();
         } else {
           voxel = voxel_layer(head, input.points, coded, check_error, voxel_give_up, &voxel_out);
         }
@@ -930,9 +934,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // cost 4.2 times the sensor-geometry bits it coded all 202k points in full here before.
       if (!voxel && !voxel_out && !full_spherical && !skip_others && !std::isfinite(grid_bits)) {
         need_rows();
-        streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best],
-                             &way_sources[best], sphere_give_up, &spherical_out);
-        if (spherical_out) way_sources[best].clear();
+        code_winner();
       }
     } else {
       need_rows();
