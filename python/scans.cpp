@@ -10,8 +10,10 @@
 #include <cctype>
 #include <memory>
 #include <string>
+#include <string_view>
 
 #include "common.hpp"
+#include "lex3d/codec/cloud_bytes.hpp"
 #include "lex3d/codec/codec.hpp"
 #include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
@@ -128,18 +130,27 @@ py::object stamp_dict(const std::optional<ScanStamp>& s) {
 
 namespace {
 
+/// What holds a file's scans: a raw capture (its turns), a ROS bag (a topic's scans), a
+/// sequence file (its models), or one point cloud.
+enum class Holder { kCapture, kBag, kSequence, kCloud };
+
+Holder holder_of(const std::string& path, io::Format format) {
+  if (format == io::Format::kPcap || (format == io::Format::kAuto && io::is_sensor_log(path))) return Holder::kCapture;
+  if (format == io::Format::kAuto && io::is_rosbag(path)) return Holder::kBag;
+  std::string ext = path.size() >= 7 ? path.substr(path.size() - 7) : "";
+  for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return ext == ".lex3dq" ? Holder::kSequence : Holder::kCloud;
+}
+
 /// The scans of one file, read one at a time (the GIL released while reading).
 class PyScans {
  public:
   PyScans(std::string path, io::ReadOptions options) : path_(std::move(path)), options_(std::move(options)) {
-    const bool log = options_.format == io::Format::kPcap || (options_.format == io::Format::kAuto && io::is_sensor_log(path_));
-    const bool bag = !log && options_.format == io::Format::kAuto && io::is_rosbag(path_);
-    std::string ext = path_.size() >= 7 ? path_.substr(path_.size() - 7) : "";
-    for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    const Holder h = holder_of(path_, options_.format);
     Status opened;
     {
       py::gil_scoped_release unlocked;
-      opened = open(log, bag, ext == ".lex3dq");
+      opened = open(h == Holder::kCapture, h == Holder::kBag, h == Holder::kSequence);
     }
     if (!opened.ok()) raise(opened);
   }
@@ -238,10 +249,46 @@ ring, time, named fields, the stamp).)")
       .def_property_readonly("stamp", [](const PyScan& s) { return stamp_dict(s.cloud.stamp); },
                              "When and in which frame it was taken ({sec, nsec, frame_id, source}), or None.")
       .def("__len__", [](const PyScan& s) { return s.cloud.size(); })
+      // (pickled whole, so that a scan read in one process is coded in another: a Dask task)
+      .def(py::pickle(
+          [](const PyScan& s) {
+            std::vector<std::uint8_t> b;
+            {
+              py::gil_scoped_release unlocked;
+              b = codec::cloud_to_bytes(s.cloud);
+            }
+            return py::make_tuple(s.name, py::bytes(reinterpret_cast<const char*>(b.data()), b.size()));
+          },
+          [](const py::tuple& t) {
+            if (t.size() != 2) throw py::value_error("lex3d.Scan: not a pickled scan");
+            PyScan s;
+            s.name = t[0].cast<std::string>();
+            const std::string_view b = t[1].cast<py::bytes>();
+            auto cloud = codec::cloud_from_bytes(reinterpret_cast<const std::uint8_t*>(b.data()), b.size());
+            if (!cloud.ok()) raise(Status(cloud.status().code(), "lex3d.Scan " + s.name + ": " + cloud.status().message()));
+            s.cloud = std::move(cloud).value();
+            return s;
+          }))
       .def("__repr__", [](const PyScan& s) { return "<lex3d.Scan " + s.name + ": " + std::to_string(s.cloud.size()) + " points>"; });
   py::class_<PyScans>(m, "Scans", "An iterator over the scans of a file (lex3d.scans).")
       .def("__iter__", [](PyScans& s) -> PyScans& { return s; })
       .def("__next__", &PyScans::next);
+  m.def(
+      "holds_scans",
+      [](const py::object& path) {
+        if (!is_path(path)) throw py::value_error("holds_scans takes a path (str or os.PathLike)");
+        const std::string p = path_of(path);
+        switch (holder_of(p, io::Format::kAuto)) {
+          case Holder::kCapture: return "capture";
+          case Holder::kBag: return "bag";
+          case Holder::kSequence: return "sequence";
+          default: return "";
+        }
+      },
+      py::arg("path"),
+      R"(What holds several scans in `path`, as lex3d.scans reads it: "capture" (a raw Ouster or
+Velodyne capture, one scan a turn), "bag" (a ROS bag, one a message), "sequence" (a .lex3dq file,
+one a model), or "" for a file of one point cloud. Decided from the name and the first bytes.)");
   m.def(
       "scans",
       [](const py::object& path, const std::string& metadata, const std::string& topic, bool single_return,

@@ -11,6 +11,7 @@ The bytes are those `lex3d compress` writes for the same settings (formats/model
 lex3d.dask (imported on its own) runs the same work on a Dask cluster.
 """
 
-from ._lex3d import PlaceDatabase, Scan, __version__, compress, decompress, learn_alphabet, scans, stamp
+from ._lex3d import PlaceDatabase, Scan, __version__, compress, decompress, holds_scans, learn_alphabet, scans, stamp
 
-__all__ = ["compress", "decompress", "learn_alphabet", "scans", "Scan", "stamp", "PlaceDatabase", "__version__"]
+__all__ = ["compress", "decompress", "learn_alphabet", "scans", "holds_scans", "Scan", "stamp", "PlaceDatabase",
+           "__version__"]

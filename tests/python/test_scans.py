@@ -76,3 +76,27 @@ def test_a_file_of_one_scan_and_bad_input():
         lex3d.compress(room, max_error=0.02, intensity=np.zeros(len(room), np.float32))
     with pytest.raises(ValueError, match="lex3d.scans"):
         lex3d.compress(room, max_error=0.02, single_return=True)
+
+
+def test_a_scan_pickles_whole():
+    import pickle
+    (turn,) = lex3d.scans(CAPTURE)
+    back = pickle.loads(pickle.dumps(turn))
+    assert back.name == turn.name and len(back) == len(turn) and back.stamp == turn.stamp
+    assert np.array_equal(back.points, turn.points)
+    assert sorted(back.fields) == sorted(turn.fields)
+    for k, v in turn.fields.items():
+        assert back.fields[k].dtype == v.dtype and np.array_equal(back.fields[k], v)
+    # the laser table read from the capture came too: the same file
+    assert lex3d.compress(back, max_error=0.02) == lex3d.compress(turn, max_error=0.02)
+    # a damaged pickle is an error, not a crash
+    name, blob = turn.__getstate__()
+    fresh = lex3d.Scan.__new__(lex3d.Scan)
+    with pytest.raises(ValueError, match="not a lex3d cloud: a count beyond the bytes"):
+        fresh.__setstate__((name, blob[: len(blob) // 2]))
+
+
+def test_holds_scans_tells_the_files_of_several_scans(tmp_path):
+    assert lex3d.holds_scans(CAPTURE) == "capture"
+    assert lex3d.holds_scans(SAMPLES / "room_scan1.pcd") == ""
+    assert lex3d.holds_scans(tmp_path / "x.lex3dq") == "sequence"

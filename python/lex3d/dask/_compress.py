@@ -12,10 +12,14 @@ import warnings
 
 from ._files import read_alphabet_file
 from ._progress import ProgressLine
+from ._sources import ScanSources, SourceChanged
 from ._worker import worker_malloc
 
 # Point cloud files a folder is searched for (pose lists, READMEs and times.txt are not scans).
-SCAN_EXTENSIONS = (".bin", ".pcd", ".ply", ".las", ".xyz", ".3d", ".pcap")
+SCAN_EXTENSIONS = (".bin", ".pcd", ".ply", ".las", ".xyz", ".3d", ".pcap", ".bag", ".lex3dq")
+
+# Scans of a capture, bag or sequence file a task carries at most (each ~1-4 MB pickled).
+SCANS_CARRIED = 4
 
 
 class CompressError(Exception):
@@ -122,9 +126,11 @@ def learn_task(paths, iterations, seed_kw, threads):
 
 
 def code_batch(items, alphabet, options, job):
-    """On a worker: codes the scans of `items` ((index, path, output) each), one after the
-    other, and returns their manifest rows (code_task)."""
+    """On a worker: codes the scans of `items` ((index, path or lex3d.Scan, output) each, or
+    those pickled), one after the other, and returns their manifest rows (code_task)."""
     worker_malloc()
+    if isinstance(items, bytes):
+        items = pickle.loads(items)
     return [code_task(index, path, output, alphabet, options, job) for index, path, output in items]
 
 
@@ -138,12 +144,13 @@ def batch_size(remaining, slots, largest=16):
 
 
 def code_task(index, path, output, alphabet, options, job):
-    """On a worker: codes one scan into `output` and returns its manifest row. A scan that
-    cannot be read or coded gives a row with status "error" and the one-line message."""
+    """On a worker: codes one scan (a path, or a lex3d.Scan read by the driver) into `output`
+    and returns its manifest row. A scan that cannot be read or coded gives a row with status
+    "error" and the one-line message."""
     import lex3d
     worker_malloc()
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    row = {"index": index, "scan": path, "file": output}
+    row = {"index": index, "scan": path if isinstance(path, str) else path.name, "file": output}
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -186,7 +193,7 @@ def _uses_words(options):
 
 def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn_scans=5,
              iterations=400, seed=None, manifest=None, progress=False, window=None, batch=None,
-             **options):
+             metadata=None, topic=None, single_return=False, sensor_model=None, **options):
     """Codes every scan of `inputs` (expand_inputs) on the cluster of `client` into OUT_000,
     OUT_001, ... (numbered_output) and writes the manifest; returns the summary (a dict).
 
@@ -196,12 +203,22 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     words, layer_coding, keep_all_points, word_radius, threads). A scan that fails is named in
     the manifest and the summary; the others complete. Raises CompressError when the job
     cannot start. window: tasks in flight (default 4 a worker thread); batch: scans a task
-    (default: batch_size, from 16 down to 1 as the work runs out)."""
+    (default: batch_size, from 16 down to 1 as the work runs out; at most SCANS_CARRIED of a
+    capture's, a bag's or a sequence file's scans, which travel with their task).
+
+    A raw capture, a ROS bag or a sequence file (.lex3dq) counts as its scans, as `lex3d
+    compress` counts them: the driver reads it through once to count them, then again as the
+    tasks go out, each scan travelling to its worker pickled (ScanSources). metadata, topic,
+    single_return, sensor_model: how those files are read (lex3d.scans)."""
     import lex3d
     from distributed import as_completed
 
-    scans, output = job_paths(inputs, output)
-    n = len(scans)
+    paths, output = job_paths(inputs, output)
+    survey0 = time.perf_counter()
+    sources = ScanSources(paths, {"metadata": metadata, "topic": topic, "single_return": single_return,
+                                  "sensor_model": sensor_model})
+    n = len(sources)
+    survey_s = time.perf_counter() - survey0
     stem = os.path.splitext(output)[0]
     manifest = os.fspath(manifest) if manifest else stem + ".manifest.jsonl"
     words = _uses_words(options)
@@ -220,7 +237,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     # Every output checked against every input (by file identity) before any work: nothing
     # is overwritten. One stat a file; the identities are held only for this check.
     inputs_seen = {}
-    for src in scans + ([alphabet_path] if alphabet_bytes is not None and alphabet_path else []):
+    for src in paths + ([alphabet_path] if alphabet_bytes is not None and alphabet_path else []):
         try:
             st = os.stat(src)
             inputs_seen[(st.st_dev, st.st_ino)] = src
@@ -261,9 +278,18 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     learn_s = 0.0
     if words and alphabet_bytes is None:
         k = min(n, max(1, learn_scans))
-        sample = [scans[j * n // k] for j in range(k)]
+        feed = sources.reader()
+        try:
+            sample = [sources.path(i) or feed.scan(i) for i in (j * n // k for j in range(k))
+                      if sources.error(i) is None]
+        except SourceChanged as e:
+            raise CompressError(2, f"learning the alphabet: {e}") from None
+        if not sample:
+            raise CompressError(2, f"learning the alphabet: no scan could be read ({sources.error(0)})")
+        del feed
         t = time.perf_counter()
         fut = client.submit(learn_task, sample, iterations, seed_kw, options.get("threads", 1), pure=False)
+        del sample
         try:
             alphabet_bytes = fut.result()
         except (ValueError, OSError) as e:
@@ -287,6 +313,10 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
 
     header = {"lex3d": lex3d.__version__, "scans": n, "alphabet": alphabet_path,
               "alphabet_sha256": alphabet_sha, "options": {k: v for k, v in coding.items()}}
+    if sources.read_options:
+        header["read_options"] = dict(sources.read_options)
+    if sources.notes:
+        header["notes"] = list(sources.notes)
     tmp_manifest = _temporary_name(manifest, job)
     bar = ProgressLine("coding", n, progress, lambda done, elapsed_s, failed:
                        f" {done / max(1e-9, elapsed_s):.1f} scans/s" + (f", {failed} failed" if failed else ""))
@@ -297,17 +327,48 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
               "peak_rss_mb": 0.0, "rewritten": 0}
     failures = []
     cpu_per_scan = []
+    # Carried scans stay in their task rather than scattered to a worker ahead of it: a task
+    # retried after its worker died finds them there. Dask's warning about large tasks (given
+    # from its own thread, after submit returns) is expected of them while the job runs.
+    if sources.multi:
+        warnings.filterwarnings("ignore", "Large object of size .* detected in task graph", UserWarning)
+    quiet = warnings.filters[0] if sources.multi else None
     try:
         with open(tmp_manifest, "w", encoding="utf-8") as mf:
             mf.write(json.dumps(header) + "\n")
             queue = as_completed()
             submitted = 0
 
+            feed = sources.reader()
+
             def submit(first, count):
-                items = [(i, scans[i], numbered_output(output, i, n)) for i in range(first, first + count)]
-                totals["task_bytes"] += len(pickle.dumps((items, coding, job)))
+                """Sends scans first..first+count-1 to a task; False when none of them needs
+                one. A scan of a multi-scan file travels with its task; an entry that is an
+                error, or a scan the file no longer gives, is its row now."""
+                items = []
+                for i in range(first, first + count):
+                    out = numbered_output(output, i, n)
+                    error = sources.error(i)
+                    if error is None:
+                        try:
+                            items.append((i, sources.path(i) or feed.scan(i), out))
+                        except SourceChanged as e:
+                            error = str(e)
+                    if error is not None:
+                        record({"index": i, "scan": sources.name(i), "file": out, "status": "error",
+                                "error": error, "cpu_s": 0.0, "wall_s": 0.0, "worker_peak_rss_mb": 0.0})
+                if not items:
+                    return False
+                # (carried scans pickled here once: the task's size is counted from them, and
+                # Dask then moves bytes)
+                if any(not isinstance(it[1], str) for it in items):
+                    items = pickle.dumps(items, protocol=pickle.HIGHEST_PROTOCOL)
+                    totals["task_bytes"] += len(items) + len(pickle.dumps((b"", coding, job)))
+                else:
+                    totals["task_bytes"] += len(pickle.dumps((items, coding, job)))
                 queue.add(client.submit(code_batch, items, alphabet_ref, coding, job,
                                         key=f"lex3d-code-{job}-{first}-{count}", retries=2))
+                return True
 
             # At most `window` tasks in flight, the rows written in scan order as they
             # complete; rows that wait for an earlier, slower scan are held, at most
@@ -320,9 +381,23 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                 nonlocal submitted, in_flight
                 while submitted < n and in_flight < window and submitted - next_row < reorder:
                     count = min(n - submitted, batch or batch_size(n - submitted, slots))
-                    submit(submitted, count)
+                    # (a task holds one-cloud files or carried scans, at most SCANS_CARRIED of those)
+                    carried = sources.path(submitted) is None
+                    run = 1
+                    while run < count and (sources.path(submitted + run) is None) == carried:
+                        run += 1
+                    count = min(run, SCANS_CARRIED) if carried else run
+                    if submit(submitted, count):
+                        in_flight += 1
                     submitted += count
-                    in_flight += 1
+                    flush()
+
+            def flush():
+                """Writes the rows that are next in scan order."""
+                nonlocal next_row
+                while next_row in pending:
+                    mf.write(json.dumps(pending.pop(next_row)) + "\n")
+                    next_row += 1
 
             def record(row):
                 nonlocal done, failed
@@ -337,7 +412,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                     if len(failures) < 20:
                         failures.append(f"{row['scan']}: {row['error']}")
                 totals["cpu_s"] += row["cpu_s"]
-                if len(cpu_per_scan) < 100000:  # the median of the first 1e5: bounded memory
+                if "pid" in row and len(cpu_per_scan) < 100000:  # (of the coded scans; the first 1e5)
                     cpu_per_scan.append(row["cpu_s"])
                 totals["peak_rss_mb"] = max(totals["peak_rss_mb"], row["worker_peak_rss_mb"])
 
@@ -349,15 +424,16 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                 totals["result_bytes"] += len(pickle.dumps(rows))
                 for row in rows:
                     record(row)
-                while next_row in pending:
-                    mf.write(json.dumps(pending.pop(next_row)) + "\n")
-                    next_row += 1
+                flush()
                 top_up()
                 bar.update(done, failed)
             mf.flush()
             os.fsync(mf.fileno())
         os.replace(tmp_manifest, manifest)
     finally:
+        if quiet is not None and quiet in warnings.filters:
+            warnings.filters.remove(quiet)
+            getattr(warnings, "_filters_mutated", lambda: None)()
         if done:
             bar.update(done, failed, final=True)
         _remove_temporaries(os.path.dirname(output) or ".", job)
@@ -366,10 +442,10 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     wall = time.perf_counter() - wall0
     cpu_per_scan.sort()
     return {
-        "scans": n, "ok": n - failed, "failed": failed, "failures": failures,
+        "scans": n, "ok": n - failed, "failed": failed, "failures": failures, "notes": list(sources.notes),
         "manifest": manifest, "alphabet": alphabet_path, "alphabet_sha256": alphabet_sha,
         "alphabet_bytes": len(alphabet_bytes) if alphabet_bytes is not None else 0,
-        "workers": workers, "threads": slots, "wall_s": wall, "learn_s": learn_s,
+        "workers": workers, "threads": slots, "wall_s": wall, "learn_s": learn_s, "survey_s": survey_s,
         "scans_per_s": n / wall if wall > 0 else 0.0,
         "points": totals["points"], "bytes": totals["bytes"],
         "bits_per_point": 8.0 * totals["bytes"] / totals["points"] if totals["points"] else 0.0,

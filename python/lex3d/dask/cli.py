@@ -3,7 +3,8 @@
 
 Runs lex3d's work over many scans on a Dask cluster (--scheduler ADDRESS, or a LocalCluster of
 --workers processes on this machine). compress writes OUT_000.lex3dm ... (the files `lex3d
-compress SCANS --alphabet A -o OUT` writes), OUT.manifest.jsonl and, when it learns one, the
+compress SCANS --alphabet A -o OUT` writes; a raw capture, a ROS bag or a sequence file counts as
+its scans, read by this process and sent to the workers), OUT.manifest.jsonl and, when it learns one, the
 alphabet; learn writes the alphabet `lex3d learn SCANS -o OUT` writes; place build writes DIR/shard_000.lex3dp, ...
 (consecutive scan ranges, one alphabet) and DIR/manifest.json, and place query answers as one
 database of all the scans would.
@@ -62,6 +63,11 @@ def _parser():
     c.add_argument("--keep-all-points", action="store_true")
     c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
     c.add_argument("--manifest", help="default OUT.manifest.jsonl")
+    c.add_argument("--metadata", help="a capture's Ouster metadata JSON or Velodyne calibration, or the JSON a bag's "
+                                      "Ouster packets need (default: beside the capture)")
+    c.add_argument("--topic", help="the topic of a ROS bag to read (default: its only point cloud topic)")
+    c.add_argument("--single-return", action="store_true", help="a dual-return capture's first returns only")
+    c.add_argument("--sensor-model", help="read a Velodyne capture as this model (vlp16, puck-hires, hdl32e, vlp32c, hdl64e)")
     _cluster_options(c)
     ln = sub.add_parser("learn", help="learn one alphabet over many scans on a Dask cluster")
     ln.add_argument("inputs", nargs="+", help="scan files, folders of scans, or @LIST (one path a line)")
@@ -256,18 +262,21 @@ def main(argv=None):
     code, summary = _run_job(args, lambda client: compress(
         args.inputs, args.output, client=client, alphabet=args.alphabet, save_alphabet=args.save_alphabet,
         learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed, manifest=args.manifest,
-        progress=not args.no_progress and sys.stderr.isatty(), **options),
+        progress=not args.no_progress and sys.stderr.isatty(), metadata=args.metadata, topic=args.topic,
+        single_return=args.single_return, sensor_model=args.sensor_model, **options),
         "no partial output files; the manifest is not written")
     if code:
         return code
-    for line in summary["failures"]:
+    for line in summary["notes"] + summary["failures"]:
         print(f"lex3d-dask: {line}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary))
     else:
         s = summary
         print(f"{s['ok']} of {s['scans']} scans coded on {s['workers']} workers ({s['threads']} threads) in "
-              f"{s['wall_s']:.1f} s ({s['scans_per_s']:.2f} scans/s; learning {s['learn_s']:.1f} s): "
+              f"{s['wall_s']:.1f} s ({s['scans_per_s']:.2f} scans/s; learning {s['learn_s']:.1f} s"
+              + (f"; counting the scans of captures, bags and sequences before: {s['survey_s']:.1f} s" if s["survey_s"] >= 0.05 else "")
+              + "): "
               f"{s['points']} points, {s['bytes']} bytes, {s['bits_per_point']:.3f} bits a point")
         print(f"  CPU {s['cpu_s']:.1f} s (median {s['cpu_s_median'] * 1000:.0f} ms a scan), worker peak memory "
               f"{s['worker_peak_rss_mb']:.0f} MB, sent to workers {s['bytes_to_workers']} bytes, "
