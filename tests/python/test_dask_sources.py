@@ -119,3 +119,30 @@ def test_an_alphabet_learned_on_a_captures_turns(client, tmp_path, capture):
     assert len(expected) == summary["scans"]
     for ref in expected:
         assert (out.parent / ref.name.replace("s_", "w_")).read_bytes() == ref.read_bytes(), ref.name
+
+
+def test_learn_on_a_capture_learns_the_commands_alphabet(client, tmp_path, capture):
+    ref = tmp_path / "cli.lex3da"
+    subprocess.run([CLI, "learn", str(capture), "-o", str(ref), "--iterations", "40"], check=True, capture_output=True)
+    summary = lex3d.dask.learn([capture], tmp_path / "dask.lex3da", client=client, iterations=40)
+    assert summary["scans"] == len(list(lex3d.scans(capture)))
+    assert (tmp_path / "dask.lex3da").read_bytes() == ref.read_bytes()
+
+
+def test_place_shards_of_a_capture_answer_as_the_commands_database(client, tmp_path, capture):
+    alphabet = tmp_path / "a.lex3da"
+    subprocess.run([CLI, "learn", str(capture), "-o", str(alphabet), "--iterations", "40"], check=True,
+                   capture_output=True)
+    whole = tmp_path / "whole.lex3dp"
+    subprocess.run([CLI, "place", "build", str(whole), str(capture), "--alphabet", str(alphabet)], check=True,
+                   capture_output=True)
+    one = lex3d.PlaceDatabase.open(whole)
+    s = lex3d.dask.build_place_shards([capture], tmp_path / "db", client=client, shards=2, alphabet=alphabet)
+    assert s["scans"] == len(one.names) >= 3
+    manifest = json.loads((tmp_path / "db" / "manifest.json").read_text())
+    assert [n for x in manifest["shards"] for n in x["names"]] == list(one.names)
+    db = lex3d.dask.ShardedPlaceDatabase(tmp_path / "db", client)
+    for turn in lex3d.scans(capture):
+        a, b = one.query(turn, top=3), db.query(turn, top=3)
+        assert [m["scan"] for m in a] == [m["scan"] for m in b]
+        assert [m["score"] for m in a] == pytest.approx([m["score"] for m in b])

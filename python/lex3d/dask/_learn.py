@@ -20,11 +20,13 @@ import time
 
 from ._compress import CompressError, _peak_rss_mb, job_paths, write_once
 from ._progress import ProgressLine
+from ._sources import ScanSources, SourceChanged
 from ._worker import worker_malloc
 
 
 class LearnShard:
-    """A Dask actor: scans [first, first + len(paths)) of the set, their learning state."""
+    """A Dask actor: scans [first, first + len(paths)) of the set (paths, or lex3d.Scan of a
+    capture, a bag or a sequence file, read by the driver), their learning state."""
 
     def __init__(self, paths, first, word_radius, threads):
         worker_malloc()
@@ -41,7 +43,8 @@ class LearnShard:
         (returned, not raised: an exception from an actor means a lost worker to the driver)."""
         from lex3d._lex3d import learning
         try:
-            self.scans = [learning.LearnScan(p, word_radius=self.word_radius, threads=self.threads, what=p)
+            self.scans = [learning.LearnScan(p, word_radius=self.word_radius, threads=self.threads,
+                                             what=p if isinstance(p, str) else p.name)
                           for p in self.paths]
         except (ValueError, OSError) as e:
             return {"error": str(e), "code": 2}
@@ -100,15 +103,16 @@ def _lost_worker_errors():
 class _Shards:
     """The driver's handles on the shards, with the bytes sent and returned, and rebuilding."""
 
-    def __init__(self, client, scans, workers, word_radius, threads):
+    def __init__(self, client, sources, workers, word_radius, threads):
         self.client = client
         self.word_radius = word_radius
         self.threads = threads
-        n = len(scans)
+        self.sources = sources
+        self.feed = sources.reader()
+        n = len(sources)
         k = max(1, min(len(workers), n))
         # Contiguous ranges of about equal size, one a worker.
         self.ranges = [(j * n // k, (j + 1) * n // k) for j in range(k)]
-        self.paths = [scans[a:b] for a, b in self.ranges]
         self.owner = []
         for j, (a, b) in enumerate(self.ranges):
             self.owner.extend([j] * (b - a))
@@ -121,8 +125,19 @@ class _Shards:
         self.radius = None
         self.lost = _lost_worker_errors()
 
+    def scans(self, j):
+        """Shard j's scans: paths, and the lex3d.Scan of captures', bags' and sequences' scans."""
+        a, b = self.ranges[j]
+        try:
+            scans = [self.sources.path(i) or self.feed.scan(i) for i in range(a, b)]
+        except SourceChanged as e:
+            raise CompressError(2, str(e)) from None
+        if self.sources.multi:
+            self.sent += len(pickle.dumps(scans))
+        return scans
+
     def start(self):
-        futures = [self.client.submit(LearnShard, self.paths[j], self.ranges[j][0], self.word_radius, self.threads,
+        futures = [self.client.submit(LearnShard, self.scans(j), self.ranges[j][0], self.word_radius, self.threads,
                                       actor=True, workers=[self.workers[j]], allow_other_workers=True, pure=False)
                    for j in range(len(self.ranges))]
         self.actors = [f.result() for f in futures]
@@ -151,7 +166,7 @@ class _Shards:
     def rebuild(self, j, words):
         """A new actor for shard j on any live worker: its scans read and prepared again and
         `words` replayed in order; returns its scans' ln L."""
-        f = self.client.submit(LearnShard, self.paths[j], self.ranges[j][0], self.word_radius, self.threads,
+        f = self.client.submit(LearnShard, self.scans(j), self.ranges[j][0], self.word_radius, self.threads,
                                actor=True, pure=False)
         self.actors[j] = f.result()
         loaded = self.one(j, "load")
@@ -163,18 +178,20 @@ class _Shards:
 
 
 def learn(inputs, output, *, client, iterations=400, patience=100, seed=1, word_radius=0.0, threads=1,
-          prefetch=64, progress=False):
+          prefetch=64, progress=False, metadata=None, topic=None, single_return=False, sensor_model=None):
     """Learns one alphabet for every scan of `inputs` (expand_inputs) on the cluster of
     `client` and writes it to `output` (a temporary name, then renamed); returns the summary
     (a dict). The alphabet is that of `lex3d learn SCANS -o OUTPUT --iterations ITERATIONS
     --patience PATIENCE --seed SEED --word-radius WORD_RADIUS`. progress: True for a line on
 stderr, or a callable given (iteration, iterations at most, BIC, words) after every
 candidate. Raises CompressError when
-    the job cannot run (code 1 usage, 2 a scan that cannot be read, 3 I/O)."""
+    the job cannot run (code 1 usage, 2 a scan that cannot be read, 3 I/O). A capture, a bag
+    or a sequence file counts as its scans, as `lex3d learn` counts them (read by the driver
+    and sent to their shard's worker, ScanSources; metadata, topic, single_return,
+    sensor_model: how they are read)."""
     from lex3d._lex3d import learning
 
     scans, output = job_paths(inputs, output)
-    n = len(scans)
     try:
         out_stat = os.stat(output)
     except OSError:
@@ -195,12 +212,18 @@ candidate. Raises CompressError when
             raise ValueError(f"threads must be in [1, 64], got {threads}")
     except ValueError as e:
         raise CompressError(1, str(e)) from None
+    sources = ScanSources(scans, {"metadata": metadata, "topic": topic, "single_return": single_return,
+                                  "sensor_model": sensor_model})
+    n = len(sources)
+    bad = next((sources.error(i) for i in range(n) if sources.error(i) is not None), None)
+    if bad is not None:  # as lex3d learn: every scan is read, or nothing is learned
+        raise CompressError(2, bad)
 
     wall0 = time.perf_counter()
     workers = sorted(client.scheduler_info().get("workers", {}))
     if not workers:
         raise CompressError(3, "the Dask cluster has no workers")
-    shards = _Shards(client, scans, workers, word_radius, threads)
+    shards = _Shards(client, sources, workers, word_radius, threads)
     shards.start()
     loaded = shards.all("load")
     if shards.rebuild_pending:
@@ -307,6 +330,7 @@ candidate. Raises CompressError when
     wall = time.perf_counter() - wall0
     return {
         "alphabet": output, "alphabet_bytes": len(alphabet), "scans": n, "points": sum(points),
+        "notes": list(sources.notes),
         "words": len(words), "word_points": sum(int.from_bytes(w[:4], "little") for w in words), "word_radius_m": radius,
         "iterations": loop.iteration, "accepted": loop.accepted, "rejected": loop.rejected,
         "evaluations": evaluations, "bic_initial": bic0, "bic_final": loop.bic,

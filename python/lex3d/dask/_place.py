@@ -24,6 +24,7 @@ import uuid
 import numpy as np
 
 from ._compress import CompressError, expand_inputs, learn_task
+from ._sources import ScanSources, SourceChanged
 from ._files import read_alphabet_file
 from ._worker import worker_malloc
 
@@ -114,18 +115,52 @@ def _write_json_atomic(path, obj, job):
         raise CompressError(3, f"{path}: cannot write: {e.strerror or e}") from None
 
 
+def _names(sources):
+    """The scans' names, as `lex3d place build` gives them: a file's stem; a capture's or bag's
+    k-th scan <stem>_<k> (where it holds more than one), a sequence's <stem>_<kkk>."""
+    count = {}
+    for path, turn, _, _ in sources.entries:
+        count[path] = count.get(path, 0) + 1
+    names = []
+    for path, turn, _, _ in sources.entries:
+        stem = _stem(path)
+        if turn is None or (count[path] == 1 and not path.lower().endswith(".lex3dq")):
+            names.append(stem)
+        elif path.lower().endswith(".lex3dq"):
+            names.append(f"{stem}_{turn:03d}")
+        else:
+            names.append(f"{stem}_{turn}")
+    return names
+
+
 def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet=None, poses=None, learn_scans=5,
-          iterations=200, seed=None):
+          iterations=200, seed=None, metadata=None, topic=None, single_return=False, sensor_model=None):
     """Builds a sharded place database in the folder `output`: shard_000.lex3dp, ... (consecutive
-    scan ranges), the alphabet (alphabet.lex3da) and manifest.json. Returns a summary dict."""
+    scan ranges), the alphabet (alphabet.lex3da) and manifest.json. Returns a summary dict.
+    A capture, a bag or a sequence file counts as its scans, as `lex3d place build` counts
+    them: the driver reads them (ScanSources; metadata, topic, single_return, sensor_model: how)
+    and each shard's task carries its scans; then at most one shard a worker is in flight."""
     import lex3d
-    scans = expand_inputs(inputs)
-    n = len(scans)
+    paths = expand_inputs(inputs)
+    sources = ScanSources(paths, {"metadata": metadata, "topic": topic, "single_return": single_return,
+                                  "sensor_model": sensor_model})
+    n = len(sources)
     if n == 0:
         raise CompressError(1, "no scans given")
+    bad = next((sources.error(i) for i in range(n) if sources.error(i) is not None), None)
+    if bad is not None:  # as lex3d place build: every scan is read, or nothing is built
+        raise CompressError(2, bad)
+    feed = sources.reader()
+
+    def scans_of(indices):
+        try:
+            return [sources.path(i) or feed.scan(i) for i in indices]
+        except SourceChanged as e:
+            raise CompressError(2, str(e)) from None
+
     ranges = shard_ranges(n, shards, scans_per_shard)
     pose_list = read_poses(poses, n) if poses else None
-    names = [_stem(p) for p in scans]
+    names = _names(sources)
     if os.path.exists(os.path.join(output, MANIFEST)):
         raise CompressError(1, f"{output}: already holds a sharded database ({MANIFEST}); give a new folder")
     job = uuid.uuid4().hex[:12]
@@ -135,7 +170,7 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
         alphabet_bytes = read_alphabet_file(alphabet)
     else:
         k = min(n, max(1, learn_scans))
-        sample = [scans[j * n // k] for j in range(k)]
+        sample = scans_of(j * n // k for j in range(k))
         t = time.perf_counter()
         seed_kw = {} if seed is None else {"seed": seed}
         try:
@@ -155,9 +190,15 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
     futures, sent = [], 0
     outputs = [os.path.abspath(os.path.join(output, f"shard_{i:03d}.lex3dp")) for i in range(len(ranges))]
     for i, (a, b) in enumerate(ranges):
-        args = (scans[a:b], names[a:b], None if pose_list is None else pose_list[a:b], alphabet_ref, outputs[i], job)
+        if sources.multi and i >= max(1, workers):
+            # (carried scans: one shard a worker in flight, so the driver holds no more)
+            from distributed import wait
+            wait(futures[i - max(1, workers)])
+        args = (scans_of(range(a, b)), names[a:b], None if pose_list is None else pose_list[a:b], alphabet_ref,
+                outputs[i], job)
         sent += len(pickle.dumps(args[:3])) + len(pickle.dumps(args[4:]))
         futures.append(client.submit(build_shard_task, *args, key=f"lex3d-place-shard-{job}-{i}", pure=False))
+        del args
     _settle(futures)
     results, error = [], None
     for i, fut in enumerate(futures):

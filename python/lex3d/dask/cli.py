@@ -42,6 +42,20 @@ def _cluster_options(c):
     c.add_argument("--json", action="store_true", help="the summary as one JSON object on stdout")
 
 
+def _read_options(c):
+    """How captures and bags are read, as `lex3d compress` reads them."""
+    c.add_argument("--metadata", help="a capture's Ouster metadata JSON or Velodyne calibration, or the JSON a bag's "
+                                      "Ouster packets need (default: beside the capture)")
+    c.add_argument("--topic", help="the topic of a ROS bag to read (default: its only point cloud topic)")
+    c.add_argument("--single-return", action="store_true", help="a dual-return capture's first returns only")
+    c.add_argument("--sensor-model", help="read a Velodyne capture as this model (vlp16, puck-hires, hdl32e, vlp32c, hdl64e)")
+
+
+def _read_kw(args):
+    return {"metadata": args.metadata, "topic": args.topic, "single_return": args.single_return,
+            "sensor_model": args.sensor_model}
+
+
 def _parser():
     p = _Parser(prog=os.path.basename(sys.argv[0]) if sys.argv[0].endswith("lex3d-dask") else "python3 -m lex3d.dask", description=__doc__.split("\n\n")[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -63,11 +77,7 @@ def _parser():
     c.add_argument("--keep-all-points", action="store_true")
     c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
     c.add_argument("--manifest", help="default OUT.manifest.jsonl")
-    c.add_argument("--metadata", help="a capture's Ouster metadata JSON or Velodyne calibration, or the JSON a bag's "
-                                      "Ouster packets need (default: beside the capture)")
-    c.add_argument("--topic", help="the topic of a ROS bag to read (default: its only point cloud topic)")
-    c.add_argument("--single-return", action="store_true", help="a dual-return capture's first returns only")
-    c.add_argument("--sensor-model", help="read a Velodyne capture as this model (vlp16, puck-hires, hdl32e, vlp32c, hdl64e)")
+    _read_options(c)
     _cluster_options(c)
     ln = sub.add_parser("learn", help="learn one alphabet over many scans on a Dask cluster")
     ln.add_argument("inputs", nargs="+", help="scan files, folders of scans, or @LIST (one path a line)")
@@ -77,6 +87,7 @@ def _parser():
     ln.add_argument("--seed", type=int, default=1, help="seed of the candidate order")
     ln.add_argument("--word-radius", type=float, default=0.0, help="metres; 0 derives it from the first scan")
     ln.add_argument("--threads", type=int, default=1, help="threads a worker (the alphabet does not depend on it)")
+    _read_options(ln)
     _cluster_options(ln)
     pl = sub.add_parser("place", help="a sharded place database: build shards on the workers, query them all")
     psub = pl.add_subparsers(dest="place_command", required=True, parser_class=_Parser)
@@ -90,6 +101,7 @@ def _parser():
     pb.add_argument("--learn-scans", type=int, default=5, help="learn on this many evenly spaced scans (default 5)")
     pb.add_argument("--iterations", type=int, default=200, help="candidate words drawn when learning (default 200)")
     pb.add_argument("--seed", type=int, help="seed of the learner")
+    _read_options(pb)
     _cluster_options(pb)
     pq = psub.add_parser("query", help="query every shard; the answer of one database of all the scans")
     pq.add_argument("database", help="the folder place build wrote")
@@ -154,10 +166,13 @@ def _learn_main(args):
     from ._learn import learn
     code, summary = _run_job(args, lambda client: learn(
         args.inputs, args.output, client=client, iterations=args.iterations, patience=args.patience, seed=args.seed,
-        word_radius=args.word_radius, threads=args.threads, progress=not args.no_progress and sys.stderr.isatty()),
+        word_radius=args.word_radius, threads=args.threads, progress=not args.no_progress and sys.stderr.isatty(),
+        **_read_kw(args)),
         "no alphabet written")
     if code:
         return code
+    for line in summary["notes"]:
+        print(f"lex3d-dask: {line}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary))
         return 0
@@ -178,7 +193,7 @@ def _place_build(args, client):
     from . import _place
     s = _place.build(args.inputs, args.output, client=client, shards=args.shards,
                      scans_per_shard=args.scans_per_shard, alphabet=args.alphabet, poses=args.poses,
-                     learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed)
+                     learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed, **_read_kw(args))
     if args.json:
         print(json.dumps(s))
     else:
@@ -262,8 +277,7 @@ def main(argv=None):
     code, summary = _run_job(args, lambda client: compress(
         args.inputs, args.output, client=client, alphabet=args.alphabet, save_alphabet=args.save_alphabet,
         learn_scans=args.learn_scans, iterations=args.iterations, seed=args.seed, manifest=args.manifest,
-        progress=not args.no_progress and sys.stderr.isatty(), metadata=args.metadata, topic=args.topic,
-        single_return=args.single_return, sensor_model=args.sensor_model, **options),
+        progress=not args.no_progress and sys.stderr.isatty(), **_read_kw(args), **options),
         "no partial output files; the manifest is not written")
     if code:
         return code
