@@ -17,6 +17,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -28,11 +29,12 @@
 #include "lex3d/io/io.hpp"
 #include "lex3d/io/rosbag.hpp"
 #include "lex3d/io/sensor_log.hpp"
+#include "lex3d/codec/cloud_bytes.hpp"
 
 namespace lex3d::fuzz {
 
 /// The inputs one reader target takes.
-enum class Reader { kPcd, kPly, kKitti, kBinXyz, kXyz, kUos, kLas, kPcap, kOuster, kHdl64, kPoses, kBag };
+enum class Reader { kPcd, kPly, kKitti, kBinXyz, kXyz, kUos, kLas, kPcap, kOuster, kHdl64, kPoses, kBag, kCloudBytes };
 
 struct ReaderKind {
   Reader reader;
@@ -45,6 +47,7 @@ inline constexpr ReaderKind kReaderKinds[] = {
     {Reader::kBinXyz, "binxyz", ".bin"}, {Reader::kXyz, "xyz", ".xyz"},       {Reader::kUos, "uos", ".3d"},
     {Reader::kLas, "las", ".las"},       {Reader::kPcap, "pcap", ".pcap"},    {Reader::kOuster, "ouster", ".pcap"},
     {Reader::kHdl64, "hdl64", ".pcap"},   {Reader::kPoses, "poses", ".txt"},    {Reader::kBag, "bag", ".bag"},
+    {Reader::kCloudBytes, "cloudbytes", ".l3dc"},  // a pickled lex3d.Scan's cloud (codec/cloud_bytes.hpp)
 };
 
 inline const ReaderKind* find_reader(std::string_view name) {
@@ -191,6 +194,18 @@ inline void check_reader(const ReaderKind& kind, const std::uint8_t* data, std::
   const std::string path = scratch_dir() + "/input" + kind.extension;
   write_whole(path, data, size);
   switch (kind.reader) {
+    case Reader::kCloudBytes: {
+      // read from memory; what reads writes back to the same bytes (nothing invented or lost)
+      const auto r = codec::cloud_from_bytes(data, size);
+      if (!r.ok()) {
+        if (r.status().code() != ErrorCode::kBadData) reader_fail("not kBadData", r.status().to_string());
+        if (r.status().message().find('\n') != std::string::npos) reader_fail("multi-line error", r.status().message());
+        return;
+      }
+      const std::vector<std::uint8_t> again = codec::cloud_to_bytes(r.value());
+      if (again.size() != size || !std::equal(again.begin(), again.end(), data)) reader_fail("cloud bytes do not write back", "");
+      return;
+    }
     case Reader::kPoses: {
       const auto r = io::read_pose_list(path);
       if (!r.ok()) return check_failure(r.status(), path);
