@@ -71,4 +71,27 @@ void write_bytes(const std::string& path, const std::vector<std::uint8_t>& bytes
   write_raw(path, reinterpret_cast<const char*>(bytes.data()), bytes.size());
 }
 
+void expect_same_georef(const Georeference& g, const Georeference& w) {
+  EXPECT_EQ(g.origin, w.origin);
+  EXPECT_EQ(g.unit_m, w.unit_m);
+  EXPECT_EQ(g.vertical_unit_m, w.vertical_unit_m);
+  EXPECT_EQ(g.unit_name, w.unit_name);
+  EXPECT_EQ(g.crs_name, w.crs_name);
+  EXPECT_EQ(g.epsg, w.epsg);
+  EXPECT_EQ(g.las_scale, w.las_scale);
+  EXPECT_EQ(g.las_offset, w.las_offset);
+  EXPECT_EQ(g.las_version_minor, w.las_version_minor);
+  EXPECT_EQ(g.las_point_format, w.las_point_format);
+  EXPECT_EQ(g.las_system_id, w.las_system_id);
+  EXPECT_EQ(g.las_software, w.las_software);
+  ASSERT_EQ(g.crs_records.size(), w.crs_records.size());
+  for (std::size_t i = 0; i < w.crs_records.size(); ++i) {
+    EXPECT_EQ(g.crs_records[i].user_id, w.crs_records[i].user_id);
+    EXPECT_EQ(g.crs_records[i].record_id, w.crs_records[i].record_id);
+    EXPECT_EQ(g.crs_records[i].description, w.crs_records[i].description);
+    EXPECT_EQ(g.crs_records[i].data, w.crs_records[i].data);
+    EXPECT_EQ(g.crs_records[i].extended, w.crs_records[i].extended);
+  }
+}
+
 }  // namespace lex3d::test

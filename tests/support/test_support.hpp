@@ -26,6 +26,9 @@ Cloud load_or_fail(const std::string& path);
 /// Writes `bytes` to `path` (replacing it), or fails the current test.
 void write_bytes(const std::string& path, const std::string& bytes);
 void write_bytes(const std::string& path, const std::vector<std::uint8_t>& bytes);
+/// Expects `got` to hold what a model file keeps of georeference `want` (origin, units, CRS
+/// name and records, the LAS container's fields; not the measured representation error).
+void expect_same_georef(const Georeference& got, const Georeference& want);
 
 }  // namespace lex3d::test
 
