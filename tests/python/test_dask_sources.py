@@ -146,3 +146,39 @@ def test_place_shards_of_a_capture_answer_as_the_commands_database(client, tmp_p
         a, b = one.query(turn, top=3), db.query(turn, top=3)
         assert [m["scan"] for m in a] == [m["scan"] for m in b]
         assert [m["score"] for m in a] == pytest.approx([m["score"] for m in b])
+
+
+def test_a_worker_killed_mid_job_loses_no_carried_scan(tmp_path):
+    # The turns travel inside their tasks: a task retried after its worker died still has them.
+    # A cluster of its own: one of its workers is killed (its nanny starts another).
+    import signal
+    import threading
+    import time
+    long = tmp_path / "long.pcap"
+    subprocess.run([sys.executable, str(ROOT / "bench" / "long_capture.py"), str(CAPTURE), str(long), "24"],
+                   check=True, capture_output=True)
+    turns = list(lex3d.scans(long))
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                       dashboard_address=":0")
+    c = distributed.Client(cluster)
+    try:
+        out = tmp_path / "k.lex3dm"
+        result = {}
+        job = threading.Thread(target=lambda: result.update(lex3d.dask.compress(
+            [long], out, client=c, max_error=0.02, window=4, batch=1)))
+        job.start()
+        deadline = time.time() + 120
+        while not (tmp_path / "k_001.lex3dm").exists() and time.time() < deadline:
+            time.sleep(0.01)
+        pids = c.run(os.getpid)
+        os.kill(sorted(pids.values())[0], signal.SIGKILL)
+        done_when_killed = len(list(tmp_path.glob("k_*.lex3dm")))
+        job.join(300)
+        assert not job.is_alive()
+        assert done_when_killed < len(turns)  # the kill came mid-job
+        assert result["ok"] == len(turns) and result["failed"] == 0
+        for k, turn in enumerate(turns):
+            assert (tmp_path / f"k_{k:03d}.lex3dm").read_bytes() == lex3d.compress(turn, max_error=0.02), k
+    finally:
+        c.close()
+        cluster.close()
