@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Scans of lidars that are not in the shared data, made from real scans that are: every
 # table in bench/sensors/ (vendor laser tables of the Velodyne VLP-32C, VLS-128, VLP-16
-# Hi-Res, HDL-64E S2 and Hesai Pandar40P, Pandar64, PandarXT-32, OT128; see
+# Hi-Res, HDL-64E S2, Hesai Pandar40P, Pandar64, PandarXT-32, OT128 and RoboSense RS-LiDAR-32; see
 # bench/sensors/README.md) is cast into KITTI HDL-64E scans and Ouster OS-1-128 turns by
 # bench/sensor_resample.py (1 cm range noise, the sensor's distance resolution, encoder
 # jitter, firing times). Writes OUT/<sensor>/<source>.bin (float32 x y z intensity=0, no
