@@ -146,6 +146,17 @@ def test_place_shards_of_a_capture_answer_as_the_commands_database(client, tmp_p
         a, b = one.query(turn, top=3), db.query(turn, top=3)
         assert [m["scan"] for m in a] == [m["scan"] for m in b]
         assert [m["score"] for m in a] == pytest.approx([m["score"] for m in b])
+    # the command lines: a capture given as queries is one query a turn on both
+    cli = subprocess.run([CLI, "place", "query", str(whole), str(capture), "--json"], check=True,
+                         capture_output=True, text=True).stdout.splitlines()
+    r = subprocess.run([sys.executable, "-m", "lex3d.dask", "place", "query", str(tmp_path / "db"), str(capture),
+                        "--scheduler", client.scheduler.address, "--json"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    dask_answers = json.loads(r.stdout)
+    cli_answers = [json.loads(line) for line in cli]
+    assert len(dask_answers) == len(cli_answers) == len(one.names)
+    for a, b in zip(cli_answers, dask_answers):
+        assert [m["scan"] for m in a["matches"][:3]] == [m["scan"] for m in b["matches"][:3]]
 
 
 def test_a_worker_killed_mid_job_loses_no_carried_scan(tmp_path):

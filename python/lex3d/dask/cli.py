@@ -110,6 +110,7 @@ def _parser():
     pq.add_argument("--top-k", type=int, default=8, help="candidates verified (default 8, as lex3d place)")
     pq.add_argument("--max-distance", type=float, help="metres: reject transforms that put the sensors farther apart")
     pq.add_argument("--ground-vehicle", action="store_true")
+    _read_options(pq)
     _cluster_options(pq)
     return p
 
@@ -203,24 +204,39 @@ def _place_build(args, client):
         print(f"  manifest {s['manifest']}")
 
 
+def _queries(paths, read_kw):
+    """(name, scan) of every query: a file of one cloud is its path; a capture's, a bag's or a
+    sequence file's scans are each a query of their own, as `lex3d place query` takes them."""
+    import lex3d
+    for path in paths:
+        if not lex3d.holds_scans(path):
+            yield path, path
+            continue
+        try:
+            for scan in lex3d.scans(path, **{k: v for k, v in read_kw.items() if v}):
+                yield scan.name, scan
+        except (ValueError, OSError) as e:
+            raise CompressError(3 if isinstance(e, OSError) else 2, str(e) if path in str(e) else f"{path}: {e}") from None
+
+
 def _place_query(args, client):
     from . import _place
     db = _place.ShardedPlaceDatabase(args.database, client)
     out = []
-    for scan in args.scans:
+    for name, scan in _queries(args.scans, _read_kw(args)):
         timings = {}
         try:
             matches = db.query(scan, top=args.top, top_k=args.top_k, max_distance=args.max_distance,
                                ground_vehicle=args.ground_vehicle, timings=timings)
         except (ValueError, OSError) as e:
             raise CompressError(3 if isinstance(e, OSError) else 2,
-                                str(e) if scan in str(e) else f"{scan}: {e}") from None
+                                str(e) if name in str(e) else f"{name}: {e}") from None
         if args.json:
-            out.append({"query": scan, "timings": timings,
+            out.append({"query": name, "timings": timings,
                         "matches": [dict(m, pose=m["pose"].tolist()) for m in matches]})
             continue
         best = matches[0] if matches else None
-        print(f"{scan}: " + (f"{best['scan']} score {best['score']:.3f}" + ("" if best["accepted"] else " (not accepted)")
+        print(f"{name}: " + (f"{best['scan']} score {best['score']:.3f}" + ("" if best["accepted"] else " (not accepted)")
                              if best else "no candidate") +
               f"  [{1000 * (timings['retrieve_s'] + timings['verify_s']):.0f} ms on {len(db.shards)} shards]")
         for m in matches:
