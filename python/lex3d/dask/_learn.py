@@ -137,10 +137,15 @@ class _Shards:
         return scans
 
     def start(self):
-        futures = [self.client.submit(LearnShard, self.scans(j), self.ranges[j][0], self.word_radius, self.threads,
+        def submit(j):
+            return self.client.submit(LearnShard, self.scans(j), self.ranges[j][0], self.word_radius, self.threads,
                                       actor=True, workers=[self.workers[j]], allow_other_workers=True, pure=False)
-                   for j in range(len(self.ranges))]
-        self.actors = [f.result() for f in futures]
+        if self.sources.multi:
+            # (carried scans: one shard's at a time in the driver; an actor only keeps them)
+            self.actors = [submit(j).result() for j in range(len(self.ranges))]
+        else:
+            futures = [submit(j) for j in range(len(self.ranges))]
+            self.actors = [f.result() for f in futures]
 
     def _count(self, args, result):
         self.sent += len(pickle.dumps(args))
