@@ -6,11 +6,8 @@ loses nothing, and the command's exit codes. Run by ctest (python.tests)."""
 import json
 import os
 import pathlib
-import signal
 import subprocess
 import sys
-import threading
-import time
 
 import pytest
 
@@ -18,6 +15,7 @@ import lex3d
 
 distributed = pytest.importorskip("distributed")
 import lex3d.dask  # noqa: E402
+from conftest import compress_killing_a_worker  # noqa: E402
 
 SAMPLES = pathlib.Path(os.environ.get("LEX3D_SAMPLES", pathlib.Path(__file__).parents[2] / "samples"))
 CLI = os.environ.get("LEX3D_CLI")
@@ -88,39 +86,20 @@ def test_tasks_shrink_to_one_scan_as_the_work_runs_out():
 
 
 def test_a_worker_killed_mid_job_loses_nothing(tmp_path):
-    # A cluster of its own: one of its workers is killed (its nanny starts another).
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                       dashboard_address=":0")
-    c = distributed.Client(cluster)
-    try:
-        alphabet = lex3d.learn_alphabet([SCANS[0]], iterations=30)
-        (tmp_path / "a.lex3da").write_bytes(alphabet)
-        inputs = [SCANS[i % 2] for i in range(16)]
-        out = tmp_path / "k.lex3dm"
-        result = {}
-        job = threading.Thread(target=lambda: result.update(lex3d.dask.compress(
-            inputs, out, client=c, alphabet=tmp_path / "a.lex3da", window=4)))
-        job.start()
-        deadline = time.time() + 120
-        while not (tmp_path / "k_001.lex3dm").exists() and time.time() < deadline:
-            time.sleep(0.01)
-        pids = c.run(os.getpid)
-        os.kill(sorted(pids.values())[0], signal.SIGKILL)
-        done_when_killed = len(list(tmp_path.glob("k_*.lex3dm")))
-        job.join(300)
-        assert not job.is_alive()
-        assert done_when_killed < 16  # the kill came mid-job
-        assert result["ok"] == 16 and result["failed"] == 0
-        _, rows = manifest_rows(result["manifest"])
-        assert [r["index"] for r in rows] == list(range(16))
-        expected = {s: lex3d.compress(s, alphabet=alphabet) for s in SCANS[:2]}
-        for i, row in enumerate(rows):
-            assert (tmp_path / f"k_{i:03d}.lex3dm").read_bytes() == expected[inputs[i]]
-            assert row["sha256"] == rows[i % 2]["sha256"]
-        assert no_temporaries(tmp_path)
-    finally:
-        c.close()
-        cluster.close()
+    alphabet = lex3d.learn_alphabet([SCANS[0]], iterations=30)
+    (tmp_path / "a.lex3da").write_bytes(alphabet)
+    inputs = [SCANS[i % 2] for i in range(16)]
+    result, done_when_killed = compress_killing_a_worker(tmp_path, lambda c: lex3d.dask.compress(
+        inputs, tmp_path / "k.lex3dm", client=c, alphabet=tmp_path / "a.lex3da", window=4))
+    assert done_when_killed < 16  # the kill came mid-job
+    assert result["ok"] == 16 and result["failed"] == 0
+    _, rows = manifest_rows(result["manifest"])
+    assert [r["index"] for r in rows] == list(range(16))
+    expected = {s: lex3d.compress(s, alphabet=alphabet) for s in SCANS[:2]}
+    for i, row in enumerate(rows):
+        assert (tmp_path / f"k_{i:03d}.lex3dm").read_bytes() == expected[inputs[i]]
+        assert row["sha256"] == rows[i % 2]["sha256"]
+    assert no_temporaries(tmp_path)
 
 
 def run_command(*args):

@@ -15,6 +15,7 @@ import lex3d
 
 distributed = pytest.importorskip("distributed")
 import lex3d.dask  # noqa: E402
+from conftest import compress_killing_a_worker  # noqa: E402
 
 ROOT = pathlib.Path(__file__).parents[2]
 SAMPLES = pathlib.Path(os.environ.get("LEX3D_SAMPLES", ROOT / "samples"))
@@ -161,35 +162,13 @@ def test_place_shards_of_a_capture_answer_as_the_commands_database(client, tmp_p
 
 def test_a_worker_killed_mid_job_loses_no_carried_scan(tmp_path):
     # The turns travel inside their tasks: a task retried after its worker died still has them.
-    # A cluster of its own: one of its workers is killed (its nanny starts another).
-    import signal
-    import threading
-    import time
     long = tmp_path / "long.pcap"
     subprocess.run([sys.executable, str(ROOT / "bench" / "long_capture.py"), str(CAPTURE), str(long), "24"],
                    check=True, capture_output=True)
     turns = list(lex3d.scans(long))
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                       dashboard_address=":0")
-    c = distributed.Client(cluster)
-    try:
-        out = tmp_path / "k.lex3dm"
-        result = {}
-        job = threading.Thread(target=lambda: result.update(lex3d.dask.compress(
-            [long], out, client=c, max_error=0.02, window=4, batch=1)))
-        job.start()
-        deadline = time.time() + 120
-        while not (tmp_path / "k_001.lex3dm").exists() and time.time() < deadline:
-            time.sleep(0.01)
-        pids = c.run(os.getpid)
-        os.kill(sorted(pids.values())[0], signal.SIGKILL)
-        done_when_killed = len(list(tmp_path.glob("k_*.lex3dm")))
-        job.join(300)
-        assert not job.is_alive()
-        assert done_when_killed < len(turns)  # the kill came mid-job
-        assert result["ok"] == len(turns) and result["failed"] == 0
-        for k, turn in enumerate(turns):
-            assert (tmp_path / f"k_{k:03d}.lex3dm").read_bytes() == lex3d.compress(turn, max_error=0.02), k
-    finally:
-        c.close()
-        cluster.close()
+    result, done_when_killed = compress_killing_a_worker(tmp_path, lambda c: lex3d.dask.compress(
+        [long], tmp_path / "k.lex3dm", client=c, max_error=0.02, window=4, batch=1))
+    assert done_when_killed < len(turns)  # the kill came mid-job
+    assert result["ok"] == len(turns) and result["failed"] == 0
+    for k, turn in enumerate(turns):
+        assert (tmp_path / f"k_{k:03d}.lex3dm").read_bytes() == lex3d.compress(turn, max_error=0.02), k
