@@ -1,6 +1,8 @@
 #include "cli_common.hpp"
 
+#include "lex3d/codec/codec.hpp"
 #include "lex3d/io/rosbag.hpp"
+#include "lex3d/lex3d.hpp"
 #include "lex3d/io/sensor_log.hpp"
 
 #include <CLI/CLI.hpp>
@@ -330,6 +332,17 @@ ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const 
                        bool points_in_world)
     : ScanLoader(paths, read_options(format, "", ""), poses_path, points_in_world) {}
 
+namespace {
+
+/// A sequence file by its name (.lex3dq, any case).
+bool is_sequence_path(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return ext == ".lex3dq";
+}
+
+}  // namespace
+
 ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOptions& options,
                        const std::string& poses_path, bool points_in_world)
     : options_(options), points_in_world_(points_in_world) {
@@ -340,8 +353,12 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
       add_bag(path, options);
       continue;
     }
+    if (!log && options.format == io::Format::kAuto && is_sequence_path(path)) {
+      add_sequence(path);
+      continue;
+    }
     if (!log) {
-      entries_.push_back({path, path, 0, "", nullptr});
+      entries_.push_back({path, path, 0, "", nullptr, nullptr});
       continue;
     }
     // One pass for each turn's frame id and capture time (the turns' names) and every error
@@ -375,13 +392,31 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
         name += ", captured " + stamp;
         scan_stem = stem + "_turn" + std::to_string(k) + "_" + stamp;
       }
-      entries_.push_back({path, name + ")", k, scan_stem, turns});
+      entries_.push_back({path, name + ")", k, scan_stem, turns, nullptr});
     }
   }
   if (points_in_world && poses_path.empty())
     throw CliError(1, "--input-frame world needs --poses: the sensor pose of each scan in that frame");
   if (poses_path.empty()) return;
   poses_ = read_scan_poses(poses_path, entries_.size());
+}
+
+void ScanLoader::add_sequence(const std::string& path) {
+  set_current_file(path);
+  auto bytes = io::read_file(path);
+  if (!bytes.ok()) throw CliError(3, bytes.status().to_string());
+  auto seq = codec::decode_sequence(bytes.value());
+  if (!seq.ok()) throw CliError(2, path + ": " + seq.status().to_string());
+  const auto shared = std::make_shared<const codec::SequenceData>(std::move(seq).value());
+  const std::string stem = std::filesystem::path(path).stem().string();
+  for (std::size_t k = 0; k < shared->model_files.size(); ++k) {
+    // (its stored name, the scan's own: a bag written from the scans is stamped from it)
+    char number[32];
+    std::snprintf(number, sizeof number, "_%03zu", k);
+    const bool named = k < shared->names.size() && !shared->names[k].empty();
+    entries_.push_back({path, path + " " + (named ? shared->names[k] : "scan " + std::to_string(k)), k,
+                        named ? shared->names[k] : stem + number, nullptr, shared});
+  }
 }
 
 void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options) {
@@ -425,7 +460,7 @@ void ScanLoader::add_bag(const std::string& path, const io::ReadOptions& options
     const std::string stamp = stamp_text(stamps[k].first, stamps[k].second);
     const char* what = bag.type == "sensor_msgs/PointCloud2" ? " message " : " frame ";
     entries_.push_back({path, path + " " + bag.topic + what + std::to_string(k) + " (stamp " + stamp + ")", k,
-                        stem + "_" + stamp, scans});
+                        stem + "_" + stamp, scans, nullptr});
   }
 }
 
@@ -440,7 +475,14 @@ std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans) {
 
 Cloud ScanLoader::load(std::size_t i) const {
   const Entry& e = entries_.at(i);
-  Cloud cloud = e.scans ? e.scans->turn(e.turn) : load_cloud(e.path, options_).cloud;
+  Cloud cloud;
+  if (e.sequence) {
+    auto d = decompress(e.sequence->model_files[e.turn], &e.sequence->alphabet_file);
+    if (!d.ok()) throw CliError(exit_code_for(d.status().code()), e.name + ": " + d.status().to_string());
+    cloud = std::move(d.value().cloud);
+  } else {
+    cloud = e.scans ? e.scans->turn(e.turn) : load_cloud(e.path, options_).cloud;
+  }
   set_current_file(e.name);
   if (!poses_.empty()) {
     if (points_in_world_) {
@@ -452,15 +494,6 @@ Cloud ScanLoader::load(std::size_t i) const {
     cloud.has_world_pose = true;
   }
   return cloud;
-}
-
-std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
-                              const std::string& poses_path, bool points_in_world) {
-  const ScanLoader loader(paths, format, poses_path, points_in_world);
-  std::vector<Cloud> clouds;
-  clouds.reserve(paths.size());
-  for (std::size_t i = 0; i < paths.size(); ++i) clouds.push_back(loader.load(i));
-  return clouds;
 }
 
 std::array<std::uint8_t, 3> word_color(std::uint32_t word) {

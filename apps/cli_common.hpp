@@ -13,6 +13,10 @@
 #include "lex3d/io/io.hpp"
 #include "lex3d/residual/sensor_profile.hpp"
 
+namespace lex3d::codec {
+struct SequenceData;
+}
+
 namespace CLI {
 class App;
 }
@@ -118,19 +122,15 @@ std::vector<Pose> read_scan_poses(const std::string& path, std::size_t scans);
 /// Parses "x,y,z" into a vector; throws a usage CliError naming `option`.
 Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option);
 
-/// Reads scans in order; with `poses_path` (one KITTI-style pose a scan, world <- sensor)
-/// each cloud gets its world pose, so features stay upright for tilted sensors. With
-/// `points_in_world` (which needs the poses) the points are already in the world frame:
-/// each pose becomes the cloud's T_cloud_sensor (where its sensor was) and its world pose
-/// the identity.
-std::vector<Cloud> load_scans(const std::vector<std::string>& paths, io::Format format,
-                              const std::string& poses_path, bool points_in_world = false);
-
-/// The scans of load_scans one at a time, for commands that need only one in memory: the
-/// poses are read (and their count checked) when it is made, a scan when it is asked for.
-/// A raw lidar log (pcap) counts as one scan a complete turn, a ROS bag as one a message of
-/// its topic (options.bag_topic): it is decoded when the loader is made and its scans are
-/// kept in memory.
+/// The scans of the inputs in order, one at a time: the poses are read (and their count
+/// checked) when it is made, a scan when it is asked for. With `poses_path` (one KITTI-style
+/// pose a scan, world <- sensor) each cloud gets its world pose, so features stay upright
+/// for tilted sensors; with `points_in_world` (which needs the poses) the points are already
+/// in the world frame: each pose becomes the cloud's T_cloud_sensor (where its sensor was)
+/// and its world pose the identity. A raw lidar log (pcap) counts as one scan a complete
+/// turn, a ROS bag as one a message of its topic (options.bag_topic), both read through once
+/// when the loader is made (names, errors) and again as scans are asked for; a sequence file
+/// (.lex3dq) as one a model, decoded when asked for.
 class ScanLoader {
  public:
   ScanLoader(std::vector<std::string> paths, io::Format format, const std::string& poses_path, bool points_in_world);
@@ -153,8 +153,10 @@ class ScanLoader {
     std::size_t turn = 0;  // raw log or ROS bag: the scan's place in its file
     std::string stem;  // raw log: "<stem>_turn<k>_<sec>.<nsec>"; ROS bag: "<stem>_<sec>.<nsec>", the message's stamp
     std::shared_ptr<Turns> scans;  // raw log or ROS bag: read scan by scan as they are loaded
+    std::shared_ptr<const codec::SequenceData> sequence;  // sequence file: its model `turn`
   };
   void add_bag(const std::string& path, const io::ReadOptions& options);
+  void add_sequence(const std::string& path);
   std::vector<Entry> entries_;
   io::ReadOptions options_;
   std::vector<Pose> poses_;  // empty: no poses file

@@ -155,6 +155,15 @@ class PyScans {
     if (!opened.ok()) raise(opened);
   }
 
+  /// The names next() gives, where the file lists its scans up front (a sequence file); None
+  /// for a capture, a bag or a one-cloud file, whose scans are known only by reading them.
+  py::object names() const {
+    if (!sequence_) return py::none();
+    py::list out;
+    for (std::size_t k = 0; k < sequence_->model_files.size(); ++k) out.append(scan_name(k));
+    return std::move(out);
+  }
+
   PyScan next() {
     PyScan s;
     if (log_) {
@@ -195,7 +204,7 @@ class PyScans {
         d = decompress(sequence_->model_files[k_], &sequence_->alphabet_file);
       }
       if (!d.ok()) raise(Status(d.status().code(), path_ + ": scan " + std::to_string(k_) + ": " + d.status().message()));
-      s.name = path_ + " " + (k_ < sequence_->names.size() ? sequence_->names[k_] : "scan " + std::to_string(k_));
+      s.name = scan_name(k_);
       s.cloud = std::move(d.value().cloud);
     } else {
       if (k_ > 0) throw py::stop_iteration();
@@ -225,6 +234,10 @@ class PyScans {
       sequence_ = std::make_unique<codec::SequenceData>(std::move(seq).value());
     }
     return {};
+  }
+
+  std::string scan_name(std::size_t k) const {
+    return path_ + " " + (k < sequence_->names.size() ? sequence_->names[k] : "scan " + std::to_string(k));
   }
 
   std::string path_;
@@ -272,7 +285,9 @@ ring, time, named fields, the stamp).)")
       .def("__repr__", [](const PyScan& s) { return "<lex3d.Scan " + s.name + ": " + std::to_string(s.cloud.size()) + " points>"; });
   py::class_<PyScans>(m, "Scans", "An iterator over the scans of a file (lex3d.scans).")
       .def("__iter__", [](PyScans& s) -> PyScans& { return s; })
-      .def("__next__", &PyScans::next);
+      .def("__next__", &PyScans::next)
+      .def_property_readonly("names", &PyScans::names,
+                             "The scans' names, where the file lists them up front (a sequence file); else None.");
   m.def(
       "holds_scans",
       [](const py::object& path) {

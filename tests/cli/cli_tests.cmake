@@ -359,6 +359,17 @@ if(NOT EXISTS "${WORK}/named_newer_college_00.ply" OR NOT EXISTS "${WORK}/named_
    OR EXISTS "${WORK}/named_000.ply")
   message(SEND_ERROR "[decompress.sequence_named] the scans were not written under their names")
 endif()
+# A sequence file as input: one scan a model, decoded, under its stored name.
+run(0 compress.from_sequence compress "${WORK}/named.lex3dq" -o "${WORK}/recoded.lex3dq" --one-file --max-error 0.1 --words off)
+expect_match(compress.from_sequence "${LAST_OUT}" "total: [0-9]+ bytes for [0-9]+ points")
+run(0 decompress.recoded decompress "${WORK}/recoded.lex3dq" -o "${WORK}/recoded.ply")
+if(NOT EXISTS "${WORK}/recoded_newer_college_00.ply" OR NOT EXISTS "${WORK}/recoded_kitti00_000000.ply")
+  message(SEND_ERROR "[compress.from_sequence] the recoded scans lost their names")
+endif()
+run(0 convert.from_sequence convert "${WORK}/named.lex3dq" "${WORK}/conv.pcd")
+expect_match(convert.from_sequence "${LAST_OUT}" "named.lex3dq kitti00_000000 -> .*conv_001.pcd: [0-9]+ points")
+file(WRITE "${WORK}/broken.lex3dq" "not a sequence")
+run(2 compress.from_bad_sequence compress "${WORK}/broken.lex3dq" -o "${WORK}/broken_out.lex3dm")
 run(1 decompress.sequence_octomap decompress "${WORK}/set.lex3dq" --octomap "${WORK}/set.bt")
 # --threads: scans decoded side by side write the same files as one at a time; 0 = every core.
 run(0 decompress.sequence_threads1 decompress "${WORK}/named.lex3dq" -o "${WORK}/t1.ply" --threads 1)

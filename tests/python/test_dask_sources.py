@@ -172,3 +172,20 @@ def test_a_worker_killed_mid_job_loses_no_carried_scan(tmp_path):
     assert result["ok"] == len(turns) and result["failed"] == 0
     for k, turn in enumerate(turns):
         assert (tmp_path / f"k_{k:03d}.lex3dm").read_bytes() == lex3d.compress(turn, max_error=0.02), k
+
+
+def test_a_sequence_file_counts_as_its_scans(client, tmp_path, capture):
+    seq = tmp_path / "drive.lex3dq"
+    subprocess.run([CLI, "compress", str(capture), str(ROOM), "-o", str(seq), "--one-file", "--max-error", "0.02"],
+                   check=True, capture_output=True)
+    names = lex3d.scans(seq).names  # listed up front: counted without decoding
+    assert len(names) == len(list(lex3d.scans(capture))) + 1
+    out = tmp_path / "dask" / "q.lex3dm"
+    out.parent.mkdir()
+    summary = lex3d.dask.compress([seq], out, client=client, max_error=0.05)
+    expected = command_files(tmp_path, [seq], ["--max-error", "0.05"])
+    assert summary["ok"] == len(expected) == len(names)
+    for ref in expected:
+        assert (out.parent / ref.name.replace("s_", "q_")).read_bytes() == ref.read_bytes(), ref.name
+    _, rows = manifest_rows(summary["manifest"])
+    assert [r["scan"] for r in rows] == names

@@ -100,3 +100,4 @@ def test_holds_scans_tells_the_files_of_several_scans(tmp_path):
     assert lex3d.holds_scans(CAPTURE) == "capture"
     assert lex3d.holds_scans(SAMPLES / "room_scan1.pcd") == ""
     assert lex3d.holds_scans(tmp_path / "x.lex3dq") == "sequence"
+    assert lex3d.scans(CAPTURE).names is None  # a capture's scans are known only by reading it

@@ -35,6 +35,15 @@ class ScanSources:
                 self.entries.append((path, None, path, None))
                 continue
             self.multi += 1
+            if kind == "sequence":
+                # (a sequence file lists its scans: nothing to decode to count them)
+                try:
+                    names = lex3d.scans(path, **self.read_options).names
+                except (ValueError, OSError) as e:
+                    self.entries.append((path, 0, f"{path} scan 0", str(e)))
+                    continue
+                self.entries.extend((path, k, name, None) for k, name in enumerate(names))
+                continue
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 k = 0
