@@ -19,6 +19,21 @@ constexpr std::uint8_t kVersion = 1;
 
 namespace b = bytes;
 
+bool little_endian() {
+  const std::uint16_t one = 1;
+  std::uint8_t first = 0;
+  std::memcpy(&first, &one, 1);
+  return first == 1;
+}
+
+/// Reverses the bytes of each S-sized scalar in [p, p + n) (a big-endian host's values to
+/// the layout's little-endian order, and back).
+template <typename S>
+void swap_scalars(std::uint8_t* p, std::size_t n) {
+  for (std::size_t at = 0; at + sizeof(S) <= n; at += sizeof(S))
+    for (std::size_t i = 0, j = sizeof(S) - 1; i < j; ++i, --j) std::swap(p[at + i], p[at + j]);
+}
+
 class Writer {
  public:
   std::vector<std::uint8_t> out;
@@ -28,11 +43,6 @@ class Writer {
   void u32(std::uint32_t v) { b::put_u32(out, v); }
   void u64(std::uint64_t v) { b::put_u64(out, v); }
   void f64(double v) { b::put_f64(out, v); }
-  void f32(float v) {
-    std::uint32_t u = 0;
-    std::memcpy(&u, &v, sizeof u);
-    u32(u);
-  }
   void str(const std::string& s) {
     u64(s.size());
     out.insert(out.end(), s.begin(), s.end());
@@ -49,7 +59,19 @@ class Writer {
     u64(v.size());
     for (const T& x : v) put(x);
   }
-  void doubles(const std::vector<double>& v) { array(v, [this](double x) { f64(x); }); }
+  /// An array of T made of scalars S only (float, integers, Eigen::Vector3f...): its count,
+  /// then its bytes as they are in memory on a little-endian host.
+  template <typename S, typename T>
+  void plain(const std::vector<T>& v) {
+    static_assert(sizeof(T) % sizeof(S) == 0, "T is made of S");
+    u64(v.size());
+    const std::size_t at = out.size(), n = v.size() * sizeof(T);
+    out.resize(at + n);
+    if (n == 0) return;
+    std::memcpy(out.data() + at, v.data(), n);
+    if (!little_endian()) swap_scalars<S>(out.data() + at, n);
+  }
+  void doubles(const std::vector<double>& v) { plain<double>(v); }
 };
 
 /// Reads what Writer wrote; the first failure sticks (every later read gives zeros).
@@ -100,12 +122,6 @@ class Reader {
     if (v > 1) fail(std::string("a flag that is neither 0 nor 1 in ") + what);
     return v == 1;
   }
-  float f32(const char* what) {
-    const std::uint32_t u = u32(what);
-    float v = 0.0F;
-    std::memcpy(&v, &u, sizeof v);
-    return v;
-  }
   /// A count of elements of `size` bytes each that the bytes left can hold.
   std::size_t count(std::size_t size, const char* what) {
     const std::uint64_t k = u64(what);
@@ -135,9 +151,20 @@ class Reader {
     for (T& x : v) x = get();
     return ok() ? std::move(v) : std::vector<T>();
   }
-  std::vector<double> doubles(const char* what) {
-    return array<double>(8, what, [&] { return f64(what); });
+  /// What Writer::plain wrote.
+  template <typename S, typename T>
+  std::vector<T> plain(const char* what) {
+    std::vector<T> v(count(sizeof(T), what));
+    const std::size_t n = v.size() * sizeof(T);
+    const std::uint8_t* q = take(n, what);
+    if (q == nullptr) return {};
+    if (n > 0) {
+      std::memcpy(static_cast<void*>(v.data()), q, n);
+      if (!little_endian()) swap_scalars<S>(reinterpret_cast<std::uint8_t*>(v.data()), n);
+    }
+    return v;
   }
+  std::vector<double> doubles(const char* what) { return plain<double, double>(what); }
 
  private:
   const std::uint8_t* p_;
@@ -170,27 +197,23 @@ std::vector<std::uint8_t> cloud_to_bytes(const Cloud& c) {
                                  (c.has_time() ? 8 : 0) + (c.has_rgb() ? 3 : 0) + 4 * c.fields.size()));
   w.out.insert(w.out.end(), kMagic, kMagic + 4);
   w.u8(kVersion);
-  w.array(c.points, [&w](const Eigen::Vector3f& p) {
-    for (int k = 0; k < 3; ++k) w.f32(p[k]);
-  });
-  w.array(c.intensity, [&w](float v) { w.f32(v); });
-  w.array(c.no_return_directions, [&w](const Eigen::Vector3f& p) {
-    for (int k = 0; k < 3; ++k) w.f32(p[k]);
-  });
+  static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float), "a point is three floats");
+  w.plain<float>(c.points);
+  w.plain<float>(c.intensity);
+  w.plain<float>(c.no_return_directions);
   w.pose(c.T_cloud_sensor);
   w.pose(c.T_world_cloud);
   w.u8(c.has_world_pose ? 1 : 0);
-  w.array(c.ring, [&w](std::uint16_t v) { w.u16(v); });
-  w.array(c.column, [&w](std::uint32_t v) { w.u32(v); });
+  w.plain<std::uint16_t>(c.ring);
+  w.plain<std::uint32_t>(c.column);
   w.u32(c.rows);
   w.u32(c.columns);
   w.doubles(c.time);
   put_source(w, c.ring_source);
   put_source(w, c.intensity_source);
   put_source(w, c.time_source);
-  w.array(c.rgb, [&w](const std::array<std::uint8_t, 3>& v) {
-    for (std::uint8_t x : v) w.u8(x);
-  });
+  static_assert(sizeof(std::array<std::uint8_t, 3>) == 3, "a colour is three bytes");
+  w.plain<std::uint8_t>(c.rgb);
   w.u8(c.geometry ? 1 : 0);
   if (c.geometry) {
     const SensorGeometry& g = *c.geometry;
@@ -238,7 +261,7 @@ std::vector<std::uint8_t> cloud_to_bytes(const Cloud& c) {
   w.array(c.fields, [&w](const IntegerField& f) {
     w.str(f.name);
     w.u8(static_cast<std::uint8_t>(f.type));
-    w.array(f.values, [&w](std::int32_t v) { w.u32(static_cast<std::uint32_t>(v)); });
+    w.plain<std::int32_t>(f.values);
   });
   return std::move(w.out);
 }
@@ -250,28 +273,21 @@ StatusOr<Cloud> cloud_from_bytes(const std::uint8_t* data, std::size_t size) {
     return bad("version " + std::to_string(data[4]) + " (this lex3d reads version " + std::to_string(kVersion) + ")");
   Reader r(data + 5, size - 5);
   Cloud c;
-  const auto vec3f = [&r](const char* what) {
-    return [&r, what] {
-      Eigen::Vector3f p;
-      for (int k = 0; k < 3; ++k) p[k] = r.f32(what);
-      return p;
-    };
-  };
-  c.points = r.array<Eigen::Vector3f>(12, "points", vec3f("points"));
+  c.points = r.plain<float, Eigen::Vector3f>("points");
   const std::size_t n = c.points.size();
   // (a per-point array holds none or one value a point)
   const auto per_point = [&r, n](std::size_t k, const char* what) {
     if (k != 0 && k != n) r.fail(std::string(what) + " holds " + std::to_string(k) + " values for " + std::to_string(n) + " points");
   };
-  c.intensity = r.array<float>(4, "intensity", [&r] { return r.f32("intensity"); });
+  c.intensity = r.plain<float, float>("intensity");
   per_point(c.intensity.size(), "intensity");
-  c.no_return_directions = r.array<Eigen::Vector3f>(12, "no-return directions", vec3f("no-return directions"));
+  c.no_return_directions = r.plain<float, Eigen::Vector3f>("no-return directions");
   c.T_cloud_sensor = r.pose("the sensor pose");
   c.T_world_cloud = r.pose("the world pose");
   c.has_world_pose = r.flag("the world pose");
-  c.ring = r.array<std::uint16_t>(2, "ring", [&r] { return r.u16("ring"); });
+  c.ring = r.plain<std::uint16_t, std::uint16_t>("ring");
   per_point(c.ring.size(), "ring");
-  c.column = r.array<std::uint32_t>(4, "column", [&r] { return r.u32("column"); });
+  c.column = r.plain<std::uint32_t, std::uint32_t>("column");
   per_point(c.column.size(), "column");
   c.rows = r.u32("the range-image shape");
   c.columns = r.u32("the range-image shape");
@@ -280,11 +296,7 @@ StatusOr<Cloud> cloud_from_bytes(const std::uint8_t* data, std::size_t size) {
   c.ring_source = get_source(r, "the ring's source field");
   c.intensity_source = get_source(r, "the intensity's source field");
   c.time_source = get_source(r, "the time's source field");
-  c.rgb = r.array<std::array<std::uint8_t, 3>>(3, "rgb", [&r] {
-    std::array<std::uint8_t, 3> v{};
-    for (std::uint8_t& x : v) x = r.u8("rgb");
-    return v;
-  });
+  c.rgb = r.plain<std::uint8_t, std::array<std::uint8_t, 3>>("rgb");
   per_point(c.rgb.size(), "rgb");
   if (r.flag("the geometry flag")) {
     SensorGeometry g;
@@ -347,7 +359,7 @@ StatusOr<Cloud> cloud_from_bytes(const std::uint8_t* data, std::size_t size) {
     const std::uint8_t t = r.u8("a named field");
     if (!field_type(t)) r.fail("an unknown field type in a named field");
     f.type = static_cast<FieldType>(t);
-    f.values = r.array<std::int32_t>(4, "a named field", [&r] { return static_cast<std::int32_t>(r.u32("a named field")); });
+    f.values = r.plain<std::int32_t, std::int32_t>("a named field");
     per_point(f.values.size(), ("field " + f.name).c_str());
     return f;
   });
