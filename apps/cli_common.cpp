@@ -233,10 +233,23 @@ void add_threads_option(CLI::App& app, int& threads, const std::string& what) {
       ->check(CLI::Range(0, 64));
 }
 
-void check_output_kind(const std::string& path, const std::string& option, const std::string& kind) {
-  if (path.empty()) return;
+std::string lower_extension(const std::string& path) {
   std::string ext = fs::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+std::shared_ptr<const codec::SequenceData> read_sequence(const std::string& path) {
+  auto bytes = io::read_file(path);
+  if (!bytes.ok()) throw CliError(3, bytes.status().to_string());
+  auto seq = codec::decode_sequence(bytes.value());
+  if (!seq.ok()) throw CliError(2, path + ": " + seq.status().to_string());
+  return std::make_shared<const codec::SequenceData>(std::move(seq).value());
+}
+
+void check_output_kind(const std::string& path, const std::string& option, const std::string& kind) {
+  if (path.empty()) return;
+  const std::string ext = lower_extension(path);
   const bool lex3d_ext = ext == ".lex3dm" || ext == ".lex3da" || ext == ".lex3dq" || ext == ".lex3dp";
   if (kind == "cloud") {
     if (lex3d_ext)
@@ -332,17 +345,6 @@ ScanLoader::ScanLoader(std::vector<std::string> paths, io::Format format, const 
                        bool points_in_world)
     : ScanLoader(paths, read_options(format, "", ""), poses_path, points_in_world) {}
 
-namespace {
-
-/// A sequence file by its name (.lex3dq, any case).
-bool is_sequence_path(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  return ext == ".lex3dq";
-}
-
-}  // namespace
-
 ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOptions& options,
                        const std::string& poses_path, bool points_in_world)
     : options_(options), points_in_world_(points_in_world) {
@@ -353,7 +355,7 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
       add_bag(path, options);
       continue;
     }
-    if (!log && options.format == io::Format::kAuto && is_sequence_path(path)) {
+    if (!log && options.format == io::Format::kAuto && lower_extension(path) == ".lex3dq") {
       add_sequence(path);
       continue;
     }
@@ -403,11 +405,7 @@ ScanLoader::ScanLoader(const std::vector<std::string>& paths, const io::ReadOpti
 
 void ScanLoader::add_sequence(const std::string& path) {
   set_current_file(path);
-  auto bytes = io::read_file(path);
-  if (!bytes.ok()) throw CliError(3, bytes.status().to_string());
-  auto seq = codec::decode_sequence(bytes.value());
-  if (!seq.ok()) throw CliError(2, path + ": " + seq.status().to_string());
-  const auto shared = std::make_shared<const codec::SequenceData>(std::move(seq).value());
+  const auto shared = read_sequence(path);
   const std::string stem = std::filesystem::path(path).stem().string();
   for (std::size_t k = 0; k < shared->model_files.size(); ++k) {
     // (its stored name, the scan's own: a bag written from the scans is stamped from it)
@@ -542,11 +540,7 @@ Eigen::Vector3d parse_vector3(const std::string& text, const std::string& option
   return v;
 }
 
-bool is_bag_output(const std::string& output) {
-  std::string ext = std::filesystem::path(output).extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext == ".bag";
-}
+bool is_bag_output(const std::string& output) { return lower_extension(output) == ".bag"; }
 
 std::string stamp_text(std::uint64_t sec, std::uint32_t nsec) {
   char text[40];

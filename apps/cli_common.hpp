@@ -177,6 +177,13 @@ int all_cores();
 /// default); `threads` is set to the resolved count, never 0. The outputs do not depend on it.
 void add_threads_option(CLI::App& app, int& threads, const std::string& what);
 
+/// The extension of `path` in lower case (".lex3dq", ".pcd"; empty when it has none).
+std::string lower_extension(const std::string& path);
+
+/// A sequence file (formats/sequence.md) read and decoded (its models not yet); throws
+/// CliError: 3 where it cannot be read, 2 where it is not a sequence file.
+std::shared_ptr<const codec::SequenceData> read_sequence(const std::string& path);
+
 /// True when `output` names a ROS bag (`.bag`): every scan goes into it, one message each.
 bool is_bag_output(const std::string& output);
 

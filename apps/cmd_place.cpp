@@ -103,12 +103,6 @@ Describing describing(const PlaceOptions& o) { return {o.gravity, o.params.threa
 
 std::string stem(const std::string& path) { return fs::path(path).stem().string(); }
 
-std::string lower_extension(const std::string& path) {
-  std::string e = fs::path(path).extension().string();
-  for (auto& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
-
 // Opens a database without decoding its entries: the file is mapped and only the header,
 // alphabet and index are read.
 PlaceDatabase read_db(const std::string& path, bool need_alphabet = true) {
@@ -143,11 +137,7 @@ class PlaceInputs {
     for (const auto& path : paths) {
       const std::string ext = lower_extension(path);
       if (ext == ".lex3dq") {
-        auto bytes = io::read_file(path);
-        if (!bytes.ok()) throw CliError(3, bytes.status().to_string());
-        auto seq = codec::decode_sequence(bytes.value());
-        if (!seq.ok()) throw CliError(2, path + ": " + seq.status().to_string());
-        auto shared = std::make_shared<const codec::SequenceData>(std::move(seq).value());
+        const auto shared = read_sequence(path);
         for (std::size_t k = 0; k < shared->model_files.size(); ++k) {
           char buf[32];
           std::snprintf(buf, sizeof buf, "_%03zu", k);

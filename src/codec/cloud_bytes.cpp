@@ -178,14 +178,17 @@ void put_source(Writer& w, const SourceField& s) {
   w.u8(static_cast<std::uint8_t>(s.type));
 }
 
-bool field_type(std::uint8_t t) { return t <= static_cast<std::uint8_t>(FieldType::kFloat64); }
+/// A FieldType byte (kUnspecified ... kFloat64).
+FieldType get_field_type(Reader& r, const char* what) {
+  const std::uint8_t t = r.u8(what);
+  if (t > static_cast<std::uint8_t>(FieldType::kFloat64)) r.fail(std::string("an unknown field type in ") + what);
+  return static_cast<FieldType>(t);
+}
 
 SourceField get_source(Reader& r, const char* what) {
   SourceField s;
   s.name = r.str(what);
-  const std::uint8_t t = r.u8(what);
-  if (!field_type(t)) r.fail(std::string("an unknown field type in ") + what);
-  s.type = static_cast<FieldType>(t);
+  s.type = get_field_type(r, what);
   return s;
 }
 
@@ -238,8 +241,7 @@ std::vector<std::uint8_t> cloud_to_bytes(const Cloud& c) {
       w.str(rec.user_id);
       w.u16(rec.record_id);
       w.str(rec.description);
-      w.u64(rec.data.size());
-      w.out.insert(w.out.end(), rec.data.begin(), rec.data.end());
+      w.plain<std::uint8_t>(rec.data);
       w.u8(rec.extended ? 1 : 0);
     });
     w.vec3(g.las_scale);
@@ -325,8 +327,7 @@ StatusOr<Cloud> cloud_from_bytes(const std::uint8_t* data, std::size_t size) {
       rec.user_id = r.str("a CRS record");
       rec.record_id = r.u16("a CRS record");
       rec.description = r.str("a CRS record");
-      const std::size_t k = r.count(1, "a CRS record");
-      if (const std::uint8_t* q = r.take(k, "a CRS record")) rec.data.assign(q, q + k);
+      rec.data = r.plain<std::uint8_t, std::uint8_t>("a CRS record");
       rec.extended = r.flag("a CRS record");
       return rec;
     });
@@ -356,9 +357,7 @@ StatusOr<Cloud> cloud_from_bytes(const std::uint8_t* data, std::size_t size) {
   c.fields = r.array<IntegerField>(8 + 1 + 8, "the named fields", [&r, &per_point] {
     IntegerField f;
     f.name = r.str("a named field");
-    const std::uint8_t t = r.u8("a named field");
-    if (!field_type(t)) r.fail("an unknown field type in a named field");
-    f.type = static_cast<FieldType>(t);
+    f.type = get_field_type(r, "a named field");
     f.values = r.plain<std::int32_t, std::int32_t>("a named field");
     per_point(f.values.size(), ("field " + f.name).c_str());
     return f;
