@@ -12,7 +12,7 @@ import warnings
 
 from ._files import read_alphabet_file
 from ._progress import ProgressLine
-from ._sources import ScanSources, SourceChanged
+from ._sources import ScanSources, SourceChanged, pack, unpack
 from ._worker import worker_malloc
 
 # Point cloud files a folder is searched for (pose lists, READMEs and times.txt are not scans).
@@ -129,9 +129,7 @@ def code_batch(items, alphabet, options, job):
     """On a worker: codes the scans of `items` ((index, path or lex3d.Scan, output) each, or
     those pickled), one after the other, and returns their manifest rows (code_task)."""
     worker_malloc()
-    if isinstance(items, bytes):
-        items = pickle.loads(items)
-    return [code_task(index, path, output, alphabet, options, job) for index, path, output in items]
+    return [code_task(index, path, output, alphabet, options, job) for index, path, output in unpack(items)]
 
 
 def batch_size(remaining, slots, largest=16):
@@ -215,8 +213,8 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
 
     paths, output = job_paths(inputs, output)
     survey0 = time.perf_counter()
-    sources = ScanSources(paths, {"metadata": metadata, "topic": topic, "single_return": single_return,
-                                  "sensor_model": sensor_model})
+    sources = ScanSources(paths, metadata=metadata, topic=topic, single_return=single_return,
+                          sensor_model=sensor_model)
     n = len(sources)
     survey_s = time.perf_counter() - survey0
     stem = os.path.splitext(output)[0]
@@ -280,8 +278,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
         k = min(n, max(1, learn_scans))
         feed = sources.reader()
         try:
-            sample = [sources.path(i) or feed.scan(i) for i in (j * n // k for j in range(k))
-                      if sources.error(i) is None]
+            sample = feed.items(i for i in (j * n // k for j in range(k)) if sources.error(i) is None)
         except SourceChanged as e:
             raise CompressError(2, f"learning the alphabet: {e}") from None
         if not sample:
@@ -351,7 +348,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                     error = sources.error(i)
                     if error is None:
                         try:
-                            items.append((i, sources.path(i) or feed.scan(i), out))
+                            items.append((i, feed.item(i), out))
                         except SourceChanged as e:
                             error = str(e)
                     if error is not None:
@@ -362,7 +359,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                 # (carried scans pickled here once: the task's size is counted from them, and
                 # Dask then moves bytes)
                 if any(not isinstance(it[1], str) for it in items):
-                    items = pickle.dumps(items, protocol=pickle.HIGHEST_PROTOCOL)
+                    items = pack(items)
                     totals["task_bytes"] += len(items) + len(pickle.dumps((b"", coding, job)))
                 else:
                     totals["task_bytes"] += len(pickle.dumps((items, coding, job)))

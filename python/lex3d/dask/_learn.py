@@ -20,7 +20,7 @@ import time
 
 from ._compress import CompressError, _peak_rss_mb, job_paths, write_once
 from ._progress import ProgressLine
-from ._sources import ScanSources, SourceChanged
+from ._sources import ScanSources, SourceChanged, pack, unpack
 from ._worker import worker_malloc
 
 
@@ -30,7 +30,7 @@ class LearnShard:
 
     def __init__(self, paths, first, word_radius, threads):
         worker_malloc()
-        self.paths = list(paths)
+        self.paths = list(unpack(paths))
         self.first = first
         self.word_radius = word_radius
         self.threads = threads
@@ -129,12 +129,14 @@ class _Shards:
         """Shard j's scans: paths, and the lex3d.Scan of captures', bags' and sequences' scans."""
         a, b = self.ranges[j]
         try:
-            scans = [self.sources.path(i) or self.feed.scan(i) for i in range(a, b)]
+            scans = self.feed.items(range(a, b))
         except SourceChanged as e:
             raise CompressError(2, str(e)) from None
-        if self.sources.multi:
-            self.sent += len(pickle.dumps(scans))
-        return scans
+        if not self.sources.multi:
+            return scans
+        packed = pack(scans)
+        self.sent += len(packed)
+        return packed
 
     def start(self):
         def submit(j):
@@ -217,10 +219,10 @@ candidate. Raises CompressError when
             raise ValueError(f"threads must be in [1, 64], got {threads}")
     except ValueError as e:
         raise CompressError(1, str(e)) from None
-    sources = ScanSources(scans, {"metadata": metadata, "topic": topic, "single_return": single_return,
-                                  "sensor_model": sensor_model})
+    sources = ScanSources(scans, metadata=metadata, topic=topic, single_return=single_return,
+                          sensor_model=sensor_model)
     n = len(sources)
-    bad = next((sources.error(i) for i in range(n) if sources.error(i) is not None), None)
+    bad = sources.first_error()
     if bad is not None:  # as lex3d learn: every scan is read, or nothing is learned
         raise CompressError(2, bad)
 

@@ -24,7 +24,7 @@ import uuid
 import numpy as np
 
 from ._compress import CompressError, expand_inputs, learn_task
-from ._sources import ScanSources, SourceChanged
+from ._sources import ScanSources, SourceChanged, pack, unpack
 from ._files import read_alphabet_file
 from ._worker import worker_malloc
 
@@ -83,15 +83,16 @@ def shard_ranges(n, shards=None, scans_per_shard=None):
 
 
 def build_shard_task(paths, names, poses, alphabet, output, job):
-    """On a worker: the place database of `paths` with `alphabet` (bytes), written to `output`
-    (through a temporary name). Returns its entries, bytes, alphabet hash and CPU time."""
+    """On a worker: the place database of `paths` (or the scans pack() made) with `alphabet`
+    (bytes), written to `output` (through a temporary name). Returns its entries, bytes,
+    alphabet hash and CPU time."""
     import lex3d
     worker_malloc()
     cpu0 = time.process_time()
     tmp = f"{output}.{job}.tmp"
     try:
         # One thread: a Dask worker runs one task a thread it has.
-        db = lex3d.PlaceDatabase.build(list(paths), names=list(names), poses=poses, alphabet=alphabet, threads=1)
+        db = lex3d.PlaceDatabase.build(list(unpack(paths)), names=list(names), poses=poses, alphabet=alphabet, threads=1)
         db.save(tmp)
         os.replace(tmp, output)
     except (ValueError, OSError) as e:  # a value, not raised: the driver names it and cleans up
@@ -142,19 +143,19 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
     and each shard's task carries its scans; then at most one shard a worker is in flight."""
     import lex3d
     paths = expand_inputs(inputs)
-    sources = ScanSources(paths, {"metadata": metadata, "topic": topic, "single_return": single_return,
-                                  "sensor_model": sensor_model})
+    sources = ScanSources(paths, metadata=metadata, topic=topic, single_return=single_return,
+                          sensor_model=sensor_model)
     n = len(sources)
     if n == 0:
         raise CompressError(1, "no scans given")
-    bad = next((sources.error(i) for i in range(n) if sources.error(i) is not None), None)
+    bad = sources.first_error()
     if bad is not None:  # as lex3d place build: every scan is read, or nothing is built
         raise CompressError(2, bad)
     feed = sources.reader()
 
     def scans_of(indices):
         try:
-            return [sources.path(i) or feed.scan(i) for i in indices]
+            return feed.items(indices)
         except SourceChanged as e:
             raise CompressError(2, str(e)) from None
 
@@ -194,9 +195,14 @@ def build(inputs, output, *, client, shards=None, scans_per_shard=None, alphabet
             # (carried scans: one shard a worker in flight, so the driver holds no more)
             from distributed import wait
             wait(futures[i - max(1, workers)])
-        args = (scans_of(range(a, b)), names[a:b], None if pose_list is None else pose_list[a:b], alphabet_ref,
-                outputs[i], job)
-        sent += len(pickle.dumps(args[:3])) + len(pickle.dumps(args[4:]))
+        scans = scans_of(range(a, b))
+        if sources.multi:
+            scans = pack(scans)
+        args = (scans, names[a:b], None if pose_list is None else pose_list[a:b], alphabet_ref, outputs[i], job)
+        carried = isinstance(scans, bytes)  # (packed: counted as they travel, not pickled again)
+        sent += (len(scans) + len(pickle.dumps(args[1:3])) if carried else len(pickle.dumps(args[:3]))) + \
+            len(pickle.dumps(args[4:]))
+        del scans
         futures.append(client.submit(build_shard_task, *args, key=f"lex3d-place-shard-{job}-{i}", pure=False))
         del args
     _settle(futures)

@@ -4,7 +4,19 @@ file's models can only be read front to back: the driver reads them, in order, a
 travels to its worker as a pickled lex3d.Scan (points and every field, the sensor's laser table,
 the stamp), which codes to the bytes `lex3d compress FILE` writes for that scan."""
 
+import pickle
 import warnings
+
+
+def pack(obj):
+    """A task's argument that carries scans (lex3d.Scan), pickled once here: its size is what
+    travels, and Dask then moves bytes rather than pickling the scans again."""
+    return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def unpack(arg):
+    """On a worker: the argument pack() made, or the argument itself where it was not packed."""
+    return pickle.loads(arg) if isinstance(arg, bytes) else arg
 
 
 class SourceChanged(Exception):
@@ -13,15 +25,16 @@ class SourceChanged(Exception):
 
 class ScanSources:
     """The scans of `paths` (expand_inputs), in order: a multi-scan file (lex3d.holds_scans)
-    counts as its scans, surveyed once here by reading it through (lex3d.scans with
-    `read_options`: metadata, topic, single_return, sensor_model). A file that cannot be read,
+    counts as its scans, surveyed once here by reading it through (lex3d.scans with the
+    options given: metadata, topic, single_return, sensor_model). A file that cannot be read,
     or whose reading fails part way, gives its scans before the failure and then one entry
     that is the error (its row in the manifest). Warnings the readers give (fields a bag's
     messages hold that lex3d does not keep) are kept in `notes`."""
 
-    def __init__(self, paths, read_options=None):
+    def __init__(self, paths, *, metadata=None, topic=None, single_return=False, sensor_model=None):
         import lex3d
-        self.read_options = {k: v for k, v in (read_options or {}).items() if v not in (None, False, "")}
+        given = {"metadata": metadata, "topic": topic, "single_return": single_return, "sensor_model": sensor_model}
+        self.read_options = {k: v for k, v in given.items() if v not in (None, False, "")}
         # (path, turn or None for a one-cloud file, name, error message or None)
         self.entries = []
         self.notes = []
@@ -65,6 +78,10 @@ class ScanSources:
         """The error entry i stands for, or None for a scan."""
         return self.entries[i][3]
 
+    def first_error(self):
+        """The first entry's error, or None when every scan was read."""
+        return next((e[3] for e in self.entries if e[3] is not None), None)
+
     def path(self, i):
         """The path of a one-cloud file, or None for a scan of a multi-scan file."""
         path, turn, _, _ = self.entries[i]
@@ -85,6 +102,14 @@ class ScanFeed:
         self.path = None
         self.iterator = None
         self.at = 0  # the turn the iterator gives next
+
+    def item(self, i):
+        """What codes entry i: a one-cloud file's path, else its lex3d.Scan (scan)."""
+        return self.sources.path(i) or self.scan(i)
+
+    def items(self, indices):
+        """item() of each of `indices`."""
+        return [self.item(i) for i in indices]
 
     def scan(self, i):
         import lex3d
