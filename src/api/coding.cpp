@@ -58,6 +58,7 @@ residual::LayerOptions CodingOptions::layer_options() const {
   l.laser = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kLaser;
   l.acquisition = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kAcquisition;
   l.lattice = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kLattice;
+  l.fast = fast;
   l.threads = threads;
   return l;
 }

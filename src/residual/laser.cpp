@@ -1492,7 +1492,9 @@ constexpr int kConeRounds = 8;
 constexpr int kMaxConeRounds = 12;
 
 bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers, double& z_rms,
-                    const std::function<std::uint32_t()>& elevation_lasers) {
+                    const std::function<std::uint32_t()>& elevation_lasers, bool fast = false) {
+  // (the points that vote and those the rounds assign: a quarter as many `fast`)
+  const std::size_t voters = fast ? 4096 : 16384, workers = fast ? 8192 : 32768;
   const std::vector<Eigen::Vector3d>& p = scan.p;
   const std::vector<double>& rho = scan.rho;
   const std::size_t n = p.size();
@@ -1502,10 +1504,10 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
   for (std::size_t i = 0; i < n; ++i)
     if (rho[i] >= kNear) far.push_back(static_cast<std::uint32_t>(i));
   if (far.size() < 128) return false;
-  if (far.size() > 16384) {
+  if (far.size() > voters) {
     std::vector<std::uint32_t> sample;
-    const double stride = static_cast<double>(far.size()) / 16384.0;
-    for (std::size_t k = 0; k < 16384; ++k) sample.push_back(far[static_cast<std::size_t>(static_cast<double>(k) * stride)]);
+    const double stride = static_cast<double>(far.size()) / static_cast<double>(voters);
+    for (std::size_t k = 0; k < voters; ++k) sample.push_back(far[static_cast<std::size_t>(static_cast<double>(k) * stride)]);
     far.swap(sample);
   }
   // The vote: heights every 2 cm, slopes in bins of 0.01° (in tan) within ±60°.
@@ -1577,7 +1579,7 @@ bool estimate_cones(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
   std::vector<std::uint32_t> work, all(n);
   std::iota(all.begin(), all.end(), 0U);
   {
-    const double stride = std::max(1.0, static_cast<double>(n) / 32768.0);
+    const double stride = std::max(1.0, static_cast<double>(n) / static_cast<double>(workers));
     for (double k = 0; k < static_cast<double>(n); k += stride) work.push_back(static_cast<std::uint32_t>(k));
   }
   const auto assign = [&](bool first, const std::vector<std::uint32_t>& points) {
@@ -1791,7 +1793,8 @@ bool finish_assignment(const Cloud& input, const Pose& T_cloud_sensor, LaserAssi
 // assign_lasers
 // ---------------------------------------------------------------------------------------
 
-std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate, int threads) {
+std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor, bool estimate, int threads,
+                                             bool fast) {
   const std::size_t n = input.size();
   if (n == 0) return std::nullopt;
   LaserAssignment a;
@@ -1886,7 +1889,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
         bool found = false;
         double z_rms = 0.0;
         if (k == 0) {
-          found = estimate_cones(scan, c.ring, c.lasers, z_rms, [&peak_lasers] { return peak_lasers.get(); });
+          found = estimate_cones(scan, c.ring, c.lasers, z_rms, [&peak_lasers] { return peak_lasers.get(); }, fast);
         } else {
           try {
             found = estimate_rings(scan, c.ring, c.lasers);
@@ -1913,10 +1916,10 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       // measured at 14 mm: 25-60 % on balm and 45 % on the HDL-64E re-sampled scans, where the
       // rough cost picked the smaller file; 5-8 % on a VLP-32C and a PandarXT-32 scan, where it
       // did not (the runner-up was 0.3-3 % smaller); 0.2-1.4 % on kitti00. A second coding of
-      // the layer costs about 40 % more encoding.
+      // the layer costs about 40 % more encoding. (Not `fast`.)
       constexpr double kCloseCosts = 0.15;
       const double gap = std::abs(cand[other].cost - cand[pick].cost) / cand[pick].cost;
-      if (std::isfinite(cand[other].cost) && gap > 1e-9 && gap < kCloseCosts) {
+      if (!fast && std::isfinite(cand[other].cost) && gap > 1e-9 && gap < kCloseCosts) {
         // the runner-up, finished as below (lasers in elevation order, its fit)
         LaserAssignment b;
         b.ring = std::move(cand[other].ring);
@@ -2335,7 +2338,7 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
                                       const std::vector<std::uint32_t>& coded,
                                       const std::vector<const LaserAssignment*>& candidates, const Pose& T_cloud_sensor,
                                       double max_error, double bound, bool thin, const std::vector<double>& shares,
-                                      int threads, std::size_t* chosen) {
+                                      int threads, std::size_t* chosen, bool fast) {
   std::vector<std::unique_ptr<Prepared>> prepared;
   for (const LaserAssignment* a : candidates) prepared.push_back(prepare_layer(input, coded, *a, T_cloud_sensor, bound, threads));
   const auto code = [&](const Prepared& p, double share, std::vector<std::uint32_t> predictors, int inner,
@@ -2354,7 +2357,7 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
     return share == 0 ? std::vector<std::uint32_t>{4, 5} : std::vector<std::uint32_t>{5};
   };
   // A large layer makes the choice of candidate assignment, share and predictor on a
-  // quarter of the turn (every fourth of 32 column blocks): each is coded there, and only
+  // quarter of the turn (every fourth of 32 column blocks; every eighth `fast`): each is coded there, and only
   // the one with the fewest bits a sampled point is coded in full. A small layer codes
   // every share of every candidate with each of its predictors in full (the shares side
   // by side, one thread each).
@@ -2370,7 +2373,7 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
       std::vector<std::uint32_t> js;  // positions in `order` of the trial's columns
       const std::uint32_t block = p.a->table.columns / 32;
       for (std::size_t j = 0; j < p.order.size(); ++j)
-        if ((p.a->column[coded[p.order[j]]] / block) % 4 == 0) js.push_back(static_cast<std::uint32_t>(j));
+        if ((p.a->column[coded[p.order[j]]] / block) % (fast ? 8 : 4) == 0) js.push_back(static_cast<std::uint32_t>(j));
       if (js.empty()) continue;
       std::vector<std::vector<std::size_t>> bytes(shares.size());
       parallel_for(shares.size(), threads, [&](std::size_t t) {

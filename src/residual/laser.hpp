@@ -77,9 +77,10 @@ struct LaserAssignment {
 /// `T_cloud_sensor`): columns from the azimuths of a laser's points, and, with `estimate`,
 /// lasers from the points' elevations. nullopt when the cloud does not look like a spinning
 /// lidar's scan. `threads`: the two estimates side by side with 2 or more (the result does
-/// not depend on it).
+/// not depend on it). `fast` (LayerOptions::fast): the cones estimated on a quarter as many
+/// points, and no runner-up (`alternative`).
 [[nodiscard]] std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor,
-                                                           bool estimate, int threads = 1);
+                                                           bool estimate, int threads = 1, bool fast = false);
 
 /// A coded sensor-geometry layer: the fields after the ones every coding has, and the stream.
 struct LaserLayer {
@@ -109,13 +110,14 @@ constexpr std::uint64_t kLaserShortFieldBytes = kLaserFieldBytes - 96;
 /// more than its neighbours (a correction across its beam, its laser's first point, or a
 /// beam length far off its laser's last): leaving out every such point broke the lasers' runs of neighbours, and
 /// the occupancy bits and predictions that cost outweighed the points (VLP-16 and HDL-32E
-/// turns at E = 6 cm: 14 % fewer bytes and 1 dB more PSNR coding them).
+/// turns at E = 6 cm: 14 % fewer bytes and 1 dB more PSNR coding them). `fast`
+/// (LayerOptions::fast): the choice on an eighth of the columns.
 [[nodiscard]] std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                                     const std::vector<std::uint32_t>& coded,
                                                     const std::vector<const LaserAssignment*>& candidates,
                                                     const Pose& T_cloud_sensor, double max_error, double bound,
                                                     bool thin, const std::vector<double>& shares, int threads,
-                                                    std::size_t* chosen = nullptr);
+                                                    std::size_t* chosen = nullptr, bool fast = false);
 
 /// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
 /// bytes from there to the payload's end) after the keep mask was read from `dec`.

@@ -760,7 +760,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // smallest of its range-step shares and laser estimates kept (laser_layer).
   std::optional<detail::LaserLayer> laser;
   std::optional<detail::LaserAssignment> lasers_of;
-  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true, threads);
+  if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true, threads, options.fast);
   // A table read from the sensor reproduces the beams: the whole budget along them.
   const bool exact_table = lasers_of && lasers_of->fit_rms < 1e-3 * max_error;
   // The acquisition-order coding (§2.11) where the points come in the order they were
@@ -803,12 +803,33 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     if (lasers_of->alternative) candidates.push_back(lasers_of->alternative.get());
     std::size_t chosen = 0;
     laser = detail::laser_layer(head, input.points, coded, candidates, T_cloud_sensor, max_error, check_error,
-                                options.thin, shares, threads, &chosen);
+                                options.thin, shares, threads, &chosen, options.fast);
     if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
   const std::size_t laser_bytes =
       laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
+  // Where half the points or more lie closer to their laser's next than a voxel cell is
+  // wide, the voxel coding (which merges such points) is tried in full whatever the
+  // trials say: on the Ouster turns at E = 20 cm it coded 15 % smaller than the
+  // sensor-geometry coding, whose bits the spherical trial still exceeded 2.1 times, and
+  // on a re-sampled VLS-128 scan at 15 cm 24 % smaller, its trial window 1.6 times the
+  // sensor-geometry bits.
+  const bool dense = [&] {
+    if (!laser || !lasers_of || lasers_of->table.columns == 0) return false;
+    const double step = 2.0 * kPi / static_cast<double>(lasers_of->table.columns);
+    const double cell = 2.0 * check_error / std::sqrt(3.0);
+    std::size_t close = 0;
+    for (const std::uint32_t i : coded) close += (T_sensor_cloud * input.points[i].cast<double>()).norm() * step < cell ? 1 : 0;
+    return 2 * close >= coded.size();
+  }();
   const bool others = (!laser && !acquisition && !lattice) || options.spherical || options.voxel;
+  // Fast (LayerOptions::fast), beside a sensor-geometry coding: on a large layer the voxel
+  // trial takes a window a quarter as large, and a voxel or spherical coding is coded in full
+  // only where its trial beats the sensor-geometry bits (the voxel one by kVoxelSkipRatio, as
+  // its smaller window overstates it: 0.93-1.5 times the larger window's bits on the shared
+  // scans) or the points are dense.
+  const bool fast_laser = options.fast && laser.has_value();
+  bool spherical_may_win = true;
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (others && !voxel) {
     const bool try_voxel = voxel_allowed && options.spherical;
@@ -826,7 +847,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
       const auto voxel_trial = [&] {
-        const std::size_t span = std::min(coded.size(), kVoxelTrialSpan * kOrderTrialPoints);
+        const std::size_t span = std::min(coded.size(), (fast_laser ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
         const std::size_t at = coded.size() / 2 - span / 2;
         const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
                                               coded.begin() + static_cast<std::ptrdiff_t>(at + span));
@@ -834,21 +855,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(span)
                               : std::numeric_limits<double>::infinity();
       };
-      // Where half the points or more lie closer to their laser's next than a voxel cell is
-      // wide, the voxel coding (which merges such points) is tried in full whatever the
-      // trials say: on the Ouster turns at E = 20 cm it coded 15 % smaller than the
-      // sensor-geometry coding, whose bits the spherical trial still exceeded 2.1 times, and
-      // on a re-sampled VLS-128 scan at 15 cm 24 % smaller, its trial window 1.6 times the
-      // sensor-geometry bits.
-      bool dense = false;
-      if (laser && lasers_of && lasers_of->table.columns > 0) {
-        const double step = 2.0 * kPi / static_cast<double>(lasers_of->table.columns);
-        const double cell = 2.0 * check_error / std::sqrt(3.0);
-        std::size_t close = 0;
-        for (const std::uint32_t i : coded)
-          close += (T_sensor_cloud * input.points[i].cast<double>()).norm() * step < cell ? 1 : 0;
-        dense = 2 * close >= coded.size();
-      }
       // With a laser table read from the sensor, the spherical trial comes first, alone:
       // where it costs kExactLaserSkipRatio times the sensor-geometry coding's bits or
       // more and the points are not dense, neither the voxel trial nor a full spherical
@@ -893,13 +899,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // 14 mm: 17.9 and 11.8 bits a point).
       const bool full_voxel = !skip_others && try_voxel &&
                               (dense || (voxel_window_bits <= kVoxelSkipRatio * spherical_window_bits &&
-                                         voxel_window_bits < kLaserSkipRatio * laser_bits)) &&
+                                         voxel_window_bits < kLaserSkipRatio * laser_bits &&
+                                         (!fast_laser || voxel_window_bits < kVoxelSkipRatio * laser_bits))) &&
                               voxel_window_bits < kVoxelSkipRatio * grid_bits;
+      spherical_may_win = !fast_laser || spherical_window_bits < laser_bits;
       // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
       // (The spherical trial does not rule it out against the sensor-geometry coding: on a
       // HDL-32E cloud stored firing by firing its window cost 1.6 times the sensor-geometry
       // coding's bits while in full it came out 5 % smaller.)
-      const bool full_spherical = !skip_others && !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits) &&
+      const bool full_spherical = !skip_others && spherical_may_win &&
+                                  !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits) &&
                                   spherical_window_bits < kVoxelSkipRatio * grid_bits;
       if (full_spherical) need_rows();
       // The codings coded in full already (sensor geometry, acquisition order, lattice) each
@@ -932,7 +941,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // coded now, stopping as the full one above does once it passes the coding in hand
       // (without one it is the only coding left). On a 128-beam scan whose spherical window
       // cost 4.2 times the sensor-geometry bits it coded all 202k points in full here before.
-      if (!voxel && !voxel_out && !full_spherical && !skip_others && !std::isfinite(grid_bits)) {
+      if (!voxel && !voxel_out && !full_spherical && !skip_others && spherical_may_win && !std::isfinite(grid_bits)) {
         need_rows();
         code_winner();
       }
@@ -948,7 +957,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   }
   // A spherical winner skipped for a voxel coding that the sensor-geometry coding beats may
   // beat both: it is coded in full after all.
-  if (others && options.spherical && laser && (voxel || voxel_out) && streams[best].empty() && !spherical_out &&
+  if (others && options.spherical && laser && spherical_may_win && (voxel || voxel_out) && streams[best].empty() && !spherical_out &&
       (voxel_out || laser_bytes < extra_bytes(kCodingVoxel) + voxel->stream.size())) {
     need_rows();
     streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);

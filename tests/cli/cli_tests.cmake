@@ -268,6 +268,12 @@ expect_match(info.laser "${LAST_OUT}" "RESL")
 expect_match(info.laser "${LAST_OUT}" "laser table")
 run(0 decompress.laser decompress "${WORK}/k_l.lex3dm" -o "${WORK}/k_l.bin" --reference "${KITTI}" --json)
 expect_match(decompress.laser "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.00[0-9]*|0\\.020*[,}]|[0-9.]+e-)")
+# Sensor-rate encoding (--fast) on the same sample: the sensor-geometry coding, a file that
+# decodes within the bound.
+run(0 compress.fast compress "${KITTI}" -o "${WORK}/k_f.lex3dm" --max-error 0.02 --fast --json)
+expect_match(compress.fast "${LAST_OUT}" "\"coding\":\"sensor-geometry\"")
+run(0 decompress.fast decompress "${WORK}/k_f.lex3dm" -o "${WORK}/k_f.bin" --reference "${KITTI}" --json)
+expect_match(decompress.fast "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.00[0-9]*|0\\.020*[,}]|[0-9.]+e-)")
 # The acquisition-order coding on a cloud stored pulse by pulse (a PCD with a rising time
 # field: 20 scan lines of 100 pulses, 30 cm apart along a line, 50 cm between lines): a
 # format 1.12 file whose decoded cloud meets the bound.

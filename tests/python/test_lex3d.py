@@ -57,7 +57,7 @@ def test_round_trip_of_a_real_scan_meets_the_bound_both_ways(kitti):
 
 @pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
 @pytest.mark.parametrize("args", [["--max-error", "0.014"], ["--target-bpp", "5"],
-                                  ["--iterations", "60", "--max-error", "none"]])
+                                  ["--iterations", "60", "--max-error", "none"], ["--max-error", "0.014", "--fast"]])
 def test_same_bytes_as_the_command(args):
     scan = SAMPLES / "newer_college_00.bin"
     points, _ = read_bin(scan, 3)
@@ -67,6 +67,8 @@ def test_same_bytes_as_the_command(args):
         expected = out.read_bytes()
     kwargs = {"max_error": 0.014} if args[0] == "--max-error" else \
              {"target_bpp": 5.0} if args[0] == "--target-bpp" else {"iterations": 60}
+    if "--fast" in args:
+        kwargs["fast"] = True
     assert lex3d.compress(points, **kwargs) == expected
     assert lex3d.compress(points.astype(np.float64), **kwargs) == expected
 

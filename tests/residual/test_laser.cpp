@@ -385,19 +385,38 @@ TEST(ResidualLaser, SameInputSameBytes) {
 
 /// A large unorganised scan (the KITTI sample: two estimates of its lasers, two range-step
 /// shares) chooses its coding on a quarter of the turn: the same bytes on 1 and 2 threads,
-/// the sensor-geometry coding, the bound kept both ways.
+/// the sensor-geometry coding, the bound kept both ways. So does sensor-rate encoding
+/// (LayerOptions::fast, which tries less), within 2 % of the default's bytes.
 TEST(ResidualLaser, LargeEstimatedScanChoosesOnASampleWhateverTheThreads) {
   const Cloud scan = test::load_or_fail(test::sample("kitti00_000000.bin"));
   ASSERT_GT(scan.size(), 100000U);
-  residual::LayerOptions one;
-  one.threads = 1;
-  residual::LayerOptions two = one;
-  two.threads = 2;
+  std::size_t bytes[2] = {0, 0};
+  for (const bool fast : {false, true}) {
+    residual::LayerOptions one;
+    one.threads = 1;
+    one.fast = fast;
+    residual::LayerOptions two = one;
+    two.threads = 2;
+    residual::LayerStats st;
+    const Bytes layer = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, &st, one);
+    EXPECT_TRUE(st.laser) << fast;
+    EXPECT_EQ(layer, residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, nullptr, two)) << fast;
+    expect_layer_bound(layer, scan, Pose::Identity(), 0.014);
+    bytes[fast ? 1 : 0] = layer.size();
+  }
+  EXPECT_LE(static_cast<double>(bytes[1]), 1.02 * static_cast<double>(bytes[0]));
+}
+
+/// Sensor-rate encoding at 15 cm on the KITTI sample, where the points lie closer together
+/// than a voxel cell: the voxel coding is still tried and kept, as by default.
+TEST(ResidualLaser, FastEncodingStillTriesTheVoxelCodingWhereThePointsAreDense) {
+  const Cloud scan = test::load_or_fail(test::sample("kitti00_000000.bin"));
+  residual::LayerOptions fast;
+  fast.fast = true;
   residual::LayerStats st;
-  const Bytes layer = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, &st, one);
-  EXPECT_TRUE(st.laser);
-  EXPECT_EQ(layer, residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, nullptr, two));
-  expect_layer_bound(layer, scan, Pose::Identity(), 0.014);
+  const Bytes layer = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.15, &st, fast);
+  EXPECT_TRUE(st.voxel);
+  expect_layer_bound(layer, scan, Pose::Identity(), 0.15);
 }
 
 /// Real scans: an Ouster capture (its metadata's exact table), a Velodyne capture (the

@@ -75,6 +75,7 @@ def _parser():
     c.add_argument("--words", choices=["on", "off", "auto"])
     c.add_argument("--layer-coding", choices=["auto", "spherical", "voxel", "laser", "acquisition", "lattice"], default="auto")
     c.add_argument("--keep-all-points", action="store_true")
+    c.add_argument("--fast", action="store_true", help="sensor-rate encoding, as lex3d compress --fast")
     c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
     c.add_argument("--manifest", help="default OUT.manifest.jsonl")
     _read_options(c)
@@ -287,6 +288,8 @@ def main(argv=None):
             options[name] = getattr(args, name)
     if args.keep_all_points:
         options["keep_all_points"] = True
+    if args.fast:
+        options["fast"] = True
     if explicit_error and args.target_bpp is not None:
         print("lex3d-dask: give --max-error or --target-bpp, not both", file=sys.stderr)
         return 1
