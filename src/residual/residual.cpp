@@ -830,6 +830,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // scans) or the points are dense.
   const bool fast_laser = options.fast && laser.has_value();
   bool spherical_may_win = true;
+  // (and no sweep coding: on the 300 files of bench/fast.sh it never won)
+  while (fast_laser && ways.size() > 2) ways.pop_back();
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (others && !voxel) {
     const bool try_voxel = voxel_allowed && options.spherical;
