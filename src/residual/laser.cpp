@@ -2220,6 +2220,12 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   std::optional<LaserLayer> best;
   for (auto& o : streams)
     if (o && (!best || o->stream.size() < best->stream.size())) best = std::move(o);
+  if (best) {
+    best->laser_of = std::move(kept_ring);
+    best->column_of = std::move(kept_column);
+    best->lasers = a.table.lasers();
+    best->columns = a.table.columns;
+  }
   return best;
 }
 

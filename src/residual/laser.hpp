@@ -93,6 +93,11 @@ struct LaserLayer {
   double range_step = 0.0;
   std::uint64_t coded = 0;           ///< points coded (after thinning)
   std::vector<std::uint32_t> sources;  ///< the input point of each coded point, in stream order
+  /// Each coded point's laser and column, in stream order (what a decoder's LayerKeys gives
+  /// after the kept word points), and the table's lasers and columns a turn.
+  std::vector<std::uint16_t> laser_of;
+  std::vector<std::uint32_t> column_of;
+  std::uint32_t lasers = 0, columns = 0;
 };
 
 /// Size of `fields` in a payload.
