@@ -166,7 +166,8 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
       residual::LayerOptions lo = layer_options;
       lo.track_sources = true;
       d.residual = residual::encode_layer(layer_input, placed, d.T_cloud_sensor, e, &st, lo);
-      std::vector<std::uint8_t> payload = residual::encode_attributes(cloud, st.sources, *attributes, &kept, st.layer);
+      std::vector<std::uint8_t> payload = residual::encode_attributes(cloud, st.sources, *attributes, &kept, st.layer,
+                                                                        options_.threads);
       if (!payload.empty()) d.attributes = std::move(payload);
       st.sources.clear();
       st.sources.shrink_to_fit();

@@ -50,6 +50,7 @@
 #include <utility>
 
 #include "codec/bytes.hpp"
+#include "lex3d/core/parallel.hpp"
 #include "residual/layer_lasers.hpp"
 #include "residual/mixing.hpp"
 #include "residual/range_coder.hpp"
@@ -734,7 +735,7 @@ void AttributeOptions::validate() const {
 
 std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
                                             const AttributeOptions& options, std::vector<AttributeField>* fields_out,
-                                            const LayerKeys& layer) {
+                                            const LayerKeys& layer, int threads) {
   options.validate();
   const std::size_t n_in = input.size(), n = sources.size();
   const std::vector<std::uint16_t>& layer_lasers = layer.laser;
@@ -922,9 +923,11 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         differences[2][j] += 255 - f.u[1][j];
       }
     }
+    // Every method that applies (each coded in full, side by side on `threads`); the
+    // smallest kept, the first of equals in this order.
+    std::vector<std::pair<std::uint32_t, std::uint8_t>> tries;  // (transform, method)
     for (const std::uint32_t transform : {std::uint32_t{0}, kColourDifferences}) {
       if (transform != 0 && f.kind != kRgb) continue;
-      const std::vector<std::vector<std::int64_t>>& u = transform != 0 ? differences : f.u;
       const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
       for (const std::uint8_t m : {kMethodTree, kMethodPrevious, kMethodLinear, kMethodLayerLaser, kMethodLayerTree,
                                    kMethodMixedTree, kMethodLayerColumn}) {
@@ -936,16 +939,24 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         // With a sensor-geometry layer method 4 codes as well with the layer's lasers (on the
         // scans measured, method 5 never won there): not tried, to save its time.
         if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
-        std::vector<std::uint8_t> s = m == kMethodLayerColumn ? code_by_column(u[0], layer, f.lowest, f.highest)
-                                      : is_by_layer(m)        ? code_values(u, span, m, layer_lasers, layer_keys)
-                                                              : code_values(u, span, m, by, hl);
-        if (best.empty() || s.size() < best.size()) {
-          best = std::move(s);
-          best_method = m;
-          best_transform = transform;
-        }
+        tries.emplace_back(transform, m);
       }
     }
+    std::vector<std::vector<std::uint8_t>> coded(tries.size());
+    parallel_for(tries.size(), threads, [&](std::size_t t) {
+      const auto [transform, m] = tries[t];
+      const std::vector<std::vector<std::int64_t>>& u = transform != 0 ? differences : f.u;
+      const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
+      coded[t] = m == kMethodLayerColumn ? code_by_column(u[0], layer, f.lowest, f.highest)
+                 : is_by_layer(m)        ? code_values(u, span, m, layer_lasers, layer_keys)
+                                         : code_values(u, span, m, by, hl);
+    }, 1);
+    for (std::size_t t = 0; t < tries.size(); ++t)
+      if (best.empty() || coded[t].size() < best.size()) {
+        best = std::move(coded[t]);
+        best_transform = tries[t].first;
+        best_method = tries[t].second;
+      }
     const std::size_t at = out.size();
     out.push_back(f.kind);
     out.push_back(f.repr);

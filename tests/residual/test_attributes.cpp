@@ -820,8 +820,11 @@ TEST(Attributes, RingFollowsTheSensorGeometryLayersLasers) {
     ASSERT_EQ(d.time[j], in.time[i]) << j;
     ASSERT_EQ(d.rgb[j], in.rgb[i]) << j;
   }
-  // the same bytes again
+  // the same bytes again, and with the methods tried side by side on two threads
   EXPECT_EQ(code_laser(in, 0.01, false).c.file, lc.c.file);
+  const Bytes one = residual::encode_attributes(in, lc.c.sources, {}, nullptr, lc.stats.layer, 1);
+  ASSERT_FALSE(one.empty());
+  EXPECT_EQ(residual::encode_attributes(in, lc.c.sources, {}, nullptr, lc.stats.layer, 2), one);
 }
 
 /// Method 3 outside a sensor-geometry layer: the descriptor's method byte set to 3 in a

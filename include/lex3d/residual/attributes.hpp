@@ -80,11 +80,12 @@ struct AttributeField {
 /// against the last value of the same laser (method 3; a ring that is a function of the
 /// table's laser then costs next to nothing), by a context tree on it (method 4), or
 /// against the value of the same measurement column (method 6: a time that is its
-/// firing's); empty otherwise.
+/// firing's); empty otherwise. `threads`: the methods tried side by side (the bytes do not
+/// depend on it).
 [[nodiscard]] std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vector<std::uint32_t>& sources,
                                                           const AttributeOptions& options = {},
                                                           std::vector<AttributeField>* fields = nullptr,
-                                                          const LayerKeys& layer = {});
+                                                          const LayerKeys& layer = {}, int threads = 1);
 
 /// The fields of an `ATTR` payload (descriptors only; the streams are not decoded).
 [[nodiscard]] StatusOr<std::vector<AttributeField>> inspect_attributes(const std::vector<std::uint8_t>& payload);
