@@ -407,7 +407,9 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
                 else:
                     failed += 1
                     if len(failures) < 20:
-                        failures.append(f"{row['scan']}: {row['error']}")
+                        # (lex3d's messages already start with the file they name)
+                        named = row["error"].startswith(row["scan"] + ":")
+                        failures.append(row["error"] if named else f"{row['scan']}: {row['error']}")
                 totals["cpu_s"] += row["cpu_s"]
                 if "pid" in row and len(cpu_per_scan) < 100000:  # (of the coded scans; the first 1e5)
                     cpu_per_scan.append(row["cpu_s"])
