@@ -1933,10 +1933,10 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       // measured at 14 mm: 25-60 % on balm and 45 % on the HDL-64E re-sampled scans, where the
       // rough cost picked the smaller file; 5-8 % on a VLP-32C and a PandarXT-32 scan, where it
       // did not (the runner-up was 0.3-3 % smaller); 0.2-1.4 % on kitti00. A second coding of
-      // the layer costs about 40 % more encoding. (Not `fast`.)
+      // the layer costs about 40 % more encoding.
       constexpr double kCloseCosts = 0.15;
       const double gap = std::abs(cand[other].cost - cand[pick].cost) / cand[pick].cost;
-      if (!fast && std::isfinite(cand[other].cost) && gap > 1e-9 && gap < kCloseCosts) {
+      if (std::isfinite(cand[other].cost) && gap > 1e-9 && gap < kCloseCosts) {
         // the runner-up, finished as below (lasers in elevation order, its fit)
         LaserAssignment b;
         b.ring = std::move(cand[other].ring);

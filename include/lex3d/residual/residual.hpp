@@ -66,13 +66,13 @@ struct LayerOptions {
   /// gridded product) and keep it when it codes smaller.
   bool lattice = true;
   /// Sensor-rate encoding: lasers estimated from the points as cones on a quarter as many
-  /// points, their runner-up estimate not coded, a motion-compensated scan's start azimuth
-  /// found by halving steps; the sensor-geometry coding chooses its range step and predictor
-  /// on an eighth of the columns (not a quarter); and beside it a spherical coding (no sweep)
-  /// or the voxel coding is coded in full only where its trial window beats it (the voxel
-  /// trial on a quarter of the default's window) or the points lie closer together than a
-  /// voxel cell. A KITTI scan in 0.62 of the time; of 300 files, 211 the same, the median
-  /// 1.000 and the largest 1.12 times the default's (bench/README.md, "Fast encoding").
+  /// points, a motion-compensated scan's start azimuth found by halving steps; the
+  /// sensor-geometry coding chooses its range step and predictor on an eighth of the columns
+  /// (not a quarter); and beside it a spherical coding (no sweep) or the voxel coding is
+  /// coded in full only where its trial window beats it (the voxel trial on a quarter of the
+  /// default's window) or the points lie closer together than a voxel cell. A KITTI scan in
+  /// 0.6 of the time; of 300 files, 230 the same, 90 % within 0.5 % and the largest 1.06 times
+  /// the default's (bench/README.md, "Fast encoding").
   bool fast = false;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
