@@ -133,7 +133,9 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
     profile_fit = fit.value();
   }
   const Cloud& layer_input = options_.sensor_profile ? profiled : cloud;
-  const residual::AttributeOptions* attributes = options_.keep_attributes ? &options_.attributes : nullptr;
+  residual::AttributeOptions attribute_options = options_.attributes;
+  attribute_options.fast = attribute_options.fast || options_.fast;
+  const residual::AttributeOptions* attributes = options_.keep_attributes ? &attribute_options : nullptr;
   residual::LayerOptions layer_options = options_.layer_options();
   layer_options.threads = threads;
   const WordsMode mode = options_.words_mode();
@@ -167,7 +169,7 @@ StatusOr<CodedScan> ScanCoder::code(const Cloud& cloud, const Model& model, int 
       lo.track_sources = true;
       d.residual = residual::encode_layer(layer_input, placed, d.T_cloud_sensor, e, &st, lo);
       std::vector<std::uint8_t> payload = residual::encode_attributes(cloud, st.sources, *attributes, &kept, st.layer,
-                                                                        options_.threads);
+                                                                        threads);
       if (!payload.empty()) d.attributes = std::move(payload);
       st.sources.clear();
       st.sources.shrink_to_fit();

@@ -47,6 +47,7 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #include "codec/bytes.hpp"
@@ -86,6 +87,9 @@ constexpr std::uint32_t kSourceNameBit = 0x100;
 constexpr std::uint64_t kColourDifferenceSpan = 510;
 /// At most this many fields in a chunk (the count is a byte).
 constexpr std::size_t kMaxFields = 255;
+/// Fast (AttributeOptions::fast): from this many decoded points, a field's methods are
+/// compared on a quarter of them, and only the smallest there is coded in full.
+constexpr std::size_t kAttributeTrialPoints = 32768;
 enum Repr : std::uint8_t { kQuantised = 0, kFloatBits = 1 };
 constexpr std::uint8_t kMethodTree = 0, kMethodPrevious = 1, kMethodLinear = 2, kMethodLayerLaser = 3,
                        kMethodLayerTree = 4, kMethodMixedTree = 5, kMethodLayerColumn = 6;
@@ -940,6 +944,42 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         // scans measured, method 5 never won there): not tried, to save its time.
         if (m == kMethodMixedTree && !layer_lasers.empty()) continue;
         tries.emplace_back(transform, m);
+      }
+    }
+    // Fast (AttributeOptions::fast), on many points: the methods other than the column one
+    // each coded on a window of a quarter of the points (the middle ones), and only the
+    // smallest there coded in full (beside the column method, where it applies).
+    if (options.fast && n >= kAttributeTrialPoints) {
+      std::vector<std::size_t> windowed;
+      for (std::size_t t = 0; t < tries.size(); ++t)
+        if (tries[t].second != kMethodLayerColumn) windowed.push_back(t);
+      if (windowed.size() > 1) {
+        const std::size_t len = n / 4, at = n / 2 - len / 2;
+        const auto cut = [&](const auto& v) {
+          using V = std::decay_t<decltype(v)>;
+          return v.empty() ? V{} : V(v.begin() + static_cast<std::ptrdiff_t>(at), v.begin() + static_cast<std::ptrdiff_t>(at + len));
+        };
+        const auto cut_all = [&](const std::vector<std::vector<std::int64_t>>& u) {
+          std::vector<std::vector<std::int64_t>> w;
+          for (const auto& ch : u) w.push_back(cut(ch));
+          return w;
+        };
+        const std::vector<std::vector<std::int64_t>> u_window = cut_all(f.u), d_window = cut_all(differences);
+        const std::vector<std::uint16_t> by_window = cut(by), layer_window = cut(layer_lasers);
+        std::vector<std::size_t> sizes(windowed.size());
+        parallel_for(windowed.size(), threads, [&](std::size_t k) {
+          const auto [transform, m] = tries[windowed[k]];
+          const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
+          const auto& u = transform != 0 ? d_window : u_window;
+          sizes[k] = (is_by_layer(m) ? code_values(u, span, m, layer_window, layer_keys) : code_values(u, span, m, by_window, hl)).size();
+        }, 1);
+        std::size_t pick = 0;
+        for (std::size_t k = 1; k < windowed.size(); ++k)
+          if (sizes[k] < sizes[pick]) pick = k;
+        std::vector<std::pair<std::uint32_t, std::uint8_t>> left;
+        for (std::size_t t = 0; t < tries.size(); ++t)
+          if (t == windowed[pick] || tries[t].second == kMethodLayerColumn) left.push_back(tries[t]);
+        tries = std::move(left);
       }
     }
     std::vector<std::vector<std::uint8_t>> coded(tries.size());

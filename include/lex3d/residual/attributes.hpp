@@ -53,6 +53,10 @@ struct AttributeOptions {
   double intensity_error = 0.0;
   /// Largest time error, seconds, when the times have no exact step; (0, 1].
   double time_error = 0.5e-9;
+  /// Sensor-rate encoding (residual::LayerOptions::fast): on many points, a field's methods
+  /// are compared on a quarter of them and only the smallest there is coded in full (by
+  /// default each is coded in full and the smallest kept).
+  bool fast = false;
   void validate() const;
 };
 
