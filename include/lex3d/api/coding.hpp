@@ -57,8 +57,8 @@ struct CodingOptions {
   bool keep_all_points = false;
   /// Residual-layer codings tried.
   LayerCoding layer_coding = LayerCoding::kAuto;
-  /// Sensor-rate encoding (residual::LayerOptions::fast): fewer codings tried where the
-  /// sensor-geometry coding applies; files a little larger.
+  /// Sensor-rate encoding (residual::LayerOptions::fast, and AttributeOptions::fast for the
+  /// attributes): fewer codings tried; files a little larger.
   bool fast = false;
   /// Instance steps, metres and radians, each 0 (derived from the alphabet's word radius,
   /// codec::quantization_for_word_radius) or in [1e-6, 0.1].
