@@ -946,6 +946,19 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
         tries.emplace_back(transform, m);
       }
     }
+    // One method's stream on values `plain` (or their colour differences, `differences_of`)
+    // and the decoded points' lasers `lasers_of` and layer lasers `layer_of` (the column
+    // method, on every point only, reads `layer`).
+    using Channels = std::vector<std::vector<std::int64_t>>;
+    const auto code_method = [&](std::uint32_t transform, std::uint8_t m, const Channels& plain,
+                                 const Channels& differences_of, const std::vector<std::uint16_t>& lasers_of,
+                                 const std::vector<std::uint16_t>& layer_of) {
+      const Channels& u = transform != 0 ? differences_of : plain;
+      const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
+      return m == kMethodLayerColumn ? code_by_column(u[0], layer, f.lowest, f.highest)
+             : is_by_layer(m)        ? code_values(u, span, m, layer_of, layer_keys)
+                                     : code_values(u, span, m, lasers_of, hl);
+    };
     // Fast (AttributeOptions::fast), on many points: the methods other than the column one
     // each coded on a window of a quarter of the points (the middle ones), and only the
     // smallest there coded in full (beside the column method, where it applies).
@@ -959,19 +972,17 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
           using V = std::decay_t<decltype(v)>;
           return v.empty() ? V{} : V(v.begin() + static_cast<std::ptrdiff_t>(at), v.begin() + static_cast<std::ptrdiff_t>(at + len));
         };
-        const auto cut_all = [&](const std::vector<std::vector<std::int64_t>>& u) {
-          std::vector<std::vector<std::int64_t>> w;
+        const auto cut_all = [&](const Channels& u) {
+          Channels w;
           for (const auto& ch : u) w.push_back(cut(ch));
           return w;
         };
-        const std::vector<std::vector<std::int64_t>> u_window = cut_all(f.u), d_window = cut_all(differences);
+        const Channels u_window = cut_all(f.u), d_window = cut_all(differences);
         const std::vector<std::uint16_t> by_window = cut(by), layer_window = cut(layer_lasers);
         std::vector<std::size_t> sizes(windowed.size());
         parallel_for(windowed.size(), threads, [&](std::size_t k) {
           const auto [transform, m] = tries[windowed[k]];
-          const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
-          const auto& u = transform != 0 ? d_window : u_window;
-          sizes[k] = (is_by_layer(m) ? code_values(u, span, m, layer_window, layer_keys) : code_values(u, span, m, by_window, hl)).size();
+          sizes[k] = code_method(transform, m, u_window, d_window, by_window, layer_window).size();
         }, 1);
         std::size_t pick = 0;
         for (std::size_t k = 1; k < windowed.size(); ++k)
@@ -984,12 +995,7 @@ std::vector<std::uint8_t> encode_attributes(const Cloud& input, const std::vecto
     }
     std::vector<std::vector<std::uint8_t>> coded(tries.size());
     parallel_for(tries.size(), threads, [&](std::size_t t) {
-      const auto [transform, m] = tries[t];
-      const std::vector<std::vector<std::int64_t>>& u = transform != 0 ? differences : f.u;
-      const std::uint64_t span = transform != 0 ? kColourDifferenceSpan : f.span;
-      coded[t] = m == kMethodLayerColumn ? code_by_column(u[0], layer, f.lowest, f.highest)
-                 : is_by_layer(m)        ? code_values(u, span, m, layer_lasers, layer_keys)
-                                         : code_values(u, span, m, by, hl);
+      coded[t] = code_method(tries[t].first, tries[t].second, f.u, differences, by, layer_lasers);
     }, 1);
     for (std::size_t t = 0; t < tries.size(); ++t)
       if (best.empty() || coded[t].size() < best.size()) {

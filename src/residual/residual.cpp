@@ -808,20 +808,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   }
   const std::size_t laser_bytes =
       laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
-  // Where half the points or more lie closer to their laser's next than a voxel cell is
-  // wide, the voxel coding (which merges such points) is tried in full whatever the
-  // trials say: on the Ouster turns at E = 20 cm it coded 15 % smaller than the
-  // sensor-geometry coding, whose bits the spherical trial still exceeded 2.1 times, and
-  // on a re-sampled VLS-128 scan at 15 cm 24 % smaller, its trial window 1.6 times the
-  // sensor-geometry bits.
-  const bool dense = [&] {
-    if (!laser || !lasers_of || lasers_of->table.columns == 0) return false;
-    const double step = 2.0 * kPi / static_cast<double>(lasers_of->table.columns);
-    const double cell = 2.0 * check_error / std::sqrt(3.0);
-    std::size_t close = 0;
-    for (const std::uint32_t i : coded) close += (T_sensor_cloud * input.points[i].cast<double>()).norm() * step < cell ? 1 : 0;
-    return 2 * close >= coded.size();
-  }();
   const bool others = (!laser && !acquisition && !lattice) || options.spherical || options.voxel;
   // Fast (LayerOptions::fast), beside a sensor-geometry coding: on a large layer the voxel
   // trial takes a window a quarter as large, and a voxel or spherical coding is coded in full
@@ -857,6 +843,21 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(span)
                               : std::numeric_limits<double>::infinity();
       };
+      // Where half the points or more lie closer to their laser's next than a voxel cell is
+      // wide, the voxel coding (which merges such points) is tried in full whatever the
+      // trials say: on the Ouster turns at E = 20 cm it coded 15 % smaller than the
+      // sensor-geometry coding, whose bits the spherical trial still exceeded 2.1 times, and
+      // on a re-sampled VLS-128 scan at 15 cm 24 % smaller, its trial window 1.6 times the
+      // sensor-geometry bits.
+      bool dense = false;
+      if (laser && lasers_of && lasers_of->table.columns > 0) {
+        const double step = 2.0 * kPi / static_cast<double>(lasers_of->table.columns);
+        const double cell = 2.0 * check_error / std::sqrt(3.0);
+        std::size_t close = 0;
+        for (const std::uint32_t i : coded)
+          close += (T_sensor_cloud * input.points[i].cast<double>()).norm() * step < cell ? 1 : 0;
+        dense = 2 * close >= coded.size();
+      }
       // With a laser table read from the sensor, the spherical trial comes first, alone:
       // where it costs kExactLaserSkipRatio times the sensor-geometry coding's bits or
       // more and the points are not dense, neither the voxel trial nor a full spherical
