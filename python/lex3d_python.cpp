@@ -355,8 +355,8 @@ target_bpp: bits per point the file should fit; the smallest bound that fits is 
 words: None (off with a residual layer, on without), 'on', 'off' or 'auto' (the smaller file).
 layer_coding: 'auto', 'spherical', 'voxel', 'laser', 'acquisition' or 'lattice'.
 keep_all_points: give every input point its own decoded point.
-fast: sensor-rate encoding, as `lex3d compress --fast`: fewer codings tried where the
-    sensor-geometry coding applies; files a little larger.
+fast: sensor-rate encoding, as `lex3d compress --fast`: fewer codings and attribute methods
+    tried; files a little larger.
 alphabet: an alphabet file (bytes, from learn_alphabet) to reuse; the model then references it.
 word_radius: metres, 0 derives it from the scan. iterations, seed: the learner's.
 threads: worker threads, [1, 64]; the bytes do not depend on it.
