@@ -1,5 +1,7 @@
 #include "lex3d/core/layout.hpp"
 
+#include "core/fast_atan2.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -28,9 +30,9 @@ class Directions {
     if (done_[i] == 0) {
       done_[i] = 1;
       const Eigen::Vector3d p = points_[i].cast<double>();
-      const double rho = std::hypot(p.x(), p.y());
+      const double rho = std::sqrt(p.x() * p.x() + p.y() * p.y());
       if (rho > 0.3 && p.allFinite())
-        d_[i] = {static_cast<float>(std::atan2(p.z(), rho)), static_cast<float>(std::atan2(p.y(), p.x())), true};
+        d_[i] = {static_cast<float>(detail::fast_atan2(p.z(), rho)), static_cast<float>(detail::fast_atan2(p.y(), p.x())), true};
     }
     return d_[i];
   }

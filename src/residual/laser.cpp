@@ -29,12 +29,14 @@
 #include "codec/bytes.hpp"
 #include "lex3d/core/parallel.hpp"
 #include "lex3d/core/layout.hpp"
+#include "core/fast_atan2.hpp"
 #include "residual/angles.hpp"
 #include "residual/counting.hpp"
 #include "residual/mixing.hpp"
 #include "residual/point_ball_grid.hpp"
 
 namespace lex3d::residual::detail {
+using lex3d::detail::fast_atan2;
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -644,8 +646,8 @@ struct ScanPoints {
 
   explicit ScanPoints(std::vector<Eigen::Vector3d> points) : p(std::move(points)), rho(p.size()), azimuth(p.size()) {
     for (std::size_t i = 0; i < p.size(); ++i) {
-      rho[i] = std::hypot(p[i].x(), p[i].y());
-      azimuth[i] = std::atan2(p[i].y(), p[i].x());
+      rho[i] = std::sqrt(p[i].x() * p[i].x() + p[i].y() * p[i].y());
+      azimuth[i] = fast_atan2(p[i].y(), p[i].x());
     }
   }
 };
@@ -667,12 +669,21 @@ std::optional<LaserTable> estimate_table(const ScanPoints& scan, const std::vect
   const std::vector<Eigen::Vector3d>& p = scan.p;
   const std::vector<double>& rho_of = scan.rho;
   const std::size_t n_points = p.size();
-  std::vector<double> beam_rho_of(n_points), beam_azimuth_of(n_points);
+  // (the beam's azimuth as its cosine and sine: x / ρ and y / ρ turned back by asin(d / ρ))
+  std::vector<double> beam_rho_of(n_points), beam_cos_of(n_points), beam_sin_of(n_points);
   for (std::size_t i = 0; i < n_points; ++i) {
     const double d = sideways(ring[i]), r = rho_of[i];
-    const double a = scan.azimuth[i];
     beam_rho_of[i] = d == 0.0 ? r : std::sqrt(std::max(0.0, r * r - d * d));
-    beam_azimuth_of[i] = d == 0.0 || !(r > 0.0) ? a : a - std::asin(std::clamp(d / r, -1.0, 1.0));
+    if (!(r > 0.0)) continue;
+    const double c = p[i].x() / r, sn = p[i].y() / r;
+    if (d == 0.0) {
+      beam_cos_of[i] = c;
+      beam_sin_of[i] = sn;
+    } else {
+      const double ss = std::clamp(d / r, -1.0, 1.0), cs = std::sqrt(1.0 - ss * ss);
+      beam_cos_of[i] = c * cs + sn * ss;
+      beam_sin_of[i] = sn * cs - c * ss;
+    }
   }
   const auto beam_rho = [&](std::uint32_t i) { return beam_rho_of[i]; };
   std::vector<std::vector<std::uint32_t>> of(lasers);
@@ -685,6 +696,14 @@ std::optional<LaserTable> estimate_table(const ScanPoints& scan, const std::vect
   t.z_offset.assign(lasers, 0);
   t.radial_offset.assign(lasers, 0);
   // Direction of the grid: the one that explains the azimuths better over all lasers.
+  // (the points' beam azimuths less their columns', as cosine and sine: the columns'
+  // cosines and sines once, the differences by the angle-difference identities)
+  std::vector<double> column_cos(columns), column_sin(columns);
+  for (std::uint32_t c = 0; c < columns; ++c) {
+    const double g = kTwoPi * static_cast<double>(c) / columns;
+    column_cos[c] = std::cos(g);
+    column_sin[c] = std::sin(g);
+  }
   double best_r = -1.0;
   for (int dir : {1, -1}) {
     double total = 0.0;
@@ -695,9 +714,10 @@ std::optional<LaserTable> estimate_table(const ScanPoints& scan, const std::vect
       std::size_t n = 0;
       for (std::uint32_t i : of[l]) {
         if (!(rho_of[i] > 1e-3)) continue;
-        const double a = beam_azimuth_of[i] - dir * kTwoPi * static_cast<double>(column[i]) / columns;
-        sc += std::cos(a);
-        ss += std::sin(a);
+        const std::uint32_t c = column[i] % columns;
+        const double gc = column_cos[c], gs = dir * column_sin[c];
+        sc += beam_cos_of[i] * gc + beam_sin_of[i] * gs;
+        ss += beam_sin_of[i] * gc - beam_cos_of[i] * gs;
         ++n;
       }
       const auto [mean, r] = circular_mean(sc, ss, n);
@@ -1127,7 +1147,7 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
     elevation.resize(far.size());
     for (std::size_t k = 0; k < far.size(); ++k) {
       const std::uint32_t i = far[k];
-      const double e = std::atan2(p[i].z() - h, rho[i]);
+      const double e = fast_atan2(p[i].z() - h, rho[i]);
       elevation[k] = e;
       mn = std::min(mn, e);
       mx = std::max(mx, e);
@@ -1215,7 +1235,7 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
   ring.resize(n);
   for (std::size_t i = 0, k = 0; i < n; ++i) {
     const bool in_far = k < far.size() && far[k] == i;
-    const double e = in_far ? far_elevation[k++] : std::atan2(p[i].z() - best_h, rho[i]);
+    const double e = in_far ? far_elevation[k++] : fast_atan2(p[i].z() - best_h, rho[i]);
     const auto it = std::lower_bound(peaks.begin(), peaks.end(), e);
     std::size_t l = static_cast<std::size_t>(it - peaks.begin());
     if (l == peaks.size() || (l > 0 && e - peaks[l - 1] < *it - e)) l = l == 0 ? 0 : l - 1;
@@ -1306,7 +1326,7 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
   constexpr double kBin = 0.01 * kPi / 180.0;
   std::vector<std::uint32_t> far;
   for (std::size_t i = 0; i < points.size(); ++i)
-    if (std::hypot(points[i].x(), points[i].y()) >= 1.0) far.push_back(static_cast<std::uint32_t>(i));
+    if (points[i].x() * points[i].x() + points[i].y() * points[i].y() >= 1.0) far.push_back(static_cast<std::uint32_t>(i));
   if (far.size() < 256) return std::nullopt;
   struct Sample {
     double x, y, z, azimuth;
@@ -1316,7 +1336,7 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
   sample.reserve(count);
   for (std::size_t k = 0; k < count; ++k) {
     const Eigen::Vector3d& q = points[far[k * far.size() / count]];
-    sample.push_back({q.x(), q.y(), q.z(), std::atan2(q.y(), q.x())});
+    sample.push_back({q.x(), q.y(), q.z(), fast_atan2(q.y(), q.x())});
   }
   // (tangents within ±kTangentBins bins: elevations within ±60°, beyond any spinning lidar's beams)
   const double kTangentBins = std::ceil(std::sqrt(3.0) / kBin);
@@ -1842,7 +1862,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     if (!layout) motion = estimate_motion(sensor_points, fast);
     if (motion)
       for (Eigen::Vector3d& q : sensor_points) {
-        const double t = motion->tau(std::atan2(q.y(), q.x()));
+        const double t = motion->tau(fast_atan2(q.y(), q.x()));
         q.x() -= motion->travel.x() * t;
         q.y() -= motion->travel.y() * t;
       }
@@ -2319,15 +2339,13 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
       const std::uint32_t column = a.column[coded[order[at]]];
       std::size_t end = at;
       off.clear();
-      // (the beams' azimuth before the shift: the column's plus the laser's offsets)
-      const double column_azimuth =
-          beams.azimuth0 + beams.column_angle * static_cast<double>(column);
+      // (a point's azimuth off its beam's unshifted direction, whose cosine and sine its
+      // Trig holds: the angle of the offset turned back by the beam's azimuth)
       for (; end < order.size() && a.column[coded[order[end]]] == column; ++end) {
         const Eigen::Vector3d& v = offset[end];
         if (v.x() * v.x() + v.y() * v.y() < 1.0) continue;
-        const std::uint16_t l = a.ring[coded[order[end]]];
-        const double beam = column_azimuth + beams.col_az[l] + beams.beam_az[l];
-        off.push_back(wrap_angle(std::atan2(v.y(), v.x()) - beam));
+        const Beams::Trig& b = beam_of[end];
+        off.push_back(fast_atan2(b.cb * v.y() - b.sb * v.x(), b.cb * v.x() + b.sb * v.y()));
       }
       std::int64_t s = last;
       if (!off.empty()) {
