@@ -9,6 +9,8 @@
 #include <limits>
 #include <utility>
 
+#include "residual/counting.hpp"
+
 namespace lex3d::residual::detail {
 namespace {
 
@@ -192,7 +194,23 @@ std::optional<Lattice> find_lattice(const std::vector<Eigen::Vector3f>& input, c
     const auto [cx, cy] = key(input[k].x(), input[k].y());
     cells.emplace_back(packed(cx, cy), k);
   }
-  std::sort(cells.begin(), cells.end());
+  // (sorted by cell, then point: by a counting sort over the cells where they are few and
+  // `coded` ascends, so that its order within a cell is the points' order)
+  const auto [nx, ny] = key(x_hi, y_hi);
+  const auto grid = static_cast<std::uint64_t>(nx + 1) * static_cast<std::uint64_t>(ny + 1);
+  if (counting_pays(grid, coded.size()) && std::is_sorted(coded.begin(), coded.end())) {
+    const auto ny1 = static_cast<std::uint64_t>(ny + 1);
+    const auto dense = [&](std::size_t j) {
+      const std::uint64_t c = cells[j].first;
+      return static_cast<std::size_t>(((c >> 32) - 2) * ny1 + ((c & 0xFFFFFFFFU) - 2));
+    };
+    const std::vector<std::uint32_t> order = counting_order(cells.size(), static_cast<std::size_t>(grid), dense);
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> sorted(cells.size());
+    for (std::size_t j = 0; j < order.size(); ++j) sorted[j] = cells[order[j]];
+    cells.swap(sorted);
+  } else {
+    std::sort(cells.begin(), cells.end());
+  }
   const auto in_cell = [&](std::int64_t cx, std::int64_t cy, auto&& visit) {
     if (cx < -2 || cy < -2) return;
     const std::uint64_t k = packed(cx, cy);
