@@ -25,6 +25,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <unordered_map>
 
 #include "codec/bytes.hpp"
 #include "lex3d/core/parallel.hpp"
@@ -1347,7 +1348,7 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
   std::vector<double> tau(sample.size(), 0.0);
   double tau_cut = std::numeric_limits<double>::quiet_NaN();
   // (every fourth sample point where `coarse`)
-  const auto sharpness = [&](double h, const TurnMotion& m, bool coarse) {
+  const auto compute_sharpness = [&](double h, const TurnMotion& m, bool coarse) {
     const bool moves = !m.travel.isZero();
     if (moves && !(m.cut == tau_cut)) {
       for (std::size_t k = 0; k < sample.size(); ++k) tau[k] = m.tau(sample[k].azimuth);
@@ -1379,6 +1380,34 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
       hist[b + 1] = 0.0;
     }
     return sum;
+  };
+  // (each value on all the sample points kept by its exact height, start and travel: the
+  // searches below step back onto points they have been, and try the same travels again
+  // from a new start azimuth's first steps)
+  struct Key {
+    double h, cut, x, y;
+    bool operator==(const Key& o) const {
+      return std::memcmp(this, &o, sizeof(Key)) == 0;
+    }
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::uint64_t w[4];
+      std::memcpy(w, &k, sizeof w);
+      std::uint64_t x = 0x9E3779B97F4A7C15ULL;
+      for (const std::uint64_t v : w) x = (x ^ v) * 0xBF58476D1CE4E5B9ULL;
+      return static_cast<std::size_t>(x ^ (x >> 31));
+    }
+  };
+  std::unordered_map<Key, double, KeyHash> seen;
+  const auto sharpness = [&](double h, const TurnMotion& m, bool coarse) {
+    if (coarse) return compute_sharpness(h, m, coarse);
+    const Key key{h, m.cut, m.travel.x(), m.travel.y()};
+    const auto it = seen.find(key);
+    if (it != seen.end()) return it->second;
+    const double v = compute_sharpness(h, m, false);
+    seen.emplace(key, v);
+    return v;
   };
   const TurnMotion still;
   double h = 0.0, best = -1.0;
