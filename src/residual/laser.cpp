@@ -1311,12 +1311,13 @@ struct TurnMotion {
 /// sharpest) fall into the sharpest peaks: the sum of squared counts of bins of their
 /// tangents 0.01° wide at the horizon, on at most 4096 points beyond 1 m, searched over 8
 /// start azimuths and travels up to 2 m a turn in x and y (every 0.5 m, on a quarter of
-/// the points), then refined by steps of 0.25, 0.1 and 0.05 m, and the start within π/8
-/// (`fast`: within 7π/64 by halving steps; the same travel on the ten kitti00 scans).
+/// the points), then refined by steps of 0.25, 0.1 and 0.05 m, and the start within 7π/64
+/// by halving steps (6 starts: trying all 16 within π/8, as before, gave the same files on
+/// the 300 codings of bench/fast.sh and the 105 of the encoder's byte checks).
 /// nullopt where no travel within the search
 /// sharpens the elevations by kMotionGain or more: a scan as the sensor took it, one too
 /// still to tell, or one whose sharpest travel lies at the edge of the search.
-std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& points, bool fast = false) {
+std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& points) {
   // (the gain a travel must bring: scans taken as the sensor saw them gain up to 8 % by
   // fitting the four parameters to their noise, balm's non-spinning scans included;
   // KITTI's, at 8 m/s, 110-120 %)
@@ -1489,20 +1490,15 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
     }
     return true;
   };
-  if (fast) {
-    // (fast: halving steps of 4, 2 and 1 around the best start so far, 6 starts, not 16)
-    int centre = 0;
-    for (const int step : {4, 2, 1}) {
-      const int from = centre;
-      for (const int k : {from - step, from + step}) {
-        const double before = best;
-        if (!try_start(k)) return std::nullopt;
-        if (best > before) centre = k;
-      }
+  // (halving steps of 4, 2 and 1 around the best start so far)
+  int centre = 0;
+  for (const int step : {4, 2, 1}) {
+    const int from = centre;
+    for (const int k : {from - step, from + step}) {
+      const double before = best;
+      if (!try_start(k)) return std::nullopt;
+      if (best > before) centre = k;
     }
-  } else {
-    for (int k = -8; k <= 8; ++k)
-      if (k != 0 && !try_start(k)) return std::nullopt;
   }
   // Against no motion at its own sharpest height, both within 10 cm of the first (1 cm steps).
   double moving = best, none = -1.0;
@@ -1888,7 +1884,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
     // in firing or row order, which is as the sensor saw it): the lasers, columns and table
     // are estimated from the points as the sensor saw them, and the table carries the motion.
     std::optional<TurnMotion> motion;
-    if (!layout) motion = estimate_motion(sensor_points, fast);
+    if (!layout) motion = estimate_motion(sensor_points);
     if (motion)
       for (Eigen::Vector3d& q : sensor_points) {
         const double t = motion->tau(fast_atan2(q.y(), q.x()));

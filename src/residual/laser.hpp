@@ -78,7 +78,7 @@ struct LaserAssignment {
 /// lasers from the points' elevations. nullopt when the cloud does not look like a spinning
 /// lidar's scan. `threads`: the two estimates side by side with 2 or more (the result does
 /// not depend on it). `fast` (LayerOptions::fast): the cones estimated on a quarter as many
-/// points, and a moving sensor's start azimuth found by halving steps.
+/// points.
 [[nodiscard]] std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_cloud_sensor,
                                                            bool estimate, int threads = 1, bool fast = false);
 

@@ -66,7 +66,7 @@ struct LayerOptions {
   /// gridded product) and keep it when it codes smaller.
   bool lattice = true;
   /// Sensor-rate encoding: lasers estimated from the points as cones on a quarter as many
-  /// points, a motion-compensated scan's start azimuth found by halving steps; the
+  /// points; the
   /// sensor-geometry coding chooses its range step and predictor on an eighth of the columns
   /// (not a quarter); and beside it a spherical coding (no sweep) or the voxel coding is
   /// coded in full only where its trial window beats it (the voxel trial on a quarter of the
