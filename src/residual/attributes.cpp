@@ -155,6 +155,19 @@ class MixedTree {
  public:
   explicit MixedTree(std::uint64_t span) : n_(span + 1), fine_(std::min<std::uint64_t>(n_, kFine)) {
     while ((std::uint64_t{1} << bits_) <= span) ++bits_;
+    // (each value's buckets and each change's activity class, once: four divisions a value
+    // otherwise, in the encoder's and the decoder's innermost loop)
+    const auto n = static_cast<std::size_t>(n_);
+    coarse_.resize(n);
+    fine_bucket_.resize(n);
+    near_.resize(n);
+    activity_.resize(n);
+    for (std::size_t v = 0; v < n; ++v) {
+      coarse_[v] = static_cast<std::uint16_t>(bucket(static_cast<std::int64_t>(v), kCoarse));
+      fine_bucket_[v] = static_cast<std::uint16_t>(bucket(static_cast<std::int64_t>(v), fine_));
+      near_[v] = static_cast<std::uint16_t>(bucket(static_cast<std::int64_t>(v), kNear));
+      activity_[v] = static_cast<std::uint8_t>(activity(static_cast<std::int64_t>(v), 0, n_));
+    }
     const std::size_t nodes = std::size_t{1} << bits_;
     models_[0].resize(static_cast<std::size_t>(kCoarse * kActivity) * nodes);
     models_[1].resize(static_cast<std::size_t>(fine_) * kActivity * nodes);
@@ -185,14 +198,25 @@ class MixedTree {
  private:
   static constexpr int kCoarse = 32, kNear = 16, kFine = 256;
   static constexpr std::int32_t kInitialWeight = 21845;
+  std::size_t bucket(std::int64_t v, std::uint64_t buckets) const {
+    return static_cast<std::size_t>(static_cast<std::uint64_t>(v) * buckets / n_);
+  }
   void start(std::int64_t prev, std::int64_t prev2, std::int64_t up) {
-    const auto b = [&](std::int64_t v, std::uint64_t buckets) {
-      return static_cast<std::size_t>(static_cast<std::uint64_t>(v) * buckets / n_);
-    };
-    const auto act = static_cast<std::size_t>(activity(prev, prev2, n_));
-    ctx_[0] = (b(prev, kCoarse) * kActivity + act) << bits_;
-    ctx_[1] = (b(prev, fine_) * kActivity + act) << bits_;  // the value itself for spans below 256
-    ctx_[2] = (b(prev, kNear) * kNear + b(up, kNear)) << bits_;
+    // (values in [0, span], as coded and decoded: from the tables; any other by division)
+    const auto in = [&](std::int64_t v) { return v >= 0 && static_cast<std::uint64_t>(v) < n_; };
+    const std::int64_t change = prev > prev2 ? prev - prev2 : prev2 - prev;
+    const auto act = static_cast<std::size_t>(in(change) ? activity_[static_cast<std::size_t>(change)]
+                                                          : activity(prev, prev2, n_));
+    if (in(prev) && in(up)) {
+      const auto p = static_cast<std::size_t>(prev);
+      ctx_[0] = (coarse_[p] * kActivity + act) << bits_;
+      ctx_[1] = (fine_bucket_[p] * kActivity + act) << bits_;  // the value itself for spans below 256
+      ctx_[2] = (near_[p] * kNear + near_[static_cast<std::size_t>(up)]) << bits_;
+      return;
+    }
+    ctx_[0] = (bucket(prev, kCoarse) * kActivity + act) << bits_;
+    ctx_[1] = (bucket(prev, fine_) * kActivity + act) << bits_;
+    ctx_[2] = (bucket(prev, kNear) * kNear + bucket(up, kNear)) << bits_;
   }
   /// The probability of a 0 (in 1/4096) of the bit at depth `d` (0: the most significant)
   /// under tree node `node`.
@@ -207,6 +231,8 @@ class MixedTree {
   std::array<std::vector<YoungBitModel>, 3> models_;
   std::unique_ptr<Mix3> mix_;  // one weight set per bit depth
   std::array<std::size_t, 3> ctx_{};
+  std::vector<std::uint16_t> coarse_, fine_bucket_, near_;  // by value
+  std::vector<std::uint8_t> activity_;                     // by change |prev - prev2|
 };
 
 /// The models of one channel for one method.
@@ -219,15 +245,27 @@ struct ChannelCoder {
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
   BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
+  std::vector<std::uint8_t> tree_bucket, tree_activity;  // method 2: by value, by change
   ChannelCoder(std::uint8_t m, std::uint64_t s) : method(m), span(s) {
     if (method == kMethodTree) {
       while ((std::uint64_t{1} << bits) <= span) ++bits;
       tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
+      // (each value's bucket and each change's class once, not two divisions a value)
+      const std::uint64_t n = span + 1;
+      tree_bucket.resize(static_cast<std::size_t>(n));
+      tree_activity.resize(static_cast<std::size_t>(n));
+      for (std::uint64_t v = 0; v < n; ++v) {
+        tree_bucket[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(v * kBuckets / n);
+        tree_activity[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(activity(static_cast<std::int64_t>(v), 0, n));
+      }
     }
     if (is_mixed(method)) mixed = std::make_unique<MixedTree>(span);
   }
   [[nodiscard]] int tree_context(std::int64_t prev, std::int64_t prev2) const {
     const std::uint64_t n = span + 1;
+    const std::int64_t change = prev > prev2 ? prev - prev2 : prev2 - prev;
+    if (prev >= 0 && static_cast<std::uint64_t>(prev) < n && static_cast<std::uint64_t>(change) < n)
+      return tree_bucket[static_cast<std::size_t>(prev)] * kActivity + tree_activity[static_cast<std::size_t>(change)];
     const int bucket = static_cast<int>(static_cast<std::uint64_t>(prev) * kBuckets / n);
     return bucket * kActivity + activity(prev, prev2, n);
   }

@@ -329,7 +329,11 @@ class PointCoder {
         occ_mix_(predictor >= 4 ? std::make_unique<OccupancyMix>(lasers) : nullptr), lasers_(lasers), spacing_(spacing), sel_(lasers, 0),
         last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone), last_res_(lasers, 0),
         last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0),
-        occ_prev2_(lasers + 1, 0), err_(lasers, 0) {}
+        occ_prev2_(lasers + 1, 0), err_(lasers, 0), eighth_(lasers) {
+    // (each laser's eighth of the table once, not a division a point)
+    for (std::uint32_t l = 0; l < lasers; ++l)
+      eighth_[l] = static_cast<std::uint8_t>((static_cast<std::uint64_t>(l) * 8) / lasers);
+  }
 
   // --- structure ---
   int column_ctx() const { return IntModel::context_of(last_dc_); }
@@ -475,7 +479,7 @@ class PointCoder {
     const int activity = p.ctx / kClasses, second = p.ctx % kClasses;
     const std::uint64_t a = pk < 0 ? static_cast<std::uint64_t>(-pk) : static_cast<std::uint64_t>(pk);
     const int size = std::clamp(bit_length(a) - 4, 0, 15);
-    const int eighth = static_cast<int>((static_cast<std::uint64_t>(l) * 8) / lasers_);
+    const int eighth = eighth_[l];
     const int gradient = IntModel::context_of(p.gradient);
     return {{p.ctx, size * kClasses + activity, (gradient * kClasses + second) * 8 + eighth}, sign_ctx(l), activity};
   }
@@ -516,6 +520,7 @@ class PointCoder {
   std::vector<std::int64_t> last_res_, last_k1_, last_k2_;
   std::vector<std::uint8_t> occ_prev_, occ_now_, occ_prev2_;  // one extra laser, never occupied
   std::vector<std::int64_t> err_;                  // per laser: recent prediction errors
+  std::vector<std::uint8_t> eighth_;               // per laser: l · 8 / lasers
   std::int64_t last_dc_ = 0, last_any_ = 0, last_k1_any_ = 0, last_shift_ = 0, last_shift_delta_ = 0;
   std::uint32_t column_ = 0, up_ = kNone;
   bool started_ = false;
