@@ -19,6 +19,7 @@
 #include <cstring>
 #include <unordered_map>
 #include <functional>
+#include <future>
 #include <optional>
 #include <limits>
 #include <stdexcept>
@@ -795,6 +796,24 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   const std::size_t lattice_bytes =
       lattice ? extra_bytes(kCodingLattice) + lattice->stream.size() : std::numeric_limits<std::size_t>::max();
   if (lasers_of && std::isfinite(grid_bits) && !exact_table && lasers_of->fit_rms > 4.0 * max_error) lasers_of.reset();
+  // On two threads or more, the voxel trial of a large layer (below) starts now, beside the
+  // sensor-geometry coding, whose coding in full keeps one thread alone: it is the same trial
+  // on the same window, so the file is the same. Not beside a table read from the sensor,
+  // where the trial waits for that coding's bits. The window is the one the trial takes beside
+  // a sensor-geometry coding (a quarter as large with `fast`); should that coding fail, the
+  // trial is made again on its own window.
+  std::future<std::optional<VoxelLayer>> early_voxel;
+  std::size_t early_span = 0;
+  if (threads >= 2 && lasers_of && !exact_table && options.spherical && voxel_allowed &&
+      coded.size() > 4 * kOrderTrialPoints) {
+    early_span = std::min(coded.size(), (options.fast ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
+    early_voxel = std::async(std::launch::async, [&input, &coded, check_error, span = early_span] {
+      const std::size_t at = coded.size() / 2 - span / 2;
+      const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
+                                            coded.begin() + static_cast<std::ptrdiff_t>(at + span));
+      return voxel_layer(RangeEncoder{}, input.points, wide, check_error);
+    });
+  }
   if (lasers_of) {
     const std::vector<double> shares =
         exact_table ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
@@ -834,15 +853,19 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
-      const auto voxel_trial = [&] {
-        const std::size_t span = std::min(coded.size(), (fast_laser ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
-        const std::size_t at = coded.size() / 2 - span / 2;
-        const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
-                                              coded.begin() + static_cast<std::ptrdiff_t>(at + span));
-        const auto v = voxel_layer(RangeEncoder{}, input.points, wide, check_error);
-        voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(span)
+      const std::size_t voxel_span = std::min(coded.size(), (fast_laser ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
+      const auto voxel_trial_bits = [&](const std::optional<VoxelLayer>& v) {
+        voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(voxel_span)
                               : std::numeric_limits<double>::infinity();
       };
+      const auto voxel_trial = [&] {
+        const std::size_t at = coded.size() / 2 - voxel_span / 2;
+        const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
+                                              coded.begin() + static_cast<std::ptrdiff_t>(at + voxel_span));
+        voxel_trial_bits(voxel_layer(RangeEncoder{}, input.points, wide, check_error));
+      };
+      // (the trial started beside the sensor-geometry coding, where it is this one)
+      const bool early = early_voxel.valid() && early_span == voxel_span;
       // Where half the points or more lie closer to their laser's next than a voxel cell is
       // wide, the voxel coding (which merges such points) is tried in full whatever the
       // trials say: on the Ouster turns at E = 20 cm it coded 15 % smaller than the
@@ -865,7 +888,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const bool defer_voxel = laser && exact_table;
       // (the voxel trial, the longest job, first: the other thread meanwhile takes the
       // spherical ones)
-      const std::size_t first_way = try_voxel && !defer_voxel ? 1 : 0;
+      const std::size_t first_way = try_voxel && !defer_voxel && !early ? 1 : 0;
       // The sensor-geometry coding, already coded in full, rules out a voxel coding whose
       // trial costs kLaserSkipRatio times its bits or more.
       const double laser_bits =
@@ -891,6 +914,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         trial[w] = code(ways[w].by_rows ? window_rows : window, ways[w].sweep, e, n, nullptr, give_up, &gave_up).size();
         if (gave_up) trial[w] = give_up + 1;
       }, 1);
+      if (try_voxel && !defer_voxel && early) voxel_trial_bits(early_voxel.get());
       for (std::size_t w = 1; w < ways.size(); ++w)
         if (trial[w] < trial[best]) best = w;
       const double spherical_window_bits =
