@@ -58,9 +58,13 @@ struct YoungBitModel {
     static constexpr std::uint8_t kStep[16] = {1 | 1 << 3,  2 | 2 << 3,  2 | 3 << 3,  3 | 4 << 3,  3 | 5 << 3,  3 | 6 << 3,
                                                3 | 7 << 3,  4 | 8 << 3,  4 | 9 << 3,  4 | 10 << 3, 4 | 11 << 3, 4 | 12 << 3,
                                                4 | 13 << 3, 4 | 14 << 3, 4 | 15 << 3, 5 | 15 << 3};
-    const unsigned step = kStep[seen & 15U];
-    const unsigned shift = step & 7U;
-    seen = static_cast<std::uint8_t>(step >> 3);
+    // (a model past its first 15 bits, as most are, keeps moving by 1/32: no table lookup)
+    unsigned shift = 5;
+    if (seen < 15) {
+      const unsigned step = kStep[seen];
+      shift = step & 7U;
+      seen = static_cast<std::uint8_t>(step >> 3);
+    }
     const std::uint32_t p = p1;
     p1 = static_cast<std::uint16_t>(bit ? std::min<std::uint32_t>(p + ((65536U - p) >> shift), 65280)
                                         : std::max<std::uint32_t>(p - (p >> shift), 256));
