@@ -8,20 +8,23 @@
 # With CALLGRIND=1 (and valgrind installed) also the instructions of one run of each,
 # which, unlike times, do not move with the machine's load.
 #
-# Usage: bench/encode_speed.sh [--lex3d BIN] [--runs N] [--error E] [--threads T] [SCAN...]
-#   SCAN   default: ../shared/data/kitti00/000000.bin and 000005.bin
+# Usage: bench/encode_speed.sh [--lex3d BIN] [--runs N] [--error E] [--threads T] [--attributes] [SCAN...]
+#   SCAN          default: ../shared/data/kitti00/000000.bin and 000005.bin
+#   --attributes  keep the scans' attributes (the command's default) instead of positions only
 set -euo pipefail
 cd "$(dirname "$0")/.."
 LEX3D=build/lex3d
 RUNS=11
 E=0.014
 THREADS=1
+KEEP=(--drop-attributes)
 while [ $# -gt 0 ]; do
   case "$1" in
     --lex3d) LEX3D="$2"; shift 2 ;;
     --runs) RUNS="$2"; shift 2 ;;
     --error) E="$2"; shift 2 ;;
     --threads) THREADS="$2"; shift 2 ;;
+    --attributes) KEEP=(); shift ;;
     -*) echo "encode_speed.sh: unknown option $1" >&2; exit 1 ;;
     *) break ;;
   esac
@@ -37,7 +40,7 @@ fi
 [ ${#scans[@]} -gt 0 ] || { echo "encode_speed.sh: no scans given and none under ../shared/data/kitti00" >&2; exit 1; }
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
-echo "load: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores; $RUNS runs each, E = $E m, --threads $THREADS"
+echo "load: $(cut -d' ' -f1-3 /proc/loadavg) on $(nproc) cores; $RUNS runs each, E = $E m, --threads $THREADS, $([ ${#KEEP[@]} -eq 0 ] && echo "attributes kept" || echo "positions only")"
 
 # timed NAME ARGS...: one whole-process run, appending its wall milliseconds to $tmp/NAME
 timed() {
@@ -52,7 +55,7 @@ timed() {
 printf "%-34s %-8s %9s %9s %9s %9s\n" scan run median_ms min_ms max_ms bytes
 for scan in "${scans[@]}"; do
   rm -f "$tmp/default" "$tmp/fast" "$tmp/decode"
-  common=(--max-error "$E" --drop-attributes --threads "$THREADS" --quiet)
+  common=(--max-error "$E" ${KEEP[@]+"${KEEP[@]}"} --threads "$THREADS" --quiet)
   for _ in $(seq "$RUNS"); do
     timed default "$LEX3D" compress "$scan" -o "$tmp/d.lex3dm" "${common[@]}"
     timed fast "$LEX3D" compress "$scan" -o "$tmp/f.lex3dm" "${common[@]}" --fast
