@@ -148,26 +148,30 @@ int activity(std::int64_t prev, std::int64_t prev2, std::uint64_t n) {
   return change == 0 ? 0 : change < 2 ? 1 : change < 6 ? 2 : 3;
 }
 
+/// v · buckets / n for every value v in [0, n): a value's bucket from a table, not a
+/// division a value in the coders' innermost loops.
+std::vector<std::uint16_t> bucket_table(std::uint64_t n, std::uint64_t buckets) {
+  std::vector<std::uint16_t> t(static_cast<std::size_t>(n));
+  for (std::uint64_t v = 0; v < n; ++v) t[static_cast<std::size_t>(v)] = static_cast<std::uint16_t>(v * buckets / n);
+  return t;
+}
+
+/// activity(c, 0, n) for every change c = |prev − prev2| in [0, n).
+std::vector<std::uint8_t> activity_table(std::uint64_t n) {
+  std::vector<std::uint8_t> t(static_cast<std::size_t>(n));
+  for (std::uint64_t c = 0; c < n; ++c) t[static_cast<std::size_t>(c)] = static_cast<std::uint8_t>(activity(static_cast<std::int64_t>(c), 0, n));
+  return t;
+}
+
 /// Method 4: u's bits, most significant first, each predicted by three context models
 /// (young bit models) whose stretched probabilities are mixed with weights learnt per bit
 /// position (formats/model.md §2.10).
 class MixedTree {
  public:
-  explicit MixedTree(std::uint64_t span) : n_(span + 1), fine_(std::min<std::uint64_t>(n_, kFine)) {
+  explicit MixedTree(std::uint64_t span)
+      : n_(span + 1), fine_(std::min<std::uint64_t>(n_, kFine)), coarse_(bucket_table(n_, kCoarse)),
+        fine_bucket_(bucket_table(n_, fine_)), near_(bucket_table(n_, kNear)), activity_(activity_table(n_)) {
     while ((std::uint64_t{1} << bits_) <= span) ++bits_;
-    // (each value's buckets and each change's activity class, once: four divisions a value
-    // otherwise, in the encoder's and the decoder's innermost loop)
-    const auto n = static_cast<std::size_t>(n_);
-    coarse_.resize(n);
-    fine_bucket_.resize(n);
-    near_.resize(n);
-    activity_.resize(n);
-    for (std::size_t v = 0; v < n; ++v) {
-      coarse_[v] = static_cast<std::uint16_t>(bucket(static_cast<std::int64_t>(v), kCoarse));
-      fine_bucket_[v] = static_cast<std::uint16_t>(bucket(static_cast<std::int64_t>(v), fine_));
-      near_[v] = static_cast<std::uint16_t>(bucket(static_cast<std::int64_t>(v), kNear));
-      activity_[v] = static_cast<std::uint8_t>(activity(static_cast<std::int64_t>(v), 0, n_));
-    }
     const std::size_t nodes = std::size_t{1} << bits_;
     models_[0].resize(static_cast<std::size_t>(kCoarse * kActivity) * nodes);
     models_[1].resize(static_cast<std::size_t>(fine_) * kActivity * nodes);
@@ -245,19 +249,14 @@ struct ChannelCoder {
   IntModel ints{IntModel::kClasses * IntModel::kClasses};
   BitModel fixed;  // method 3: a laser whose values are all its first
   std::int64_t last_residual = 0;
-  std::vector<std::uint8_t> tree_bucket, tree_activity;  // method 2: by value, by change
+  std::vector<std::uint16_t> tree_bucket;  // method 0: by value
+  std::vector<std::uint8_t> tree_activity;  // method 0: by change
   ChannelCoder(std::uint8_t m, std::uint64_t s) : method(m), span(s) {
     if (method == kMethodTree) {
       while ((std::uint64_t{1} << bits) <= span) ++bits;
       tree.resize(static_cast<std::size_t>(kBuckets * kActivity) << bits);
-      // (each value's bucket and each change's class once, not two divisions a value)
-      const std::uint64_t n = span + 1;
-      tree_bucket.resize(static_cast<std::size_t>(n));
-      tree_activity.resize(static_cast<std::size_t>(n));
-      for (std::uint64_t v = 0; v < n; ++v) {
-        tree_bucket[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(v * kBuckets / n);
-        tree_activity[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(activity(static_cast<std::int64_t>(v), 0, n));
-      }
+      tree_bucket = bucket_table(span + 1, kBuckets);
+      tree_activity = activity_table(span + 1);
     }
     if (is_mixed(method)) mixed = std::make_unique<MixedTree>(span);
   }

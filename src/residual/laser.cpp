@@ -25,7 +25,6 @@
 #include <limits>
 #include <map>
 #include <numeric>
-#include <unordered_map>
 
 #include "codec/bytes.hpp"
 #include "lex3d/core/parallel.hpp"
@@ -720,7 +719,7 @@ std::optional<LaserTable> estimate_table(const ScanPoints& scan, const std::vect
       std::size_t n = 0;
       for (std::uint32_t i : of[l]) {
         if (!(rho_of[i] > 1e-3)) continue;
-        const std::uint32_t c = column[i] % columns;
+        const std::uint32_t c = column[i] < columns ? column[i] : column[i] % columns;
         const double gc = column_cos[c], gs = dir * column_sin[c];
         sc += beam_cos_of[i] * gc + beam_sin_of[i] * gs;
         ss += beam_sin_of[i] * gc - beam_cos_of[i] * gs;
@@ -1390,25 +1389,10 @@ std::optional<TurnMotion> estimate_motion(const std::vector<Eigen::Vector3d>& po
   // (each value on all the sample points kept by its exact height, start and travel: the
   // searches below step back onto points they have been, and try the same travels again
   // from a new start azimuth's first steps)
-  struct Key {
-    double h, cut, x, y;
-    bool operator==(const Key& o) const {
-      return std::memcmp(this, &o, sizeof(Key)) == 0;
-    }
-  };
-  struct KeyHash {
-    std::size_t operator()(const Key& k) const {
-      std::uint64_t w[4];
-      std::memcpy(w, &k, sizeof w);
-      std::uint64_t x = 0x9E3779B97F4A7C15ULL;
-      for (const std::uint64_t v : w) x = (x ^ v) * 0xBF58476D1CE4E5B9ULL;
-      return static_cast<std::size_t>(x ^ (x >> 31));
-    }
-  };
-  std::unordered_map<Key, double, KeyHash> seen;
+  std::map<std::array<double, 4>, double> seen;
   const auto sharpness = [&](double h, const TurnMotion& m, bool coarse) {
     if (coarse) return compute_sharpness(h, m, coarse);
-    const Key key{h, m.cut, m.travel.x(), m.travel.y()};
+    const std::array<double, 4> key{h, m.cut, m.travel.x(), m.travel.y()};
     const auto it = seen.find(key);
     if (it != seen.end()) return it->second;
     const double v = compute_sharpness(h, m, false);
@@ -1978,12 +1962,12 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
       // whatever its cost, unless that cost is not finite (a point that is not: the cost is
       // finite for finite points), as the choice below would then refuse it (kitti00 in
       // `--fast`, whose cones are given up: 37 M of 1.10 G instructions).
-      const bool both = cand[0].found && cand[1].found;
-      const bool finite = std::all_of(scan.p.begin(), scan.p.end(), [](const Eigen::Vector3d& q) { return q.allFinite(); });
+      const bool costs = (cand[0].found && cand[1].found) ||
+                         !std::all_of(scan.p.begin(), scan.p.end(), [](const Eigen::Vector3d& q) { return q.allFinite(); });
       parallel_for(cand.size(), threads, [&](std::size_t k) {
         Candidate& c = cand[k];
         if (!c.found) return;
-        c.cost = both || !finite ? assignment_cost(scan.p, c.ring, c.column, c.table) : 0.0;
+        c.cost = costs ? assignment_cost(scan.p, c.ring, c.column, c.table) : 0.0;
       }, 1);
       std::size_t pick = 0;
       for (std::size_t k = 1; k < cand.size(); ++k)

@@ -66,9 +66,8 @@ struct LayerOptions {
   /// gridded product) and keep it when it codes smaller.
   bool lattice = true;
   /// Sensor-rate encoding: lasers estimated from the points as cones on a quarter as many
-  /// points; the
-  /// sensor-geometry coding chooses its range step and predictor on an eighth of the columns
-  /// (not a quarter); and beside it a spherical coding (no sweep) or the voxel coding is
+  /// points; the sensor-geometry coding chooses its range step and predictor on an eighth of
+  /// the columns (not a quarter); and beside it a spherical coding (no sweep) or the voxel coding is
   /// coded in full only where its trial window beats it (the voxel trial on a quarter of the
   /// default's window) or the points lie closer together than a voxel cell. A KITTI scan in
   /// 0.6 of the time; of 300 files, 230 the same, 90 % within 0.5 % and the largest 1.06 times
