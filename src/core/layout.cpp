@@ -14,6 +14,9 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kSameElevation = 0.3 * kPi / 180.0;
 constexpr double kSameAzimuth = 2.0 * kPi / 180.0;
 constexpr std::size_t kMaxPairs = 20000;
+/// The share of a layout's points that must lie within kSameElevation of their laser's
+/// median elevation (number_lasers).
+constexpr double kKeptToLaser = 0.5;
 
 struct Direction {
   float elevation = 0, azimuth = 0;
@@ -73,6 +76,41 @@ double share_alike(Directions& d, std::size_t gap, bool same_azimuth_too, double
   return seen >= 64 ? static_cast<double>(alike) / static_cast<double>(seen) : 0.0;
 }
 
+/// Numbers `layout`'s lasers from the top beam down by the median elevation of their
+/// points and tells whether the points keep to their lasers: at least kKeptToLaser of the
+/// points within kSameElevation of their laser's median elevation. A count that
+/// happens to be lasers times columns in a cloud that dropped its no-returns passes the
+/// pair test (points a firing apart agree until the next drop-out) but not this one.
+bool number_lasers(Directions& d, OrderLayout& layout) {
+  const std::size_t n = d.size();
+  const auto laser_at = [&layout](std::size_t i) {
+    return layout.firing_major ? i % layout.lasers : i / layout.columns;
+  };
+  std::vector<std::vector<float>> el(layout.lasers);
+  for (std::size_t i = 0; i < n; ++i)
+    if (const Direction& a = d[i]; a.valid) el[laser_at(i)].push_back(a.elevation);
+  std::vector<float> median(layout.lasers, 0.0F);
+  for (std::uint32_t l = 0; l < layout.lasers; ++l) {
+    std::vector<float>& v = el[l];  // (reordered: the count below does not mind)
+    if (v.empty()) continue;
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    median[l] = v[v.size() / 2];
+  }
+  std::size_t kept = 0, seen = 0;
+  for (std::uint32_t l = 0; l < layout.lasers; ++l)
+    for (const float e : el[l]) {
+      ++seen;
+      if (std::abs(static_cast<double>(e) - median[l]) < kSameElevation) ++kept;
+    }
+  if (seen < 64 || static_cast<double>(kept) < kKeptToLaser * static_cast<double>(seen)) return false;
+  std::vector<std::uint16_t> order(layout.lasers);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](std::uint16_t a, std::uint16_t b) { return median[a] > median[b]; });
+  layout.laser_of.assign(layout.lasers, 0);
+  for (std::uint32_t k = 0; k < layout.lasers; ++k) layout.laser_of[order[k]] = static_cast<std::uint16_t>(k);
+  return true;
+}
+
 }  // namespace
 
 std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f>& points) {
@@ -90,7 +128,7 @@ std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f
         layout.lasers = l;
         layout.columns = static_cast<std::uint32_t>(n / l);
         layout.firing_major = true;
-        found = true;
+        found = number_lasers(d, layout);
       }
     }
   // Row by row: neighbours alike, and so are points a row apart in azimuth, not in elevation.
@@ -118,26 +156,10 @@ std::optional<OrderLayout> detect_order_layout(const std::vector<Eigen::Vector3f
         layout.lasers = rows;
         layout.columns = static_cast<std::uint32_t>(w);
         layout.firing_major = false;
-        found = true;
+        found = number_lasers(d, layout);
       }
     }
   if (!found) return std::nullopt;
-  // Lasers numbered from the top beam down by the median elevation of their points.
-  std::vector<std::vector<float>> el(layout.lasers);
-  for (std::size_t i = 0; i < n; ++i)
-    if (const Direction& a = d[i]; a.valid) el[layout.firing_major ? i % layout.lasers : i / layout.columns].push_back(a.elevation);
-  std::vector<float> median(layout.lasers, 0.0F);
-  for (std::uint32_t l = 0; l < layout.lasers; ++l) {
-    auto& v = el[l];
-    if (v.empty()) continue;
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-    median[l] = v[v.size() / 2];
-  }
-  std::vector<std::uint16_t> order(layout.lasers);
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&](std::uint16_t a, std::uint16_t b) { return median[a] > median[b]; });
-  layout.laser_of.assign(layout.lasers, 0);
-  for (std::uint32_t k = 0; k < layout.lasers; ++k) layout.laser_of[order[k]] = static_cast<std::uint16_t>(k);
   return layout;
 }
 

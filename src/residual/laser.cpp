@@ -1296,6 +1296,104 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
 }
 
 
+/// Lasers too sparse for the estimates' peaks, beyond the edge of the field of view the
+/// others span (a top beam that sees mostly sky: on a VLP-16 made from a KITTI scan, 11
+/// points of the +3.3° beam, which the cones gave to the +2° one). Each laser's points are
+/// fitted with a line z = h + t ρ (beyond 1 m); a point of the top laser more than
+/// kStrayAngle or 8 median deviations above its line (of the bottom laser, below it) is a
+/// stray. Strays whose elevations gather within kSparseWidth of one another, at least
+/// kSparseMin of them and at least half the strays within kSparseBackground, become a
+/// laser of their own (numbered after the others; finish_assignment orders the table).
+/// Within the field of view strays gathering at one elevation are rather the turns of a
+/// motion-compensated scan's lasers (KITTI's), not lasers of their own. Returns how many
+/// lasers were added.
+std::uint32_t recover_sparse_lasers(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers) {
+  static constexpr double kStrayAngle = 0.05 * kPi / 180.0;
+  constexpr double kSparseWidth = 0.02 * kPi / 180.0;
+  constexpr std::size_t kSparseMin = 8;
+  constexpr double kSparseBackground = 0.2 * kPi / 180.0;
+  const std::size_t n = scan.p.size();
+  if (lasers < 2 || n != ring.size()) return 0;
+  std::vector<double> sr(lasers, 0), sz(lasers, 0), srr(lasers, 0), srz(lasers, 0), cnt(lasers, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = scan.rho[i];
+    if (!(r >= 1.0) || ring[i] >= lasers || !std::isfinite(scan.p[i].z())) continue;
+    const std::uint16_t l = ring[i];
+    sr[l] += r;
+    sz[l] += scan.p[i].z();
+    srr[l] += r * r;
+    srz[l] += r * scan.p[i].z();
+    cnt[l] += 1;
+  }
+  std::vector<double> h(lasers, 0.0), t(lasers, 0.0);
+  std::vector<std::uint8_t> fitted(lasers, 0);
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    const double den = cnt[l] * srr[l] - sr[l] * sr[l];
+    if (cnt[l] < 8 || !(den > 1e-6 * cnt[l] * srr[l])) continue;
+    t[l] = (cnt[l] * srz[l] - sr[l] * sz[l]) / den;
+    h[l] = (sz[l] - t[l] * sr[l]) / cnt[l];
+    fitted[l] = 1;
+  }
+  // The top and bottom lasers (the steepest lines up and down): a sparse laser beyond the
+  // edge of the field of view gave them its points. Their points' angles off their lines,
+  // each laser's limit, and the strays beyond it, outward.
+  std::uint32_t top = lasers, bottom = lasers;
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    if (fitted[l] == 0) continue;
+    if (top == lasers || t[l] > t[top]) top = l;
+    if (bottom == lasers || t[l] < t[bottom]) bottom = l;
+  }
+  if (top == lasers || top == bottom) return 0;
+  std::vector<double> dev_top, dev_bottom;
+  std::vector<std::pair<double, std::uint32_t>> outward;  // (angle off the line, point)
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint16_t l = ring[i];
+    const double r = scan.rho[i];
+    if ((l != top && l != bottom) || !(r >= 1.0) || !std::isfinite(scan.p[i].z())) continue;
+    const double off = (scan.p[i].z() - h[l] - t[l] * r) / r;
+    (l == top ? dev_top : dev_bottom).push_back(std::abs(off));
+    if (l == top ? off > kStrayAngle : off < -kStrayAngle) outward.emplace_back(std::abs(off), static_cast<std::uint32_t>(i));
+  }
+  const auto limit_of = [](std::vector<double>& d) {
+    if (d.empty()) return std::numeric_limits<double>::infinity();
+    std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2), d.end());
+    return std::max(kStrayAngle, 8.0 * d[d.size() / 2]);
+  };
+  const double limit_top = limit_of(dev_top), limit_bottom = limit_of(dev_bottom);
+  // the strays' elevations seen from their laser's origin height, in order
+  std::vector<std::pair<double, std::uint32_t>> strays;
+  for (const auto& [off, i] : outward) {
+    const std::uint16_t l = ring[i];
+    if (off > (l == top ? limit_top : limit_bottom)) strays.emplace_back(std::atan2(scan.p[i].z() - h[l], scan.rho[i]), i);
+  }
+  if (strays.size() < kSparseMin) return 0;
+  std::sort(strays.begin(), strays.end());
+  std::uint32_t added = 0;
+  for (std::size_t a = 0; a < strays.size() && lasers < kMaxLasers;) {
+    // the run of strays within kSparseWidth of the first
+    std::size_t b = a;
+    while (b < strays.size() && strays[b].first - strays[a].first <= kSparseWidth) ++b;
+    if (b - a < kSparseMin) {
+      ++a;
+      continue;
+    }
+    const double e = strays[(a + b) / 2].first;
+    // (a laser's own, not a chance cluster of scattered strays: at least half the strays
+    // within kSparseBackground of it)
+    const auto lo = std::lower_bound(strays.begin(), strays.end(), std::make_pair(e - kSparseBackground, 0U));
+    const auto hi = std::upper_bound(strays.begin(), strays.end(), std::make_pair(e + kSparseBackground, ~0U));
+    if (2 * (b - a) < static_cast<std::size_t>(hi - lo)) {
+      ++a;
+      continue;
+    }
+    for (std::size_t k = a; k < b; ++k) ring[strays[k].second] = static_cast<std::uint16_t>(lasers);
+    ++lasers;
+    ++added;
+    a = b;
+  }
+  return added;
+}
+
 /// The sensor's travel over a turn, for a scan whose points were motion-compensated: each
 /// point moved to where it lies from the sensor's pose at one instant, so that seen from
 /// the head its beams no longer keep their elevations (KITTI's scans: ~0.85 m a turn at
@@ -1952,6 +2050,7 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
           peaks.set_value(found ? c.lasers : 0);
         }
         std::vector<double> tangential;
+        if (found) (void)recover_sparse_lasers(scan, c.ring, c.lasers);
         if (!found || !estimate_columns(scan, c.ring, c.lasers, c.column, c.columns, tangential, k == 0)) return;
         auto t = estimate_table(scan, c.ring, c.column, c.lasers, c.columns, tangential);
         if (!t || !storable(*t)) return;
@@ -2079,6 +2178,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   struct Coded {
     std::int64_t k = 0, k1 = 0, k2 = 0;
     Eigen::Vector3f decoded;
+    float rounding = 0.0F;  ///< the beam length's distance past step k, in steps (-1/2..1/2)
   };
   std::vector<Coded> q(m);  // by position t among the points coded (J(t) in `order`)
   std::vector<std::uint8_t> failed(m, 0);
@@ -2089,10 +2189,12 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     const Beams::Beam b = beams.beam(a.ring[i], beam_of[j]);
     const Eigen::Vector3d& v = offset[j];
     Coded& c = q[t];
-    if (!quantise(v.dot(b.u), qr, c.k)) {
+    const double along = v.dot(b.u);
+    if (!quantise(along, qr, c.k)) {
       failed[t] = 1;
       return;
     }
+    c.rounding = static_cast<float>(along / qr - static_cast<double>(c.k));
     c.decoded = beams.point(b, c.k, 0, 0, qr, qt);
     if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
     if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) {
@@ -2116,6 +2218,59 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     if (!found) failed[t] = 1;
   }, 4096);
   if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
+
+  // Rate-distortion choice of the beam lengths: a point whose length lies near the middle
+  // of two steps takes the step toward its laser's last point (the left neighbour, as the
+  // coder mostly predicts) where that keeps it within the bound and the bits it saves,
+  // at λ = 2 ln 2 / 12 · step² a bit (an entropy-coded uniform quantiser's slope, D = step²/12
+  // falling by 2 ln 2 · D a bit), outweigh the squared error it adds. The bits are those of
+  // the scan's own residuals against that neighbour. Each point must still decode within
+  // the bound of its own position, so the thinning below sees the final points.
+  {
+    static constexpr std::int64_t kSpan = 64;  // residuals beyond ±kSpan share the end bins
+    const std::uint32_t lasers = a.table.lasers();
+    std::vector<double> count(2 * kSpan + 1, 0.5);
+    std::vector<std::int64_t> last(lasers, 0);
+    std::vector<std::uint8_t> any(lasers, 0);
+    const auto bin = [](std::int64_t r) { return static_cast<std::size_t>(std::clamp(r, -kSpan, kSpan) + kSpan); };
+    double total = 0.5 * static_cast<double>(count.size());
+    for (std::size_t t = 0; t < m; ++t) {
+      const std::uint32_t l = a.ring[coded[order[J(t)]]];
+      if (any[l] != 0) {
+        count[bin(q[t].k - last[l])] += 1.0;
+        total += 1.0;
+      }
+      last[l] = q[t].k;
+      any[l] = 1;
+    }
+    std::vector<double> bits(count.size());
+    for (std::size_t r = 0; r < count.size(); ++r) bits[r] = -std::log2(count[r] / total);
+    std::fill(any.begin(), any.end(), 0);
+    const double lambda = 2.0 * std::log(2.0) / 12.0 * qr * qr;
+    // (the other step is within the bound only where the length's rounding is at least this
+    // far from the step it rounded to, in steps; a margin for the cross-beam part)
+    const double reach = 1.0 - bound / qr - 1e-9;
+    for (std::size_t t = 0; t < m; ++t) {
+      const std::size_t j = J(t);
+      const std::uint32_t i = coded[order[j]];
+      const std::uint32_t l = a.ring[i];
+      Coded& c = q[t];
+      const std::int64_t toward = any[l] == 0 || last[l] == c.k ? 0 : last[l] > c.k ? 1 : -1;
+      if (toward != 0 && static_cast<double>(toward) * c.rounding >= reach) {
+        const std::int64_t k = c.k + toward;
+        const Eigen::Vector3d truth = input[i].cast<double>();
+        const Eigen::Vector3f d = beams.point(beams.beam(l, beam_of[j]), k, c.k1, c.k2, qr, qt);
+        const double err = (d.cast<double>() - truth).squaredNorm();
+        if (err <= e2 && err - (c.decoded.cast<double>() - truth).squaredNorm() <
+                             lambda * (bits[bin(c.k - last[l])] - bits[bin(k - last[l])])) {
+          c.k = k;
+          c.decoded = d;
+        }
+      }
+      last[l] = c.k;
+      any[l] = 1;
+    }
+  }
 
   // Thinning (with `thin`): a point that a point decoded before it explains is not coded
   // where coding it would cost more than its neighbours (laser_layer): it needs a

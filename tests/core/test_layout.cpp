@@ -64,6 +64,21 @@ TEST(OrderLayout, RowByRow) {
   EXPECT_EQ(layout->column(1024 * 3 + 17), 17U);
 }
 
+TEST(OrderLayout, ACloudThatDroppedItsNoReturnsHasNoLayoutWhateverItsCount) {
+  // Ten lasers firing by firing, one return in 200 dropped (not kept as a placeholder), and
+  // the cloud cut to a multiple of ten points: points a firing apart still agree in 19 of 20
+  // pairs, but after the first drop-out position i % 10 is no longer laser i % 10.
+  const auto full = scan(10, 1800, true, 1 << 30);
+  std::vector<Eigen::Vector3f> p;
+  for (std::size_t i = 0; i < full.size(); ++i)
+    if (i % 200 != 77) p.push_back(full[i]);
+  p.resize(p.size() - p.size() % 10);
+  ASSERT_EQ(p.size() % 10, 0U);
+  EXPECT_FALSE(detect_order_layout(p).has_value());
+  // the same cloud with its placeholders keeps its layout
+  EXPECT_TRUE(detect_order_layout(full).has_value());
+}
+
 TEST(OrderLayout, NoOrderNoLayout) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(-20.0F, 20.0F);

@@ -168,6 +168,28 @@ TEST(ResidualLaser, WithoutRingsTheLasersAreEstimatedFromThePoints) {
   expect_layer_bound(layer, scan, Pose::Identity(), 0.01);
 }
 
+TEST(ResidualLaser, ASparseTopLaserIsALaserOfItsOwn) {
+  // The top beam (15 degrees) returns from 12 firings only, as a beam that sees mostly sky:
+  // too few points for an elevation peak, yet a laser of its own, not strays of the next one.
+  Cloud scan = organised_scan(16, 1024, 0.0, 3, 0.0, false);
+  Cloud sparse;
+  std::size_t top = 0;
+  for (std::size_t i = 0; i < scan.size(); ++i) {
+    if (scan.ring[i] == 0) {
+      if (scan.column[i] < 300 || top == 12) continue;
+      ++top;
+    }
+    sparse.points.push_back(scan.points[i]);
+  }
+  ASSERT_EQ(top, 12U);
+  residual::LayerStats st;
+  const Bytes layer = residual::encode_layer(sparse, Cloud{}, Pose::Identity(), 0.01, &st, only(true));
+  ASSERT_TRUE(st.laser);
+  EXPECT_EQ(st.lasers, 16U) << st.laser_table_source;
+  EXPECT_LT(st.laser_table_rms, 0.002) << "no point sits on the beam below its own";
+  expect_layer_bound(layer, sparse, Pose::Identity(), 0.01);
+}
+
 TEST(ResidualLaser, EstimatedBeamsThatMissThePointsStillCompete) {
   // Columns fired off their grid azimuths leave the estimated beams centimetres from the
   // points; the per-column azimuth shift takes that up, so the coding must still be tried
