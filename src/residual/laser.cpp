@@ -47,6 +47,9 @@ constexpr std::int64_t kMaxLengthUnits = 64 * 65536;
 /// Predictors 2 and 3: left and upper pixels more than this many range steps apart mark
 /// an edge, where a flag says which of them predicts (formats/model.md §2.8.2).
 constexpr std::int64_t kEdgeSteps = 16;
+/// The share of a layer's points sharing a pixel with the point before above which a
+/// pixel's points keep the input order (prepare_layer).
+constexpr double kSharedPixels = 0.25;
 /// Layers of this many points or more choose their range-step share and predictor on a
 /// quarter of the turn's columns and code only the winner in full.
 constexpr std::size_t kLaserTrialMinPoints = 32768;
@@ -2484,9 +2487,51 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
   const Beams& beams = prepared->beams;
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
 
-  // Column by column, lasers in order, then input order.
+  // Column by column, lasers in order; several points of one pixel (a laser that fired
+  // twice within a column) along the scan: by their azimuth in the grid's direction, then
+  // range, then input order, so that the file does not depend on the order of the input's
+  // points (kitti00/000000 at 14 mm: 77,902 bytes in its own order, 79,897 shuffled and
+  // 81,718 reversed when a pixel's points kept the input order; now 77,970, 77,769 and
+  // 77,915). Not where more than kSharedPixels of the points share a pixel with the point
+  // before: there the table is coarse for the points (an indoor scanner's room, 70 %) and
+  // the input order, a scanner's sweep, codes smaller (room_scan2 at 5 mm: 45,378 bytes
+  // against 53,148 along the azimuth).
   std::vector<std::uint32_t>& order = prepared->order;
   order = pixel_order(coded, a);
+  const auto same_pixel = [&](std::size_t x, std::size_t y) {
+    const std::uint32_t i = coded[order[x]], k = coded[order[y]];
+    return a.column[i] == a.column[k] && a.ring[i] == a.ring[k];
+  };
+  std::size_t shared = 0;
+  for (std::size_t at = 0; at + 1 < order.size(); ++at) shared += same_pixel(at, at + 1) ? 1 : 0;
+  if (static_cast<double>(shared) <= kSharedPixels * static_cast<double>(order.size())) {
+    struct Key {
+      double along, range;
+      std::uint32_t k;
+    };
+    std::vector<Key> run;
+    for (std::size_t at = 0; at < order.size();) {
+      std::size_t end = at + 1;
+      while (end < order.size() && same_pixel(at, end)) ++end;
+      if (end - at > 1) {
+        run.clear();
+        const Eigen::Vector3d p0 = T_head_cloud * input[coded[order[at]]].cast<double>();
+        const double az0 = fast_atan2(p0.y(), p0.x());
+        for (std::size_t j = at; j < end; ++j) {
+          const Eigen::Vector3d p = T_head_cloud * input[coded[order[j]]].cast<double>();
+          const double along = static_cast<double>(table.direction) * wrap_angle(fast_atan2(p.y(), p.x()) - az0);
+          run.push_back({std::isfinite(along) ? along : 0.0, p.allFinite() ? p.norm() : 0.0, order[j]});
+        }
+        std::sort(run.begin(), run.end(), [](const Key& x, const Key& y) {
+          if (x.along != y.along) return x.along < y.along;
+          if (x.range != y.range) return x.range < y.range;
+          return x.k < y.k;
+        });
+        for (std::size_t j = at; j < end; ++j) order[j] = run[j - at].k;
+      }
+      at = end;
+    }
+  }
   // Each column's azimuth shift: the median of its points' azimuths off their beams (a
   // sensor whose firings do not fall on an even grid), in the table's shift units.
   // Every point's beam (its azimuths' cosines and sines) and its offset from the beam's

@@ -431,6 +431,24 @@ TEST(ResidualLaser, LargeEstimatedScanChoosesOnASampleWhateverTheThreads) {
 
 /// Sensor-rate encoding at 15 cm on the KITTI sample, where the points lie closer together
 /// than a voxel cell: the voxel coding is still tried and kept, as by default.
+/// The same scan with its points in the reverse order codes to about the same size: the
+/// points of one pixel go along the scan, not in the input's order (the KITTI sample at
+/// 14 mm: 5 % larger reversed when they kept the input order).
+TEST(ResidualLaser, ThePointsOrderHardlyMatters) {
+  const Cloud scan = test::load_or_fail(test::sample("kitti00_000000.bin"));
+  Cloud reversed;
+  reversed.points.assign(scan.points.rbegin(), scan.points.rend());
+  residual::LayerOptions fast;
+  fast.fast = true;
+  residual::LayerStats st;
+  const Bytes forward = residual::encode_layer(scan, Cloud{}, Pose::Identity(), 0.014, &st, fast);
+  ASSERT_TRUE(st.laser);
+  const Bytes backward = residual::encode_layer(reversed, Cloud{}, Pose::Identity(), 0.014, nullptr, fast);
+  EXPECT_LE(static_cast<double>(backward.size()), 1.005 * static_cast<double>(forward.size()));
+  EXPECT_GE(static_cast<double>(backward.size()), 0.995 * static_cast<double>(forward.size()));
+  expect_layer_bound(backward, reversed, Pose::Identity(), 0.014);
+}
+
 TEST(ResidualLaser, FastEncodingStillTriesTheVoxelCodingWhereThePointsAreDense) {
   const Cloud scan = test::load_or_fail(test::sample("kitti00_000000.bin"));
   residual::LayerOptions fast;
