@@ -48,7 +48,7 @@ constexpr std::int64_t kMaxLengthUnits = 64 * 65536;
 /// an edge, where a flag says which of them predicts (formats/model.md §2.8.2).
 constexpr std::int64_t kEdgeSteps = 16;
 /// The share of a layer's points sharing a pixel with the point before above which a
-/// pixel's points keep the input order (prepare_layer).
+/// pixel's points keep the input order (order_pixels_along_scan).
 constexpr double kSharedPixels = 0.25;
 /// Layers of this many points or more choose their range-step share and predictor on a
 /// quarter of the turn's columns and code only the winner in full.
@@ -1137,6 +1137,37 @@ bool columns_from_times(const ScanPoints& scan, const std::vector<double>& time,
 /// Lasers of points that know none: the elevations (seen from the height that makes them
 /// sharpest) of the points beyond the nearest quarter form one peak a laser; each point
 /// goes to the nearest peak, and then to the laser whose fitted beam passes nearest it.
+/// Each laser's beam as a line z = h + t ρ: least squares over its points that `use(i)`
+/// accepts, where it has 8 or more and their ranges are not all alike (`fitted`).
+struct LaserLines {
+  std::vector<double> h, t;
+  std::vector<std::uint8_t> fitted;
+};
+template <typename Use>
+LaserLines fit_laser_lines(const ScanPoints& scan, const std::vector<std::uint16_t>& ring, std::uint32_t lasers,
+                           Use use) {
+  std::vector<double> sr(lasers, 0), sz(lasers, 0), srr(lasers, 0), srz(lasers, 0), cnt(lasers, 0);
+  for (std::size_t i = 0; i < scan.p.size(); ++i) {
+    if (ring[i] >= lasers || !use(i)) continue;
+    const std::uint16_t l = ring[i];
+    const double r = scan.rho[i], z = scan.p[i].z();
+    sr[l] += r;
+    sz[l] += z;
+    srr[l] += r * r;
+    srz[l] += r * z;
+    cnt[l] += 1;
+  }
+  LaserLines lines{std::vector<double>(lasers, 0.0), std::vector<double>(lasers, 0.0), std::vector<std::uint8_t>(lasers, 0)};
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    const double den = cnt[l] * srr[l] - sr[l] * sr[l];
+    if (!(cnt[l] >= 8 && den > 1e-6 * cnt[l] * srr[l])) continue;
+    lines.t[l] = (cnt[l] * srz[l] - sr[l] * sz[l]) / den;
+    lines.h[l] = (sz[l] - lines.t[l] * sr[l]) / cnt[l];
+    lines.fitted[l] = 1;
+  }
+  return lines;
+}
+
 bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers) {
   const std::vector<Eigen::Vector3d>& p = scan.p;
   const std::vector<double>& rho = scan.rho;
@@ -1253,31 +1284,14 @@ bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, st
   // point moved to the laser whose line passes nearest in elevation (beams whose origins
   // sit at different heights, as a HDL-64E's do).
   for (int round = 0; round < 3; ++round) {
-    std::vector<double> sr(lasers, 0), sz(lasers, 0), srr(lasers, 0), srz(lasers, 0), cnt(lasers, 0);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!(rho[i] >= near)) continue;
-      const std::uint16_t l = ring[i];
-      sr[l] += rho[i];
-      sz[l] += p[i].z();
-      srr[l] += rho[i] * rho[i];
-      srz[l] += rho[i] * p[i].z();
-      cnt[l] += 1;
-    }
-    std::vector<double> h(lasers), t(lasers);
-    for (std::uint32_t l = 0; l < lasers; ++l) {
-      const double den = cnt[l] * srr[l] - sr[l] * sr[l];
-      if (cnt[l] >= 8 && den > 1e-6 * cnt[l] * srr[l]) {
-        t[l] = (cnt[l] * srz[l] - sr[l] * sz[l]) / den;
-        h[l] = (sz[l] - t[l] * sr[l]) / cnt[l];
-      } else {
+    LaserLines lines = fit_laser_lines(scan, ring, lasers, [&rho, near](std::size_t i) { return rho[i] >= near; });
+    std::vector<double>& h = lines.h;
+    std::vector<double>& t = lines.t;
+    for (std::uint32_t l = 0; l < lasers; ++l)
+      if (lines.fitted[l] == 0 || std::abs(h[l] - best_h) > 0.5) {
         t[l] = std::tan(peaks[l]);
         h[l] = best_h;
       }
-      if (std::abs(h[l] - best_h) > 0.5) {
-        t[l] = std::tan(peaks[l]);
-        h[l] = best_h;
-      }
-    }
     for (std::size_t i = 0; i < n; ++i) {
       // (the nearest line in elevation: the smallest height difference at the point's range)
       const double r = std::max(rho[i], 1e-3);
@@ -1317,26 +1331,11 @@ std::uint32_t recover_sparse_lasers(const ScanPoints& scan, std::vector<std::uin
   constexpr double kSparseBackground = 0.2 * kPi / 180.0;
   const std::size_t n = scan.p.size();
   if (lasers < 2 || n != ring.size()) return 0;
-  std::vector<double> sr(lasers, 0), sz(lasers, 0), srr(lasers, 0), srz(lasers, 0), cnt(lasers, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    const double r = scan.rho[i];
-    if (!(r >= 1.0) || ring[i] >= lasers || !std::isfinite(scan.p[i].z())) continue;
-    const std::uint16_t l = ring[i];
-    sr[l] += r;
-    sz[l] += scan.p[i].z();
-    srr[l] += r * r;
-    srz[l] += r * scan.p[i].z();
-    cnt[l] += 1;
-  }
-  std::vector<double> h(lasers, 0.0), t(lasers, 0.0);
-  std::vector<std::uint8_t> fitted(lasers, 0);
-  for (std::uint32_t l = 0; l < lasers; ++l) {
-    const double den = cnt[l] * srr[l] - sr[l] * sr[l];
-    if (cnt[l] < 8 || !(den > 1e-6 * cnt[l] * srr[l])) continue;
-    t[l] = (cnt[l] * srz[l] - sr[l] * sz[l]) / den;
-    h[l] = (sz[l] - t[l] * sr[l]) / cnt[l];
-    fitted[l] = 1;
-  }
+  const LaserLines lines =
+      fit_laser_lines(scan, ring, lasers, [&scan](std::size_t i) { return scan.rho[i] >= 1.0 && std::isfinite(scan.p[i].z()); });
+  const std::vector<double>& h = lines.h;
+  const std::vector<double>& t = lines.t;
+  const std::vector<std::uint8_t>& fitted = lines.fitted;
   // The top and bottom lasers (the steepest lines up and down): a sparse laser beyond the
   // edge of the field of view gave them its points. Their points' angles off their lines,
   // each laser's limit, and the strays beyond it, outward.
@@ -2479,6 +2478,51 @@ struct Prepared {
       : a(&assignment), beams(assignment.table, T_cloud_sensor) {}
 };
 
+/// Reorders the points of each pixel in `order` (pixel_order's) along the scan: by their
+/// azimuth in the grid's direction, then range, then input order, so that the file does not
+/// depend on the order of the input's points (kitti00/000000 at 14 mm: 77,902 bytes in its
+/// own order, 79,897 shuffled and 81,718 reversed when a pixel's points kept the input
+/// order; now 77,970, 77,769 and 77,915). Not where more than kSharedPixels of the points
+/// share a pixel with the point before: there the table is coarse for the points (an indoor
+/// scanner's room, 70 %) and the input order, a scanner's sweep, codes smaller (room_scan2
+/// at 5 mm: 45,378 bytes against 53,148 along the azimuth).
+void order_pixels_along_scan(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
+                             const LaserAssignment& a, const Pose& T_head_cloud, std::vector<std::uint32_t>& order) {
+  const auto same_pixel = [&](std::size_t x, std::size_t y) {
+    const std::uint32_t i = coded[order[x]], k = coded[order[y]];
+    return a.column[i] == a.column[k] && a.ring[i] == a.ring[k];
+  };
+  std::size_t shared = 0;
+  for (std::size_t at = 0; at + 1 < order.size(); ++at) shared += same_pixel(at, at + 1) ? 1 : 0;
+  if (static_cast<double>(shared) > kSharedPixels * static_cast<double>(order.size())) return;
+  struct Key {
+    double along, range;
+    std::uint32_t k;
+  };
+  std::vector<Key> run;
+  for (std::size_t at = 0; at < order.size();) {
+    std::size_t end = at + 1;
+    while (end < order.size() && same_pixel(at, end)) ++end;
+    if (end - at > 1) {
+      run.clear();
+      const Eigen::Vector3d p0 = T_head_cloud * input[coded[order[at]]].cast<double>();
+      const double az0 = fast_atan2(p0.y(), p0.x());
+      for (std::size_t j = at; j < end; ++j) {
+        const Eigen::Vector3d p = T_head_cloud * input[coded[order[j]]].cast<double>();
+        const double along = static_cast<double>(a.table.direction) * wrap_angle(fast_atan2(p.y(), p.x()) - az0);
+        run.push_back({std::isfinite(along) ? along : 0.0, p.allFinite() ? p.norm() : 0.0, order[j]});
+      }
+      std::sort(run.begin(), run.end(), [](const Key& x, const Key& y) {
+        if (x.along != y.along) return x.along < y.along;
+        if (x.range != y.range) return x.range < y.range;
+        return x.k < y.k;
+      });
+      for (std::size_t j = at; j < end; ++j) order[j] = run[j - at].k;
+    }
+    at = end;
+  }
+}
+
 std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& input, const std::vector<std::uint32_t>& coded,
                                         const LaserAssignment& a, const Pose& T_cloud_sensor, double bound, int threads) {
   const LaserTable& table = a.table;
@@ -2487,51 +2531,10 @@ std::unique_ptr<Prepared> prepare_layer(const std::vector<Eigen::Vector3f>& inpu
   const Beams& beams = prepared->beams;
   const Pose T_head_cloud = beams.T_cloud_head.inverse();
 
-  // Column by column, lasers in order; several points of one pixel (a laser that fired
-  // twice within a column) along the scan: by their azimuth in the grid's direction, then
-  // range, then input order, so that the file does not depend on the order of the input's
-  // points (kitti00/000000 at 14 mm: 77,902 bytes in its own order, 79,897 shuffled and
-  // 81,718 reversed when a pixel's points kept the input order; now 77,970, 77,769 and
-  // 77,915). Not where more than kSharedPixels of the points share a pixel with the point
-  // before: there the table is coarse for the points (an indoor scanner's room, 70 %) and
-  // the input order, a scanner's sweep, codes smaller (room_scan2 at 5 mm: 45,378 bytes
-  // against 53,148 along the azimuth).
+  // Column by column, lasers in order (several points of one pixel along the scan).
   std::vector<std::uint32_t>& order = prepared->order;
   order = pixel_order(coded, a);
-  const auto same_pixel = [&](std::size_t x, std::size_t y) {
-    const std::uint32_t i = coded[order[x]], k = coded[order[y]];
-    return a.column[i] == a.column[k] && a.ring[i] == a.ring[k];
-  };
-  std::size_t shared = 0;
-  for (std::size_t at = 0; at + 1 < order.size(); ++at) shared += same_pixel(at, at + 1) ? 1 : 0;
-  if (static_cast<double>(shared) <= kSharedPixels * static_cast<double>(order.size())) {
-    struct Key {
-      double along, range;
-      std::uint32_t k;
-    };
-    std::vector<Key> run;
-    for (std::size_t at = 0; at < order.size();) {
-      std::size_t end = at + 1;
-      while (end < order.size() && same_pixel(at, end)) ++end;
-      if (end - at > 1) {
-        run.clear();
-        const Eigen::Vector3d p0 = T_head_cloud * input[coded[order[at]]].cast<double>();
-        const double az0 = fast_atan2(p0.y(), p0.x());
-        for (std::size_t j = at; j < end; ++j) {
-          const Eigen::Vector3d p = T_head_cloud * input[coded[order[j]]].cast<double>();
-          const double along = static_cast<double>(table.direction) * wrap_angle(fast_atan2(p.y(), p.x()) - az0);
-          run.push_back({std::isfinite(along) ? along : 0.0, p.allFinite() ? p.norm() : 0.0, order[j]});
-        }
-        std::sort(run.begin(), run.end(), [](const Key& x, const Key& y) {
-          if (x.along != y.along) return x.along < y.along;
-          if (x.range != y.range) return x.range < y.range;
-          return x.k < y.k;
-        });
-        for (std::size_t j = at; j < end; ++j) order[j] = run[j - at].k;
-      }
-      at = end;
-    }
-  }
+  order_pixels_along_scan(input, coded, a, T_head_cloud, order);
   // Each column's azimuth shift: the median of its points' azimuths off their beams (a
   // sensor whose firings do not fall on an even grid), in the table's shift units.
   // Every point's beam (its azimuths' cosines and sines) and its offset from the beam's

@@ -514,6 +514,12 @@ using codec::bytes::ld_u64;
 using codec::bytes::put_f64;
 using codec::bytes::put_u64;
 
+/// The `span` consecutive entries of `coded` about its middle (a trial's window; span <= size).
+std::vector<std::uint32_t> middle_window(const std::vector<std::uint32_t>& coded, std::size_t span) {
+  const std::size_t at = coded.size() / 2 - span / 2;
+  return {coded.begin() + static_cast<std::ptrdiff_t>(at), coded.begin() + static_cast<std::ptrdiff_t>(at + span)};
+}
+
 /// Orders the coded points along rows of elevation by azimuth.
 std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, const std::vector<std::uint32_t>& coded,
                                      double row_height) {
@@ -808,10 +814,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       coded.size() > 4 * kOrderTrialPoints) {
     early_span = std::min(coded.size(), (options.fast ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
     early_voxel = std::async(std::launch::async, [&input, &coded, check_error, span = early_span] {
-      const std::size_t at = coded.size() / 2 - span / 2;
-      const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
-                                            coded.begin() + static_cast<std::ptrdiff_t>(at + span));
-      return voxel_layer(RangeEncoder{}, input.points, wide, check_error);
+      return voxel_layer(RangeEncoder{}, input.points, middle_window(coded, span), check_error);
     });
   }
   if (lasers_of) {
@@ -846,9 +849,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       // large (its contexts need more points to learn), is coded in full too unless it
       // costs kVoxelSkipRatio times the spherical winner's bits there: a single scan of a
       // spinning lidar, whose full costs differ about as much, skips it.
-      const std::size_t begin = coded.size() / 2 - kOrderTrialPoints / 2;
-      const std::vector<std::uint32_t> window(coded.begin() + static_cast<std::ptrdiff_t>(begin),
-                                              coded.begin() + static_cast<std::ptrdiff_t>(begin + kOrderTrialPoints));
+      const std::vector<std::uint32_t> window = middle_window(coded, kOrderTrialPoints);
       to_spherical_at(window);
       const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
@@ -859,10 +860,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                               : std::numeric_limits<double>::infinity();
       };
       const auto voxel_trial = [&] {
-        const std::size_t at = coded.size() / 2 - voxel_span / 2;
-        const std::vector<std::uint32_t> wide(coded.begin() + static_cast<std::ptrdiff_t>(at),
-                                              coded.begin() + static_cast<std::ptrdiff_t>(at + voxel_span));
-        voxel_trial_bits(voxel_layer(RangeEncoder{}, input.points, wide, check_error));
+        voxel_trial_bits(voxel_layer(RangeEncoder{}, input.points, middle_window(coded, voxel_span), check_error));
       };
       // (the trial started beside the sensor-geometry coding, where it is this one)
       const bool early = early_voxel.valid() && early_span == voxel_span;
