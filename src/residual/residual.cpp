@@ -113,12 +113,6 @@ constexpr std::uint64_t kMaxVoxelsPerByte = 1000;
 /// sensor-geometry coding, whose bits rule out the voxel coding long before the window's size
 /// matters (bench/fast.sh's 300 codings: 299 the same bytes, one 5.8 % smaller).
 constexpr std::size_t kVoxelTrialSpan = 4;
-/// Beside a sensor-geometry coding the spherical winner is coded in full only where its trial
-/// window costs less than this many times the sensor-geometry bits a point (encoder only).
-/// On bench/fast.sh's 300 codings the two where a spherical coding won at a ratio above 1
-/// (kitti00 at 5 mm, 1.003 and 1.035) won by 0.1 and 0.4 %; where it lost the ratio was
-/// above 1.027 at 5 mm and above 1.15 from 14 mm.
-constexpr double kSphericalTrialMargin = 1.1;
 /// The voxel coding is not coded in full when its trial costs this many times the
 /// spherical winner's (encoder only). Measured, voxel / spherical on the trial windows
 /// and in full: single spinning-lidar scans (kitti00, balm) 1.32-1.84 and 1.36-1.95;
@@ -840,17 +834,21 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       laser ? extra_bytes(kCodingLaser) + laser->stream.size() : std::numeric_limits<std::size_t>::max();
   const bool others = (!laser && !acquisition && !lattice) || options.spherical || options.voxel;
   // Beside a sensor-geometry coding, on a large layer: the voxel trial takes a window a
-  // quarter as large, and a voxel or spherical coding is coded in full only where its trial
-  // comes near the sensor-geometry bits (the voxel one within kVoxelSkipRatio, as its smaller
-  // window overstates it: 0.93-1.5 times the larger window's bits on the shared scans; the
-  // spherical one within kSphericalTrialMargin) or the points are dense. On kitti00/000000 at
-  // 14 mm that is 0.39 G of 1.75 G instructions; on bench/fast.sh's 300 codings 299 files are
-  // the same bytes and one (a balm scan at 10 cm) 5.8 % smaller.
+  // quarter as large, and the voxel coding is coded in full only where its trial comes within
+  // kVoxelSkipRatio of the sensor-geometry bits (its smaller window overstates it: 0.93-1.5
+  // times the larger window's bits on the shared scans) or the points are dense. On
+  // kitti00/000000 at 14 mm that is 0.17 G of 1.75 G instructions; on bench/fast.sh's 300
+  // codings 299 files are the same bytes and one (a balm scan at 10 cm) 5.8 % smaller.
+  // With `fast` the spherical winner too is coded in full only where its trial window beats
+  // the sensor-geometry bits. (Not so by default: on balm's non-repeating scans the middle
+  // window misjudges the whole; the spherical coding won in full at window ratios up to 1.40
+  // and lost at 0.75.)
   const bool beside_laser = laser.has_value();
+  const bool fast_laser = options.fast && beside_laser;
   bool spherical_may_win = true;
   // (and with `fast` no sweep coding: on the 300 files of bench/fast.sh it never won; it
   // does on a tilting 2D scanner's scan, indoor/scan001.3d, beside an estimated table)
-  while (options.fast && beside_laser && ways.size() > 2) ways.pop_back();
+  while (fast_laser && ways.size() > 2) ways.pop_back();
   if (others && !options.spherical && voxel_allowed) voxel = voxel_layer(head, input.points, coded, check_error);
   if (others && !voxel) {
     const bool try_voxel = voxel_allowed && options.spherical;
@@ -938,12 +936,11 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                                          voxel_window_bits < kLaserSkipRatio * laser_bits &&
                                          (!beside_laser || voxel_window_bits < kVoxelSkipRatio * laser_bits))) &&
                               voxel_window_bits < kVoxelSkipRatio * grid_bits;
-      spherical_may_win = !beside_laser || spherical_window_bits < kSphericalTrialMargin * laser_bits;
+      spherical_may_win = !fast_laser || spherical_window_bits < laser_bits;
       // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
-      // (Against the sensor-geometry coding the spherical trial rules it out only beyond
-      // kSphericalTrialMargin. Its tables estimated less well then (6b70f00), a HDL-32E cloud
-      // stored firing by firing had a window 1.6 times the sensor-geometry bits and came out
-      // 5 % smaller in full; the HDL-32E PCDs at 30-60 mm now give the same files either way.)
+      // (The spherical trial does not rule it out against the sensor-geometry coding: on a
+      // HDL-32E cloud stored firing by firing its window cost 1.6 times the sensor-geometry
+      // coding's bits while in full it came out 5 % smaller, and balm's scans above.)
       const bool full_spherical = !skip_others && spherical_may_win &&
                                   !(try_voxel && voxel_window_bits < kSphericalSkipRatio * spherical_window_bits) &&
                                   spherical_window_bits < kVoxelSkipRatio * grid_bits;
