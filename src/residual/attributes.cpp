@@ -1288,6 +1288,8 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
     if (f.kind == kRing) decoded.ring_source = f.source;
     if (f.kind == kIntensity) decoded.intensity_source = f.source;
     if (f.kind == kTime) decoded.time_source = f.source;
+    // (a quantised value: base + (kmin + u)·step, in double; a float field rounds it once)
+    const auto stepped = [&f](std::int64_t k) { return f.base + static_cast<double>(f.kmin + k) * f.step; };
     switch (f.kind) {
       case kRing:
         laser.assign(u[0].begin(), u[0].end());
@@ -1298,7 +1300,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         decoded.intensity.resize(n);
         for (std::size_t j = 0; j < n; ++j)
           decoded.intensity[j] = f.repr == kFloatBits ? key_float(static_cast<std::int32_t>(f.kmin + u[0][j]))
-                                                      : static_cast<float>(f.base + static_cast<double>(f.kmin + u[0][j]) * f.step);
+                                                      : static_cast<float>(stepped(u[0][j]));
         for (std::size_t j = 0; j < n; ++j)
           if (!std::isfinite(decoded.intensity[j]))
             return bad_data("attribute field intensity of point " + std::to_string(j) + " decodes to a non-finite value",
@@ -1306,7 +1308,7 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
         break;
       case kTime:
         decoded.time.resize(n);
-        for (std::size_t j = 0; j < n; ++j) decoded.time[j] = f.base + static_cast<double>(f.kmin + u[0][j]) * f.step;
+        for (std::size_t j = 0; j < n; ++j) decoded.time[j] = stepped(u[0][j]);
         break;
       case kRgb:
         decoded.rgb.resize(n);
@@ -1329,10 +1331,10 @@ Status detail::decode_attributes(const std::vector<std::uint8_t>& payload, const
       case kNamed: {
         IntegerField x{f.name, std::vector<std::int32_t>(n), static_cast<FieldType>(f.transform)};
         // (floating point: the float's key, from its bit pattern or its step)
-        const bool stepped = is_float_type(x.type) && f.repr == kQuantised;
+        const bool quantised = is_float_type(x.type) && f.repr == kQuantised;
         for (std::size_t j = 0; j < n; ++j)
-          x.values[j] = stepped ? float_key(static_cast<float>(f.base + static_cast<double>(f.kmin + u[0][j]) * f.step))
-                                : static_cast<std::int32_t>(f.kmin + u[0][j]);
+          x.values[j] = quantised ? float_key(static_cast<float>(stepped(u[0][j])))
+                                  : static_cast<std::int32_t>(f.kmin + u[0][j]);
         decoded.fields.push_back(std::move(x));
         break;
       }
