@@ -1134,9 +1134,6 @@ bool columns_from_times(const ScanPoints& scan, const std::vector<double>& time,
   return true;
 }
 
-/// Lasers of points that know none: the elevations (seen from the height that makes them
-/// sharpest) of the points beyond the nearest quarter form one peak a laser; each point
-/// goes to the nearest peak, and then to the laser whose fitted beam passes nearest it.
 /// Each laser's beam as a line z = h + t ρ: least squares over its points that `use(i)`
 /// accepts, where it has 8 or more and their ranges are not all alike (`fitted`).
 struct LaserLines {
@@ -1168,6 +1165,9 @@ LaserLines fit_laser_lines(const ScanPoints& scan, const std::vector<std::uint16
   return lines;
 }
 
+/// Lasers of points that know none: the elevations (seen from the height that makes them
+/// sharpest) of the points beyond the nearest quarter form one peak a laser; each point
+/// goes to the nearest peak, and then to the laser whose fitted beam passes nearest it.
 bool estimate_rings(const ScanPoints& scan, std::vector<std::uint16_t>& ring, std::uint32_t& lasers) {
   const std::vector<Eigen::Vector3d>& p = scan.p;
   const std::vector<double>& rho = scan.rho;

@@ -810,11 +810,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // where the trial waits for that coding's bits. The window is the one the trial takes beside
   // a sensor-geometry coding (one spherical window); should that coding fail, the trial is
   // made again on its own window.
+  // (the voxel trial's window: one spherical window beside a sensor-geometry coding, else
+  // kVoxelTrialSpan of them)
+  const auto voxel_trial_span = [&coded](bool beside_laser) {
+    return std::min(coded.size(), (beside_laser ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
+  };
   std::future<std::optional<VoxelLayer>> early_voxel;
   std::size_t early_span = 0;
   if (threads >= 2 && lasers_of && !exact_table && options.spherical && voxel_allowed &&
       coded.size() > 4 * kOrderTrialPoints) {
-    early_span = std::min(coded.size(), kOrderTrialPoints);
+    early_span = voxel_trial_span(true);
     early_voxel = std::async(std::launch::async, [&input, &coded, check_error, span = early_span] {
       return voxel_layer(RangeEncoder{}, input.points, middle_window(coded, span), check_error);
     });
@@ -855,7 +860,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     if (coded.size() > 4 * kOrderTrialPoints) {
       // On a large layer, a window of consecutive input points is coded the spherical ways
       // and only the winner is coded in full. The voxel coding, on a window four times as
-      // large (its contexts need more points to learn), is coded in full too unless it
+      // large (its contexts need more points to learn; as large beside a sensor-geometry
+      // coding, whose bits rule it out sooner), is coded in full too unless it
       // costs kVoxelSkipRatio times the spherical winner's bits there: a single scan of a
       // spinning lidar, whose full costs differ about as much, skips it.
       const std::vector<std::uint32_t> window = middle_window(coded, kOrderTrialPoints);
@@ -863,7 +869,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::vector<std::uint32_t> window_rows = row_order(spherical, window, row_height);
       std::vector<std::size_t> trial(ways.size(), 0);
       double voxel_window_bits = 0.0;
-      const std::size_t voxel_span = std::min(coded.size(), (beside_laser ? 1 : kVoxelTrialSpan) * kOrderTrialPoints);
+      const std::size_t voxel_span = voxel_trial_span(beside_laser);
       const auto voxel_trial_bits = [&](const std::optional<VoxelLayer>& v) {
         voxel_window_bits = v ? 8.0 * static_cast<double>(v->stream.size()) / static_cast<double>(voxel_span)
                               : std::numeric_limits<double>::infinity();
