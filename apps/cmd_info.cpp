@@ -233,6 +233,7 @@ bool info_lex3d_file(const InfoOptions& o) {
       j.value("tangential_step_m", layer->tangential_step).value("lasers", static_cast<std::uint64_t>(layer->lasers))
           .value("columns", static_cast<std::uint64_t>(layer->columns))
           .value("range_predictor", range_predictor_name(layer->predictor))
+          .value("quick_models", layer->quick_models)
           .value("laser_table", "stored in the layer (its source is reported by compress --json, not stored)");
     if (layer && layer->coding == 2) {
       j.value("octree_depth", static_cast<std::uint64_t>(layer->depth)).value("octree_contexts", octree_contexts_name(layer->octree_contexts));
@@ -296,8 +297,9 @@ bool info_lex3d_file(const InfoOptions& o) {
                     static_cast<unsigned long long>(layer->word_points), static_cast<unsigned long long>(layer_bytes));
       if (layer && layer->coding == 3)
         std::printf("laser table    %u lasers, %u columns a turn, stored in the layer (its source is reported by "
-                    "compress --json, not stored); step across the beams %.4g m; ranges predicted by the %s%s\n",
+                    "compress --json, not stored); step across the beams %.4g m; ranges predicted by the %s%s%s\n",
                     layer->lasers, layer->columns, layer->tangential_step, range_predictor_name(layer->predictor),
+                    layer->quick_models ? " (quick-learning models)" : "",
                     layer->motion ? "; beams moving over the turn (a motion-compensated scan)" : "");
       if (layer && layer->coding == 2)
         std::printf("octree         %u levels of %.4g m cells from (%.4g, %.4g, %.4g) m, %s contexts\n", layer->depth,

@@ -97,6 +97,10 @@ constexpr std::uint16_t kLaserTablePredictorsMinor = 11;
 /// turn, model.md §2.8.5) and the first minor version that has it.
 constexpr std::uint32_t kLaserMotionBit = 1U << 9;
 constexpr std::uint16_t kLaserMotionMinor = 14;
+/// Bit 10 of a sensor-geometry layer's predictor field (predictor 4 or 5's mixed models
+/// learn at the quick rates, model.md §2.8.4) and the first minor version that has it.
+constexpr std::uint32_t kLaserQuickModelsBit = 1U << 10;
+constexpr std::uint16_t kLaserQuickModelsMinor = 18;
 /// The first minor version with an acquisition-order layer whose x and y are fitted with a
 /// line or whose cells are taller than wide (its prediction field not 0, model.md §2.11),
 /// or a lattice layer whose cells' points are stacked (its order field not 0, §2.12).
@@ -803,10 +807,12 @@ bool laser_short_layer(const std::vector<std::uint8_t>& payload) {
 bool is_sweep_layer(const std::vector<std::uint8_t>& payload) { return layer_coding(payload) == 1; }
 
 /// The minor version a sensor-geometry layer's range predictor needs: 7 for edge flags
-/// (predictor 2 or 3), 9 for mixed contexts (4 or 5); 0 for other layers and predictors.
+/// (predictor 2 or 3), 9 for mixed contexts (4 or 5), 11, 14 or 18 for bit 8, 9 or 10 of its
+/// field; 0 for other layers and predictors.
 std::uint16_t laser_predictor_minor(const std::vector<std::uint8_t>& payload) {
   if (layer_coding(payload) != 3 || payload.size() < kLaserPredictorOffset + 4) return 0;
   const std::uint32_t field = ld_u32(payload.data() + kLaserPredictorOffset);
+  if ((field & kLaserQuickModelsBit) != 0) return kLaserQuickModelsMinor;
   if ((field & kLaserMotionBit) != 0) return kLaserMotionMinor;
   if ((field & kLaserTablePredictorsBit) != 0) return kLaserTablePredictorsMinor;
   const std::uint32_t predictor = field & 0xFFU;
@@ -1357,7 +1363,9 @@ StatusOr<ModelData> decode_model(const std::vector<std::uint8_t>& bytes,
     if (const std::uint16_t need = laser_predictor_minor(*out.residual); h.minor < need) {
       const std::uint32_t field = ld_u32(out.residual->data() + kLaserPredictorOffset);
       return ctx.error(std::string("a sensor-geometry layer ") +
-                           ((field & kLaserMotionBit) != 0
+                           ((field & kLaserQuickModelsBit) != 0
+                                ? "whose mixed models learn at the quick rates (predictor field bit 10)"
+                                : (field & kLaserMotionBit) != 0
                                 ? "whose beams move over the turn (predictor field bit 9)"
                                 : (field & kLaserTablePredictorsBit) != 0
                                 ? "whose laser table picks its predictors (predictor field bit 8)"

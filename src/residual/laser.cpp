@@ -264,7 +264,7 @@ class MixedRangeModel {
     int sign;      ///< 0, 1, 2: the laser's last residual zero, positive, negative
     int mantissa;  ///< the class of the recent errors
   };
-  MixedRangeModel() : mant_(kClasses) {
+  explicit MixedRangeModel(MixRates rates) : mix_{kWeightSets, kInitialWeight, rates}, mant_(kClasses) {
     for (int m = 0; m < 3; ++m) models_[m].resize(static_cast<std::size_t>(kContexts[m]) * kSlots);
   }
   void put(RangeEncoder& enc, const Contexts& x, std::int64_t v) {
@@ -315,7 +315,7 @@ class MixedRangeModel {
   }
 
   std::array<std::vector<YoungBitModel>, 3> models_;
-  Mix3 mix_{kWeightSets, kInitialWeight};
+  Mix3 mix_;
   MantissaModels mant_;
 };
 
@@ -325,10 +325,12 @@ class PointCoder {
   static constexpr int kClasses = IntModel::kClasses;
   /// `spacing`: range step · grid step / E, so that a beam length index times it is the gap,
   /// in units of E, between neighbouring columns' points at that range.
-  PointCoder(std::uint32_t lasers, double spacing, std::uint32_t predictor)
+  /// `quick`: with predictors 4 and 5, the mixed models learn at the quick rates (format 1.18).
+  PointCoder(std::uint32_t lasers, double spacing, std::uint32_t predictor, bool quick)
       : med_(predictor == 1 || predictor == 2 || predictor == 4), edges_(predictor >= 2),
-        mixed_(predictor >= 4 ? std::make_unique<MixedRangeModel>() : nullptr),
-        occ_mix_(predictor >= 4 ? std::make_unique<OccupancyMix>(lasers) : nullptr), lasers_(lasers), spacing_(spacing), sel_(lasers, 0),
+        mixed_(predictor >= 4 ? std::make_unique<MixedRangeModel>(quick ? kQuickMixRates : MixRates{}) : nullptr),
+        occ_mix_(predictor >= 4 ? std::make_unique<OccupancyMix>(lasers, quick ? kQuickMixRates : MixRates{}) : nullptr),
+        lasers_(lasers), spacing_(spacing), sel_(lasers, 0),
         last_k_(lasers, 0), last_c_(lasers, kNone), prev_k_(lasers, 0), prev_c_(lasers, kNone), last_res_(lasers, 0),
         last_k1_(lasers, 0), last_k2_(lasers, 0), occ_prev_(lasers + 1, 0), occ_now_(lasers + 1, 0),
         occ_prev2_(lasers + 1, 0), err_(lasers, 0), eighth_(lasers) {
@@ -490,11 +492,11 @@ class PointCoder {
   /// below, the two pixels above in this column and `near`. Weights per (pixel above,
   /// laser's last column).
   struct OccupancyMix {
-    explicit OccupancyMix(std::uint32_t lasers) : by_laser(static_cast<std::size_t>(lasers) * 8) {}
+    OccupancyMix(std::uint32_t lasers, MixRates rates) : by_laser(static_cast<std::size_t>(lasers) * 8), mix{4, 21845, rates} {}
     std::vector<YoungBitModel> by_ctx = std::vector<YoungBitModel>(256);
     std::vector<YoungBitModel> by_laser;
     std::vector<YoungBitModel> by_window = std::vector<YoungBitModel>(64 * 4);
-    Mix3 mix{4, 21845};
+    Mix3 mix;
   };
   std::uint32_t occupancy_p0(std::uint32_t l) {
     OccupancyMix& m = *occ_mix_;
@@ -2333,6 +2335,7 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     table.predictor = predictor;
     table.shift_unit = beams.shift_unit;
     table.table_predictors = table_predictors;
+    table.quick_models = predictor >= 4;
     LaserLayer out;
     out.head_pose = head_pose;
     out.range_step = qr;
@@ -2357,7 +2360,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
       enc.put(flag, any_correction);
       enc.put(flag, any_more);
     }
-    PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor);
+    PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor,
+                  table.quick_models);
     std::size_t at = 0;
     std::int64_t prev_column = -1;
     std::uint64_t remaining = kept.size();
@@ -2418,7 +2422,8 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     codec::bytes::put_u32(out.fields, table.columns);
     codec::bytes::put_u32(out.fields, static_cast<std::uint32_t>(table.direction));
     codec::bytes::put_u32(out.fields, table.predictor | (table.table_predictors ? kTablePredictorsBit : 0U) |
-                                          (table.has_motion() ? kMotionBit : 0U));
+                                          (table.has_motion() ? kMotionBit : 0U) |
+                                          (table.quick_models ? kQuickModelsBit : 0U));
     codec::bytes::put_f64(out.fields, table.azimuth0);
     if (head_pose) {
       for (int r = 0; r < 3; ++r)
@@ -2712,7 +2717,8 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   table.predictor = predictor_field & 0xFFU;
   table.table_predictors = (predictor_field & kTablePredictorsBit) != 0;
   table.motion_coded = (predictor_field & kMotionBit) != 0;
-  if ((predictor_field & ~(0xFFU | kTablePredictorsBit | kMotionBit)) != 0)
+  table.quick_models = (predictor_field & kQuickModelsBit) != 0;
+  if ((predictor_field & ~(0xFFU | kTablePredictorsBit | kMotionBit | kQuickModelsBit)) != 0)
     return LaserDecodeError{"predictor field " + std::to_string(predictor_field) + " has reserved bits set", 28};
   table.azimuth0 = codec::bytes::ld_f64(f + 32);
   if (lasers < 1 || lasers > kMaxLasers)
@@ -2722,6 +2728,10 @@ std::optional<LaserDecodeError> read_laser_fields(const std::uint8_t* f, std::ui
   if (dir != 1U && dir != 0xFFFFFFFFU) return LaserDecodeError{"column direction is neither +1 nor -1", 24};
   table.direction = dir == 1U ? 1 : -1;
   if (table.predictor > 5) return LaserDecodeError{"range predictor " + std::to_string(table.predictor) + " is not in 0..5", 28};
+  if (table.quick_models && table.predictor < 4)
+    return LaserDecodeError{"quick models (bit 10 of the predictor field) with range predictor " +
+                                std::to_string(table.predictor) + ", which has no mixed models",
+                            28};
   if (!(std::isfinite(table.azimuth0) && std::abs(table.azimuth0) <= kTwoPi))
     return LaserDecodeError{"azimuth of column 0 is not in [-2pi, 2pi]", 32};
   table.T_sensor_head = Pose::Identity();
@@ -2776,7 +2786,8 @@ std::optional<LaserDecodeError> decode_laser_points(RangeDecoder& dec, LaserTabl
     }
   }
   const Beams beams(table, T_cloud_sensor);
-  PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor);
+  PointCoder pc(table.lasers(), qr * (kTwoPi / static_cast<double>(table.columns)) / max_error, table.predictor,
+                table.quick_models);
   bool any_correction = true, any_more = true;
   if (table.predictor >= 2) {
     BitModel flag;

@@ -26,6 +26,9 @@ constexpr std::uint32_t kMaxLasers = 1024;
 constexpr std::uint32_t kTablePredictorsBit = 1U << 8;
 /// Bit 9 of the stored predictor field: the table's motion follows its fields in the stream (format 1.14).
 constexpr std::uint32_t kMotionBit = 1U << 9;
+/// Bit 10 of the stored predictor field, with range predictor 4 or 5: the mixed models learn
+/// at the quick rates (kQuickMixRates, formats/model.md §2.8.4, format 1.18).
+constexpr std::uint32_t kQuickModelsBit = 1U << 10;
 constexpr std::uint32_t kMaxLaserColumns = 1U << 20;
 
 /// A laser table as a layer stores it: quantised per-laser fields and the azimuth grid.
@@ -43,6 +46,8 @@ struct LaserTable {
   /// line through the two previous, the laser four back), signalled by bit 8 of the stored
   /// predictor field (formats/model.md §2.8.1, format 1.11); else all against the previous.
   bool table_predictors = false;
+  /// With predictor 4 or 5: the mixed models learn at the quick rates (bit 10, format 1.18).
+  bool quick_models = false;
   double azimuth0 = 0.0;
   Pose T_sensor_head = Pose::Identity();
   /// The sensor's travel over one turn (head frame, kLaserLengthUnit) and the column the

@@ -49,17 +49,19 @@ inline const std::array<std::int16_t, 4096>& stretch_table() {
 }
 
 /// An adaptive probability of a 1 (in 1/65536) that moves by 1/2, 1/4, 1/8, 1/16 of the
-/// error over its first 1, 2, 4, 8 bits and by 1/32 after 15.
+/// error over its first 1, 2, 4, 8 bits and by 1/2^last_shift after 15: 1/32 by default,
+/// 1/16 in the quick models of format 1.18 (formats/model.md §2.8.4).
 struct YoungBitModel {
   std::uint16_t p1 = 32768;
   std::uint8_t seen = 0;
-  void update(bool bit) {
+  void update(bool bit, unsigned last_shift = 5) {
     // (per `seen`, 0-15: the shift in the low 3 bits, the next `seen` above them)
     static constexpr std::uint8_t kStep[16] = {1 | 1 << 3,  2 | 2 << 3,  2 | 3 << 3,  3 | 4 << 3,  3 | 5 << 3,  3 | 6 << 3,
                                                3 | 7 << 3,  4 | 8 << 3,  4 | 9 << 3,  4 | 10 << 3, 4 | 11 << 3, 4 | 12 << 3,
                                                4 | 13 << 3, 4 | 14 << 3, 4 | 15 << 3, 5 | 15 << 3};
-    // (a model past its first 15 bits, as most are, keeps moving by 1/32: no table lookup)
-    unsigned shift = 5;
+    // (a model past its first 15 bits, as most are, keeps moving by 1/2^last_shift: no
+    // table lookup; the table's shifts are 4 or less)
+    unsigned shift = last_shift;
     if (seen < 15) {
       const unsigned step = kStep[seen];
       shift = step & 7U;
@@ -71,13 +73,23 @@ struct YoungBitModel {
   }
 };
 
+/// How fast a mixer and its models learn: the models' last shift (YoungBitModel) and the
+/// weights' (each moves by error · input >> weight_shift). The quick rates are those of
+/// format 1.18's sensor-geometry layers (formats/model.md §2.8.4).
+struct MixRates {
+  unsigned model_shift = 5;
+  unsigned weight_shift = 10;
+};
+constexpr MixRates kQuickMixRates{4, 12};
+
 /// The probabilities of three YoungBitModels mixed in the logistic domain by one of several
 /// weight sets (in 1/65536), which learn from each bit: p0 gives the mixed probability,
 /// learn then updates the three models and the set's weights.
 class Mix3 {
  public:
-  Mix3(std::size_t weight_sets, std::int32_t initial_weight)
-      : weights_(3 * weight_sets, initial_weight), stretch_(stretch_table().data()), squash_(squash_table().data()) {}
+  Mix3(std::size_t weight_sets, std::int32_t initial_weight, MixRates rates = {})
+      : weights_(3 * weight_sets, initial_weight), stretch_(stretch_table().data()), squash_(squash_table().data()),
+        rates_(rates) {}
   // (learn uses the weight set p0 chose, by pointer: a move keeps the weights where they are)
   Mix3(const Mix3&) = delete;
   Mix3& operator=(const Mix3&) = delete;
@@ -102,8 +114,8 @@ class Mix3 {
   void learn(bool bit) {
     const std::int32_t error = (bit ? 4096 : 0) - p1_;
     for (int m = 0; m < 3; ++m) {
-      model_[m]->update(bit);
-      w_[m] = std::clamp(w_[m] + ((error * input_[m]) >> 10), -kMaxWeight, kMaxWeight);
+      model_[m]->update(bit, rates_.model_shift);
+      w_[m] = std::clamp(w_[m] + ((error * input_[m]) >> rates_.weight_shift), -kMaxWeight, kMaxWeight);
     }
   }
 
@@ -112,6 +124,7 @@ class Mix3 {
   std::vector<std::int32_t> weights_;
   const std::int16_t* stretch_;
   const std::int16_t* squash_;
+  MixRates rates_;
   YoungBitModel* model_[3] = {nullptr, nullptr, nullptr};
   std::int32_t* w_ = nullptr;
   std::int32_t input_[3] = {0, 0, 0};

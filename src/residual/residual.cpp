@@ -640,6 +640,7 @@ StatusOr<LayerHeader> read_layer_header(const std::uint8_t* payload, std::size_t
     h.predictor = predictor_field & 0xFFU;
     h.table_predictors = (predictor_field & detail::kTablePredictorsBit) != 0;
     h.motion = (predictor_field & detail::kMotionBit) != 0;
+    h.quick_models = (predictor_field & detail::kQuickModelsBit) != 0;
     h.stream_offset += h.head_pose ? detail::kLaserFieldBytes : detail::kLaserShortFieldBytes;
   }
   return h;

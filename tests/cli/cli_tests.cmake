@@ -255,15 +255,17 @@ expect_match(decompress.voxel "${LAST_OUT}" "\"hausdorff_m\":(0\\.01[0-9]*|0\\.0
 run(0 compress.spherical compress "${NC}" -o "${WORK}/nc_s.lex3dm" --max-error 0.02 --layer-coding spherical --json)
 expect_match(compress.spherical "${LAST_OUT}" "\"coding\":\"(previous-point|sweep)\"")
 # The sensor-geometry coding, forced on the KITTI sample (its lasers estimated from the
-# points): a format 1.14 file (no words; range predictor 4 or 5; moving beams) whose decoded cloud meets the bound.
+# points): a format 1.18 file (no words; range predictor 4 or 5 with quick models; moving beams) whose decoded cloud
+# meets the bound.
 run(0 compress.laser compress "${KITTI}" -o "${WORK}/k_l.lex3dm" --max-error 0.02 --layer-coding laser --json)
 expect_match(compress.laser "${LAST_OUT}" "\"coding\":\"sensor-geometry\"")
 expect_match(compress.laser "${LAST_OUT}" "\"laser_table\":{\"source\":\"estimated")
 run(0 info.laser info "${WORK}/k_l.lex3dm")
 # (no words: the short MHDR, no ALPH or INST; KITTI's points are motion-compensated: the
-# layer's beams move over the turn, format 1.14)
-expect_match(info.laser "${LAST_OUT}" "format 1\\.14")
+# layer's beams move over the turn, format 1.14; its mixed models learn quickly, 1.18)
+expect_match(info.laser "${LAST_OUT}" "format 1\\.18")
 expect_match(info.laser "${LAST_OUT}" "beams moving over the turn")
+expect_match(info.laser "${LAST_OUT}" "quick-learning models")
 expect_match(info.laser "${LAST_OUT}" "RESL")
 expect_match(info.laser "${LAST_OUT}" "laser table")
 run(0 decompress.laser decompress "${WORK}/k_l.lex3dm" -o "${WORK}/k_l.bin" --reference "${KITTI}" --json)
@@ -508,7 +510,7 @@ run(0 attr.compress compress "${KITTI}" -o "${WORK}/k_attr.lex3dm" --max-error 0
 expect_match(attr.compress "${LAST_OUT}" "\"attributes\":\\[\\{\"name\":\"intensity\"")
 expect_match(attr.compress_lossless "${LAST_OUT}" "\"lossless\":true")
 run(0 attr.info info "${WORK}/k_attr.lex3dm")
-expect_match(attr.info "${LAST_OUT}" "format 1\\.1[14]")  # (ATTR: 1.6 or later; no words: 1.11; moving beams: 1.14)
+expect_match(attr.info "${LAST_OUT}" "format 1\\.1[148]")  # (ATTR: 1.6 or later; no words: 1.11; moving beams: 1.14; quick models: 1.18)
 expect_match(attr.info_fields "${LAST_OUT}" "fields +x y z intensity")
 run(0 attr.decompress decompress "${WORK}/k_attr.lex3dm" -o "${WORK}/k_attr.pcd")
 file(READ "${WORK}/k_attr.pcd" pcd_head LIMIT 200)

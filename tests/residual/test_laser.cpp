@@ -299,15 +299,15 @@ TEST(ResidualLaser, IdentityHeadPoseIsLeftOutInFormat1_11) {
   EXPECT_FALSE(h.value().head_pose);
   EXPECT_EQ(h.value().stream_offset, 8U + 32U + 40U);
   const Bytes file = codec::encode_model(d);
-  EXPECT_EQ(file[10], 11);
+  EXPECT_EQ(file[10], 18) << "1.11 for the marker, 1.18 for the quick models";
   const auto decoded = codec::decode_model(file);
   ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
   const auto cloud = residual::decode_cloud(decoded.value());
   ASSERT_TRUE(cloud.ok()) << cloud.status().to_string();
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
-  // (its table may also pick its predictors, another feature of 1.11, which is named first)
-  expect_rejected(retype_chunk(file, "RESL", "RESL", 10), "needs format version 1.11");
+  // (the quick models of 1.18 are named first)
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 10), "needs format version 1.18");
   // Truncated within the short fields: a clear error, no crash.
   for (std::size_t n : {std::size_t{8}, std::size_t{40}, std::size_t{79}}) {
     codec::ModelData cut = decoded.value();
@@ -330,13 +330,11 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   std::uint32_t field = 0;
   std::memcpy(&field, d.residual->data() + 68, 4);  // (little-endian hosts)
   const std::uint32_t predictor = field & 0xFFU;
-  const bool table_predictors = (field & 0x100U) != 0;  // (this table: its fields pick their predictors)
-  EXPECT_EQ(field & ~0x1FFU, 0U);
+  EXPECT_EQ(field & ~0x5FFU, 0U) << "bits 0-7 the predictor, 8 the table's predictors, 10 the quick models";
+  EXPECT_EQ(field & 0x400U, 0x400U) << "the quick models (bit 10) with every predictor 4 or 5";
   EXPECT_GE(predictor, 4U);
   EXPECT_LE(predictor, 5U);
-  EXPECT_EQ(file[10], table_predictors ? 11 : 9)
-      << "a sensor-geometry layer with mixed contexts (predictor 4 or 5) makes the file format 1.9, 1.11 where its "
-         "table's fields pick their predictors";
+  EXPECT_EQ(file[10], 18) << "a sensor-geometry layer whose mixed models learn quickly makes the file format 1.18";
   const auto decoded = codec::decode_model(file);
   ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
   const auto cloud = residual::decode_cloud(decoded.value());
@@ -344,11 +342,9 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   EXPECT_LE(hausdorff(scan, cloud.value()), 0.01);
   EXPECT_LE(hausdorff(cloud.value(), scan), 0.01);
   expect_rejected(retype_chunk(file, "RESL", "RESL", 3), "1.4");
-  const std::string need = table_predictors ? "picks its predictors (predictor field bit 8) needs format version 1.11"
-                                            : "with range predictor " + std::to_string(predictor) +
-                                                  " needs format version 1.9";
+  const std::string need = "learn at the quick rates (predictor field bit 10) needs format version 1.18";
   expect_rejected(retype_chunk(file, "RESL", "RESL", 6), need);
-  if (table_predictors) expect_rejected(retype_chunk(file, "RESL", "RESL", 10), need);
+  expect_rejected(retype_chunk(file, "RESL", "RESL", 17), need);
   expect_rejected(retype_chunk(file, "RESL", "RESD", 4), "RESL");
   expect_rejected(retype_chunk(file, "RESL", "RESV", 4), "RESL");
   // The rule of predictors 4 and 5 on a file of format 1.9, whatever the encoder now picks.
@@ -363,6 +359,12 @@ TEST(ResidualLaser, ModelFileVersionRules) {
   const auto r = residual::decode_cloud(bad);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find("reserved bits"), std::string::npos) << r.status().to_string();
+  // The quick models with a predictor that has no mixed models: a clear error.
+  codec::ModelData unmixed = decoded.value();
+  (*unmixed.residual)[68] = 3;  // predictor 3, bit 10 still set
+  const auto u = residual::decode_cloud(unmixed);
+  ASSERT_FALSE(u.ok());
+  EXPECT_NE(u.status().message().find("no mixed models"), std::string::npos) << u.status().to_string();
 }
 
 TEST(ResidualLaser, CorruptPayloadsAreRejectedOrDecodeBounded) {
@@ -729,9 +731,9 @@ TEST(ResidualLaser, AMotionCompensatedScanKeepsItsLasersWithMovingBeams) {
   const Bytes file = wordless_layer_file(scan, 0.01, &in_file);
   ASSERT_TRUE(in_file.laser);
   ASSERT_GT(file.size(), 130U);
-  EXPECT_EQ(file[10], 14);
+  EXPECT_EQ(file[10], 18) << "1.14 for the moving beams, 1.18 for the quick models";
   EXPECT_EQ(file[56 + 69] & 2, 2) << "bit 9 of the predictor field";
-  expect_rejected(with_minor(file, 13), "1.14");
+  expect_rejected(with_minor(file, 13), "1.18");
   // the same scene taken still: no motion found, format 1.11
   const Cloud still = moving_scan(Eigen::Vector2d::Zero(), 2.0, 7);
   residual::LayerStats st_still;
@@ -751,19 +753,44 @@ TEST(ResidualLaser, AMotionCompensatedScanKeepsItsLasersWithMovingBeams) {
   expect_layer_bound(ringed_layer, ringed, Pose::Identity(), 0.01);
 }
 
-// Format 1.14: a motion-compensated scan, its beams moving over the turn.
-TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_14) {
+/// The golden files of a motion-compensated 8-laser turn, its beams moving over the turn,
+/// as the encoder codes it, which must make the file format 1.`minor`.
+void write_moving_golden(const std::string& stem, int minor) {
   const Cloud input = moving_scan(Eigen::Vector2d(0.8, -0.3), 2.0, 7, 8, 128);
   residual::LayerStats st;
   const Bytes file = wordless_layer_file(input, 0.01, &st);
   ASSERT_TRUE(st.laser);
-  ASSERT_EQ(file[10], 14);
-  write_golden_files("tiny_residual_laser_1.14", file, input);
+  ASSERT_EQ(file[10], minor);
+  write_golden_files(stem, file, input);
 }
+
+// Format 1.14: the moving beams. (Written before format 1.18: the encoder now writes 1.18.)
+TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_14) { write_moving_golden("tiny_residual_laser_1.14", 14); }
 
 TEST(ResidualLaserGolden, Format1_14FileDecodesToTheRecordedCloud) {
   expect_golden("tiny_residual_laser_1.14", read_xyz(golden_path("tiny_residual_laser_1.14.input.xyz")), 0.01, 14,
                 "MHDR RESL IEND ");
+}
+
+// Format 1.18: the same scan, its layer's mixed models learning at the quick rates.
+TEST(ResidualLaserGolden, DISABLED_WriteGoldenFile1_18) { write_moving_golden("tiny_residual_laser_1.18", 18); }
+
+TEST(ResidualLaserGolden, Format1_18FileDecodesToTheRecordedCloud) {
+  expect_golden("tiny_residual_laser_1.18", read_xyz(golden_path("tiny_residual_laser_1.18.input.xyz")), 0.01, 18,
+                "MHDR RESL IEND ");
+  // The same stream read with the rates of format 1.14 (bit 10 cleared): other points, so
+  // the bit is what the decoder follows.
+  const Bytes file = read_bytes(golden_path("tiny_residual_laser_1.18.lex3dm"));
+  const auto decoded = codec::decode_model(file);
+  ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
+  codec::ModelData slow = decoded.value();
+  ASSERT_GE(slow.residual->size(), 72U);
+  ASSERT_EQ((*slow.residual)[69] & 4, 4);
+  (*slow.residual)[69] = static_cast<std::uint8_t>((*slow.residual)[69] & ~4U);
+  const auto a = residual::decode_cloud(decoded.value());
+  const auto b = residual::decode_cloud(slow);
+  ASSERT_TRUE(a.ok()) << a.status().to_string();
+  EXPECT_TRUE(!b.ok() || b.value().points != a.value().points);
 }
 
 }  // namespace

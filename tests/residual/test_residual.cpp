@@ -239,10 +239,9 @@ TEST(ResidualLayer, RealScanThroughTheModelFile) {
     EXPECT_LE(st.explained_points + st.residual_points, cloud.size());
     if (e >= 0.2) EXPECT_GT(st.explained_points, cloud.size() / 4) << "words explain part of the scan at E = " << e;
     const Bytes file = codec::encode_model(d);
-    const bool head_left_out = st.laser && (*d.residual)[4] == 0xFE;  // (marker 0xFFFFFFFE)
-    EXPECT_EQ(file[10], head_left_out ? 11 : st.laser ? 9 : st.voxel ? 8 : st.sweep ? 2 : 1)
+    EXPECT_EQ(file[10], st.laser ? 18 : st.voxel ? 8 : st.sweep ? 2 : 1)
         << "a model with a residual layer is format 1.1, 1.2 with the sweep coding, 1.8 with the voxel coding, "
-           "1.9 with the sensor-geometry coding (predictors 4 and 5), 1.11 without its head pose";
+           "1.18 with the sensor-geometry coding (predictors 4 and 5 with quick models)";
     const auto decoded = codec::decode_model(file);
     ASSERT_TRUE(decoded.ok()) << decoded.status().to_string();
     ASSERT_TRUE(decoded.value().residual.has_value());

@@ -133,6 +133,7 @@ struct LayerHeader {
   std::uint32_t predictor = 0;     ///< sensor-geometry coding: range predictor 0-5 (formats/model.md §2.8.2, §2.8.4)
   bool table_predictors = false;   ///< sensor-geometry coding: the laser table's fields each against its own predictor (format 1.11)
   bool motion = false;             ///< sensor-geometry coding: the beams' origins move over the turn (a motion-compensated scan, format 1.14)
+  bool quick_models = false;       ///< sensor-geometry coding: predictor 4 or 5's mixed models learn at the quick rates (format 1.18)
   bool head_pose = true;           ///< sensor-geometry coding: T_sensor_head stored (marker 0xFFFFFFFF), else the identity (0xFFFFFFFE, format 1.11)
   std::uint64_t fields_offset = 0; ///< where max_error starts (8 in an RESW payload)
   std::uint64_t stream_offset = 0; ///< where the range-coded stream starts
