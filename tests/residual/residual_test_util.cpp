@@ -25,18 +25,31 @@ Bytes with_minor(Bytes file, std::uint8_t minor) {
   return file;
 }
 
-Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor) {
+namespace {
+/// Calls `change(at, len)` on each chunk of type `type` (its type at `at`, its payload of
+/// `len` bytes at `at` + 12), then recomputes that chunk's CRC.
+void change_chunks(Bytes& file, const char* type, const std::function<void(std::size_t, std::uint64_t)>& change) {
   for (std::size_t at = 20; at + 12 <= file.size();) {
     std::uint64_t len = 0;
     for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(file[at + 4 + i]) << (8 * i);
-    if (std::memcmp(file.data() + at, from, 4) == 0) {
-      std::memcpy(file.data() + at, to, 4);
+    if (std::memcmp(file.data() + at, type, 4) == 0) {
+      change(at, len);
       const auto crc = static_cast<std::uint32_t>(crc32(0L, file.data() + at, static_cast<uInt>(12 + len)));
       for (int i = 0; i < 4; ++i) file[at + 12 + len + i] = static_cast<std::uint8_t>(crc >> (8 * i));
     }
     at += 12 + len + 4;
   }
+}
+}  // namespace
+
+Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor) {
+  change_chunks(file, from, [&](std::size_t at, std::uint64_t) { std::memcpy(file.data() + at, to, 4); });
   return with_minor(std::move(file), minor);
+}
+
+Bytes edit_chunk(Bytes file, const char* type, const std::function<void(std::uint8_t*, std::uint64_t)>& edit) {
+  change_chunks(file, type, [&](std::size_t at, std::uint64_t len) { edit(file.data() + at + 12, len); });
+  return file;
 }
 
 void expect_rejected(const Bytes& file, const std::string& needle) {

@@ -17,6 +17,9 @@ using Bytes = std::vector<std::uint8_t>;
 Bytes with_minor(Bytes file, std::uint8_t minor);
 /// Rewrites chunk `from` of a model file as `to` (its CRC recomputed) and sets the minor version.
 Bytes retype_chunk(Bytes file, const char* from, const char* to, std::uint8_t minor);
+/// `file` with `edit` applied to the payload (start, length) of each chunk of type `type`,
+/// its CRC recomputed; the header as it was.
+Bytes edit_chunk(Bytes file, const char* type, const std::function<void(std::uint8_t*, std::uint64_t)>& edit);
 /// Decoding model file `file` fails, and the message names `needle`.
 void expect_rejected(const Bytes& file, const std::string& needle);
 /// tests/residual/golden/`name`.

@@ -34,7 +34,7 @@ namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 using residual_test::with_minor;
-using residual_test::retype_chunk;
+using residual_test::edit_chunk;
 
 /// A spinning-lidar-like scan: `lasers` rings of `columns` points around a room, with
 /// intensities in 0.01 steps, times in microseconds within the turn, ring and colour.
@@ -1167,17 +1167,11 @@ TEST(Attributes, LayerColumnCodesStaggeredFiringTimes) {
   for (std::size_t j = 0; j < in.size(); ++j) ASSERT_EQ(out.value().time[j], in.time[lc.c.sources[j]]) << j;
   // the same bytes again
   EXPECT_EQ(code_laser(in, 0.01, false).c.file, lc.c.file);
-  // method 6 in a file that says 1.16 (its layer re-marked with the predictor of format 1.9,
-  // so that only the ATTR chunk needs more)
-  Bytes v16 = lc.c.file;
-  for (std::size_t at = 20; at + 12 <= v16.size();) {
-    std::uint64_t len = 0;
-    for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(v16[at + 4 + i]) << (8 * i);
-    if (std::memcmp(v16.data() + at, "RESL", 4) == 0)
-      v16[at + 12 + 69] = static_cast<std::uint8_t>(v16[at + 12 + 69] & ~0x06U);  // predictor field bits 9 and 10
-    at += 12 + len + 4;
-  }
-  v16 = retype_chunk(v16, "RESL", "RESL", 16);  // (its CRC made again)
+  // method 6 in a file that says 1.16 (its layer's predictor field bits 9 and 10 cleared,
+  // so that only the ATTR chunk needs more than 1.16)
+  const Bytes v16 = with_minor(edit_chunk(lc.c.file, "RESL",
+                                          [](std::uint8_t* p, std::uint64_t) { p[69] = static_cast<std::uint8_t>(p[69] & ~0x06U); }),
+                               16);
   auto refused = codec::decode_model(v16);
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(refused.status().message().find("1.17"), std::string::npos) << refused.status().to_string();
