@@ -2171,12 +2171,125 @@ std::optional<LaserAssignment> assign_lasers(const Cloud& input, const Pose& T_c
 
 namespace {
 
+/// A point's beam length and corrections as the encoder rounds them, and the point they
+/// decode to.
+struct Coded {
+  std::int64_t k = 0, k1 = 0, k2 = 0;
+  Eigen::Vector3f decoded;
+  float rounding = 0.0F;  ///< the beam length's distance past step k, in steps (-1/2..1/2)
+  double err = 0.0;       ///< the decoded point's squared distance from the input point
+};
+
+/// Rate-distortion choice of the beam lengths (formats/model.md §2.8.3). A point may take
+/// the step its length rounds to or a neighbouring one that still decodes within the bound
+/// (`decode_at(t, k, p)` gives point t's decoded point p with step k and its squared error,
+/// which must not pass e2; with a range step of two thirds of the bound or more, as every
+/// share the encoder tries gives, no step further away can). Along each laser, in coding order, the steps are chosen together: those
+/// that minimise the sum of the squared errors and λ times the bits of each step's change
+/// from the laser's step before it (a Viterbi pass, a state for each step a point may
+/// take). The bits are −log2 of each change's share among the rounded steps' (the scan's
+/// own residuals against the left neighbour, as the coder mostly predicts); λ =
+/// lambda_scale · 2 ln 2 / 12 · q_r² a bit, an entropy-coded uniform quantiser's slope
+/// (D = q_r² / 12 falling by 2 ln 2 · D a bit).
+template <class Decode>
+void choose_beam_lengths(std::vector<Coded>& q, const std::vector<std::uint32_t>& laser_at, std::uint32_t lasers,
+                         double qr, double bound, double e2, double lambda_scale, const Decode& decode_at) {
+  static constexpr std::int64_t kSpan = 64;  // changes beyond ±kSpan share the end bins
+  const std::size_t m = q.size();
+  const auto bin = [](std::int64_t r) { return static_cast<std::size_t>(std::clamp(r, -kSpan, kSpan) + kSpan); };
+  std::vector<double> bits(2 * kSpan + 1, 0.5);
+  {
+    std::vector<std::int64_t> last(lasers, 0);
+    std::vector<std::uint8_t> any(lasers, 0);
+    double total = 0.5 * static_cast<double>(bits.size());
+    for (std::size_t t = 0; t < m; ++t) {
+      const std::uint32_t l = laser_at[t];
+      if (any[l] != 0) {
+        bits[bin(q[t].k - last[l])] += 1.0;
+        total += 1.0;
+      }
+      last[l] = q[t].k;
+      any[l] = 1;
+    }
+    for (double& b : bits) b = -std::log2(b / total);
+  }
+  const double lambda = lambda_scale * 2.0 * std::log(2.0) / 12.0 * qr * qr;
+  // A point's steps: from q[t].k − 1 (where `below`) to q[t].k + 1 (where `above`); state x
+  // is step q[t].k + x − 1. A laser's open stretch: its points since the last that had one
+  // step only (all paths pass there, so what lies before it is settled), each with the best
+  // state of the point before it for each of its own.
+  struct Node {
+    std::uint32_t t;
+    std::uint8_t first, last;  // its states
+    std::array<std::uint8_t, 3> back;
+  };
+  std::vector<std::vector<Node>> open(lasers);
+  std::vector<std::array<double, 3>> cost(lasers);  // path costs to each state of the laser's last point
+  // (the steps of an open stretch from state x of its last node back to its start)
+  const auto settle = [&](std::vector<Node>& stretch, int x) {
+    for (std::size_t i = stretch.size(); i-- > 0;) {
+      const Node& nd = stretch[i];
+      if (x != 1) {
+        q[nd.t].k += x - 1;
+        q[nd.t].err = decode_at(nd.t, q[nd.t].k, q[nd.t].decoded);
+      }
+      x = nd.back[x];
+    }
+    stretch.clear();
+  };
+  Eigen::Vector3f p;
+  for (std::size_t t = 0; t < m; ++t) {
+    const std::uint32_t l = laser_at[t];
+    const Coded& c = q[t];
+    std::array<double, 3> err{0.0, c.err, 0.0};
+    Node nd{static_cast<std::uint32_t>(t), 1, 1, {1, 1, 1}};
+    for (const int d : {-1, 1}) {
+      if (std::abs(static_cast<double>(c.rounding) - d) * qr > bound) continue;
+      const double e = decode_at(t, c.k + d, p);
+      if (e > e2) continue;
+      err[static_cast<std::size_t>(1 + d)] = e;
+      (d < 0 ? nd.first : nd.last) = static_cast<std::uint8_t>(1 + d);
+    }
+    std::vector<Node>& stretch = open[l];
+    std::array<double, 3> next{};
+    for (int x = nd.first; x <= nd.last; ++x) {
+      const auto xs = static_cast<std::size_t>(x);
+      double best = 0.0;
+      if (!stretch.empty()) {
+        const Node& pn = stretch.back();
+        const std::int64_t pk = q[pn.t].k;
+        best = std::numeric_limits<double>::infinity();
+        for (int y = pn.first; y <= pn.last; ++y) {
+          const double v = cost[l][static_cast<std::size_t>(y)] + lambda * bits[bin(c.k + x - (pk + y))];
+          if (v < best) {
+            best = v;
+            nd.back[xs] = static_cast<std::uint8_t>(y);
+          }
+        }
+      }
+      next[xs] = best + err[xs];
+    }
+    cost[l] = next;
+    if (nd.first == nd.last && !stretch.empty()) settle(stretch, nd.back[1]);
+    stretch.push_back(nd);
+  }
+  for (std::uint32_t l = 0; l < lasers; ++l) {
+    std::vector<Node>& stretch = open[l];
+    if (stretch.empty()) continue;
+    int x = stretch.back().first;
+    for (int y = x + 1; y <= stretch.back().last; ++y)
+      if (cost[l][static_cast<std::size_t>(y)] < cost[l][static_cast<std::size_t>(x)]) x = y;
+    settle(stretch, x);
+  }
+}
+
 std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector<Eigen::Vector3f>& input,
                                      const std::vector<std::uint32_t>& coded, const LaserAssignment& a,
                                      const Beams& beams, const std::vector<std::uint32_t>& order,
                                      const std::vector<std::int64_t>& shift, const std::vector<Beams::Trig>& beam_of,
                                      const std::vector<Eigen::Vector3d>& offset, double max_error, double bound,
-                                     bool thin, double share, const std::vector<std::uint32_t>& predictors,
+                                     bool thin, double share, double lambda_scale,
+                                     const std::vector<std::uint32_t>& predictors,
                                      int threads, const std::vector<std::uint32_t>* js = nullptr,
                                      std::vector<std::size_t>* sizes = nullptr) {
   // The points coded: positions `js` in `order` (a trial on some columns), else all of them.
@@ -2187,12 +2300,6 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   if (!(qt > 0.0)) return std::nullopt;
   const double e2 = bound * bound;
 
-  // Every point's beam length and corrections, and the point they decode to.
-  struct Coded {
-    std::int64_t k = 0, k1 = 0, k2 = 0;
-    Eigen::Vector3f decoded;
-    float rounding = 0.0F;  ///< the beam length's distance past step k, in steps (-1/2..1/2)
-  };
   std::vector<Coded> q(m);  // by position t among the points coded (J(t) in `order`)
   std::vector<std::uint8_t> failed(m, 0);
   parallel_for(m, threads, [&](std::size_t t) {
@@ -2209,13 +2316,15 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
     }
     c.rounding = static_cast<float>(along / qr - static_cast<double>(c.k));
     c.decoded = beams.point(b, c.k, 0, 0, qr, qt);
-    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
+    c.err = (c.decoded.cast<double>() - truth).squaredNorm();
+    if (c.err <= e2) return;
     if (!quantise(v.dot(b.e1), qt, c.k1) || !quantise(v.dot(b.e2), qt, c.k2)) {
       failed[t] = 1;
       return;
     }
     c.decoded = beams.point(b, c.k, c.k1, c.k2, qr, qt);
-    if ((c.decoded.cast<double>() - truth).squaredNorm() <= e2) return;
+    c.err = (c.decoded.cast<double>() - truth).squaredNorm();
+    if (c.err <= e2) return;
     // rounding at the edge of the bound: the neighbouring steps
     const Coded base = c;
     bool found = false;
@@ -2223,8 +2332,9 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
       for (int d1 = -1; d1 <= 1 && !found; ++d1)
         for (int d2 = -1; d2 <= 1 && !found; ++d2) {
           const Eigen::Vector3f d = beams.point(b, base.k + dk, base.k1 + d1, base.k2 + d2, qr, qt);
-          if ((d.cast<double>() - truth).squaredNorm() <= e2) {
-            c = {base.k + dk, base.k1 + d1, base.k2 + d2, d};
+          const double err = (d.cast<double>() - truth).squaredNorm();
+          if (err <= e2) {
+            c = {base.k + dk, base.k1 + d1, base.k2 + d2, d, 0.0F, err};
             found = true;
           }
         }
@@ -2232,57 +2342,18 @@ std::optional<LaserLayer> code_laser(const RangeEncoder& head, const std::vector
   }, 4096);
   if (std::any_of(failed.begin(), failed.end(), [](std::uint8_t f) { return f != 0; })) return std::nullopt;
 
-  // Rate-distortion choice of the beam lengths: a point whose length lies near the middle
-  // of two steps takes the step toward its laser's last point (the left neighbour, as the
-  // coder mostly predicts) where that keeps it within the bound and the bits it saves,
-  // at λ = 2 ln 2 / 12 · step² a bit (an entropy-coded uniform quantiser's slope, D = step²/12
-  // falling by 2 ln 2 · D a bit), outweigh the squared error it adds. The bits are those of
-  // the scan's own residuals against that neighbour. Each point must still decode within
-  // the bound of its own position, so the thinning below sees the final points.
+  // Rate-distortion choice of the beam lengths (choose_beam_lengths): each point may take
+  // any step that keeps it within the bound; each laser's steps are chosen together.
   {
-    static constexpr std::int64_t kSpan = 64;  // residuals beyond ±kSpan share the end bins
-    const std::uint32_t lasers = a.table.lasers();
-    std::vector<double> count(2 * kSpan + 1, 0.5);
-    std::vector<std::int64_t> last(lasers, 0);
-    std::vector<std::uint8_t> any(lasers, 0);
-    const auto bin = [](std::int64_t r) { return static_cast<std::size_t>(std::clamp(r, -kSpan, kSpan) + kSpan); };
-    double total = 0.5 * static_cast<double>(count.size());
-    for (std::size_t t = 0; t < m; ++t) {
-      const std::uint32_t l = a.ring[coded[order[J(t)]]];
-      if (any[l] != 0) {
-        count[bin(q[t].k - last[l])] += 1.0;
-        total += 1.0;
-      }
-      last[l] = q[t].k;
-      any[l] = 1;
-    }
-    std::vector<double> bits(count.size());
-    for (std::size_t r = 0; r < count.size(); ++r) bits[r] = -std::log2(count[r] / total);
-    std::fill(any.begin(), any.end(), 0);
-    const double lambda = 2.0 * std::log(2.0) / 12.0 * qr * qr;
-    // (the other step is within the bound only where the length's rounding is at least this
-    // far from the step it rounded to, in steps; a margin for the cross-beam part)
-    const double reach = 1.0 - bound / qr - 1e-9;
-    for (std::size_t t = 0; t < m; ++t) {
+    std::vector<std::uint32_t> laser_at(m);
+    for (std::size_t t = 0; t < m; ++t) laser_at[t] = a.ring[coded[order[J(t)]]];
+    const auto decode_at = [&](std::size_t t, std::int64_t k, Eigen::Vector3f& p) {
       const std::size_t j = J(t);
       const std::uint32_t i = coded[order[j]];
-      const std::uint32_t l = a.ring[i];
-      Coded& c = q[t];
-      const std::int64_t toward = any[l] == 0 || last[l] == c.k ? 0 : last[l] > c.k ? 1 : -1;
-      if (toward != 0 && static_cast<double>(toward) * c.rounding >= reach) {
-        const std::int64_t k = c.k + toward;
-        const Eigen::Vector3d truth = input[i].cast<double>();
-        const Eigen::Vector3f d = beams.point(beams.beam(l, beam_of[j]), k, c.k1, c.k2, qr, qt);
-        const double err = (d.cast<double>() - truth).squaredNorm();
-        if (err <= e2 && err - (c.decoded.cast<double>() - truth).squaredNorm() <
-                             lambda * (bits[bin(c.k - last[l])] - bits[bin(k - last[l])])) {
-          c.k = k;
-          c.decoded = d;
-        }
-      }
-      last[l] = c.k;
-      any[l] = 1;
-    }
+      p = beams.point(beams.beam(laser_at[t], beam_of[j]), k, q[t].k1, q[t].k2, qr, qt);
+      return (p.cast<double>() - input[i].cast<double>()).squaredNorm();
+    };
+    choose_beam_lengths(q, laser_at, a.table.lasers(), qr, bound, e2, lambda_scale, decode_at);
   }
 
   // Thinning (with `thin`): a point that a point decoded before it explains is not coded
@@ -2622,13 +2693,13 @@ std::optional<LaserLayer> laser_layer(const RangeEncoder& head, const std::vecto
                                       const std::vector<std::uint32_t>& coded,
                                       const std::vector<const LaserAssignment*>& candidates, const Pose& T_cloud_sensor,
                                       double max_error, double bound, bool thin, const std::vector<double>& shares,
-                                      int threads, std::size_t* chosen, bool fast) {
+                                      double lambda_scale, int threads, std::size_t* chosen, bool fast) {
   std::vector<std::unique_ptr<Prepared>> prepared;
   for (const LaserAssignment* a : candidates) prepared.push_back(prepare_layer(input, coded, *a, T_cloud_sensor, bound, threads));
   const auto code = [&](const Prepared& p, double share, std::vector<std::uint32_t> predictors, int inner,
                         const std::vector<std::uint32_t>* js = nullptr, std::vector<std::size_t>* sizes = nullptr) {
     return code_laser(head, input, coded, *p.a, p.beams, p.order, p.shift, p.beam_of, p.offset, max_error, bound, thin,
-                      share, predictors, inner, js, sizes);
+                      share, lambda_scale, predictors, inner, js, sizes);
   };
   // Each share with predictor 5 (left neighbour, a flag at edges), the first also with
   // predictor 4 (median edge detector, a flag at edges), both with mixed contexts: at 14 mm

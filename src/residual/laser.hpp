@@ -126,8 +126,9 @@ constexpr std::uint64_t kLaserShortFieldBytes = kLaserFieldBytes - 96;
                                                     const std::vector<std::uint32_t>& coded,
                                                     const std::vector<const LaserAssignment*>& candidates,
                                                     const Pose& T_cloud_sensor, double max_error, double bound,
-                                                    bool thin, const std::vector<double>& shares, int threads,
-                                                    std::size_t* chosen = nullptr, bool fast = false);
+                                                    bool thin, const std::vector<double>& shares,
+                                                    double lambda_scale, int threads, std::size_t* chosen = nullptr,
+                                                    bool fast = false);
 
 /// Decodes the points of a sensor-geometry layer whose `fields` start at `fields` (`size`
 /// bytes from there to the payload's end) after the keep mask was read from `dec`.

@@ -833,7 +833,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     if (lasers_of->alternative) candidates.push_back(lasers_of->alternative.get());
     std::size_t chosen = 0;
     laser = detail::laser_layer(head, input.points, coded, candidates, T_cloud_sensor, max_error, check_error,
-                                options.thin, shares, threads, &chosen, options.fast);
+                                options.thin, shares, 1.0, threads, &chosen, options.fast);
     if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
   const std::size_t laser_bytes =
