@@ -14,7 +14,7 @@ quality: for each codec the per-setting medians are reduced to their Pareto fron
 interpolated linearly in D1 PSNR between the two front settings around the target;
 "—" when no setting reaches the target, "≤ b" when even the cheapest front setting is
 above it (b = that setting's bits per point). A last table sets the families side by side at
-every target: lex3d (the better of lex3d and lex3d-seq), G-PCC octree, G-PCC predictive +
+every target: lex3d (the best of lex3d, lex3d-seq and lex3d-mse), G-PCC octree, G-PCC predictive +
 angular, Draco (the better of kd-tree and sequential), PCL octree, and lex3d over the best
 standard codec.
 """
@@ -27,9 +27,9 @@ import os
 import statistics
 import sys
 
-CODEC_ORDER = ["lex3d", "lex3d-seq", "gpcc-octree", "gpcc-pred", "draco-kd", "draco-seq", "pcl-octree", "octomap"]
+CODEC_ORDER = ["lex3d", "lex3d-seq", "lex3d-mse", "gpcc-octree", "gpcc-pred", "draco-kd", "draco-seq", "pcl-octree", "octomap"]
 # the side-by-side table: family -> codecs whose best rate it takes
-FAMILIES = [("lex3d", ["lex3d", "lex3d-seq"]), ("G-PCC octree", ["gpcc-octree"]),
+FAMILIES = [("lex3d", ["lex3d", "lex3d-seq", "lex3d-mse"]), ("G-PCC octree", ["gpcc-octree"]),
             ("G-PCC pred+angular", ["gpcc-pred"]), ("Draco", ["draco-kd", "draco-seq"]), ("PCL octree", ["pcl-octree"])]
 CSV_COLUMNS = ["dataset", "scan", "codec", "setting", "points", "bytes", "stream_bytes", "shared_bytes", "bpp",
                "d1_psnr_db", "rmse_m", "hausdorff_m", "chamfer_m", "mse_ab", "mse_ba", "coverage_2cm", "coverage_5cm",
@@ -198,7 +198,7 @@ def side_by_side(interp, targets):
         return f"≤ {c['bpp']:.3f}" if c["kind"] == "below" else f"{c['bpp']:.3f}"
 
     lines = ["## All data sets: bits per point at equal D1 PSNR", "",
-             "lex3d = better of lex3d and lex3d-seq; Draco = better of kd-tree and sequential; "
+             "lex3d = best of lex3d, lex3d-seq and lex3d-mse; Draco = better of kd-tree and sequential; "
              "ratio = lex3d / the best standard codec (G-PCC, Draco, PCL) at that PSNR.", "",
              "| data | codec | " + " | ".join(f"{t:g} dB" for t in targets) + " |",
              "|---|---|" + "---|" * len(targets)]
@@ -231,7 +231,7 @@ def plot(summary, targets, out_dir):
         print("rd_report.py: matplotlib missing (apt-get install python3-matplotlib); no plots", file=sys.stderr)
         return []
     paths = []
-    styles = {"lex3d": ("tab:red", "o"), "lex3d-seq": ("tab:purple", "D"), "draco-kd": ("tab:blue", "s"),
+    styles = {"lex3d": ("tab:red", "o"), "lex3d-seq": ("tab:purple", "D"), "lex3d-mse": ("tab:orange", "v"), "draco-kd": ("tab:blue", "s"),
               "draco-seq": ("tab:cyan", "v"), "pcl-octree": ("tab:green", "^"), "octomap": ("tab:orange", "x"),
               "gpcc-octree": ("black", "P"), "gpcc-pred": ("tab:brown", "*")}
     for ds, settings in summary.items():

@@ -174,7 +174,8 @@ py::object compress(const py::object& points, const py::object& intensity, std::
                     double word_radius, int iterations, std::uint64_t seed, int threads, bool report,
                     const py::object& sensor, const py::object& fields, const std::vector<std::string>& drop_fields,
                     const py::object& ring, const py::object& time, const py::object& stamp,
-                    const std::string& metadata, const std::string& topic, bool single_return, bool fast) {
+                    const std::string& metadata, const std::string& topic, bool single_return, bool fast,
+                    const std::string& objective) {
   // A path is read as `lex3d compress PATH` reads it (its attributes and sensor pose kept); a
   // lex3d.Scan gives everything its file gave.
   const bool from_file = lex3d::python::is_path(points);
@@ -206,6 +207,9 @@ py::object compress(const py::object& points, const py::object& intensity, std::
   o.layer_coding = layer_coding(coding);
   o.keep_all_points = keep_all_points;
   o.fast = fast;
+  if (objective != "bound" && objective != "mse")
+    throw py::value_error("objective must be 'bound' or 'mse', got '" + objective + "'");
+  o.mse = objective == "mse";
   if (alphabet) o.alphabet = to_vector(*alphabet);
   o.model.word_radius = word_radius;
   o.max_iterations = iterations;
@@ -321,7 +325,7 @@ PYBIND11_MODULE(_lex3d, m) {
         py::arg("sensor") = py::none(), py::arg("fields") = py::none(),
         py::arg("drop_fields") = std::vector<std::string>{}, py::arg("ring") = py::none(), py::arg("time") = py::none(),
         py::arg("stamp") = py::none(), py::arg("metadata") = "", py::arg("topic") = "", py::arg("single_return") = false,
-        py::arg("fast") = false,
+        py::arg("fast") = false, py::arg("objective") = "bound",
         R"(Compresses one scan into a model file (bytes), as `lex3d compress` does.
 
 points: (N, 3) float32 or float64 array, metres, sensor frame; every value finite. float64
@@ -357,6 +361,8 @@ layer_coding: 'auto', 'spherical', 'voxel', 'laser', 'acquisition' or 'lattice'.
 keep_all_points: give every input point its own decoded point.
 fast: sensor-rate encoding, as `lex3d compress --fast`: fewer codings and attribute methods
     tried; files a little larger.
+objective: 'bound' (the fewest bits within max_error) or 'mse' (the fewest bits for the mean
+    squared error, still within max_error), as `lex3d compress --objective`.
 alphabet: an alphabet file (bytes, from learn_alphabet) to reuse; the model then references it.
 word_radius: metres, 0 derives it from the scan. iterations, seed: the learner's.
 threads: worker threads, [1, 64]; the bytes do not depend on it.

@@ -59,6 +59,7 @@ residual::LayerOptions CodingOptions::layer_options() const {
   l.acquisition = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kAcquisition;
   l.lattice = layer_coding == LayerCoding::kAuto || layer_coding == LayerCoding::kLattice;
   l.fast = fast;
+  l.mse = mse;
   l.threads = threads;
   return l;
 }

@@ -86,6 +86,15 @@ constexpr std::uint64_t kMaxLatticeCellsPerPoint = 4;
 /// largest for a table that reproduces the points (read from a sensor's metadata), the
 /// smaller two for an estimated table, which leave room for corrections across the beams.
 constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
+/// LayerOptions::mse (encoder only): the sensor-geometry coding's one share of 2E' (a range
+/// step of E') and the scale of λ in its choice of beam lengths; the other codings code to
+/// kMseOthersShare E, the bound at which the default's range step for an estimated table
+/// (share kLaserShares[1]) is this one. Measured at equal D1 PSNR (bench/rd.sh, lex3d
+/// alone, 70-86 dB) against shares 0.4-0.6 and scales 1-3 (bench/README.md, "The
+/// mean-squared-error objective").
+constexpr double kMseShare = 0.5;
+constexpr double kMseLambdaScale = 2.0;
+constexpr double kMseOthersShare = kMseShare / kLaserShares[1];
 /// The voxel coding is not coded in full when its trial window costs this many times the
 /// sensor-geometry coding's bits a point (encoder only).
 constexpr double kLaserSkipRatio = 1.6;
@@ -654,9 +663,9 @@ Cloud word_cloud(const codec::ModelData& data) {
 }
 
 std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, const Pose& T_cloud_sensor,
-                                       double max_error, LayerStats* stats, const LayerOptions& options) {
-  if (!(max_error >= kMinMaxError && max_error <= kMaxMaxError))
-    throw std::invalid_argument("residual layer: max error " + std::to_string(max_error) + " m is outside [" +
+                                       double bound_asked, LayerStats* stats, const LayerOptions& options) {
+  if (!(bound_asked >= kMinMaxError && bound_asked <= kMaxMaxError))
+    throw std::invalid_argument("residual layer: max error " + std::to_string(bound_asked) + " m is outside [" +
                                 std::to_string(kMinMaxError) + ", " + std::to_string(kMaxMaxError) + "]");
   const std::size_t n_in = input.size(), n_w = words.size();
   if (n_in > 0xFFFFFFF0U || n_w > 0xFFFFFFF0U) throw std::invalid_argument("residual layer: too many points");
@@ -669,9 +678,13 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   for (const auto& p : input.points) extent = std::max(extent, p.cwiseAbs().maxCoeff());
   for (const auto& p : words.points) extent = std::max(extent, p.cwiseAbs().maxCoeff());
   extent = std::max(extent, static_cast<float>(T_cloud_sensor.translation().cwiseAbs().maxCoeff()));
+  // With `mse` the sensor-geometry coding codes to the bound asked and the others (and the
+  // words' keep mask) to kMseOthersShare of it: max_error and check_error are theirs.
+  const double max_error = options.mse ? std::max(kMinMaxError, kMseOthersShare * bound_asked) : bound_asked;
   const double check_error = max_error * (1.0 - 1e-5) - 2.5e-7 * static_cast<double>(extent);
+  const double laser_check_error = bound_asked * (1.0 - 1e-5) - 2.5e-7 * static_cast<double>(extent);
   if (!(check_error > 0.5 * max_error))
-    throw std::invalid_argument("residual layer: a max error of " + std::to_string(max_error) +
+    throw std::invalid_argument("residual layer: a max error of " + std::to_string(bound_asked) +
                                 " m is below the float32 resolution of coordinates as large as " +
                                 std::to_string(extent) + " m");
 
@@ -772,7 +785,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::optional<detail::LaserAssignment> lasers_of;
   if (options.laser && !coded.empty()) lasers_of = detail::assign_lasers(input, T_cloud_sensor, true, threads, options.fast);
   // A table read from the sensor reproduces the beams: the whole budget along them.
-  const bool exact_table = lasers_of && lasers_of->fit_rms < 1e-3 * max_error;
+  const bool exact_table = lasers_of && lasers_of->fit_rms < 1e-3 * bound_asked;
   // The acquisition-order coding (§2.11) where the points come in the order they were
   // fired (their times rise): an airborne or mobile-mapping scanner's file. Not beside a
   // laser table read from the sensor, whose coding follows the firing order already (on
@@ -826,14 +839,17 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     });
   }
   if (lasers_of) {
-    const std::vector<double> shares =
-        exact_table ? std::vector<double>{kLaserShares[0]} : std::vector<double>{kLaserShares[1], kLaserShares[2]};
+    // With `mse`, one share and λ (kMseShare, kMseLambdaScale) whatever the table.
+    const std::vector<double> shares = options.mse   ? std::vector<double>{kMseShare}
+                                       : exact_table ? std::vector<double>{kLaserShares[0]}
+                                                     : std::vector<double>{kLaserShares[1], kLaserShares[2]};
+    const double lambda_scale = options.mse ? kMseLambdaScale : 1.0;
     // Lasers estimated two ways from the points: both are candidates, the smaller kept.
     std::vector<const detail::LaserAssignment*> candidates = {&*lasers_of};
     if (lasers_of->alternative) candidates.push_back(lasers_of->alternative.get());
     std::size_t chosen = 0;
-    laser = detail::laser_layer(head, input.points, coded, candidates, T_cloud_sensor, max_error, check_error,
-                                options.thin, shares, 1.0, threads, &chosen, options.fast);
+    laser = detail::laser_layer(head, input.points, coded, candidates, T_cloud_sensor, bound_asked, laser_check_error,
+                                options.thin, shares, lambda_scale, threads, &chosen, options.fast);
     if (laser && chosen == 1) lasers_of = detail::LaserAssignment(*candidates[1]);
   }
   const std::size_t laser_bytes =
@@ -1008,11 +1024,13 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
                 extra_bytes(kCodingVoxel) + voxel->stream.size() <
                     extra_bytes(ways[best].sweep ? kCodingSweep : 0) + streams[best].size());
   const bool sweep = !use_voxel && ways[best].sweep;
+  // (the bound of the coding kept: the one asked for with the sensor-geometry coding)
+  double kept_error = max_error;
   const auto fill_stats = [&](std::size_t residual, std::size_t escapes, bool is_sweep, bool is_voxel, bool is_laser,
                               std::size_t bytes) {
     if (!stats) return;
     *stats = LayerStats{};
-    stats->max_error = max_error;
+    stats->max_error = kept_error;
     stats->word_points = n_w;
     stats->kept_word_points = static_cast<std::size_t>(std::count(keep.begin(), keep.end(), std::uint8_t{1}));
     stats->explained_points = n_in - coded.size();
@@ -1064,7 +1082,7 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     out_sources.assign(to_find.size() + (coded_sources ? coded_sources->size() : 0), 0);
     if (coded_sources) std::copy(coded_sources->begin(), coded_sources->end(), out_sources.begin() + static_cast<std::ptrdiff_t>(kept_n));
     if (to_find.empty()) return;
-    PointBallGrid grid(max_error, n_in);
+    PointBallGrid grid(kept_error, n_in);
     for (const auto& p : input.points) grid.insert(p);
     std::vector<std::uint8_t> missing(to_find.size(), 0);
     parallel_for(to_find.size(), threads, [&](std::size_t j) {
@@ -1125,7 +1143,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     // bytes a file for any table but a sensor's own with an offset head (an Ouster's metadata).
     codec::bytes::put_u32(out, kCodingLaser);
     codec::bytes::put_u32(out, laser->head_pose ? kSweepMarker : kLaserShortMarker);
-    put_f64(out, max_error);
+    kept_error = bound_asked;
+    put_f64(out, kept_error);
     put_f64(out, laser->range_step);
     put_u64(out, n_w);
     put_u64(out, laser->coded);

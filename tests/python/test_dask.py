@@ -36,6 +36,7 @@ def no_temporaries(folder):
     ({"iterations": 40}, ["--max-error", "none"]),
     ({"max_error": 0.02}, ["--max-error", "0.02"]),
     ({"max_error": 0.02, "batch": 2}, ["--max-error", "0.02"]),  # tasks of 2 and 1 scans
+    ({"max_error": 0.02, "objective": "mse"}, ["--max-error", "0.02", "--objective", "mse"]),
 ])
 def test_same_files_as_the_command(client, tmp_path, options, cli_args):
     out = tmp_path / "dask" / "s.lex3dm"
@@ -117,6 +118,10 @@ def test_command_on_a_running_scheduler(client, tmp_path):
     summary = json.loads(r.stdout)
     assert summary["ok"] == 2 and summary["workers"] == 2
     assert (tmp_path / "s_001.lex3dm").read_bytes() == lex3d.compress(SCANS[1], max_error=0.03)
+    r = run_command("compress", SCANS[1], "-o", str(tmp_path / "m.lex3dm"), "--max-error", "0.03",
+                    "--objective", "mse", "--scheduler", client.scheduler.address, "--json")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "m.lex3dm").read_bytes() == lex3d.compress(SCANS[1], max_error=0.03, objective="mse")
 
 
 def test_command_exit_codes_and_messages(tmp_path):

@@ -57,7 +57,8 @@ def test_round_trip_of_a_real_scan_meets_the_bound_both_ways(kitti):
 
 @pytest.mark.skipif(not CLI, reason="LEX3D_CLI not set (run through ctest)")
 @pytest.mark.parametrize("args", [["--max-error", "0.014"], ["--target-bpp", "5"],
-                                  ["--iterations", "60", "--max-error", "none"], ["--max-error", "0.014", "--fast"]])
+                                  ["--iterations", "60", "--max-error", "none"], ["--max-error", "0.014", "--fast"],
+                                  ["--max-error", "0.014", "--objective", "mse"]])
 def test_same_bytes_as_the_command(args):
     scan = SAMPLES / "newer_college_00.bin"
     points, _ = read_bin(scan, 3)
@@ -69,8 +70,15 @@ def test_same_bytes_as_the_command(args):
              {"target_bpp": 5.0} if args[0] == "--target-bpp" else {"iterations": 60}
     if "--fast" in args:
         kwargs["fast"] = True
+    if "--objective" in args:
+        kwargs["objective"] = args[args.index("--objective") + 1]
     assert lex3d.compress(points, **kwargs) == expected
     assert lex3d.compress(points.astype(np.float64), **kwargs) == expected
+
+
+def test_an_unknown_objective_is_refused(small):
+    with pytest.raises(ValueError, match="objective must be 'bound' or 'mse'"):
+        lex3d.compress(small, max_error=0.01, objective="psnr")
 
 
 def test_intensity_is_kept_with_a_layer_and_reported_without(kitti):

@@ -60,6 +60,9 @@ struct CodingOptions {
   /// Sensor-rate encoding (residual::LayerOptions::fast, and AttributeOptions::fast for the
   /// attributes): fewer codings tried; files a little larger.
   bool fast = false;
+  /// The mean-squared-error objective (residual::LayerOptions::mse): the fewest bits for
+  /// the mean squared error within the bound, rather than the fewest bits within it.
+  bool mse = false;
   /// Instance steps, metres and radians, each 0 (derived from the alphabet's word radius,
   /// codec::quantization_for_word_radius) or in [1e-6, 0.1].
   codec::Quantization quantization{0.0, 0.0, 0.0005};

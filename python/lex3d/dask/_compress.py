@@ -198,7 +198,7 @@ def compress(inputs, output, *, client, alphabet=None, save_alphabet=None, learn
     alphabet: an alphabet file (path or bytes) to reuse; otherwise, when words are used, one is
     learned on `learn_scans` evenly spaced scans on one worker and written to `save_alphabet`
     (default: OUT's stem + ".lex3da"). options: those of lex3d.compress (max_error, target_bpp,
-    words, layer_coding, keep_all_points, fast, word_radius, threads). A scan that fails is named in
+    words, layer_coding, keep_all_points, fast, objective, word_radius, threads). A scan that fails is named in
     the manifest and the summary; the others complete. Raises CompressError when the job
     cannot start. window: tasks in flight (default 4 a worker thread); batch: scans a task
     (default: batch_size, from 16 down to 1 as the work runs out; at most SCANS_CARRIED of a

@@ -76,6 +76,9 @@ def _parser():
     c.add_argument("--layer-coding", choices=["auto", "spherical", "voxel", "laser", "acquisition", "lattice"], default="auto")
     c.add_argument("--keep-all-points", action="store_true")
     c.add_argument("--fast", action="store_true", help="sensor-rate encoding, as lex3d compress --fast")
+    c.add_argument("--objective", choices=["bound", "mse"], default="bound",
+                   help="the fewest bits within the bound (bound, the default) or for the mean squared error "
+                        "within it (mse), as lex3d compress --objective")
     c.add_argument("--threads", type=int, default=1, help="threads a scan (default 1; the bytes do not depend on it)")
     c.add_argument("--manifest", help="default OUT.manifest.jsonl")
     _read_options(c)
@@ -290,6 +293,8 @@ def main(argv=None):
         options["keep_all_points"] = True
     if args.fast:
         options["fast"] = True
+    if args.objective != "bound":
+        options["objective"] = args.objective
     if explicit_error and args.target_bpp is not None:
         print("lex3d-dask: give --max-error or --target-bpp, not both", file=sys.stderr)
         return 1
