@@ -485,8 +485,9 @@ void register_compress(CLI::App& app) {
                   "Residual layer: the fewest bits within --max-error (bound), or the fewest bits for the mean "
                   "squared error, still within it (mse): the sensor-geometry coding takes a range step of E, not "
                   "about 1.8 E, and each point the step within E that rate and distortion favour; the other "
-                  "codings code to 5/9 E. At the same bound files are larger with about a third of the mean "
-                  "squared error; at the same PSNR smaller (bench/README.md, \"The mean-squared-error objective\")")
+                  "codings code to 5/9 E. At the same bound files are larger with a lower mean squared error; "
+                  "at the same PSNR smaller (bench/README.md, \"Beam lengths chosen a laser at a time, and the "
+                  "mean-squared-error objective\")")
       ->check(CLI::IsMember({"bound", "mse"}))
       ->capture_default_str();
   sub->add_option("--intensity-error", o->intensity_error,

@@ -90,8 +90,8 @@ constexpr double kLaserShares[] = {0.985, 0.9, 0.75};
 /// step of E') and the scale of λ in its choice of beam lengths; the other codings code to
 /// kMseOthersShare E, the bound at which the default's range step for an estimated table
 /// (share kLaserShares[1]) is this one. Measured at equal D1 PSNR (bench/rd.sh, lex3d
-/// alone, 70-86 dB) against shares 0.4-0.6 and scales 1-3 (bench/README.md, "The
-/// mean-squared-error objective").
+/// alone, 70-86 dB) against shares 0.35-0.6 and scales 1-3 (bench/README.md, "Beam
+/// lengths chosen a laser at a time, and the mean-squared-error objective").
 constexpr double kMseShare = 0.5;
 constexpr double kMseLambdaScale = 2.0;
 constexpr double kMseOthersShare = kMseShare / kLaserShares[1];

@@ -77,8 +77,9 @@ struct LayerOptions {
   /// the bound. The sensor-geometry coding takes a range step of E (not about 1.8 E) and
   /// lets each point take either step within E, chosen by rate and distortion; the other
   /// codings code to 5/9 E. At the same E a file is larger and its mean squared error
-  /// about a third; at the same PSNR (70-86 dB) files are smaller than the default's
-  /// (bench/README.md, "The mean-squared-error objective").
+  /// lower (about a third where the laser table fits the points); at the same PSNR files
+  /// are smaller than the default's (bench/README.md, "Beam lengths chosen a laser at a
+  /// time, and the mean-squared-error objective").
   bool mse = false;
   /// Worker threads; the output does not depend on it.
   int threads = 2;
