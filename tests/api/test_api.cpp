@@ -256,6 +256,17 @@ TEST(Api, TargetBitsPerPointPicksABoundThatFits) {
   ASSERT_TRUE(c.ok()) << c.status().to_string();
   ASSERT_TRUE(c.value().max_error.has_value());
   EXPECT_LE(c.value().bits_per_point(), 6.0);
+  // With the mean-squared-error objective the search fits the same budget: a bound at least
+  // as large (the objective codes finer at a given bound), every point within it.
+  o.mse = true;
+  auto m = lex3d::compress(cloud, o);
+  ASSERT_TRUE(m.ok()) << m.status().to_string();
+  ASSERT_TRUE(m.value().max_error.has_value());
+  EXPECT_LE(m.value().bits_per_point(), 6.0);
+  EXPECT_GE(*m.value().max_error, *c.value().max_error);
+  auto back = lex3d::decompress(m.value().bytes);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_LE(lex3d::eval::compare_clouds(cloud, back.value().cloud).hausdorff, *m.value().max_error);
 }
 
 TEST(PclConversions, CarryIntensityAndPoseAndCountNonFinitePoints) {
