@@ -25,7 +25,7 @@ Codecs and settings:
                each scan compressed with --alphabet; the alphabet file's bytes are shared
                out equally over the dataset's scans in this run
   lex3d-mse    lex3d compress --objective mse (the fewest bits for the mean squared error
-               within the bound), the residual layer alone, over LEX3D_E; where
+               within the bound), the residual layer alone, over LEX3D_MSE_E; where
                `lex3d compress --help` lists --objective
   Both lex3d modes are word-only unless `lex3d compress --help` lists --max-error; then
   lex3d sweeps LEX3D_E with the residual layer alone (lex3d's default with --max-error) and

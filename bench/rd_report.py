@@ -231,7 +231,7 @@ def plot(summary, targets, out_dir):
         print("rd_report.py: matplotlib missing (apt-get install python3-matplotlib); no plots", file=sys.stderr)
         return []
     paths = []
-    styles = {"lex3d": ("tab:red", "o"), "lex3d-seq": ("tab:purple", "D"), "lex3d-mse": ("tab:orange", "v"), "draco-kd": ("tab:blue", "s"),
+    styles = {"lex3d": ("tab:red", "o"), "lex3d-seq": ("tab:purple", "D"), "lex3d-mse": ("tab:pink", "v"), "draco-kd": ("tab:blue", "s"),
               "draco-seq": ("tab:cyan", "v"), "pcl-octree": ("tab:green", "^"), "octomap": ("tab:orange", "x"),
               "gpcc-octree": ("black", "P"), "gpcc-pred": ("tab:brown", "*")}
     for ds, settings in summary.items():

@@ -2184,10 +2184,10 @@ struct Coded {
 /// the step its length rounds to or a neighbouring one that still decodes within the bound
 /// (`decode_at(t, k, p)` gives point t's decoded point p with step k and its squared error,
 /// which must not pass e2; with a range step of two thirds of the bound or more, as every
-/// share the encoder tries gives, no step further away can). Along each laser, in coding order, the steps are chosen together: those
-/// that minimise the sum of the squared errors and λ times the bits of each step's change
-/// from the laser's step before it (a Viterbi pass, a state for each step a point may
-/// take). The bits are −log2 of each change's share among the rounded steps' (the scan's
+/// share the encoder tries gives, no step further away can). Along each laser, in coding
+/// order, the steps are chosen together: those that minimise the sum of the squared errors
+/// and λ times the bits of each step's change from the laser's step before it (a Viterbi
+/// pass, a state for each step a point may take). The bits are −log2 of each change's share among the rounded steps' (the scan's
 /// own residuals against the left neighbour, as the coder mostly predicts); λ =
 /// lambda_scale · 2 ln 2 / 12 · q_r² a bit, an entropy-coded uniform quantiser's slope
 /// (D = q_r² / 12 falling by 2 ln 2 · D a bit).

@@ -681,8 +681,9 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   // With `mse` the sensor-geometry coding codes to the bound asked and the others (and the
   // words' keep mask) to kMseOthersShare of it: max_error and check_error are theirs.
   const double max_error = options.mse ? std::max(kMinMaxError, kMseOthersShare * bound_asked) : bound_asked;
-  const double check_error = max_error * (1.0 - 1e-5) - 2.5e-7 * static_cast<double>(extent);
-  const double laser_check_error = bound_asked * (1.0 - 1e-5) - 2.5e-7 * static_cast<double>(extent);
+  const auto check_of = [extent](double e) { return e * (1.0 - 1e-5) - 2.5e-7 * static_cast<double>(extent); };
+  const double check_error = check_of(max_error);
+  const double laser_check_error = check_of(bound_asked);
   if (!(check_error > 0.5 * max_error))
     throw std::invalid_argument("residual layer: a max error of " + std::to_string(bound_asked) +
                                 " m is below the float32 resolution of coordinates as large as " +
