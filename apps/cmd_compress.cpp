@@ -479,7 +479,7 @@ void register_compress(CLI::App& app) {
   sub->add_flag("--fast", o->fast,
                 "Residual layer: sensor-rate encoding. Lasers estimated from the points take a quarter of the "
                 "work, and beside the sensor-geometry coding the other codings are coded in full only where a "
-                "trial says they win (an attribute's methods too): a KITTI scan encodes in 0.6 of the time, most files come out the same "
+                "trial says they win (an attribute's methods too): a KITTI scan encodes in 0.8 of the time, most files come out the same "
                 "and a few up to 6 % larger (bench/README.md, \"Fast encoding\")");
   sub->add_option("--objective", o->objective,
                   "Residual layer: the fewest bits within --max-error (bound), or the fewest bits for the mean "

@@ -102,6 +102,10 @@ struct LayerStats {
   bool laser = false;                  ///< coded with the sensor-geometry coding (an RESL chunk)
   bool acquisition = false;            ///< coded in acquisition order (an RESA chunk)
   bool lattice = false;                ///< coded on a lattice (an RESG chunk)
+  /// A spherical coding was coded over the whole layer (until it could no longer be the
+  /// smallest, beside a coding in hand); not where its trials ruled it out. Encoder work
+  /// only: the file does not say.
+  bool spherical_in_full = false;
   /// Where the laser table came from when the sensor-geometry coding was tried (empty
   /// when it was not), and the RMS distance of the points from their table's beams.
   std::string laser_table_source;
