@@ -1018,8 +1018,9 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
             head_bytes + static_cast<std::size_t>(std::ceil(kSampleSkipRatio * laser_bits * static_cast<double>(sample.size()) / 8.0));
         std::size_t e = 0, n = 0;
         bool gave_up = false;
-        (void)code(sample, ways[best].sweep, e, n, nullptr, limit, &gave_up);
-        spherical_may_win = !gave_up;
+        const std::size_t bytes = code(sample, ways[best].sweep, e, n, nullptr, limit, &gave_up).size();
+        // (the stop is checked every 256 points: a sample that ends past the limit is out too)
+        spherical_may_win = !gave_up && bytes <= limit;
       }
       // Where the voxel trial wins clearly (a map), the spherical winner is not coded in full.
       // (The spherical trial does not rule it out against the sensor-geometry coding: on a
