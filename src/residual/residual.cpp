@@ -542,6 +542,9 @@ std::vector<std::uint32_t> middle_window(const std::vector<std::uint32_t>& coded
   return {coded.begin() + static_cast<std::ptrdiff_t>(at), coded.begin() + static_cast<std::ptrdiff_t>(at + span)};
 }
 
+/// The row of elevation a point lies in (row_order's rows, row_height apart).
+std::int64_t row_of(const Spherical& s, double row_height) { return static_cast<std::int64_t>(std::floor(s.elevation / row_height)); }
+
 /// Orders the coded points along rows of elevation by azimuth.
 std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, const std::vector<std::uint32_t>& coded,
                                      double row_height) {
@@ -555,7 +558,7 @@ std::vector<std::uint32_t> row_order(const std::vector<Spherical>& spherical, co
   std::int64_t row_lo = std::numeric_limits<std::int64_t>::max(), row_hi = std::numeric_limits<std::int64_t>::min();
   for (std::uint32_t i : coded) {
     const Spherical& s = spherical[i];
-    keys.push_back({static_cast<std::int64_t>(std::floor(s.elevation / row_height)), s.azimuth, i});
+    keys.push_back({row_of(s, row_height), s.azimuth, i});
     row_lo = std::min(row_lo, keys.back().row);
     row_hi = std::max(row_hi, keys.back().row);
   }
@@ -761,16 +764,16 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   std::vector<std::uint32_t> rows;
   // (a spherical or voxel coding stopped once it could no longer be the smallest)
   bool spherical_out = false, voxel_out = false;
-  // (a spherical coding coded over the whole layer, to its end or until spherical_out)
-  bool spherical_full = false;
   const auto need_rows = [&] {
     if (!rows.empty()) return;
     to_spherical_at(coded);
     rows = row_order(spherical, coded, row_height);
   };
   // The sample of an order (kSampleRuns runs, every kSampleEvery-th kept), and of the row
-  // order: the rows whose first point falls in a kept run, in row order (the rows of every
-  // coded point counted, only the sample's sorted).
+  // order: the rows whose first point falls in a kept run, in row order (every coded point's
+  // row sorted, a row at a time rather than by a table over the rows, which an estimated
+  // row height far below the points' spacing would make huge; only the sample put in row
+  // order).
   const auto runs_sample = [&](const std::vector<std::uint32_t>& order) {
     std::vector<std::uint32_t> out;
     out.reserve(order.size() / kSampleEvery + 1);
@@ -781,23 +784,17 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   };
   const auto row_sample = [&] {
     to_spherical_at(coded);
-    std::vector<std::int64_t> row(coded.size());
-    std::int64_t lo = std::numeric_limits<std::int64_t>::max(), hi = std::numeric_limits<std::int64_t>::min();
-    for (std::size_t k = 0; k < coded.size(); ++k) {
-      row[k] = static_cast<std::int64_t>(std::floor(spherical[coded[k]].elevation / row_height));
-      lo = std::min(lo, row[k]);
-      hi = std::max(hi, row[k]);
-    }
+    std::vector<std::int64_t> sorted(coded.size());
+    for (std::size_t k = 0; k < coded.size(); ++k) sorted[k] = row_of(spherical[coded[k]], row_height);
+    std::sort(sorted.begin(), sorted.end());
+    // (the rows kept, ascending: each row's first point is its run's start in `sorted`)
+    std::vector<std::int64_t> kept_rows;
+    for (std::size_t a = 0; a < sorted.size(); ++a)
+      if ((a == 0 || sorted[a] != sorted[a - 1]) && (a * kSampleRuns / sorted.size()) % kSampleEvery == 0)
+        kept_rows.push_back(sorted[a]);
     std::vector<std::uint32_t> picked;
-    if (coded.empty()) return picked;
-    // (rows by their counts, in order; a row kept where its first point starts a kept run)
-    std::vector<std::size_t> count(static_cast<std::size_t>(hi - lo) + 1, 0);
-    for (const std::int64_t r : row) ++count[static_cast<std::size_t>(r - lo)];
-    std::vector<std::uint8_t> keep_row(count.size(), 0);
-    for (std::size_t r = 0, before = 0; r < count.size(); before += count[r++])
-      keep_row[r] = count[r] > 0 && (before * kSampleRuns / coded.size()) % kSampleEvery == 0 ? 1 : 0;
-    for (std::size_t k = 0; k < coded.size(); ++k)
-      if (keep_row[static_cast<std::size_t>(row[k] - lo)] != 0) picked.push_back(coded[k]);
+    for (const std::uint32_t i : coded)
+      if (std::binary_search(kept_rows.begin(), kept_rows.end(), row_of(spherical[i], row_height))) picked.push_back(i);
     return row_order(spherical, picked, row_height);
   };
   struct Way {
@@ -1043,7 +1040,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
       const std::size_t sphere_give_up = give_up_at(in_hand, extra_bytes(ways[best].sweep ? kCodingSweep : 0));
       // (the spherical winner, coded in full until it passes sphere_give_up)
       const auto code_winner = [&] {
-        spherical_full = true;
         streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best],
                              &way_sources[best], sphere_give_up, &spherical_out);
         if (spherical_out) way_sources[best].clear();
@@ -1071,7 +1067,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
         if (w == ways.size()) voxel = voxel_layer(head, input.points, coded, check_error);
         else streams[w] = code(ways[w].by_rows ? rows : coded, ways[w].sweep, escaped[w], counts[w], &way_sources[w]);
       }, 1);
-      spherical_full = true;
       for (std::size_t w = 1; w < ways.size(); ++w)
         if (streams[w].size() < streams[best].size()) best = w;
     }
@@ -1081,7 +1076,6 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
   if (others && options.spherical && laser && spherical_may_win && (voxel || voxel_out) && streams[best].empty() && !spherical_out &&
       (voxel_out || laser_bytes < extra_bytes(kCodingVoxel) + voxel->stream.size())) {
     need_rows();
-    spherical_full = true;
     streams[best] = code(ways[best].by_rows ? rows : coded, ways[best].sweep, escaped[best], counts[best], &way_sources[best]);
   }
   const bool use_voxel =
@@ -1105,7 +1099,8 @@ std::vector<std::uint8_t> encode_layer(const Cloud& input, const Cloud& words, c
     stats->voxel = is_voxel;
     stats->laser = is_laser;
     stats->bytes = bytes;
-    stats->spherical_in_full = spherical_full;
+    // (a spherical stream, or one stopped once it could not be the smallest: trials write neither)
+    stats->spherical_in_full = !streams[best].empty() || spherical_out;
     if (lasers_of) {
       stats->laser_table_source = lasers_of->source;
       stats->laser_table_rms = lasers_of->fit_rms;
